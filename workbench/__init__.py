@@ -1,0 +1,25 @@
+"""Facial Editing Workbench — the headless core.
+
+Everything here runs without any UI package: the shared :class:`FaceModel`
+state object, file import/export, and the numerical methods. The notebook
+widgets live in the separate ``widgets`` package and only observe the model.
+"""
+
+from __future__ import annotations
+
+__version__ = "0.1.0"
+
+from workbench.io import load
+from workbench.model import BlendShape, FaceModel, HandleSet, ModelError, ModelMetadata
+from workbench.samples import load_sample
+
+__all__ = [
+    "BlendShape",
+    "FaceModel",
+    "HandleSet",
+    "ModelError",
+    "ModelMetadata",
+    "__version__",
+    "load",
+    "load_sample",
+]

@@ -1,0 +1,74 @@
+"""Command line: ``workbench info PATH``.
+
+``info`` prints what a new user wants to know before opening a face: vertex,
+triangle and polygon counts, the connected components (eyes, teeth...), the
+blendshapes with their ARKit-52 mapping, and units/axes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+
+import numpy as np
+
+from workbench.model import FaceModel
+
+
+def format_info(model: FaceModel, path: str) -> str:
+    """A human-readable summary of ``model`` (loaded from ``path``)."""
+    md = model.metadata
+    lines = [
+        f"{path}",
+        f"  name        {md.name or '-'}",
+        f"  vertices    {model.n_vertices}",
+        f"  triangles   {len(model.faces)}",
+        f"  polygons    {len(model.polygons)} "
+        f"(sizes: {', '.join(f'{int(k)}-gon x{int(c)}' for k, c in zip(*np.unique(model.polygons.sizes, return_counts=True), strict=True))})",
+        f"  units       {md.units} ({md.metres_per_unit:g} m per unit), up {md.up_axis}, front {md.front_axis}",
+    ]
+    bb = model.vertices.max(0) - model.vertices.min(0)
+    lines.append(f"  size        {bb[0]:.4g} x {bb[1]:.4g} x {bb[2]:.4g} {md.units}")
+    counts = np.bincount(model.component_labels, minlength=len(model.component_names))
+    lines.append(f"  components  {len(model.component_names)}")
+    for name, c in zip(model.component_names, counts, strict=True):
+        lines.append(f"    {name:<20} {int(c):>8} vertices")
+    arkit = model.arkit_names
+    n_arkit = sum(v is not None for v in arkit.values())
+    lines.append(f"  shapes      {len(model.shapes)} ({n_arkit} mapped to ARKit-52)")
+    for s in model.shapes:
+        moved = int(np.count_nonzero(np.abs(s.delta).max(axis=1) > 0))
+        mapped = arkit[s.name]
+        tag = "" if mapped is None else ("  = ARKit" if mapped == s.name else f"  -> ARKit {mapped}")
+        extra = " muted" if s.mute else ""
+        lines.append(
+            f"    {s.name:<22} range [{s.slider_min:g}, {s.slider_max:g}]  "
+            f"moves {moved} vertices{extra}{tag}"
+        )
+    for p in md.provenance:
+        lines.append("  provenance  " + ", ".join(f"{k}={v}" for k, v in p.items()))
+    return "\n".join(lines)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="workbench", description="Facial Editing Workbench")
+    sub = parser.add_subparsers(dest="command", required=True)
+    p_info = sub.add_parser("info", help="summarise a face file (.fwb, .glb/.gltf, OBJ folder, .obj + targets)")
+    p_info.add_argument("path")
+    args = parser.parse_args(argv)
+    if args.command == "info":
+        from workbench.io import load
+
+        try:
+            model = load(args.path)
+        except (OSError, ValueError) as exc:
+            print(f"workbench info: {exc}", file=sys.stderr)
+            return 2
+        print(format_info(model, args.path))
+        return 0
+    return 1  # pragma: no cover - argparse rejects unknown commands
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,845 @@
+"""The face-model state object shared by every tool and view.
+
+:class:`FaceModel` is a pure-Python evented model in the style of napari's
+``components``: views subscribe to its psygnal events and change it only
+through its methods. Every edit is undoable (see :mod:`workbench.history`);
+an *interaction* (a mouse drag, a slider scrub) emits cheap ``*_changing``
+events while it lasts and one undo step plus one ``changed`` event on release.
+
+Evaluation (:meth:`FaceModel.evaluate`) is ``neutral + sum_k w_k * delta_k``
+plus the editing layers later tools add, computed in float32 with one BLAS
+call (or per-shape axpy when few weights are non-zero) and cached until
+something it depends on changes.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import threading
+from collections.abc import Callable, Iterable, Iterator, Mapping
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from psygnal import Signal, SignalGroup
+
+from workbench.history import Command, History, payload_nbytes
+from workbench.polygons import Polygons
+
+
+class ModelError(ValueError):
+    """An edit or construction argument the model cannot accept."""
+
+
+def _readonly(a: NDArray[Any]) -> NDArray[Any]:
+    a.setflags(write=False)
+    return a
+
+
+@dataclass(frozen=True, eq=False)
+class BlendShape:
+    """A named blendshape stored as a per-vertex displacement from the neutral.
+
+    Parameters
+    ----------
+    name : str
+        Unique within a model.
+    delta : (n, 3) float
+        Displacement of every vertex at weight 1 (stored float32, read-only).
+    slider_min, slider_max : float
+        Allowed weight range (Blender's "Range Min/Max"); weights are clamped to it.
+    mute : bool
+        A muted shape contributes nothing but keeps its weight.
+    vertex_mask : (n,) float or None
+        Optional per-vertex factor in [0, 1] (Blender's shape-key vertex group).
+    """
+
+    name: str
+    delta: NDArray[np.float32]
+    slider_min: float = 0.0
+    slider_max: float = 1.0
+    mute: bool = False
+    vertex_mask: NDArray[np.float32] | None = None
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or not self.name.strip():
+            raise ModelError(f"blendshape name must be a non-empty string, got {self.name!r}")
+        d = np.asarray(self.delta)
+        if d.ndim != 2 or d.shape[1] != 3:
+            raise ModelError(f"blendshape {self.name!r}: delta must be (n, 3), got {d.shape}")
+        d32 = d if (d.dtype == np.float32 and not d.flags.writeable) else d.astype(np.float32)
+        if not np.isfinite(d32).all():
+            row = int(np.flatnonzero(~np.isfinite(d32).all(axis=1))[0])
+            raise ModelError(f"blendshape {self.name!r}: delta has NaN/inf at vertex {row}")
+        object.__setattr__(self, "delta", _readonly(d32))
+        lo, hi = float(self.slider_min), float(self.slider_max)
+        if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+            raise ModelError(
+                f"blendshape {self.name!r}: need finite slider_min < slider_max, got {lo}, {hi}"
+            )
+        object.__setattr__(self, "slider_min", lo)
+        object.__setattr__(self, "slider_max", hi)
+        object.__setattr__(self, "mute", bool(self.mute))
+        if self.vertex_mask is not None:
+            m = np.asarray(self.vertex_mask, dtype=np.float32).reshape(-1)
+            if m.shape[0] != d32.shape[0]:
+                raise ModelError(
+                    f"blendshape {self.name!r}: vertex_mask has {m.shape[0]} values, "
+                    f"expected one per vertex ({d32.shape[0]})"
+                )
+            if not (np.isfinite(m).all() and m.min() >= 0.0 and m.max() <= 1.0):
+                raise ModelError(f"blendshape {self.name!r}: vertex_mask values must be in [0, 1]")
+            object.__setattr__(self, "vertex_mask", _readonly(m))
+
+    def replace(self, **changes: Any) -> BlendShape:
+        """A copy with some fields changed (arrays are shared, not copied)."""
+        return dataclasses.replace(self, **changes)
+
+    def effective_delta(self) -> NDArray[np.float32]:
+        """(n, 3) float32: the delta with the vertex mask applied."""
+        if self.vertex_mask is None:
+            return self.delta
+        return self.delta * self.vertex_mask[:, None]
+
+
+@dataclass(frozen=True)
+class ModelMetadata:
+    """Where the model came from and how to read its coordinates.
+
+    ``units`` is a length unit name ("m", "cm", "dm", "mm"); ``up_axis`` and
+    ``front_axis`` are signed axis names ("+y", "+z"): the face looks toward
+    ``front_axis``. "Left" in shape names always means the subject's left.
+    """
+
+    name: str = ""
+    units: str = "m"
+    up_axis: str = "+y"
+    front_axis: str = "+z"
+    provenance: tuple[Mapping[str, Any], ...] = ()
+
+    def __post_init__(self) -> None:
+        if self.units not in UNIT_TO_METRES:
+            raise ModelError(f"metadata.units must be one of {sorted(UNIT_TO_METRES)}, got {self.units!r}")
+        for ax_name in ("up_axis", "front_axis"):
+            ax = getattr(self, ax_name)
+            if ax not in AXES:
+                raise ModelError(f"metadata.{ax_name} must be one of {AXES}, got {ax!r}")
+        object.__setattr__(
+            self, "provenance", tuple(MappingProxyType(dict(p)) for p in self.provenance)
+        )
+
+    @property
+    def metres_per_unit(self) -> float:
+        return UNIT_TO_METRES[self.units]
+
+    def with_provenance(self, entry: Mapping[str, Any]) -> ModelMetadata:
+        return dataclasses.replace(self, provenance=(*self.provenance, entry))
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "name": self.name,
+            "units": self.units,
+            "up_axis": self.up_axis,
+            "front_axis": self.front_axis,
+            "provenance": [dict(p) for p in self.provenance],
+        }
+
+
+UNIT_TO_METRES = {"m": 1.0, "dm": 0.1, "cm": 0.01, "mm": 0.001}
+AXES = ("+x", "-x", "+y", "-y", "+z", "-z")
+
+
+@dataclass(frozen=True, eq=False)
+class HandleSet:
+    """Handle vertices for shell editing (filled by the handle-editing tool).
+
+    Parameters
+    ----------
+    vertices : (h,) int
+        Vertex ids of the handles, in handle order.
+    offsets : (h, 3) float
+        Displacement of each handle on top of the current blend (the edit layer).
+    names : tuple of str
+        One label per handle.
+    mirror : (h,) int
+        Index of the mirror handle, or -1.
+    """
+
+    vertices: NDArray[np.int32] = field(default_factory=lambda: np.zeros(0, np.int32))
+    offsets: NDArray[np.float32] = field(default_factory=lambda: np.zeros((0, 3), np.float32))
+    names: tuple[str, ...] = ()
+    mirror: NDArray[np.int32] = field(default_factory=lambda: np.zeros(0, np.int32))
+
+    def __post_init__(self) -> None:
+        v = np.asarray(self.vertices, dtype=np.int32).reshape(-1)
+        o = np.asarray(self.offsets, dtype=np.float32).reshape(-1, 3)
+        mi = np.asarray(self.mirror, dtype=np.int32).reshape(-1)
+        if mi.size == 0:
+            mi = np.full(v.size, -1, np.int32)
+        if o.shape[0] == 0:
+            o = np.zeros((v.size, 3), np.float32)
+        names = tuple(self.names) or tuple(f"h{i}" for i in range(v.size))
+        if not (o.shape[0] == v.size == mi.size == len(names)):
+            raise ModelError(
+                "handles: vertices, offsets, names and mirror need one entry per handle, got "
+                f"{v.size}, {o.shape[0]}, {len(names)}, {mi.size}"
+            )
+        for name, arr in (("vertices", v), ("offsets", o), ("mirror", mi)):
+            object.__setattr__(self, name, _readonly(arr))
+        object.__setattr__(self, "names", names)
+
+    def __len__(self) -> int:
+        return int(self.vertices.size)
+
+
+class FaceModelEvents(SignalGroup):
+    """One signal per field; ``*_changing`` fire during interactions only."""
+
+    weights = Signal(dict)
+    weights_changing = Signal(dict)
+    shapes = Signal()
+    vertices = Signal()
+    handles = Signal()
+    handles_changing = Signal()
+    regions = Signal()
+    paint_layers = Signal()
+    paint_layers_changing = Signal()
+    tracks = Signal()
+    metadata = Signal()
+    deformed = Signal(bool)
+    history = Signal()
+
+
+#: Fields stored in the generic slots, and whether they change ``evaluate()``.
+_SLOTS: dict[str, bool] = {"handles": True, "regions": False, "paint_layers": True, "tracks": False}
+
+
+@dataclass
+class _Interaction:
+    label: str
+    weights_before: dict[str, float] = field(default_factory=dict)
+    slots_before: dict[str, Any] = field(default_factory=dict)
+
+
+class FaceModel:
+    """Neutral mesh, blendshapes, weights and editing layers, with undo and events.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float
+        Neutral vertex positions.
+    faces : (m, 3) int
+        Triangles. If ``polygons`` is given, pass ``faces=None`` to triangulate them.
+    shapes : iterable of BlendShape
+        Blendshapes, names unique, deltas (n, 3).
+    polygons : Polygons, optional
+        Original faces (quads) kept for export; defaults to the triangles.
+    component_labels : (n,) int, optional
+        Connected-component label of each vertex (eyes, teeth, skin...).
+    component_names : list of str, optional
+        One name per label value.
+    metadata : ModelMetadata, optional
+    weights : mapping, optional
+        Initial weights (default 0 for every shape).
+    handles : HandleSet, optional
+        Initial handle set (default: none).
+    """
+
+    def __init__(
+        self,
+        vertices: ArrayLike,
+        faces: ArrayLike | None,
+        shapes: Iterable[BlendShape] = (),
+        *,
+        polygons: Polygons | None = None,
+        component_labels: ArrayLike | None = None,
+        component_names: Iterable[str] | None = None,
+        metadata: ModelMetadata | None = None,
+        weights: Mapping[str, float] | None = None,
+        handles: HandleSet | None = None,
+    ) -> None:
+        V = np.array(vertices, dtype=np.float64)
+        if V.ndim != 2 or V.shape[1] != 3 or V.shape[0] == 0:
+            raise ModelError(f"vertices must be a non-empty (n, 3) array, got shape {V.shape}")
+        if not np.isfinite(V).all():
+            row = int(np.flatnonzero(~np.isfinite(V).all(axis=1))[0])
+            raise ModelError(f"vertices: NaN/inf coordinate at vertex {row}")
+        n = V.shape[0]
+        if faces is None:
+            if polygons is None:
+                raise ModelError("give faces, polygons, or both")
+            F, _ = polygons.triangulate()
+        else:
+            F = np.array(faces, dtype=np.int64)
+            if F.ndim != 2 or F.shape[1] != 3:
+                raise ModelError(f"faces must be (m, 3), got shape {F.shape}")
+        if F.size and (F.min() < 0 or F.max() >= n):
+            bad = int(np.flatnonzero((F < 0).any(1) | (F >= n).any(1))[0])
+            raise ModelError(f"faces: face {bad} has a vertex index outside 0..{n - 1}")
+        if polygons is not None and polygons.indices.size and polygons.indices.max() >= n:
+            raise ModelError(f"polygons: vertex index outside 0..{n - 1}")
+        self._vertices = _readonly(V)
+        self._vertices32 = _readonly(V.astype(np.float32))
+        self._faces = _readonly(F.astype(np.int32))
+        self._polygons = polygons if polygons is not None else Polygons.from_triangles(self._faces)
+
+        if component_labels is None:
+            labels = np.zeros(n, np.int32)
+            names = list(component_names) if component_names is not None else ["mesh"]
+        else:
+            labels = np.asarray(component_labels, dtype=np.int32).reshape(-1)
+            if labels.shape[0] != n:
+                raise ModelError(f"component_labels has {labels.shape[0]} entries, expected {n}")
+            names = (
+                list(component_names)
+                if component_names is not None
+                else [f"component_{i}" for i in range(int(labels.max()) + 1)]
+            )
+            if labels.min() < 0 or labels.max() >= len(names):
+                raise ModelError("component_labels must index into component_names")
+        self._component_labels = _readonly(labels)
+        self._component_names = tuple(names)
+        self._metadata = metadata or ModelMetadata()
+
+        self._lock = threading.RLock()
+        self.events = FaceModelEvents()
+        self.history = History()
+        self._interaction: _Interaction | None = None
+        self._evaluated: NDArray[np.float32] | None = None
+        self._layer_providers: dict[str, Callable[[FaceModel], NDArray[np.float32] | None]] = {}
+
+        self._shapes: tuple[BlendShape, ...] = ()
+        self._stack: NDArray[np.float32] = np.zeros((0, n, 3), np.float32)
+        self._effective: NDArray[np.float32] = self._stack
+        self._index: dict[str, int] = {}
+        self._weights: dict[str, float] = {}
+        self._install_shapes(tuple(shapes), {})
+        if weights:
+            unknown = set(weights) - set(self._index)
+            if unknown:
+                raise ModelError(f"weights: unknown shape names {sorted(unknown)}")
+            for k, v in weights.items():
+                self._weights[k] = self._clamp(k, v)
+        handles = handles if handles is not None else HandleSet()
+        if len(handles) and (handles.vertices.min() < 0 or handles.vertices.max() >= n):
+            raise ModelError(f"handles: vertex ids must be in 0..{n - 1}")
+        self._slots: dict[str, Any] = {
+            "handles": handles,
+            "regions": None,
+            "paint_layers": MappingProxyType({}),
+            "tracks": MappingProxyType({}),
+        }
+
+    # ------------------------------------------------------------------ basics
+    def __repr__(self) -> str:
+        return (
+            f"<FaceModel {self._metadata.name or 'unnamed'}: {self.n_vertices} vertices, "
+            f"{len(self._faces)} triangles, {len(self._shapes)} shapes, units={self._metadata.units}>"
+        )
+
+    @property
+    def lock(self) -> threading.RLock:
+        """Re-entrant lock held by every mutation; take it to read a consistent state."""
+        return self._lock
+
+    @property
+    def n_vertices(self) -> int:
+        return int(self._vertices.shape[0])
+
+    @property
+    def vertices(self) -> NDArray[np.float64]:
+        """(n, 3) float64, read-only: the neutral positions."""
+        return self._vertices
+
+    @property
+    def faces(self) -> NDArray[np.int32]:
+        """(m, 3) int32, read-only: triangles (counter-clockwise seen from outside)."""
+        return self._faces
+
+    @property
+    def polygons(self) -> Polygons:
+        """The original polygon faces (quads) the triangles came from."""
+        return self._polygons
+
+    @property
+    def component_labels(self) -> NDArray[np.int32]:
+        """(n,) int32: component of each vertex, indexing :attr:`component_names`."""
+        return self._component_labels
+
+    @property
+    def component_names(self) -> list[str]:
+        return list(self._component_names)
+
+    def component_vertices(self, name: str) -> NDArray[np.intp]:
+        """Vertex ids of the named component."""
+        if name not in self._component_names:
+            raise ModelError(f"unknown component {name!r}; have {list(self._component_names)}")
+        return np.flatnonzero(self._component_labels == self._component_names.index(name))
+
+    @property
+    def metadata(self) -> ModelMetadata:
+        return self._metadata
+
+    # ------------------------------------------------------------------ shapes
+    @property
+    def shapes(self) -> tuple[BlendShape, ...]:
+        return self._shapes
+
+    @property
+    def shape_names(self) -> list[str]:
+        return [s.name for s in self._shapes]
+
+    def shape(self, name: str) -> BlendShape:
+        return self._shapes[self._shape_index(name)]
+
+    @property
+    def deltas(self) -> NDArray[np.float32]:
+        """(k, n, 3) float32, read-only: every shape's delta (masks not applied)."""
+        return self._stack
+
+    @property
+    def arkit_names(self) -> dict[str, str | None]:
+        """Shape name → canonical ARKit-52 name (or None when not recognised)."""
+        from workbench.arkit import canonical_arkit_name
+
+        return {s.name: canonical_arkit_name(s.name) for s in self._shapes}
+
+    def _shape_index(self, name: str) -> int:
+        try:
+            return self._index[name]
+        except KeyError:
+            raise KeyError(
+                f"no blendshape named {name!r}; the model has {len(self._shapes)} shapes"
+                + (f", e.g. {self.shape_names[:5]}" if self._shapes else "")
+            ) from None
+
+    def _install_shapes(self, shapes: tuple[BlendShape, ...], weights: Mapping[str, float]) -> None:
+        """Replace the shape list; rebuild the stacked delta matrix; no events, no history."""
+        n = self.n_vertices
+        names = [s.name for s in shapes]
+        seen: set[str] = set()
+        for s in shapes:
+            if not isinstance(s, BlendShape):
+                raise ModelError(f"shapes must be BlendShape objects, got {type(s).__name__}")
+            if s.delta.shape[0] != n:
+                raise ModelError(
+                    f"blendshape {s.name!r} has {s.delta.shape[0]} vertices, the neutral has {n}"
+                )
+            if s.name in seen:
+                raise ModelError(f"duplicate blendshape name {s.name!r}")
+            seen.add(s.name)
+        stack = np.empty((len(shapes), n, 3), np.float32)
+        for i, s in enumerate(shapes):
+            stack[i] = s.delta
+        _readonly(stack)
+        # Shapes share the stacked memory so the model holds each delta once.
+        self._shapes = tuple(s.replace(delta=stack[i]) for i, s in enumerate(shapes))
+        self._stack = stack
+        if any(s.vertex_mask is not None for s in shapes):
+            eff = stack.copy()
+            for i, s in enumerate(shapes):
+                if s.vertex_mask is not None:
+                    eff[i] *= s.vertex_mask[:, None]
+            self._effective = _readonly(eff)
+        else:
+            self._effective = stack
+        self._index = {nm: i for i, nm in enumerate(names)}
+        self._weights = {nm: float(weights.get(nm, 0.0)) for nm in names}
+        self._evaluated = None
+
+    def _apply_shapes(self, shapes: tuple[BlendShape, ...], weights: Mapping[str, float]) -> None:
+        with self._lock:
+            self._install_shapes(shapes, weights)
+            self.events.shapes.emit()
+            self.events.weights.emit(dict(self._weights))
+            self.events.deformed.emit(True)
+
+    def _edit_shapes(
+        self, label: str, shapes: tuple[BlendShape, ...], weights: Mapping[str, float]
+    ) -> None:
+        with self._lock:
+            if self._interaction is not None:
+                raise ModelError(f"{label}: shape list edits are not allowed inside an interaction")
+            old_shapes, old_weights = self._shapes, dict(self._weights)
+            new_weights = dict(weights)
+            self._apply_shapes(shapes, new_weights)
+            new_shapes = self._shapes
+            old_names = {o.name for o in old_shapes}
+            # added deltas are new memory; the rest is shared with the live model
+            added = [s.delta for s in new_shapes if s.name not in old_names]
+            nbytes = payload_nbytes(added) + 64 * len(new_shapes)
+            self._push(
+                Command(
+                    label,
+                    lambda: self._apply_shapes(old_shapes, old_weights),
+                    lambda: self._apply_shapes(new_shapes, new_weights),
+                    nbytes,
+                )
+            )
+
+    def add_shape(
+        self,
+        name: str,
+        delta: ArrayLike,
+        *,
+        slider_min: float = 0.0,
+        slider_max: float = 1.0,
+        mute: bool = False,
+        vertex_mask: ArrayLike | None = None,
+        weight: float = 0.0,
+    ) -> BlendShape:
+        """Add a blendshape (undoable). ``delta`` is a displacement, not an absolute shape."""
+        shape = BlendShape(
+            name,
+            np.asarray(delta),
+            slider_min,
+            slider_max,
+            mute,
+            None if vertex_mask is None else np.asarray(vertex_mask),
+        )
+        with self._lock:
+            if name in self._index:
+                raise ModelError(f"a blendshape named {name!r} already exists")
+            weights = dict(self._weights)
+            weights[name] = min(max(float(weight), shape.slider_min), shape.slider_max)
+            self._edit_shapes(f"Add shape {name}", (*self._shapes, shape), weights)
+            return self.shape(name)
+
+    def remove_shape(self, name: str) -> None:
+        """Remove a blendshape (undoable)."""
+        with self._lock:
+            i = self._shape_index(name)
+            shapes = self._shapes[:i] + self._shapes[i + 1 :]
+            weights = {k: v for k, v in self._weights.items() if k != name}
+            self._edit_shapes(f"Remove shape {name}", shapes, weights)
+
+    def _edit_shape_props(self, name: str, label: str, /, **changes: Any) -> None:
+        with self._lock:
+            i = self._shape_index(name)
+            new = self._shapes[i].replace(**changes)
+            shapes = (*self._shapes[:i], new, *self._shapes[i + 1 :])
+            weights = dict(self._weights)
+            if "name" in changes:
+                if changes["name"] in self._index and changes["name"] != name:
+                    raise ModelError(f"a blendshape named {changes['name']!r} already exists")
+                weights = {(changes["name"] if k == name else k): v for k, v in weights.items()}
+            nm = new.name
+            weights[nm] = min(max(weights[nm], new.slider_min), new.slider_max)
+            self._edit_shapes(label, shapes, weights)
+
+    def rename_shape(self, name: str, new_name: str) -> None:
+        self._edit_shape_props(name, f"Rename {name} to {new_name}", name=new_name)
+
+    def set_shape_mute(self, name: str, mute: bool) -> None:
+        self._edit_shape_props(name, f"{'Mute' if mute else 'Unmute'} {name}", mute=bool(mute))
+
+    def set_shape_range(self, name: str, slider_min: float, slider_max: float) -> None:
+        self._edit_shape_props(
+            name, f"Range of {name}", slider_min=slider_min, slider_max=slider_max
+        )
+
+    def set_shape_mask(self, name: str, vertex_mask: ArrayLike | None) -> None:
+        self._edit_shape_props(
+            name,
+            f"Mask {name}",
+            vertex_mask=None if vertex_mask is None else np.asarray(vertex_mask),
+        )
+
+    # ----------------------------------------------------------------- weights
+    @property
+    def weights(self) -> Mapping[str, float]:
+        """Read-only mapping shape name → current weight."""
+        return MappingProxyType(dict(self._weights))
+
+    def weight_vector(self) -> NDArray[np.float32]:
+        """(k,) float32 weights in shape order, muted shapes as 0."""
+        return np.array(
+            [0.0 if s.mute else self._weights[s.name] for s in self._shapes], np.float32
+        )
+
+    def _clamp(self, name: str, value: float) -> float:
+        s = self._shapes[self._shape_index(name)]
+        v = float(value)
+        if not math.isfinite(v):
+            raise ModelError(f"weight for {name!r} must be finite, got {value!r}")
+        return min(max(v, s.slider_min), s.slider_max)
+
+    def _apply_weights(self, values: Mapping[str, float], final: bool) -> None:
+        with self._lock:
+            self._weights.update(values)
+            self._evaluated = None
+            if final:
+                self.events.weights.emit(dict(values))
+            else:
+                self.events.weights_changing.emit(dict(values))
+            self.events.deformed.emit(final)
+
+    def set_weight(self, name: str, value: float) -> None:
+        """Set one weight (clamped to the shape's slider range); undoable."""
+        self.set_weights({name: value}, label=f"Set {name}")
+
+    def set_weights(self, values: Mapping[str, float], label: str | None = None) -> None:
+        """Set several weights as one undoable edit."""
+        with self._lock:
+            new = {k: self._clamp(k, v) for k, v in values.items()}
+            old = {k: self._weights[k] for k in new}
+            changed = {k: v for k, v in new.items() if v != old[k]}
+            if not changed:
+                return
+            inter = self._interaction
+            if inter is not None:
+                for k in changed:
+                    inter.weights_before.setdefault(k, old[k])
+                self._apply_weights(changed, final=False)
+                return
+            before = {k: old[k] for k in changed}
+            self._apply_weights(changed, final=True)
+            self._push(
+                Command(
+                    label or f"Set {len(changed)} weights",
+                    lambda: self._apply_weights(before, True),
+                    lambda: self._apply_weights(changed, True),
+                    payload_nbytes([before, changed]),
+                )
+            )
+
+    def reset_weights(self) -> None:
+        """Set every weight to 0 (clamped into range) as one undoable edit."""
+        self.set_weights({s.name: 0.0 for s in self._shapes}, label="Reset weights")
+
+    # ------------------------------------------------------------------- slots
+    @property
+    def handles(self) -> HandleSet:
+        """Handle vertices and their offsets (the handle-editing layer)."""
+        return self._slots["handles"]
+
+    @property
+    def regions(self) -> Any:
+        """Blend regions (None until segmented)."""
+        return self._slots["regions"]
+
+    @property
+    def paint_layers(self) -> Mapping[str, Any]:
+        """Per-expression paint layers (empty until painted)."""
+        return self._slots["paint_layers"]
+
+    @property
+    def tracks(self) -> Mapping[str, Any]:
+        """Keyframe tracks (empty until keyed)."""
+        return self._slots["tracks"]
+
+    def _apply_slot(self, name: str, value: Any, final: bool) -> None:
+        with self._lock:
+            self._slots[name] = value
+            changing = getattr(self.events, f"{name}_changing", None)
+            if final or changing is None:
+                getattr(self.events, name).emit()
+            else:
+                changing.emit()
+            if _SLOTS[name]:
+                self._evaluated = None
+                self.events.deformed.emit(final)
+
+    def set_slot(self, name: str, value: Any, label: str) -> None:
+        """Replace a layer slot (handles, regions, paint_layers, tracks) as one undoable edit.
+
+        Tools call this with immutable values (new objects, not mutated old ones),
+        so undo can keep the old object as it was.
+        """
+        if name not in _SLOTS:
+            raise ModelError(f"unknown slot {name!r}; slots are {sorted(_SLOTS)}")
+        if isinstance(value, dict):
+            value = MappingProxyType(dict(value))
+        with self._lock:
+            old = self._slots[name]
+            if old is value:
+                return
+            inter = self._interaction
+            if inter is not None:
+                inter.slots_before.setdefault(name, old)
+                self._apply_slot(name, value, final=False)
+                return
+            self._apply_slot(name, value, final=True)
+            self._push(
+                Command(
+                    label,
+                    lambda: self._apply_slot(name, old, True),
+                    lambda: self._apply_slot(name, value, True),
+                    payload_nbytes(value),
+                )
+            )
+
+    def set_handles(self, handles: HandleSet, label: str = "Edit handles") -> None:
+        """Replace the handle set (undoable)."""
+        if not isinstance(handles, HandleSet):
+            raise ModelError(f"set_handles expects a HandleSet, got {type(handles).__name__}")
+        if len(handles) and (handles.vertices.min() < 0 or handles.vertices.max() >= self.n_vertices):
+            raise ModelError(f"handles: vertex ids must be in 0..{self.n_vertices - 1}")
+        self.set_slot("handles", handles, label)
+
+    def register_layer(
+        self, name: str, provider: Callable[[FaceModel], NDArray[np.float32] | None]
+    ) -> None:
+        """Add a displacement layer to :meth:`evaluate` (used by later tools).
+
+        ``provider(model)`` returns an (n, 3) float32 displacement or None.
+        """
+        with self._lock:
+            self._layer_providers[name] = provider
+            self._evaluated = None
+
+    # ---------------------------------------------------------------- evaluate
+    def evaluate(self) -> NDArray[np.float32]:
+        """(n, 3) float32, read-only: the current deformed mesh.
+
+        ``neutral + sum_k w_k * delta_k`` (masked, muted shapes skipped) plus any
+        registered editing layers. Cached until a weight, shape or layer changes.
+        """
+        with self._lock:
+            if self._evaluated is None:
+                self._evaluated = _readonly(self._compute())
+            return self._evaluated
+
+    def _compute(self) -> NDArray[np.float32]:
+        out = self._vertices32.copy()
+        flat = out.reshape(-1)
+        k = len(self._shapes)
+        if k:
+            w = self.weight_vector()
+            nz = np.flatnonzero(w)
+            D = self._effective.reshape(k, -1)
+            if 0 < nz.size * 4 <= k:
+                # few active shapes: in-place axpy touches only their rows
+                for i in nz:
+                    flat += w[i] * D[i]
+            elif nz.size:
+                flat += w @ D
+        for provider in self._layer_providers.values():
+            extra = provider(self)
+            if extra is not None:
+                out += extra
+        return out
+
+    # ------------------------------------------------------------ interactions
+    @contextmanager
+    def interaction(self, label: str) -> Iterator[None]:
+        """Group edits (a drag, a scrub) into one undo step.
+
+        Inside, edits emit ``*_changing`` events; on exit one ``changed`` event per
+        touched field is emitted and one undo step is recorded. Nested calls join
+        the outer interaction.
+        """
+        with self._lock:
+            if self._interaction is not None:
+                outer = True
+            else:
+                outer = False
+                self._interaction = _Interaction(label)
+        if outer:
+            yield
+            return
+        try:
+            yield
+        finally:
+            with self._lock:
+                inter = self._interaction
+                self._interaction = None
+                assert inter is not None
+                self._finish_interaction(inter)
+
+    @property
+    def interacting(self) -> bool:
+        return self._interaction is not None
+
+    def _finish_interaction(self, inter: _Interaction) -> None:
+        w_before = {k: v for k, v in inter.weights_before.items() if k in self._weights}
+        w_after = {k: self._weights[k] for k in w_before}
+        w_before = {k: v for k, v in w_before.items() if w_after[k] != v}
+        w_after = {k: w_after[k] for k in w_before}
+        s_before = dict(inter.slots_before)
+        s_after = {k: self._slots[k] for k in s_before}
+        if not w_before and not any(s_before[k] is not s_after[k] for k in s_before):
+            # nothing net changed, but views saw "changing": settle them
+            if inter.weights_before or inter.slots_before:
+                self.events.deformed.emit(True)
+            return
+
+        def apply(weights: dict[str, float], slots: dict[str, Any]) -> None:
+            with self._lock:
+                if weights:
+                    self._weights.update(weights)
+                    self._evaluated = None
+                    self.events.weights.emit(dict(weights))
+                for name, value in slots.items():
+                    self._slots[name] = value
+                    getattr(self.events, name).emit()
+                    if _SLOTS[name]:
+                        self._evaluated = None
+                self.events.deformed.emit(True)
+
+        apply(w_after, s_after)
+        self._push(
+            Command(
+                inter.label,
+                lambda: apply(w_before, s_before),
+                lambda: apply(w_after, s_after),
+                payload_nbytes([w_before, w_after]) + payload_nbytes(list(s_after.values())),
+            )
+        )
+
+    # ------------------------------------------------------------------- undo
+    def _push(self, cmd: Command) -> None:
+        self.history.push(cmd)
+        self.events.history.emit()
+
+    @property
+    def can_undo(self) -> bool:
+        return self.history.can_undo
+
+    @property
+    def can_redo(self) -> bool:
+        return self.history.can_redo
+
+    def undo(self) -> str | None:
+        """Undo the last edit; returns its label, or None if there was nothing to undo."""
+        with self._lock:
+            if self._interaction is not None:
+                raise ModelError("cannot undo during an interaction (finish the drag first)")
+            cmd = self.history.undo()
+            if cmd is not None:
+                self.events.history.emit()
+            return None if cmd is None else cmd.label
+
+    def redo(self) -> str | None:
+        """Redo the last undone edit; returns its label, or None."""
+        with self._lock:
+            if self._interaction is not None:
+                raise ModelError("cannot redo during an interaction (finish the drag first)")
+            cmd = self.history.redo()
+            if cmd is not None:
+                self.events.history.emit()
+            return None if cmd is None else cmd.label
+
+    # --------------------------------------------------------------- file I/O
+    def save(self, path: str | Any) -> None:
+        """Save to a workbench file (``.fwb``): atomic, checksummed; see :mod:`workbench.fileformat`."""
+        from workbench.fileformat import save_model
+
+        save_model(self, path)
+
+    def to_trimesh(self, evaluated: bool = True) -> Any:
+        """A :class:`trimesh.Trimesh` of the current (or neutral) mesh, for analysis and I/O."""
+        import trimesh
+
+        pts = self.evaluate() if evaluated else self._vertices
+        return trimesh.Trimesh(np.asarray(pts, np.float64), self._faces, process=False)
+
+    def set_metadata(self, metadata: ModelMetadata) -> None:
+        """Replace the metadata (not undoable: it describes the data, it does not edit it)."""
+        with self._lock:
+            self._metadata = metadata
+            self.events.metadata.emit()
