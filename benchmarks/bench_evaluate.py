@@ -77,7 +77,7 @@ def bench_resolution(res: str) -> list[str]:
         l_med2, _ = timeit(lambda: load_model(p), repeat=3)
         size = p.stat().st_size / 2**20
     io_row = f"| {res:>5} | {model.n_vertices:>7} | {s_med:8.1f} | {l_med2:8.1f} | {size:7.1f} | {first_load:8.2f} |"
-    return rows + [io_row]
+    return [*rows, io_row]
 
 
 def main() -> None:

@@ -220,3 +220,17 @@ def test_concurrent_set_weight_from_threads_is_consistent(tiny_model: FaceModel)
     expected[[0, 3, 6], 0] -= 0.5
     np.testing.assert_allclose(tiny_model.evaluate(), expected, atol=1e-7)
     assert len(tiny_model.history.undo_labels) == 256  # bounded; oldest dropped
+
+
+def test_history_group_is_one_step_and_rolls_back_on_error(tiny_model: FaceModel) -> None:
+    with tiny_model.history.group("Two edits"):
+        tiny_model.set_weight("up", 0.5)
+        tiny_model.add_shape("x", np.zeros((9, 3)))
+    assert tiny_model.history.undo_labels == ["Two edits"]
+    tiny_model.undo()
+    assert tiny_model.shape_names == ["up", "left"] and tiny_model.weights["up"] == 0.0
+    with pytest.raises(KeyError), tiny_model.history.group("Fails"):
+        tiny_model.set_weight("up", 0.7)
+        tiny_model.set_weight("missing", 1.0)
+    assert tiny_model.weights["up"] == 0.0  # the partial edit was rolled back
+    assert tiny_model.history.undo_labels == []

@@ -13,7 +13,8 @@ from __future__ import annotations
 
 import threading
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -88,6 +89,7 @@ class History:
         self._undo: deque[Command] = deque()
         self._redo: list[Command] = []
         self._lock = threading.RLock()
+        self._group: list[Command] | None = None
 
     @property
     def nbytes(self) -> int:
@@ -114,6 +116,9 @@ class History:
     def push(self, command: Command) -> None:
         """Record an already-applied command; clears the redo stack."""
         with self._lock:
+            if self._group is not None:
+                self._group.append(command)
+                return
             self._undo.append(command)
             self._redo.clear()
             self._trim()
@@ -124,6 +129,28 @@ class History:
         total = self.nbytes
         while len(self._undo) > 1 and total > self.max_bytes:
             total -= self._undo.popleft().nbytes
+
+    @contextmanager
+    def group(self, label: str) -> Iterator[None]:
+        """Record every command pushed inside as one step (undone in reverse order).
+
+        If the body raises, the commands pushed so far are undone and nothing is recorded.
+        """
+        with self._lock:
+            if self._group is not None:  # nested: join the outer group
+                yield
+                return
+            self._group = []
+            try:
+                yield
+            except BaseException:
+                cmds, self._group = self._group, None
+                for c in reversed(cmds):
+                    c.undo()
+                raise
+            cmds, self._group = self._group, None
+            if cmds:
+                self.push(compound(label, cmds))
 
     def undo(self) -> Command | None:
         """Undo the most recent step; returns it, or None when there is nothing to undo."""

@@ -27,6 +27,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from psygnal import Signal, SignalGroup
 
+from workbench.handle_layer import HandleLayer
 from workbench.history import Command, History, payload_nbytes
 from workbench.polygons import Polygons
 
@@ -311,6 +312,8 @@ class FaceModel:
         self._interaction: _Interaction | None = None
         self._evaluated: NDArray[np.float32] | None = None
         self._layer_providers: dict[str, Callable[[FaceModel], NDArray[np.float32] | None]] = {}
+        self._handle_layer = HandleLayer()
+        self._layer_providers["handles"] = self._handle_layer
 
         self._shapes: tuple[BlendShape, ...] = ()
         self._stack: NDArray[np.float32] = np.zeros((0, n, 3), np.float32)
@@ -680,6 +683,127 @@ class FaceModel:
         if len(handles) and (handles.vertices.min() < 0 or handles.vertices.max() >= self.n_vertices):
             raise ModelError(f"handles: vertex ids must be in 0..{self.n_vertices - 1}")
         self.set_slot("handles", handles, label)
+
+    def add_handle(self, vertex: int, name: str | None = None, mirror: int = -1) -> int:
+        """Add a handle at ``vertex`` (undoable); returns its index.
+
+        ``mirror`` is the index of an existing handle that mirrors this one (or -1);
+        the link is made both ways.
+        """
+        with self._lock:
+            h = self.handles
+            v = int(vertex)
+            if not 0 <= v < self.n_vertices:
+                raise ModelError(f"add_handle: vertex must be in 0..{self.n_vertices - 1}, got {vertex}")
+            idx = len(h)
+            mir = np.append(h.mirror, np.int32(mirror))
+            if mirror >= 0:
+                if mirror >= idx:
+                    raise ModelError(f"add_handle: mirror must index an existing handle, got {mirror}")
+                mir[mirror] = idx
+            self.set_handles(
+                HandleSet(
+                    np.append(h.vertices, v),
+                    np.vstack([h.offsets, np.zeros((1, 3), np.float32)]),
+                    (*h.names, name or f"h{idx}"),
+                    mir,
+                ),
+                label=f"Add handle {name or idx}",
+            )
+            return idx
+
+    def remove_handle(self, index: int) -> None:
+        """Remove handle ``index`` (undoable); mirror links to it are cleared."""
+        with self._lock:
+            h = self.handles
+            if not 0 <= index < len(h):
+                raise ModelError(f"remove_handle: index must be in 0..{len(h) - 1}, got {index}")
+            keep = np.arange(len(h)) != index
+            remap = np.cumsum(keep) - 1
+            mir = h.mirror[keep]
+            mir = np.where(mir == index, -1, np.where(mir >= 0, remap[np.maximum(mir, 0)], -1))
+            self.set_handles(
+                HandleSet(
+                    h.vertices[keep],
+                    h.offsets[keep],
+                    tuple(n for i, n in enumerate(h.names) if i != index),
+                    mir,
+                ),
+                label=f"Remove handle {h.names[index]}",
+            )
+
+    def set_handle_offsets(self, offsets: ArrayLike, label: str = "Move handles") -> None:
+        """Set every handle's offset, (h, 3), on top of the blend (undoable)."""
+        with self._lock:
+            h = self.handles
+            o = np.asarray(offsets, dtype=np.float32).reshape(-1, 3)
+            if o.shape[0] != len(h):
+                raise ModelError(f"set_handle_offsets: expected ({len(h)}, 3) offsets, got {o.shape}")
+            if not np.isfinite(o).all():
+                raise ModelError("set_handle_offsets: offsets must be finite")
+            self.set_slot("handles", dataclasses.replace(h, offsets=o), label)
+
+    def move_handle(self, index: int, offset: ArrayLike, *, symmetric: bool = False) -> None:
+        """Set one handle's offset (3,); with ``symmetric`` its mirror gets the x-reflected offset.
+
+        The reflection assumes the face is symmetric about the plane x = 0 of
+        model space (true for the sample head). Call inside ``model.interaction``
+        while dragging so the drag is one undo step.
+        """
+        with self._lock:
+            h = self.handles
+            if not 0 <= index < len(h):
+                raise ModelError(f"move_handle: index must be in 0..{len(h) - 1}, got {index}")
+            o = h.offsets.copy()
+            o[index] = np.asarray(offset, dtype=np.float32).reshape(3)
+            m = int(h.mirror[index])
+            if symmetric and m >= 0:
+                o[m] = o[index] * np.array([-1.0, 1.0, 1.0], np.float32)
+            self.set_handle_offsets(o, label=f"Move handle {h.names[index]}")
+
+    def reset_handle_offsets(self) -> None:
+        """Zero every handle offset (undoable)."""
+        self.set_handle_offsets(np.zeros((len(self.handles), 3)), label="Reset handles")
+
+    def handle_displacement(self) -> NDArray[np.float32]:
+        """(n, 3) float32: the displacement the handle layer adds (a copy)."""
+        with self._lock:
+            d = self._handle_layer(self)
+            return np.zeros((self.n_vertices, 3), np.float32) if d is None else d.copy()
+
+    @property
+    def shell_stiffness(self) -> tuple[float, float]:
+        """``(k_s, k_b)`` of the handle layer's thin-shell energy."""
+        return self._handle_layer.k_s, self._handle_layer.k_b
+
+    def set_shell_stiffness(self, k_s: float, k_b: float) -> None:
+        """Change the stiffness of the handle layer (rebuilds its basis on next evaluation)."""
+        if k_s < 0 or k_b < 0 or (k_s == 0 and k_b == 0):
+            raise ModelError(f"need k_s >= 0, k_b >= 0, not both zero; got {k_s}, {k_b}")
+        with self._lock:
+            self._handle_layer.k_s, self._handle_layer.k_b = float(k_s), float(k_b)
+            self._evaluated = None
+            self.events.deformed.emit(True)
+
+    def set_handle_progress(self, progress: Callable[[float, str], None] | None) -> None:
+        """Callback ``progress(fraction, message)`` for long basis precomputes (a progress bar)."""
+        self._handle_layer.progress = progress
+
+    def bake_handles_to_shape(self, name: str) -> BlendShape:
+        """Turn the handle layer into a new blendshape ``name`` at weight 1, and zero the offsets.
+
+        One undo step. The new shape's delta is the handle layer's displacement,
+        so the face looks the same before and after.
+        """
+        with self._lock:
+            if self._interaction is not None:
+                raise ModelError("bake_handles_to_shape: finish the drag first")
+            delta = self.handle_displacement()
+            with self.history.group(f"Bake handles to {name}"):
+                self.add_shape(name, delta, weight=1.0)
+                self.reset_handle_offsets()
+            self.events.history.emit()
+            return self.shape(name)
 
     def register_layer(
         self, name: str, provider: Callable[[FaceModel], NDArray[np.float32] | None]

@@ -31,6 +31,14 @@ def _vf(V: ArrayLike, F: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.int
     return v, f
 
 
+def _full_size(A: sp.spmatrix, n: int) -> sp.csr_matrix:
+    """libigl sizes some operators by the largest face index; pad to all n vertices."""
+    A = sp.csr_matrix(A)
+    if A.shape[0] < n:
+        A.resize((n, n))
+    return A
+
+
 def cotangent_laplacian(V: ArrayLike, F: ArrayLike) -> sp.csr_matrix:
     """Cotangent Laplace–Beltrami matrix (negative semi-definite).
 
@@ -44,13 +52,13 @@ def cotangent_laplacian(V: ArrayLike, F: ArrayLike) -> sp.csr_matrix:
     L : (n, n) sparse CSR float64
     """
     v, f = _vf(V, F)
-    return sp.csr_matrix(igl.cotmatrix(v, f))
+    return _full_size(igl.cotmatrix(v, f), v.shape[0])
 
 
 def mass_matrix(V: ArrayLike, F: ArrayLike) -> sp.csr_matrix:
     """Diagonal Voronoi-hybrid mass matrix, (n, n) sparse CSR float64."""
     v, f = _vf(V, F)
-    return sp.csr_matrix(igl.massmatrix(v, f, igl.MASSMATRIX_TYPE_VORONOI))
+    return _full_size(igl.massmatrix(v, f, igl.MASSMATRIX_TYPE_VORONOI), v.shape[0])
 
 
 def bilaplacian(L: sp.spmatrix, M: sp.spmatrix) -> sp.csr_matrix:

@@ -1,0 +1,172 @@
+"""Linear thin-shell handle editing (Bickel et al. 2008, §4): identities and hand-checked cases."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+import trimesh
+
+from workbench.shell import ShellDeformer, shell_system_matrix
+from workbench.sparse_cholesky import SparseSPDSolver, cholmod_available
+
+
+def _disk(n: int = 14) -> tuple[np.ndarray, np.ndarray]:
+    """A gently curved open patch (one boundary loop)."""
+    xs, ys = np.meshgrid(np.linspace(-1, 1, n), np.linspace(-1, 1, n))
+    V = np.stack([xs.ravel(), ys.ravel(), 0.2 * (xs.ravel() ** 2 + ys.ravel() ** 2)], 1)
+    F = []
+    for j in range(n - 1):
+        for i in range(n - 1):
+            a = j * n + i
+            F += [[a, a + 1, a + n + 1], [a, a + n + 1, a + n]]
+    return V, np.array(F)
+
+
+def _interior(V: np.ndarray, n: int = 14) -> list[int]:
+    c = n // 2
+    return [c * n + c, (c - 3) * n + c - 3, (c + 3) * n + c + 2, c * n + 2]
+
+
+def test_handles_are_interpolated_exactly() -> None:
+    V, F = _disk()
+    H = _interior(V)
+    d = ShellDeformer(V, F, H)
+    P = V[H] + np.array([[0, 0, 0.3], [0.1, 0, 0], [0, -0.2, 0.1], [0, 0, -0.1]])
+    out = d.deform(P)
+    np.testing.assert_allclose(out[H], P, atol=1e-6)
+
+
+def test_basis_equals_direct_sparse_solve_and_minimizes_energy() -> None:
+    V, F = _disk()
+    H = _interior(V)
+    d = ShellDeformer(V, F, H, k_s=0.5, k_b=3.0, pin_boundary=False)
+    rng = np.random.default_rng(1)
+    uH = rng.normal(scale=0.1, size=(len(H), 3))
+    u = d.displacement(uH).astype(np.float64)
+    A = shell_system_matrix(V, F, 0.5, 3.0).tocsr()
+    free = np.setdiff1d(np.arange(len(V)), H)
+    direct = np.zeros_like(u)
+    direct[H] = uH
+    direct[free] = spla.spsolve(A[free][:, free].tocsc(), -A[free][:, H] @ uH)
+    np.testing.assert_allclose(u, direct, atol=1e-5)
+    # stationarity at free vertices, and any change of the free vertices raises the energy
+    np.testing.assert_allclose((A @ u)[free], 0.0, atol=1e-4)
+    energy = lambda x: float(np.einsum("ic,ic->", x, A @ x))  # noqa: E731
+    for _ in range(5):
+        pert = np.zeros_like(u)
+        pert[free] = rng.normal(scale=1e-2, size=(free.size, 3))
+        assert energy(u + pert) > energy(u)
+
+
+def test_rigid_translation_when_stretching_is_off() -> None:
+    V, F = _disk()
+    H = _interior(V)
+    d = ShellDeformer(V, F, H, k_s=0.0, k_b=1.0, pin_boundary=False)
+    t = np.array([0.3, -0.2, 0.5])
+    np.testing.assert_allclose(d.deform(V[H] + t), V + t, atol=1e-5)
+
+
+def test_boundary_is_pinned_by_default_and_a_boundary_handle_wins() -> None:
+    V, F = _disk()
+    loop = trimesh.Trimesh(V, F, process=False).outline().entities[0].points
+    boundary = np.unique(loop)
+    H = [*_interior(V), int(boundary[0])]
+    d = ShellDeformer(V, F, H)
+    P = V[H] + 0.2
+    out = d.deform(P)
+    others = np.setdiff1d(boundary, H)
+    np.testing.assert_allclose(out[others], V[others], atol=1e-6)
+    np.testing.assert_allclose(out[H], P, atol=1e-6)
+
+
+def test_rank_one_update_matches_full_product() -> None:
+    V, F = _disk()
+    H = _interior(V)
+    d = ShellDeformer(V, F, H)
+    rng = np.random.default_rng(2)
+    uH = rng.normal(scale=0.1, size=(len(H), 3))
+    d.reset(uH)
+    uH[2] = [0.05, -0.3, 0.2]
+    d.update(2, uH[2])
+    np.testing.assert_allclose(d.current_displacement, d.displacement(uH), atol=1e-6)
+
+
+def test_duplicate_handles_share_a_column_and_average() -> None:
+    V, F = _disk()
+    H = _interior(V)
+    d = ShellDeformer(V, F, [*H, H[0]])
+    assert d.basis_.shape[1] == len(H)
+    P = np.vstack([V[H], V[H[0]] + [0, 0, 0.4]])
+    P[0] += [0, 0, 0.2]
+    out = d.deform(P)
+    np.testing.assert_allclose(out[H[0]], V[H[0]] + [0, 0, 0.3], atol=1e-6)
+
+
+def test_components_without_handles_follow_their_policy() -> None:
+    V, F = _disk()
+    # three little triangles floating in front of the patch
+    extra_V = np.array([[0, 0, 0.5], [0.1, 0, 0.5], [0, 0.1, 0.5]], float)
+    comps = []
+    for shift in (0.0, 0.3, 0.6):
+        comps.append(extra_V + np.array([shift, 0.0, 0.0]))
+    V2 = np.vstack([V, *comps])
+    n0 = len(V)
+    F2 = np.vstack([F, *[np.array([[0, 1, 2]]) + n0 + 3 * i for i in range(3)]])
+    labels = np.concatenate([np.zeros(n0, int), np.repeat([1, 2, 3], 3)])
+    names = ["skin", "eye_left", "eyelashes_left", "tongue"]
+    H = _interior(V)
+    d = ShellDeformer(V2, F2, H, component_labels=labels, component_names=names)
+    assert d.policies_ == {"eye_left": "fixed", "eyelashes_left": "follow", "tongue": "rigid"}
+    P = V[H] + [0, 0, 0.25]
+    out = d.deform(P).astype(float)
+    eye = slice(n0, n0 + 3)
+    lashes = slice(n0 + 3, n0 + 6)
+    tongue = slice(n0 + 6, n0 + 9)
+    np.testing.assert_array_equal(out[eye], V2[eye].astype(np.float32))
+    disp_lashes = out[lashes] - V2[lashes]
+    disp_tongue = out[tongue] - V2[tongue]
+    assert np.all(disp_lashes[:, 2] > 0)  # rides on the skin below it
+    np.testing.assert_allclose(disp_tongue, disp_tongue[[0]].repeat(3, 0), atol=1e-7)  # rigid
+    assert disp_tongue[0, 2] > 0
+    assert np.isfinite(out).all()
+
+
+@pytest.mark.skipif(not cholmod_available(), reason="CHOLMOD (scikit-sparse) is not installed")
+def test_cholmod_and_superlu_agree() -> None:
+    V, F = _disk()
+    H = _interior(V)
+    a = ShellDeformer(V, F, H, backend="cholmod")
+    b = ShellDeformer(V, F, H, backend="superlu")
+    assert a.backend_ == "cholmod" and b.backend_ == "superlu"
+    np.testing.assert_allclose(a.basis_, b.basis_, atol=1e-6)
+
+
+def test_solver_rejects_singular_matrix() -> None:
+    A = sp.csc_matrix(np.array([[1.0, 1.0], [1.0, 1.0]]))
+    with pytest.raises(np.linalg.LinAlgError):
+        SparseSPDSolver(A, "superlu")
+
+
+def test_bad_arguments_are_named() -> None:
+    V, F = _disk()
+    with pytest.raises(ValueError, match="handles: need at least one"):
+        ShellDeformer(V, F, [])
+    with pytest.raises(ValueError, match=r"handles: vertex ids must be in 0\.\.195"):
+        ShellDeformer(V, F, [1000])
+    with pytest.raises(ValueError, match="k_s >= 0"):
+        ShellDeformer(V, F, [1], k_s=0, k_b=0)
+    d = ShellDeformer(V, F, [1, 2])
+    with pytest.raises(ValueError, match="expected 2 handle positions"):
+        d.deform(np.zeros((3, 3)))
+
+
+def test_fast_solver_is_installed_where_expected() -> None:
+    """The full test environment must have CHOLMOD; the core-only one runs on SuperLU."""
+    import os
+
+    if os.environ.get("WORKBENCH_EXPECT_CHOLMOD") == "1":
+        assert cholmod_available(), "scikit-sparse/CHOLMOD missing: check .ci/workbench's install"
+    d = ShellDeformer(*_disk(), [5, 50])
+    assert d.backend_ == ("cholmod" if cholmod_available() else "superlu")

@@ -1,0 +1,221 @@
+"""Expression gallery: a grid of blendshape thumbnails to pick from.
+
+Each blendshape is shown as a small offscreen render (see
+:func:`widgets.render.expression_thumbnails`) with a button carrying its name;
+clicking the button selects the shape. The selection is a traitlet
+(``gallery.selected``) so other widgets can ``observe`` or ``link`` to it, and
+:meth:`ExpressionGallery.on_select` takes plain callbacks. Later tools use the
+gallery as the paint palette and the timeline's shape source.
+
+Why hand-written: ipywidgets has no image-grid picker, and ``ipywidgets.Image``
+has no click event (ipyevents would add a front-end extension); a button under
+each picture works in every Jupyter front end and in Voila.
+
+Thumbnails are cached in-process by (shape name, delta hash, neutral-mesh hash,
+size, camera), so rebuilding the gallery or editing one shape re-renders only
+what changed.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections import OrderedDict
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import ipywidgets as ipw
+import numpy as np
+import traitlets
+
+from widgets.render import delta_hash, expression_thumbnails
+from workbench import FaceModel
+
+__all__ = ["ExpressionGallery", "cached_thumbnails", "clear_thumbnail_cache"]
+
+_CACHE_LIMIT = 4096
+_CACHE: OrderedDict[tuple, bytes] = OrderedDict()
+
+
+def _mesh_key(model: FaceModel) -> str:
+    """Hash of what a thumbnail depends on besides the delta: neutral, faces, components."""
+    h = hashlib.blake2b(digest_size=12)
+    for arr in (model.vertices, model.faces, model.component_labels):
+        h.update(np.ascontiguousarray(arr).tobytes())
+    h.update("\0".join(model.component_names).encode())
+    h.update(f"{model.metadata.up_axis}{model.metadata.front_axis}".encode())
+    return h.hexdigest()
+
+
+def clear_thumbnail_cache() -> None:
+    """Forget all cached thumbnails."""
+    _CACHE.clear()
+
+
+def cached_thumbnails(
+    model: FaceModel,
+    names: Sequence[str] | None = None,
+    size: tuple[int, int] = (96, 96),
+    *,
+    camera: str = "face",
+    progress: bool = False,
+) -> dict[str, bytes]:
+    """Like :func:`widgets.render.expression_thumbnails`, but cached.
+
+    Only shapes whose (name, effective delta) were not rendered before for this
+    neutral mesh, size and camera are rendered (with one plotter).
+
+    Returns
+    -------
+    dict[str, bytes]
+        Name to PNG bytes, in the order of ``names`` (default all shapes).
+    """
+    wanted = list(model.shape_names) if names is None else list(names)
+    mesh_key = _mesh_key(model)
+    keys = {}
+    for name in wanted:
+        shape = model.shape(name)
+        keys[name] = (
+            name,
+            delta_hash(shape.effective_delta()),
+            mesh_key,
+            tuple(size),
+            camera,
+        )
+    missing = [n for n in wanted if keys[n] not in _CACHE]
+    if missing:
+        fresh = expression_thumbnails(model, missing, size=size, camera=camera, progress=progress)
+        for name, png in fresh.items():
+            _CACHE[keys[name]] = png
+    out = {}
+    for name in wanted:
+        _CACHE.move_to_end(keys[name])
+        out[name] = _CACHE[keys[name]]
+    while len(_CACHE) > _CACHE_LIMIT:
+        _CACHE.popitem(last=False)
+    return out
+
+
+class ExpressionGallery(ipw.VBox):
+    """Grid of blendshape thumbnails; click a name to select that shape.
+
+    Parameters
+    ----------
+    model : FaceModel
+    size : (width, height) int
+        Thumbnail size in pixels.
+    columns : int
+        Thumbnails per row.
+    names : sequence of str, optional
+        Shapes to show (default: all, in model order, following shape edits).
+    camera : str
+        Camera preset for the thumbnails (see :func:`widgets.render.render_png`).
+
+    Attributes
+    ----------
+    selected : str or None
+        Name of the selected shape (a traitlet: ``observe``/``link`` it).
+    thumbnails : dict[str, bytes]
+        The PNG bytes currently shown.
+    """
+
+    selected = traitlets.Unicode(None, allow_none=True)
+
+    def __init__(
+        self,
+        model: FaceModel,
+        *,
+        size: tuple[int, int] = (96, 96),
+        columns: int = 8,
+        names: Sequence[str] | None = None,
+        camera: str = "face",
+        **kwargs: Any,
+    ) -> None:
+        if columns < 1:
+            raise ValueError(f"ExpressionGallery: columns must be >= 1, got {columns}")
+        self.model = model
+        self.size = (int(size[0]), int(size[1]))
+        self.columns = int(columns)
+        self.camera = camera
+        self._names_fixed = list(names) if names is not None else None
+        self.thumbnails: dict[str, bytes] = {}
+        self._cells: dict[str, tuple[ipw.Image, ipw.Button]] = {}
+        self._handlers: dict[Callable, Callable] = {}
+        self._title = ipw.HTML("<b>Expressions</b>")
+        self._grid = ipw.GridBox(
+            layout=ipw.Layout(
+                grid_template_columns=f"repeat({self.columns}, {self.size[0] + 8}px)",
+                grid_gap="4px",
+            )
+        )
+        super().__init__([self._title, self._grid], **kwargs)
+        self.add_class("fw-expression-gallery")
+        self.refresh()
+        # shape edits (added/removed/renamed/new deltas) re-render what changed
+        model.events.shapes.connect(self.refresh)
+
+    # ---------------------------------------------------------------- public
+    @property
+    def names(self) -> list[str]:
+        """Shape names shown, in grid order."""
+        return list(self._cells)
+
+    def refresh(self) -> None:
+        """Re-read the model's shapes and rebuild the grid (cached thumbnails are reused)."""
+        names = self._names_fixed
+        if names is None:
+            names = list(self.model.shape_names)
+        else:
+            names = [n for n in names if n in self.model.shape_names]
+        self.thumbnails = cached_thumbnails(self.model, names, self.size, camera=self.camera)
+        cells = []
+        self._cells = {}
+        w, h = self.size
+        for name, png in self.thumbnails.items():
+            img = ipw.Image(value=png, format="png", width=w, height=h)
+            img.layout = ipw.Layout(width=f"{w}px", height=f"{h}px", border="2px solid transparent")
+            btn = ipw.Button(description=name, tooltip=name, layout=ipw.Layout(width=f"{w + 4}px"))
+            btn.on_click(lambda _b, n=name: self.select(n))
+            self._cells[name] = (img, btn)
+            cells.append(ipw.VBox([img, btn], layout=ipw.Layout(align_items="center")))
+        self._grid.children = cells
+        self._title.value = f"<b>Expressions</b> ({len(cells)})"
+        if self.selected is not None and self.selected not in self._cells:
+            self.selected = None
+        self._highlight(self.selected)
+
+    def select(self, name: str | None) -> None:
+        """Select a shape by name (``None`` clears the selection)."""
+        if name is not None and name not in self._cells:
+            raise KeyError(f"ExpressionGallery.select: {name!r} is not shown; shown: {self.names}")
+        self.selected = name
+
+    def on_select(self, callback: Callable[[str | None], Any], remove: bool = False) -> None:
+        """Call ``callback(name)`` whenever the selection changes (``remove=True`` unregisters)."""
+        handler = self._handlers.get(callback)
+        if remove:
+            if handler is not None:
+                self.unobserve(handler, names="selected")
+                del self._handlers[callback]
+            return
+        if handler is None:
+
+            def handler(change: dict[str, Any]) -> None:
+                callback(change["new"])
+
+            self._handlers[callback] = handler
+            self.observe(handler, names="selected")
+
+    def close(self) -> None:
+        self.model.events.shapes.disconnect(self.refresh)
+        super().close()
+
+    # --------------------------------------------------------------- private
+    @traitlets.observe("selected")
+    def _on_selected(self, change: dict[str, Any]) -> None:
+        self._highlight(change["new"])
+
+    def _highlight(self, name: str | None) -> None:
+        for n, (img, btn) in self._cells.items():
+            on = n == name
+            btn.button_style = "info" if on else ""
+            img.layout.border = "2px solid #2196f3" if on else "2px solid transparent"
