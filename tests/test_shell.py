@@ -170,3 +170,13 @@ def test_fast_solver_is_installed_where_expected() -> None:
         assert cholmod_available(), "scikit-sparse/CHOLMOD missing: check .ci/workbench's install"
     d = ShellDeformer(*_disk(), [5, 50])
     assert d.backend_ == ("cholmod" if cholmod_available() else "superlu")
+
+
+def test_nothing_free_to_solve() -> None:
+    """One interior handle on a 3x3 grid with its boundary pinned: every vertex is fixed."""
+    V = np.array([[x, y, 0.0] for y in range(3) for x in range(3)])
+    F = np.array([[0, 1, 4], [0, 4, 3], [1, 2, 5], [1, 5, 4], [3, 4, 7], [3, 7, 6], [4, 5, 8], [4, 8, 7]])
+    d = ShellDeformer(V, F, [4], backend="superlu")
+    assert d.backend_ == "none"
+    out = d.deform(V[[4]] + [0, 0, 1])
+    assert out[4, 2] == 1.0 and np.abs(out[np.arange(9) != 4] - V[np.arange(9) != 4]).max() == 0

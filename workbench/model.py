@@ -311,6 +311,7 @@ class FaceModel:
         self.history = History()
         self._interaction: _Interaction | None = None
         self._evaluated: NDArray[np.float32] | None = None
+        self._blended: NDArray[np.float32] | None = None
         self._layer_providers: dict[str, Callable[[FaceModel], NDArray[np.float32] | None]] = {}
         self._handle_layer = HandleLayer()
         self._layer_providers["handles"] = self._handle_layer
@@ -453,6 +454,7 @@ class FaceModel:
         self._index = {nm: i for i, nm in enumerate(names)}
         self._weights = {nm: float(weights.get(nm, 0.0)) for nm in names}
         self._evaluated = None
+        self._blended = None
 
     def _apply_shapes(self, shapes: tuple[BlendShape, ...], weights: Mapping[str, float]) -> None:
         with self._lock:
@@ -575,6 +577,7 @@ class FaceModel:
         with self._lock:
             self._weights.update(values)
             self._evaluated = None
+            self._blended = None
             if final:
                 self.events.weights.emit(dict(values))
             else:
@@ -820,32 +823,48 @@ class FaceModel:
     def evaluate(self) -> NDArray[np.float32]:
         """(n, 3) float32, read-only: the current deformed mesh.
 
-        ``neutral + sum_k w_k * delta_k`` (masked, muted shapes skipped) plus any
-        registered editing layers. Cached until a weight, shape or layer changes.
+        :meth:`blended` (``neutral + sum_k w_k * delta_k``) plus every editing
+        layer (the handle layer, and layers later tools register). Cached until a
+        weight, shape or layer changes; a handle drag reuses the cached blend.
         """
         with self._lock:
             if self._evaluated is None:
-                self._evaluated = _readonly(self._compute())
+                out = self.blended()
+                layers = [p(self) for p in self._layer_providers.values()]
+                layers = [x for x in layers if x is not None]
+                if layers:
+                    out = out.copy()
+                    for extra in layers:
+                        out += extra
+                self._evaluated = _readonly(out) if out.flags.writeable else out
             return self._evaluated
 
-    def _compute(self) -> NDArray[np.float32]:
+    def blended(self) -> NDArray[np.float32]:
+        """(n, 3) float32, read-only: ``neutral + sum_k w_k * delta_k`` without editing layers.
+
+        Masked shapes use their masked delta; muted shapes are skipped. Cached
+        until a weight or shape changes.
+        """
+        with self._lock:
+            if self._blended is None:
+                self._blended = _readonly(self._blend())
+            return self._blended
+
+    def _blend(self) -> NDArray[np.float32]:
+        k = len(self._shapes)
+        w = self.weight_vector() if k else np.zeros(0, np.float32)
+        nz = np.flatnonzero(w)
+        if nz.size * 4 > k:
+            # many active shapes: one BLAS gemv straight into the output buffer
+            flat = np.empty(3 * self.n_vertices, np.float32)
+            np.dot(w, self._effective.reshape(k, -1), out=flat)
+            flat += self._vertices32.reshape(-1)
+            return flat.reshape(-1, 3)
         out = self._vertices32.copy()
         flat = out.reshape(-1)
-        k = len(self._shapes)
-        if k:
-            w = self.weight_vector()
-            nz = np.flatnonzero(w)
-            D = self._effective.reshape(k, -1)
-            if 0 < nz.size * 4 <= k:
-                # few active shapes: in-place axpy touches only their rows
-                for i in nz:
-                    flat += w[i] * D[i]
-            elif nz.size:
-                flat += w @ D
-        for provider in self._layer_providers.values():
-            extra = provider(self)
-            if extra is not None:
-                out += extra
+        D = self._effective.reshape(k, -1)
+        for i in nz:  # few active shapes: in-place axpy touches only their rows
+            flat += w[i] * D[i]
         return out
 
     # ------------------------------------------------------------ interactions
@@ -897,6 +916,7 @@ class FaceModel:
                 if weights:
                     self._weights.update(weights)
                     self._evaluated = None
+                    self._blended = None
                     self.events.weights.emit(dict(weights))
                 for name, value in slots.items():
                     self._slots[name] = value

@@ -232,18 +232,20 @@ class ShellDeformer:
         A = A.tocsr()
         A_ff = A[free_ids][:, free_ids].tocsc()
         A_fH = A[free_ids][:, self.unique_handles_]
-        solver = SparseSPDSolver(A_ff, self.backend)
-        self.backend_ = solver.backend_
-        t2 = time.perf_counter()
         H = self.unique_handles_.size
         B = np.zeros((n, H), dtype=np.float32, order="F")
-        block = 32  # bounded memory for the dense right-hand sides
-        rhs = -A_fH.toarray() if H <= block else None
-        for start in range(0, H, block):
-            stop = min(H, start + block)
-            b = rhs[:, start:stop] if rhs is not None else -A_fH[:, start:stop].toarray()
-            B[free_ids, start:stop] = solver.solve(b)
-            self._progress(0.2 + 0.7 * stop / H, f"solving handle columns {stop}/{H}")
+        t2 = t1
+        if free_ids.size == 0:  # every vertex is a handle or pinned: nothing to solve
+            self.backend_ = "none"
+        else:
+            solver = SparseSPDSolver(A_ff, self.backend)
+            self.backend_ = solver.backend_
+            t2 = time.perf_counter()
+            block = 32  # bounded memory for the dense right-hand sides
+            for start in range(0, H, block):
+                stop = min(H, start + block)
+                B[free_ids, start:stop] = solver.solve(-A_fH[:, start:stop].toarray())
+                self._progress(0.2 + 0.7 * stop / H, f"solving handle columns {stop}/{H}")
         B[self.unique_handles_, np.arange(H)] = 1.0
         t3 = time.perf_counter()
         self._attach_passive_components(B, labels, names, active, free | constrained)
