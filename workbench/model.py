@@ -27,8 +27,10 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from psygnal import Signal, SignalGroup
 
+from workbench.expressions import Expression, expression_from_state
 from workbench.handle_layer import HandleLayer
 from workbench.history import Command, History, payload_nbytes
+from workbench.paint import Brush, PaintLayer, PaintMix, apply_dab, flood, normalize
 from workbench.polygons import Polygons
 
 
@@ -209,6 +211,7 @@ class FaceModelEvents(SignalGroup):
     regions = Signal()
     paint_layers = Signal()
     paint_layers_changing = Signal()
+    expressions = Signal()
     tracks = Signal()
     metadata = Signal()
     deformed = Signal(bool)
@@ -216,7 +219,13 @@ class FaceModelEvents(SignalGroup):
 
 
 #: Fields stored in the generic slots, and whether they change ``evaluate()``.
-_SLOTS: dict[str, bool] = {"handles": True, "regions": False, "paint_layers": True, "tracks": False}
+_SLOTS: dict[str, bool] = {
+    "handles": True,
+    "regions": False,
+    "paint_layers": True,
+    "expressions": True,
+    "tracks": False,
+}
 
 
 @dataclass
@@ -315,6 +324,8 @@ class FaceModel:
         self._layer_providers: dict[str, Callable[[FaceModel], NDArray[np.float32] | None]] = {}
         self._handle_layer = HandleLayer()
         self._layer_providers["handles"] = self._handle_layer
+        self._paint_layer = PaintLayer()
+        self._layer_providers["paint"] = self._paint_layer
 
         self._shapes: tuple[BlendShape, ...] = ()
         self._stack: NDArray[np.float32] = np.zeros((0, n, 3), np.float32)
@@ -334,7 +345,8 @@ class FaceModel:
         self._slots: dict[str, Any] = {
             "handles": handles,
             "regions": None,
-            "paint_layers": MappingProxyType({}),
+            "paint_layers": PaintMix(),
+            "expressions": MappingProxyType({}),
             "tracks": MappingProxyType({}),
         }
 
@@ -629,9 +641,14 @@ class FaceModel:
         return self._slots["regions"]
 
     @property
-    def paint_layers(self) -> Mapping[str, Any]:
-        """Per-expression paint layers (empty until painted)."""
+    def paint_layers(self) -> PaintMix:
+        """Painted blend functions, expression name -> (n,) weights (empty until painted)."""
         return self._slots["paint_layers"]
+
+    @property
+    def expressions(self) -> Mapping[str, Expression]:
+        """Saved expressions (name -> :class:`~workbench.expressions.Expression`)."""
+        return self._slots["expressions"]
 
     @property
     def tracks(self) -> Mapping[str, Any]:
@@ -808,6 +825,103 @@ class FaceModel:
             self.events.history.emit()
             return self.shape(name)
 
+    # --------------------------------------------------- expressions, painting
+    def save_expression(self, name: str) -> Expression:
+        """Save the current evaluated state as expression ``name`` (undoable); replaces a same-named one."""
+        with self._lock:
+            expr = expression_from_state(self, name)
+            lib = dict(self.expressions)
+            lib[name] = expr
+            self.set_slot("expressions", lib, f"Save expression {name}")
+            return expr
+
+    def remove_expression(self, name: str) -> None:
+        """Remove a saved expression (undoable); its paint is removed with it."""
+        with self._lock:
+            if name not in self.expressions:
+                raise KeyError(f"no saved expression named {name!r}; have {list(self.expressions)}")
+            with self.history.group(f"Remove expression {name}"):
+                if name in self.paint_layers:
+                    maps = {k: v for k, v in self.paint_layers.items() if k != name}
+                    self.set_slot("paint_layers", PaintMix(maps), "Remove paint")
+                self.set_slot(
+                    "expressions", {k: v for k, v in self.expressions.items() if k != name},
+                    f"Remove expression {name}",
+                )
+            self.events.history.emit()
+
+    @property
+    def paint_surface(self) -> Any:
+        """The :class:`~workbench.paint.PaintSurface` (edge graph, mirror map) of this mesh."""
+        return self._paint_layer.surface(self)
+
+    def _check_expression(self, name: str) -> None:
+        if name not in self.expressions and name not in self._index:
+            raise KeyError(
+                f"no expression named {name!r}: paint with a blendshape name or a saved expression"
+            )
+
+    def paint_dab(self, expression: str, center: int, brush: Brush | None = None) -> None:
+        """One brush dab of ``expression`` at vertex ``center``.
+
+        Undoable; call inside ``model.interaction("Paint ...")`` so that a
+        stroke (press, move, release) is one undo step.
+        """
+        with self._lock:
+            self._check_expression(expression)
+            mix = apply_dab(self.paint_layers, expression, self.paint_surface, brush or Brush(), int(center))
+            self.set_slot("paint_layers", mix, f"Paint {expression}")
+
+    def paint_stroke(self, expression: str, centers: Iterable[int], brush: Brush | None = None) -> None:
+        """A whole stroke (several dabs) as one undo step."""
+        with self.interaction(f"Paint {expression}"):
+            for c in centers:
+                self.paint_dab(expression, c, brush)
+
+    def paint_flood(self, expression: str, opacity: float = 1.0, vertices: ArrayLike | None = None) -> None:
+        """Paint ``expression`` everywhere (or on ``vertices``) with strength ``opacity`` (undoable)."""
+        with self._lock:
+            self._check_expression(expression)
+            mix = flood(self.paint_layers, expression, opacity, self.n_vertices, vertices)
+            self.set_slot("paint_layers", mix, f"Flood {expression}")
+
+    def paint_normalize(self) -> None:
+        """Make painted weights sum to 1 wherever something is painted (undoable)."""
+        with self._lock:
+            self.set_slot("paint_layers", normalize(self.paint_layers, self.n_vertices), "Normalize paint")
+
+    def set_paint(self, mix: PaintMix, label: str = "Set paint") -> None:
+        """Replace the whole paint layer (e.g. a regional blend); undoable."""
+        if not isinstance(mix, PaintMix):
+            raise ModelError(f"set_paint expects a PaintMix, got {type(mix).__name__}")
+        for name, w in mix.items():
+            self._check_expression(name)
+            if w.shape != (self.n_vertices,):
+                raise ModelError(f"paint map {name!r} must have shape ({self.n_vertices},), got {w.shape}")
+        self.set_slot("paint_layers", mix, label)
+
+    def clear_paint(self) -> None:
+        """Remove all paint (undoable)."""
+        self.set_slot("paint_layers", PaintMix(), "Clear paint")
+
+    def paint_displacement(self) -> NDArray[np.float32]:
+        """(n, 3) float32: what the paint layer adds on top of blend + handles (a copy)."""
+        with self._lock:
+            d = self._paint_layer(self)
+            return np.zeros((self.n_vertices, 3), np.float32) if d is None else d.copy()
+
+    def bake_paint_to_shape(self, name: str) -> BlendShape:
+        """Turn the paint layer into a new blendshape at weight 1 and clear the paint (one undo step)."""
+        with self._lock:
+            if self._interaction is not None:
+                raise ModelError("bake_paint_to_shape: finish the stroke first")
+            delta = self.paint_displacement()
+            with self.history.group(f"Bake paint to {name}"):
+                self.add_shape(name, delta, weight=1.0)
+                self.clear_paint()
+            self.events.history.emit()
+            return self.shape(name)
+
     def register_layer(
         self, name: str, provider: Callable[[FaceModel], NDArray[np.float32] | None]
     ) -> None:
@@ -830,8 +944,9 @@ class FaceModel:
         with self._lock:
             if self._evaluated is None:
                 out = self.blended()
-                layers = [p(self) for p in self._layer_providers.values()]
-                layers = [x for x in layers if x is not None]
+                layers = [
+                    x for x in (p(self) for p in self._layer_providers.values()) if x is not None
+                ]
                 if layers:
                     out = out.copy()
                     for extra in layers:

@@ -1,0 +1,182 @@
+"""Painterly blending (Pighin et al. 1998): convexity, exact reproduction, mirror, undo, locality."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import workbench
+from workbench.model import FaceModel, ModelError
+from workbench.paint import Brush, PaintMix, feathered_presets, regional_mix
+
+
+@pytest.fixture(scope="module")
+def head_data() -> FaceModel:
+    return workbench.load_sample("head")
+
+
+@pytest.fixture
+def head(head_data: FaceModel) -> FaceModel:
+    m = FaceModel(
+        head_data.vertices, head_data.faces, head_data.shapes,
+        component_labels=head_data.component_labels, component_names=head_data.component_names,
+        metadata=head_data.metadata,
+    )
+    return m
+
+
+def _mouth_corner(m: FaceModel, side: float = 1.0) -> int:
+    d = np.linalg.norm(m.shape("mouthSmileLeft" if side > 0 else "mouthSmileRight").delta, axis=1)
+    return int(np.argmax(d))
+
+
+def test_hard_opaque_brush_reproduces_the_expression_inside(head: FaceModel) -> None:
+    c = _mouth_corner(head)
+    brush = Brush(radius=0.4, opacity=1.0, falloff="constant")
+    head.paint_dab("mouthSmileLeft", c, brush)
+    ids, _ = head.paint_surface.within(c, 0.4)
+    expected = head.vertices[ids] + head.shape("mouthSmileLeft").delta[ids]
+    np.testing.assert_allclose(head.evaluate()[ids], expected, atol=1e-6)
+    assert np.all(head.paint_layers["mouthSmileLeft"][ids] == 1.0)
+
+
+def test_brush_uses_surface_distance_not_straight_line(head: FaceModel) -> None:
+    """A dab on the upper lip must not reach the lower lip right below it (across the mouth)."""
+    jaw = np.linalg.norm(head.shape("jawOpen").delta, axis=1)
+    skin = head.component_vertices("skin")
+    lower_lip = int(skin[np.argmax(jaw[skin])])  # the jaw moves the lower lip most
+    V = head.vertices
+    # the upper-lip vertex right above it: near in space, not moved by jawOpen
+    cand = skin[(jaw[skin] < 0.05 * jaw.max()) & (V[skin, 1] > V[lower_lip, 1])]
+    upper = int(cand[np.argmin(np.linalg.norm(V[cand] - V[lower_lip], axis=1))])
+    straight = float(np.linalg.norm(V[upper] - V[lower_lip]))
+    radius = 2.0 * straight
+    ids, _ = head.paint_surface.within(upper, radius)
+    assert lower_lip not in ids  # a straight-line radius of 2x the gap would include it
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(
+    st.lists(
+        st.tuples(
+            st.sampled_from(["mouthSmileLeft", "eyeBlinkLeft", "browInnerUp"]),
+            st.integers(0, 4327),
+            st.floats(0.05, 0.6),
+            st.floats(0.0, 1.0),
+            st.sampled_from(["smooth", "linear", "constant", "sphere"]),
+            st.sampled_from(["add", "subtract", "smooth"]),
+            st.booleans(),
+        ),
+        min_size=1,
+        max_size=8,
+    )
+)
+def test_weights_stay_convex_after_any_strokes(head: FaceModel, strokes) -> None:
+    head.clear_paint()
+    for name, centre, radius, opacity, falloff, mode, mirror in strokes:
+        head.paint_dab(name, centre, Brush(radius, opacity, falloff, mode, mirror))
+    maps = list(head.paint_layers.values())
+    for w in maps:
+        assert w.min() >= 0.0 and w.max() <= 1.0
+    if maps:
+        assert np.sum(maps, axis=0).max() <= 1.0 + 1e-6
+
+
+def test_mirror_painting_is_symmetric(head: FaceModel) -> None:
+    c = _mouth_corner(head)
+    head.paint_dab("mouthPucker", c, Brush(radius=0.35, opacity=0.8, mirror=True))
+    w = head.paint_layers["mouthPucker"]
+    mirror = head.paint_surface.mirror
+    painted = np.flatnonzero(w > 0.05)
+    assert painted.size > 10
+    np.testing.assert_allclose(w[mirror[painted]], w[painted], atol=0.05)
+    left = (head.vertices[painted, 0] > 0.01).sum()
+    right = (head.vertices[painted, 0] < -0.01).sum()
+    assert abs(left - right) <= 0.1 * painted.size
+
+
+def test_stroke_is_one_undo_step_and_undo_is_bit_exact(head: FaceModel) -> None:
+    c = _mouth_corner(head)
+    head.paint_dab("mouthSmileLeft", c, Brush(opacity=0.3))
+    before = {k: v.copy() for k, v in head.paint_layers.items()}
+    ev_before = head.evaluate().copy()
+    head.paint_stroke("eyeBlinkLeft", [c, c + 1, c + 2], Brush(opacity=0.7, radius=0.5))
+    assert head.history.undo_labels[-1] == "Paint eyeBlinkLeft"
+    head.undo()
+    assert set(head.paint_layers) == set(before)
+    for k, v in before.items():
+        assert np.array_equal(head.paint_layers[k], v)
+    assert np.array_equal(head.evaluate(), ev_before)
+
+
+def test_a_dab_changes_only_the_vertices_under_the_brush(head: FaceModel) -> None:
+    c = _mouth_corner(head)
+    head.paint_dab("mouthSmileLeft", c, Brush(opacity=0.5))
+    a = head.evaluate().copy()
+    brush = Brush(radius=0.25, opacity=0.5)
+    head.paint_dab("mouthSmileLeft", c, brush)
+    b = head.evaluate()
+    ids, _ = head.paint_surface.within(c, 0.25)
+    changed = np.flatnonzero(np.any(a != b, axis=1))
+    assert changed.size > 0 and np.isin(changed, ids).all()
+    # the incremental layer equals a from-scratch evaluation
+    fresh = FaceModel(head.vertices, head.faces, head.shapes)
+    fresh.set_paint(head.paint_layers)
+    np.testing.assert_allclose(fresh.evaluate(), b, atol=1e-6)
+
+
+def test_paint_composes_with_the_global_blend_as_a_convex_combination(head: FaceModel) -> None:
+    head.set_weight("jawOpen", 0.5)
+    head.paint_flood("mouthSmileLeft", 0.25)
+    D_base = 0.5 * head.shape("jawOpen").delta
+    expected = head.vertices + 0.75 * D_base + 0.25 * head.shape("mouthSmileLeft").delta
+    np.testing.assert_allclose(head.evaluate(), expected, atol=1e-5)
+    head.paint_normalize()
+    np.testing.assert_allclose(head.evaluate(), head.vertices + head.shape("mouthSmileLeft").delta, atol=1e-5)
+
+
+def test_saved_expressions_paint_and_bake(head: FaceModel) -> None:
+    head.set_weights({"mouthSmileLeft": 1.0, "mouthSmileRight": 1.0})
+    smile = head.save_expression("smile")
+    head.reset_weights()
+    assert "smile" in head.expressions
+    np.testing.assert_allclose(smile.displacement, head.shape("mouthSmileLeft").delta + head.shape("mouthSmileRight").delta, atol=1e-6)
+    head.paint_dab("smile", _mouth_corner(head), Brush(radius=0.6, opacity=1.0))
+    before = head.evaluate().copy()
+    head.bake_paint_to_shape("painted_smile")
+    assert len(head.paint_layers) == 0 and head.weights["painted_smile"] == 1.0
+    np.testing.assert_allclose(head.evaluate(), before, atol=1e-5)
+    with pytest.raises(KeyError, match="no expression named 'nope'"):
+        head.paint_dab("nope", 0)
+
+
+def test_regional_presets_are_partitions_of_unity(head: FaceModel) -> None:
+    for preset, count in (("upper_lower", 2), ("six", 6)):
+        names, R = feathered_presets(head.vertices, preset, feather=0.2)
+        assert len(names) == count and R.shape == (count, head.n_vertices)
+        assert R.min() >= -1e-12
+        np.testing.assert_allclose(R.sum(axis=0), 1.0, atol=1e-9)
+    names, R = feathered_presets(head.vertices, "six", feather=0.2)
+    mixes = [{"browInnerUp": 1.0} if n.startswith("forehead") else {"mouthSmileLeft": 0.5} if n == "lower_L" else {} for n in names]
+    mix = regional_mix(R, mixes, head.n_vertices)
+    head.set_paint(mix, "Regional blend")
+    assert set(head.paint_layers) == {"browInnerUp", "mouthSmileLeft"}
+    left_lower = (head.vertices[:, 0] > 0.3) & (head.vertices[:, 1] < np.percentile(head.vertices[:, 1], 30))
+    assert head.paint_layers["mouthSmileLeft"][left_lower].max() == pytest.approx(0.5, abs=1e-6)
+    with pytest.raises(ValueError, match="sum to <= 1"):
+        regional_mix(R, [{"a": 0.7, "b": 0.7}] * 6, head.n_vertices)
+
+
+def test_bad_brush_and_paint_arguments() -> None:
+    with pytest.raises(ValueError, match="radius must be > 0"):
+        Brush(radius=0)
+    with pytest.raises(ValueError, match=r"opacity must be in \[0, 1\]"):
+        Brush(opacity=2)
+    with pytest.raises(ValueError, match="falloff must be"):
+        Brush(falloff="spiky")  # type: ignore[arg-type]
+    m = FaceModel(np.eye(3), [[0, 1, 2]])
+    with pytest.raises(ModelError, match="PaintMix"):
+        m.set_paint({"x": np.zeros(3)})  # type: ignore[arg-type]
+    assert isinstance(m.paint_layers, PaintMix)

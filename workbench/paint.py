@@ -1,0 +1,380 @@
+"""Painterly expression blending (Pighin et al. 1998, §4.2 inside the SIGGRAPH 2006 course).
+
+A new expression is a locally varying convex combination of existing ones:
+every painted expression ``e`` has a blend function ``W_e(v)`` over the
+vertices. We keep, at every vertex,
+
+    W_e(v) >= 0,      sum_e W_e(v) <= 1,
+
+and give the **remainder** ``1 - sum_e W_e(v)`` to the *base*: whatever the
+layers below paint produce (the global blend of the sliders plus the handle
+layer; the neutral face when the sliders are at zero). The painted face is
+therefore
+
+    x(v) = (1 - sum_e W_e) base(v) + sum_e W_e (neutral(v) + D_e(v)),
+
+i.e. the paint layer adds ``sum_e W_e (D_e - D_base)`` on top of the base.
+Global blend is ``W_e`` constant, regional blend is ``W_e`` constant per
+softly feathered region (:func:`regional_mix`), and the brush paints ``W_e``
+directly on the rendered face.
+
+Brush (one dab): the brush covers the vertices within ``radius`` of the dab
+centre measured *along the surface* — shortest paths on the mesh's edge graph
+of the neutral (Dijkstra; it overestimates the true geodesic by a few percent
+on a regular triangulation, and never jumps across the mouth or between the
+eyelids as a straight-line radius would). Strength ``s = opacity *
+falloff(d / radius)``; modes:
+
+* ``add``: alpha-over compositing ``W <- (1 - s) W + s [e]`` (convexity kept;
+  opacity 1 with a hard falloff reproduces the expression exactly);
+* ``subtract``: ``W_e <- (1 - s) W_e`` (the freed share goes to the base);
+* ``smooth``: ``W <- (1 - s) W + s * mean of the 1-ring`` for every expression.
+
+X-mirror applies the same dab at the mirrored vertex (nearest vertex to the
+x-reflection). Written here because no kept library offers expression
+painting; graph search is scipy's.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Literal
+
+import igl
+import numpy as np
+import scipy.sparse as sp
+from numpy.typing import ArrayLike, NDArray
+from scipy.sparse.csgraph import dijkstra
+from scipy.spatial import cKDTree
+
+from workbench.expressions import expression_displacement
+
+if TYPE_CHECKING:
+    from workbench.model import FaceModel
+
+Falloff = Literal["smooth", "linear", "constant", "sphere"]
+Mode = Literal["add", "subtract", "smooth"]
+
+
+def falloff_curve(x: NDArray[np.float64], kind: Falloff) -> NDArray[np.float64]:
+    """Brush profile on normalized distance ``x`` in [0, 1]: 1 at the centre, 0 at the rim.
+
+    ``constant`` is a hard brush (1 everywhere inside).
+    """
+    x = np.clip(x, 0.0, 1.0)
+    if kind == "smooth":
+        return (1.0 - x * x) ** 2
+    if kind == "linear":
+        return 1.0 - x
+    if kind == "constant":
+        return np.ones_like(x)
+    if kind == "sphere":
+        return np.sqrt(np.maximum(1.0 - x * x, 0.0))
+    raise ValueError(f"falloff must be 'smooth', 'linear', 'constant' or 'sphere', got {kind!r}")
+
+
+@dataclass(frozen=True)
+class Brush:
+    """Brush settings.
+
+    Parameters
+    ----------
+    radius : float
+        Surface distance in model units.
+    opacity : float
+        Strength at the centre, in [0, 1].
+    falloff : {"smooth", "linear", "constant", "sphere"}
+    mode : {"add", "subtract", "smooth"}
+    mirror : bool
+        Also paint at the x-mirrored position.
+    """
+
+    radius: float = 0.3
+    opacity: float = 0.5
+    falloff: Falloff = "smooth"
+    mode: Mode = "add"
+    mirror: bool = False
+
+    def __post_init__(self) -> None:
+        if not (self.radius > 0 and np.isfinite(self.radius)):
+            raise ValueError(f"brush radius must be > 0, got {self.radius}")
+        if not 0.0 <= self.opacity <= 1.0:
+            raise ValueError(f"brush opacity must be in [0, 1], got {self.opacity}")
+        if self.mode not in ("add", "subtract", "smooth"):
+            raise ValueError(f"brush mode must be 'add', 'subtract' or 'smooth', got {self.mode!r}")
+        falloff_curve(np.zeros(1), self.falloff)  # validates the name
+
+
+@dataclass(frozen=True, eq=False)
+class PaintMix(Mapping[str, NDArray[np.float32]]):
+    """Painted blend functions: expression name -> (n,) float32 weights (read-only).
+
+    Immutable: every dab makes a new mix (unchanged maps are shared, not copied),
+    so undo can keep the old one as it was.
+    """
+
+    maps: Mapping[str, NDArray[np.float32]] = field(default_factory=dict)
+
+    def __getitem__(self, name: str) -> NDArray[np.float32]:
+        return self.maps[name]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self.maps)
+
+    def __len__(self) -> int:
+        return len(self.maps)
+
+    def total(self, n: int) -> NDArray[np.float32]:
+        """(n,) float32: sum of all painted weights (<= 1)."""
+        out = np.zeros(n, np.float32)
+        for w in self.maps.values():
+            out += w
+        return out
+
+
+def _freeze(maps: dict[str, NDArray[np.float32]]) -> dict[str, NDArray[np.float32]]:
+    for w in maps.values():
+        w.setflags(write=False)
+    return maps
+
+
+class PaintSurface:
+    """Per-mesh precompute for painting: edge graph, 1-ring averaging, mirror map.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float
+        Rest pose (distances are measured on it).
+    faces : (m, 3) int
+    """
+
+    def __init__(self, vertices: ArrayLike, faces: ArrayLike) -> None:
+        V = np.asarray(vertices, dtype=np.float64)
+        F = np.asarray(faces, dtype=np.int64)
+        self.n = V.shape[0]
+        A = sp.coo_matrix(igl.adjacency_matrix(F))
+        A.resize((self.n, self.n))
+        i, j = A.row, A.col
+        lengths = np.linalg.norm(V[i] - V[j], axis=1)
+        self.graph = sp.csr_matrix((lengths, (i, j)), shape=(self.n, self.n))
+        deg = np.asarray((A > 0).sum(axis=1)).ravel().astype(np.float64)
+        deg[deg == 0] = 1.0
+        self.ring_mean = sp.csr_matrix(sp.diags(1.0 / deg) @ (A > 0).astype(np.float64))
+        self.vertices = V
+        tree = cKDTree(V)
+        _, self.mirror = tree.query(V * np.array([-1.0, 1.0, 1.0]))
+        self.mirror = np.asarray(self.mirror, dtype=np.int64)
+
+    def within(self, center: int, radius: float) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+        """Vertices within surface distance ``radius`` of ``center`` and their distances."""
+        d = dijkstra(self.graph, directed=False, indices=int(center), limit=radius)
+        ids = np.flatnonzero(np.isfinite(d))
+        return ids, d[ids]
+
+
+def apply_dab(
+    mix: PaintMix,
+    expression: str,
+    surface: PaintSurface,
+    brush: Brush,
+    center: int,
+) -> PaintMix:
+    """One brush dab at vertex ``center``; returns the new mix (``mix`` is unchanged)."""
+    if not 0 <= center < surface.n:
+        raise ValueError(f"dab centre must be a vertex id in 0..{surface.n - 1}, got {center}")
+    centers = [int(center)]
+    if brush.mirror and surface.mirror[center] != center:
+        centers.append(int(surface.mirror[center]))
+    maps = {k: v.copy() for k, v in mix.maps.items()}
+    touched_all = []
+    for c in centers:
+        ids, dist = surface.within(c, brush.radius)
+        s = (brush.opacity * falloff_curve(dist / brush.radius, brush.falloff)).astype(np.float32)
+        if brush.mode == "add":
+            for w in maps.values():
+                w[ids] *= 1.0 - s
+            target = maps.setdefault(expression, np.zeros(surface.n, np.float32))
+            target[ids] += s
+        elif brush.mode == "subtract":
+            if expression in maps:
+                maps[expression][ids] *= 1.0 - s
+        else:  # smooth every map toward its 1-ring mean
+            for w in maps.values():
+                ring = surface.ring_mean[ids] @ w
+                w[ids] = (1.0 - s) * w[ids] + s * ring.astype(np.float32)
+        touched_all.append(ids)
+    _clip_convex(maps, np.concatenate(touched_all))
+    return PaintMix(_freeze(maps))
+
+
+def _clip_convex(maps: dict[str, NDArray[np.float32]], ids: NDArray[np.int64]) -> None:
+    """Guard against float round-off: W >= 0 and sum <= 1 at ``ids``."""
+    if not maps:
+        return
+    for w in maps.values():
+        np.clip(w, 0.0, 1.0, out=w)
+    total = np.zeros(ids.size, np.float32)
+    for w in maps.values():
+        total += w[ids]
+    over = total > 1.0
+    if np.any(over):
+        scale = 1.0 / total[over]
+        for w in maps.values():
+            w[ids[over]] *= scale
+
+
+def flood(mix: PaintMix, expression: str, opacity: float, n: int, vertices: ArrayLike | None = None) -> PaintMix:
+    """Paint ``expression`` with strength ``opacity`` on all (or the given) vertices."""
+    if not 0.0 <= opacity <= 1.0:
+        raise ValueError(f"opacity must be in [0, 1], got {opacity}")
+    ids = np.arange(n) if vertices is None else np.asarray(vertices, dtype=np.int64).reshape(-1)
+    maps = {k: v.copy() for k, v in mix.maps.items()}
+    for w in maps.values():
+        w[ids] *= 1.0 - opacity
+    maps.setdefault(expression, np.zeros(n, np.float32))[ids] += opacity
+    _clip_convex(maps, ids)
+    return PaintMix(_freeze(maps))
+
+
+def normalize(mix: PaintMix, n: int) -> PaintMix:
+    """Scale the painted weights to sum to 1 wherever anything is painted (no base left there)."""
+    total = mix.total(n)
+    painted = np.flatnonzero(total > 0)
+    maps = {k: v.copy() for k, v in mix.maps.items()}
+    for w in maps.values():
+        w[painted] /= total[painted]
+    _clip_convex(maps, painted)
+    return PaintMix(_freeze(maps))
+
+
+def regional_mix(
+    region_weights: NDArray[np.float64], mixes: Sequence[Mapping[str, float]], n: int
+) -> PaintMix:
+    """Regional blend: expression weights constant per softly feathered region.
+
+    Parameters
+    ----------
+    region_weights : (r, n) float
+        Feathered region memberships, summing to <= 1 per vertex.
+    mixes : sequence of r mappings
+        Expression name -> weight for each region; each mapping's weights must
+        be >= 0 and sum to <= 1.
+    """
+    R = np.asarray(region_weights, dtype=np.float64)
+    if R.shape != (len(mixes), n):
+        raise ValueError(f"region_weights must be ({len(mixes)}, {n}), got {R.shape}")
+    maps: dict[str, NDArray[np.float32]] = {}
+    for r, mx in enumerate(mixes):
+        vals = np.array(list(mx.values()), dtype=np.float64)
+        if vals.size and (vals.min() < 0 or vals.sum() > 1 + 1e-9):
+            raise ValueError(f"mix of region {r}: weights must be >= 0 and sum to <= 1, got {dict(mx)}")
+        for name, wt in mx.items():
+            maps.setdefault(name, np.zeros(n, np.float32))
+            maps[name] += (wt * R[r]).astype(np.float32)
+    _clip_convex(maps, np.arange(n))
+    return PaintMix(_freeze(maps))
+
+
+def feathered_presets(vertices: NDArray[np.float64], preset: str, feather: float) -> tuple[list[str], NDArray[np.float64]]:
+    """Pighin's regional presets as soft memberships, (r, n), summing to 1.
+
+    ``preset``: ``"upper_lower"`` (forehead+eyes / lower face) or ``"six"``
+    (forehead, eyes, lower face, each split left/right at x = 0). Region borders
+    are horizontal planes at fractions of the face height (y up) and the
+    mid-plane; ``feather`` is the transition half-width in model units.
+    """
+    V = np.asarray(vertices, dtype=np.float64)
+    y = V[:, 1]
+    lo, hi = np.percentile(y, 5), np.percentile(y, 99.5)
+
+    def step(t: NDArray[np.float64]) -> NDArray[np.float64]:
+        # smooth 0 -> 1 transition over [-feather, feather]
+        u = np.clip((t / max(feather, 1e-12) + 1.0) / 2.0, 0.0, 1.0)
+        return u * u * (3.0 - 2.0 * u)
+
+    eyes_line = lo + 0.62 * (hi - lo)
+    brow_line = lo + 0.74 * (hi - lo)
+    if preset == "upper_lower":
+        upper = step(y - eyes_line + 0.05 * (hi - lo))
+        return ["upper", "lower"], np.stack([upper, 1.0 - upper])
+    if preset == "six":
+        fore = step(y - brow_line)
+        eyes = step(y - eyes_line + 0.05 * (hi - lo)) - fore
+        lower = 1.0 - fore - eyes
+        left = step(V[:, 0])
+        names, rows = [], []
+        for name, band in (("forehead", fore), ("eyes", eyes), ("lower", lower)):
+            names += [f"{name}_L", f"{name}_R"]
+            rows += [band * left, band * (1.0 - left)]
+        return names, np.stack(rows)
+    raise ValueError(f"preset must be 'upper_lower' or 'six', got {preset!r}")
+
+
+class PaintLayer:
+    """FaceModel layer: ``sum_e W_e (D_e - D_base)``, recomputed only where the paint changed.
+
+    The changed vertices are found by comparing the new maps with the cached
+    ones (a cheap O(n) comparison), so any number of dabs between two
+    evaluations is handled, and only those rows are recomputed.
+    """
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._surface: PaintSurface | None = None
+        self._cache: NDArray[np.float32] | None = None
+        self._base: NDArray[np.float32] | None = None
+        self._key: tuple[object, ...] = ()
+        self._maps: dict[str, NDArray[np.float32]] = {}
+
+    def surface(self, model: FaceModel) -> PaintSurface:
+        with self._lock:
+            if self._surface is None or self._surface.n != model.n_vertices:
+                self._surface = PaintSurface(model.vertices, model.faces)
+            return self._surface
+
+    @staticmethod
+    def _rows(
+        model: FaceModel, maps: Mapping[str, NDArray[np.float32]], base: NDArray[np.float32],
+        ids: NDArray[np.int64] | slice,
+    ) -> NDArray[np.float32]:
+        out = np.zeros_like(base[ids])
+        for name, w in maps.items():
+            out += w[ids, None] * (expression_displacement(model, name)[ids] - base[ids])
+        return out
+
+    def _changed(self, maps: Mapping[str, NDArray[np.float32]], n: int) -> NDArray[np.int64] | None:
+        """Vertices whose weights differ from the cached maps (None: too many, recompute all)."""
+        changed = np.zeros(n, bool)
+        for name in set(maps) | set(self._maps):
+            new, old = maps.get(name), self._maps.get(name)
+            if new is old:
+                continue
+            if new is None or old is None:
+                return None
+            changed |= new != old
+        ids = np.flatnonzero(changed)
+        return ids if ids.size < n // 3 else None
+
+    def __call__(self, model: FaceModel) -> NDArray[np.float32] | None:
+        mix = model.paint_layers
+        if not isinstance(mix, PaintMix) or not mix.maps:
+            return None
+        with self._lock:
+            blended = model.blended()
+            # the objects themselves (not ids, which can be reused after a free)
+            key = (blended, model.handles.offsets, model.expressions)
+            ids = None
+            same_base = len(self._key) == 3 and all(a is b for a, b in zip(key, self._key, strict=True))
+            if same_base and self._cache is not None:
+                ids = self._changed(mix.maps, model.n_vertices)
+            if ids is None or self._base is None or self._cache is None:
+                base = blended - model.vertices.astype(np.float32) + model.handle_displacement()
+                self._base = base
+                self._cache = self._rows(model, mix.maps, base, slice(None))
+            elif ids.size:
+                self._cache[ids] = self._rows(model, mix.maps, self._base, ids)
+            self._key = key
+            self._maps = dict(mix.maps)
+            return self._cache
