@@ -159,3 +159,42 @@ def test_crash_mid_save_keeps_previous_file(
     assert saved.read_bytes() == before
     assert [p.name for p in saved.parent.iterdir()] == [saved.name]  # temp file cleaned up
     assert workbench.load(saved).weights["up"] == 0.5
+
+
+def test_expressions_paint_and_keys_round_trip(tiny_model: FaceModel, tmp_path: Path) -> None:
+    from workbench.paint import Brush
+
+    m = tiny_model
+    m.set_handles(HandleSet([4], [[0.0, 0.0, 0.2]], ("centre",), [-1]))
+    m.set_weight("left", 0.5)
+    m.save_expression("lean")
+    m.reset_weights()
+    m.reset_handle_offsets()
+    m.paint_dab("lean", 3, Brush(radius=1.5, opacity=0.6))
+    m.set_weight("up", 0.2)
+    m.key_weights(0.0)
+    m.key_expression(1.0, "lean", interpolation="linear")
+    m.save(tmp_path / "full.fwb")
+    g = workbench.load(tmp_path / "full.fwb")
+    assert list(g.expressions) == ["lean"]
+    e, f = g.expressions["lean"], m.expressions["lean"]
+    np.testing.assert_array_equal(e.displacement, f.displacement)
+    np.testing.assert_array_equal(e.handle_offsets, f.handle_offsets)
+    assert dict(e.weights) == dict(f.weights)
+    assert list(g.paint_layers) == ["lean"]
+    np.testing.assert_array_equal(g.paint_layers["lean"], m.paint_layers["lean"])
+    assert g.tracks.to_json() == m.tracks.to_json()
+    np.testing.assert_allclose(g.evaluate(), m.evaluate(), atol=1e-6)
+    for t in (0.0, 0.3, 1.0):
+        np.testing.assert_allclose(g.evaluate_at(t), m.evaluate_at(t), atol=1e-6)
+    assert read_manifest(tmp_path / "full.fwb")["schema_version"] == 2
+
+
+def test_timeline_naming_unknown_shapes_is_refused(saved: Path, tmp_path: Path) -> None:
+    bad = tmp_path / "keys.fwb"
+    tracks = {"fps": 30.0, "start": 0.0, "end": 1.0, "tracks": {"weights/ghost": [
+        {"time": 0.0, "value": [1.0], "interpolation": "linear", "in_tangent": [0.0],
+         "out_tangent": [0.0], "tangent_mode": "auto_clamped"}]}}
+    _edit_manifest(saved, bad, lambda m: m.update(tracks=tracks))
+    with pytest.raises(WorkbenchFileError, match=r"tracks: .*ghost"):
+        workbench.load(bad)

@@ -56,6 +56,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     sub = parser.add_subparsers(dest="command", required=True)
     p_info = sub.add_parser("info", help="summarise a face file (.fwb, .glb/.gltf, OBJ folder, .obj + targets)")
     p_info.add_argument("path")
+    p_exp = sub.add_parser(
+        "export",
+        help="export the animation of a saved workbench file (.glb/.gltf, .usd/.usda/.usdc, .pc2, .mdd, .obj sequence, .csv)",
+    )
+    p_exp.add_argument("saved_file", help="a .fwb workbench file with keys on its timeline")
+    p_exp.add_argument("out", help="output path; the suffix picks the format")
+    p_exp.add_argument("--fps", type=float, default=None, help="frame rate for baked/per-frame formats (default: the timeline's)")
+    p_exp.add_argument("--bake", action="store_true", help="write per-frame points instead of blend shapes + weights")
+    p_exp.add_argument("--format", default=None, help="override the format chosen from the suffix")
     args = parser.parse_args(argv)
     if args.command == "info":
         from workbench.io import load
@@ -66,6 +75,23 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(f"workbench info: {exc}", file=sys.stderr)
             return 2
         print(format_info(model, args.path))
+        return 0
+    if args.command == "export":
+        from workbench.export import ExportError, export
+        from workbench.io import load
+        from workbench.tracks import TrackError
+
+        try:
+            model = load(args.saved_file)
+            if not model.tracks.tracks:
+                print(f"workbench export: {args.saved_file}: the timeline has no keys", file=sys.stderr)
+                return 2
+            written = export(model, model.tracks, args.out, fps=args.fps, bake=args.bake, format=args.format)
+        except (OSError, ValueError, ExportError, TrackError) as exc:
+            print(f"workbench export: {exc}", file=sys.stderr)
+            return 2
+        for p in written:
+            print(p)
         return 0
     return 1  # pragma: no cover - argparse rejects unknown commands
 

@@ -17,13 +17,20 @@ Layout (a plain zip, members stored uncompressed so large arrays load fast)::
       "shapes": [{"name", "slider_min", "slider_max", "mute", "mask": bool}, ...],
       "weights": {"jawOpen": 0.25, ...},
       "handles": {"names": [...]},
+      "expressions": [{"name", "weights", "n_handles"}, ...],      (schema >= 2)
+      "paint": ["smile", ...],                                      (schema >= 2)
+      "tracks": {"fps", "start", "end", "tracks": {...}},           (schema >= 2)
       "arrays": {"neutral": {"file", "dtype", "shape", "sha256"}, ...}
     }
 
 Arrays: ``neutral`` (n,3) <f8, ``faces`` (m,3) <i4, ``polygon_indices`` (s,) <i4,
 ``polygon_offsets`` (p+1,) <i8, ``component_labels`` (n,) <i4, ``deltas`` (k,n,3) <f4,
 ``masks`` (k_masked, n) <f4 in the order of shapes with ``mask: true``,
-``handle_vertices`` (h,) <i4, ``handle_offsets`` (h,3) <f4, ``handle_mirror`` (h,) <i4.
+``handle_vertices`` (h,) <i4, ``handle_offsets`` (h,3) <f4, ``handle_mirror`` (h,) <i4;
+schema 2 adds ``expression_displacements`` (E,n,3) <f4, ``expression_handle_vertices``
+(sum of n_handles,) <i4 and ``expression_handle_offsets`` (sum of n_handles, 3) <f4
+(expressions in manifest order), and ``paint_maps`` (P,n) <f4 in the order of ``paint``.
+The timeline is JSON in the manifest (:meth:`workbench.tracks.Timeline.to_json`).
 
 Guarantees: saving writes a temporary file beside the target, fsyncs it and
 renames it over the target, so a crash mid-save leaves the previous good file.
@@ -47,17 +54,19 @@ import tempfile
 import zipfile
 from collections.abc import Callable
 from pathlib import Path
+from types import MappingProxyType
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from workbench.expressions import expressions_to_json
 from workbench.polygons import Polygons
 
 if TYPE_CHECKING:
     from workbench.model import FaceModel
 
 FORMAT_NAME = "face-workbench"
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
 SUFFIX = ".fwb"
 _MAX_MANIFEST_BYTES = 64 * 2**20
 
@@ -84,7 +93,22 @@ def _npy_bytes(a: np.ndarray) -> bytes:
 def _model_arrays(model: FaceModel) -> dict[str, np.ndarray]:
     masked = [s.vertex_mask for s in model.shapes if s.vertex_mask is not None]
     h = model.handles
+    n = model.n_vertices
+    exprs = list(model.expressions.values())
+    paint = model.paint_layers
     return {
+        "expression_displacements": (
+            np.stack([e.displacement for e in exprs]).astype("<f4") if exprs else np.zeros((0, n, 3), "<f4")
+        ),
+        "expression_handle_vertices": np.concatenate(
+            [np.zeros(0, "<i4")] + [e.handle_vertices.astype("<i4") for e in exprs]
+        ),
+        "expression_handle_offsets": np.concatenate(
+            [np.zeros((0, 3), "<f4")] + [e.handle_offsets.astype("<f4") for e in exprs]
+        ),
+        "paint_maps": (
+            np.stack([paint[k] for k in paint]).astype("<f4") if len(paint) else np.zeros((0, n), "<f4")
+        ),
         "neutral": model.vertices.astype("<f8"),
         "faces": model.faces.astype("<i4"),
         "polygon_indices": model.polygons.indices.astype("<i4"),
@@ -134,6 +158,9 @@ def save_model(model: FaceModel, path: str | os.PathLike[str]) -> Path:
             ],
             "weights": dict(model.weights),
             "handles": {"names": list(model.handles.names)},
+            "expressions": expressions_to_json(model.expressions),
+            "paint": list(model.paint_layers),
+            "tracks": model.tracks.to_json(),
             "arrays": {},
         }
     payloads = {}
@@ -175,11 +202,16 @@ def save_model(model: FaceModel, path: str | os.PathLike[str]) -> Path:
 
 
 # -------------------------------------------------------------------- loading
-#: schema_version -> function upgrading a manifest (and its arrays' entries) to
-#: schema_version + 1. Schema 1 is the first release, so this is empty for now;
-#: tests/data/schema_v1_head_tiny.fwb is kept so every future schema proves it still
-#: loads version 1.
-_MIGRATIONS: dict[int, Callable[[dict[str, Any]], dict[str, Any]]] = {}
+def _migrate_1_to_2(manifest: dict[str, Any]) -> dict[str, Any]:
+    """Schema 2 added saved expressions, paint layers and the timeline: start them empty."""
+    out = dict(manifest)
+    out.update(schema_version=2, expressions=[], paint=[], tracks=None)
+    return out
+
+
+#: schema_version -> function upgrading a manifest to schema_version + 1.
+#: tests/data/schema_v1_tiny.fwb (written by schema 1) proves old files still load.
+_MIGRATIONS: dict[int, Callable[[dict[str, Any]], dict[str, Any]]] = {1: _migrate_1_to_2}
 
 
 def _read_npy(
@@ -273,7 +305,10 @@ def _manifest(zf: zipfile.ZipFile, path: Path) -> dict[str, Any]:
 
 def load_model(path: str | os.PathLike[str]) -> FaceModel:
     """Load a workbench file written by :func:`save_model` (any supported schema version)."""
+    from workbench.expressions import Expression
     from workbench.model import BlendShape, FaceModel, HandleSet, ModelError, ModelMetadata
+    from workbench.paint import PaintMix
+    from workbench.tracks import Timeline, TrackError
 
     path = Path(path)
     with _open_zip(path) as zf:
@@ -281,8 +316,10 @@ def load_model(path: str | os.PathLike[str]) -> FaceModel:
         entries = manifest.get("arrays")
         if not isinstance(entries, dict):
             raise WorkbenchFileError(path, "manifest.arrays", "missing")
-        required = ("neutral", "faces", "polygon_indices", "polygon_offsets",
-                    "component_labels", "deltas", "masks")
+        required = (
+            "neutral", "faces", "polygon_indices", "polygon_offsets",
+            "component_labels", "deltas", "masks",
+        )
         for name in required:
             if name not in entries:
                 raise WorkbenchFileError(path, f"arrays.{name}", "missing from manifest")
@@ -329,6 +366,43 @@ def load_model(path: str | os.PathLike[str]) -> FaceModel:
             if "handle_vertices" in arrays
             else None,
         )
+        n = model.n_vertices
+        exprs = manifest.get("expressions", [])
+        disp = arrays.get("expression_displacements", np.zeros((0, n, 3), "<f4"))
+        hv = arrays.get("expression_handle_vertices", np.zeros(0, "<i4"))
+        ho = arrays.get("expression_handle_offsets", np.zeros((0, 3), "<f4"))
+        if disp.shape != (len(exprs), n, 3):
+            raise WorkbenchFileError(path, "arrays.expression_displacements", f"expected ({len(exprs)}, {n}, 3), got {disp.shape}")
+        library, start = {}, 0
+        for i, ej in enumerate(exprs):
+            stop = start + int(ej["n_handles"])
+            if stop > len(hv) or stop > len(ho):
+                raise WorkbenchFileError(path, f"expressions[{i}].n_handles", "more handles than stored")
+            library[ej["name"]] = Expression(ej["name"], disp[i], ej["weights"], hv[start:stop], ho[start:stop])
+            start = stop
+        paint_names = manifest.get("paint", [])
+        pm = arrays.get("paint_maps", np.zeros((0, n), "<f4"))
+        if pm.shape != (len(paint_names), n):
+            raise WorkbenchFileError(path, "arrays.paint_maps", f"expected ({len(paint_names)}, {n}), got {pm.shape}")
+        tracks_json = manifest.get("tracks")
+        # the loaded state is the starting point, not an edit: install without history
+        if library:
+            model._slots["expressions"] = MappingProxyType(library)
+        if paint_names:
+            bad = [p for p in paint_names if p not in library and p not in model.shape_names]
+            if bad:
+                raise WorkbenchFileError(path, "paint", f"paints unknown expressions {bad}")
+            maps = {p: pm[i].copy() for i, p in enumerate(paint_names)}
+            for w in maps.values():
+                w.setflags(write=False)
+            model._slots["paint_layers"] = PaintMix(maps)
+        if tracks_json:
+            try:
+                timeline = Timeline.from_json(tracks_json)
+                timeline.check_model(model)
+            except TrackError as exc:
+                raise WorkbenchFileError(path, "tracks", str(exc)) from None
+            model._slots["tracks"] = timeline
     except WorkbenchFileError:
         raise
     except (KeyError, TypeError) as exc:

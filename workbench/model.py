@@ -32,6 +32,7 @@ from workbench.handle_layer import HandleLayer
 from workbench.history import Command, History, payload_nbytes
 from workbench.paint import Brush, PaintLayer, PaintMix, apply_dab, flood, normalize
 from workbench.polygons import Polygons
+from workbench.tracks import Interpolation, Timeline, weight_track_name
 
 
 class ModelError(ValueError):
@@ -213,6 +214,7 @@ class FaceModelEvents(SignalGroup):
     paint_layers_changing = Signal()
     expressions = Signal()
     tracks = Signal()
+    time = Signal(float)
     metadata = Signal()
     deformed = Signal(bool)
     history = Signal()
@@ -347,8 +349,9 @@ class FaceModel:
             "regions": None,
             "paint_layers": PaintMix(),
             "expressions": MappingProxyType({}),
-            "tracks": MappingProxyType({}),
+            "tracks": Timeline(),
         }
+        self._time = 0.0
 
     # ------------------------------------------------------------------ basics
     def __repr__(self) -> str:
@@ -651,8 +654,8 @@ class FaceModel:
         return self._slots["expressions"]
 
     @property
-    def tracks(self) -> Mapping[str, Any]:
-        """Keyframe tracks (empty until keyed)."""
+    def tracks(self) -> Timeline:
+        """The keyframe :class:`~workbench.tracks.Timeline` (no tracks until something is keyed)."""
         return self._slots["tracks"]
 
     def _apply_slot(self, name: str, value: Any, final: bool) -> None:
@@ -921,6 +924,143 @@ class FaceModel:
                 self.clear_paint()
             self.events.history.emit()
             return self.shape(name)
+
+    # ----------------------------------------------------------------- timeline
+    @property
+    def time(self) -> float:
+        """Current time in seconds (set by :meth:`set_time`)."""
+        return self._time
+
+    def set_timeline(self, timeline: Timeline, label: str = "Edit keys") -> None:
+        """Replace the timeline (undoable); it is checked against the model's shapes/handles."""
+        if not isinstance(timeline, Timeline):
+            raise ModelError(f"set_timeline expects a Timeline, got {type(timeline).__name__}")
+        timeline.check_model(self)
+        self.set_slot("tracks", timeline, label)
+
+    def _grow_range(self, tl: Timeline, time: float) -> Timeline:
+        return tl.replace(start=min(tl.start, time), end=max(tl.end, time))
+
+    def key_weights(
+        self,
+        time: float,
+        names: Iterable[str] | None = None,
+        interpolation: Interpolation = "bezier",
+    ) -> None:
+        """Key the current weights at ``time`` (one undo step).
+
+        ``names`` default: every shape that has a non-zero weight or is already keyed.
+        """
+        with self._lock:
+            tl = self.tracks
+            if names is None:
+                keyed = set(tl.weight_tracks)
+                names = [n for n in self.shape_names if self._weights[n] != 0.0 or n in keyed]
+            names = list(names)
+            for n in names:
+                self._shape_index(n)
+                tl = tl.add_key(weight_track_name(n), time, self._weights[n], interpolation=interpolation)
+            self.set_timeline(self._grow_range(tl, time), f"Key {len(names)} weights at {time:g}s")
+
+    def key_expression(self, time: float, expression: str, interpolation: Interpolation = "bezier") -> None:
+        """Key an expression at ``time`` (drop from the gallery onto the timeline).
+
+        A saved expression keys its recipe weights and, when the handle set
+        matches, its handle offsets; a blendshape keys itself at 1. Every other
+        already-keyed shape is keyed at 0, and a shape keyed for the first time
+        gets 0-keys at the earlier key times, so every keyed expression shows
+        exactly as saved at its time.
+        """
+        with self._lock:
+            if expression in self.expressions:
+                expr = self.expressions[expression]
+                values = dict(expr.weights)
+                offsets = expr.handle_offsets
+                same_handles = np.array_equal(expr.handle_vertices, self.handles.vertices)
+            elif expression in self._index:
+                values, offsets, same_handles = {expression: 1.0}, None, False
+            else:
+                raise KeyError(f"no expression named {expression!r}")
+            tl = self.tracks
+            keyed = set(tl.weight_tracks)
+            earlier = sorted({float(t) for tr in tl.weight_tracks.values() for t in tr.times})
+            for n in keyed | {k for k, v in values.items() if v != 0.0}:
+                if n not in keyed:
+                    # a newly keyed shape was 0 in the expressions keyed before
+                    for t in earlier:
+                        tl = tl.add_key(weight_track_name(n), t, 0.0, interpolation=interpolation)
+                tl = tl.add_key(weight_track_name(n), time, values.get(n, 0.0), interpolation=interpolation)
+            if same_handles and offsets is not None and len(self.handles) and np.any(offsets):
+                tl = tl.add_key("handles", time, offsets, interpolation=interpolation)
+            self.set_timeline(self._grow_range(tl, time), f"Key {expression} at {time:g}s")
+
+    def key_handles(self, time: float, interpolation: Interpolation = "bezier") -> None:
+        """Key the handle offsets at ``time`` (undoable)."""
+        with self._lock:
+            if not len(self.handles):
+                raise ModelError("key_handles: the model has no handles")
+            tl = self.tracks.add_key("handles", time, self.handles.offsets, interpolation=interpolation)
+            self.set_timeline(self._grow_range(tl, time), f"Key handles at {time:g}s")
+
+    def delete_key(self, track: str, index: int) -> None:
+        """Delete key ``index`` of ``track`` (undoable)."""
+        self.set_timeline(self.tracks.delete_key(track, index), f"Delete key {index} of {track}")
+
+    def move_key(self, track: str, index: int, time: float, value: ArrayLike | None = None) -> None:
+        """Move key ``index`` of ``track`` to ``time`` (and ``value``), undoable."""
+        with self._lock:
+            tl = self.tracks.move_key(track, index, time, value)
+            self.set_timeline(self._grow_range(tl, time), f"Move key of {track}")
+
+    def _apply_sample(self, time: float) -> None:
+        """Write the timeline's values at ``time`` into the live state (no history, no events)."""
+        sample = self.tracks.evaluate(time)
+        for n, v in sample.weights.items():
+            if n in self._weights:
+                s = self._shapes[self._index[n]]
+                self._weights[n] = min(max(float(v), s.slider_min), s.slider_max)
+        if sample.handle_offsets is not None and sample.handle_offsets.shape == self.handles.offsets.shape:
+            self._slots["handles"] = dataclasses.replace(
+                self.handles, offsets=np.asarray(sample.handle_offsets, np.float32)
+            )
+        self._evaluated = None
+        self._blended = None
+
+    def set_time(self, time: float) -> None:
+        """Go to ``time``: keyed weights and handle offsets take their animated values.
+
+        Like changing the frame in Blender this is not an undo step; unkeyed
+        shapes keep their values. Emits ``time``, ``weights``, ``handles`` and
+        ``deformed`` (final) events.
+        """
+        t = float(time)
+        if not math.isfinite(t):
+            raise ModelError(f"time must be finite, got {time!r}")
+        with self._lock:
+            if self._interaction is not None:
+                raise ModelError("set_time: finish the drag first")
+            self._time = t
+            self._apply_sample(t)
+            self.events.time.emit(t)
+            self.events.weights.emit(dict(self._weights))
+            self.events.handles.emit()
+            self.events.deformed.emit(True)
+
+    def evaluate_at(self, time: float) -> NDArray[np.float32]:
+        """(n, 3) float32 mesh at ``time`` (head pose applied), without changing the model."""
+        with self._lock:
+            saved = (dict(self._weights), self._slots["handles"], self._evaluated, self._blended)
+            try:
+                self._apply_sample(float(time))
+                out = self.evaluate().copy()
+            finally:
+                self._weights, self._slots["handles"], self._evaluated, self._blended = (
+                    saved[0], saved[1], saved[2], saved[3],
+                )
+            pose = self.tracks.evaluate(float(time)).head_matrix()
+            if not np.allclose(pose, np.eye(4)):
+                out = (out @ pose[:3, :3].T.astype(np.float32)) + pose[:3, 3].astype(np.float32)
+            return out
 
     def register_layer(
         self, name: str, provider: Callable[[FaceModel], NDArray[np.float32] | None]

@@ -1,0 +1,61 @@
+"""Optional: Blender (bpy in its own venv) imports our .glb: shape-key names and LINEAR key values.
+
+Runs only when a Python with ``bpy`` is given by ``WORKBENCH_BPY_PYTHON`` (or
+exists at ``/work/bpy-venv/bin/python``); bpy needs numpy<2, hence its own venv.
+Blender maps glTF time t to frame t * 24 and clamps shape-key values to [0, 1].
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+from pathlib import Path
+
+import pytest
+from consumer_timelines import expression_timeline
+
+from workbench.export import export
+
+SCRIPT = r"""
+import json, sys
+import bpy
+from bpy_extras import anim_utils
+bpy.ops.wm.read_factory_settings(use_empty=True)
+bpy.ops.import_scene.gltf(filepath=sys.argv[-1])
+obj = next(o for o in bpy.data.objects if o.type == "MESH")
+keys = obj.data.shape_keys
+names = [kb.name for kb in keys.key_blocks][1:]
+ad = keys.animation_data
+bag = anim_utils.action_get_channelbag_for_slot(ad.action, ad.action_slot)
+curves = {}
+for fc in bag.fcurves:
+    name = fc.data_path.split('"')[1]
+    curves[name] = [[kp.co[0], kp.co[1], kp.interpolation] for kp in fc.keyframe_points]
+print("JSON" + json.dumps({"names": names, "curves": curves}))
+"""
+
+
+def _bpy_python() -> Path | None:
+    p = os.environ.get("WORKBENCH_BPY_PYTHON") or "/work/bpy-venv/bin/python"
+    return Path(p) if Path(p).is_file() else None
+
+
+@pytest.mark.skipif(_bpy_python() is None, reason="no Python with bpy (set WORKBENCH_BPY_PYTHON)")
+def test_blender_reads_names_and_linear_keys(head, tmp_path):
+    tl = expression_timeline("linear")
+    (p,) = export(head, tl, tmp_path / "a.glb")
+    script = tmp_path / "check.py"
+    script.write_text(SCRIPT)
+    proc = subprocess.run(
+        [str(_bpy_python()), str(script), str(p)], capture_output=True, text=True, timeout=300
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    out = json.loads(next(line[4:] for line in proc.stdout.splitlines() if line.startswith("JSON")))
+    assert out["names"] == head.shape_names
+    jaw = out["curves"]["jawOpen"]
+    track = tl.tracks["weights/jawOpen"]
+    for t, v in zip(track.times, track.values[:, 0], strict=True):
+        hit = [c for c in jaw if abs(c[0] - t * 24) < 1e-3]
+        assert hit and hit[0][1] == pytest.approx(v, abs=1e-6)
+        assert hit[0][2] == "LINEAR"

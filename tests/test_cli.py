@@ -1,0 +1,69 @@
+"""The ``workbench`` command line: info and export."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+import workbench
+from workbench.cli import main
+from workbench.export import export
+
+REPO = Path(__file__).resolve().parent.parent
+
+
+def test_info_on_the_sample_head(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["info", str(REPO / "sample_models" / "head")]) == 0
+    out = capsys.readouterr().out
+    assert "vertices    5084" in out
+    assert "4-gon x4948" in out
+    assert "units       dm (0.1 m per unit), up +y, front +z" in out
+    assert "shapes      52 (52 mapped to ARKit-52)" in out
+    for comp in ("skin", "eye_left", "teeth_lower", "tongue"):
+        assert comp in out
+
+
+def test_info_on_a_gltf_with_morph_targets(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    model = workbench.load_sample("head")
+    for name in list(model.shape_names)[6:]:
+        model.remove_shape(name)
+    model.rename_shape("browDownLeft", "BrowDown_L")  # a non-canonical spelling
+    glb = tmp_path / "face.glb"
+    model.key_weights(0.0, ["cheekPuff"])
+    export(model, model.tracks, glb)
+    assert main(["info", str(glb)]) == 0
+    out = capsys.readouterr().out
+    assert "shapes      6 (6 mapped to ARKit-52)" in out
+    assert "BrowDown_L" in out and "-> ARKit browDownLeft" in out
+    assert "units       m (1 m per unit)" in out
+
+
+def test_export_command_writes_a_glb(tmp_path: Path) -> None:
+    model = workbench.load_sample("head")
+    model.key_expression(0.0, "jawOpen")
+    model.key_expression(1.0, "mouthSmileLeft")
+    saved = tmp_path / "anim.fwb"
+    model.save(saved)
+    out = tmp_path / "anim.glb"
+    r = subprocess.run(
+        [sys.executable, "-m", "workbench.cli", "export", str(saved), str(out), "--fps", "24"],
+        capture_output=True, text=True, check=False,
+    )
+    assert r.returncode == 0, r.stderr
+    assert out.is_file() and out.read_bytes()[:4] == b"glTF"
+    assert r.stdout.strip() == str(out)
+
+
+def test_cli_errors_name_the_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    bad = tmp_path / "broken.obj"
+    bad.write_text("v 0 0 0\nv 1 0 0\nf 1 2 9\n")
+    assert main(["info", str(bad)]) == 2
+    assert "broken.obj" in capsys.readouterr().err
+    model = workbench.load_sample("head")
+    saved = tmp_path / "nokeys.fwb"
+    model.save(saved)
+    assert main(["export", str(saved), str(tmp_path / "x.glb")]) == 2
+    assert "no keys" in capsys.readouterr().err

@@ -1,0 +1,319 @@
+"""Keys, tracks and the timeline: hand-worked interpolation cases and edit functions."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from workbench.tracks import (
+    HANDLES,
+    HEAD_POSE,
+    Key,
+    MeshSampler,
+    Timeline,
+    Track,
+    TrackError,
+    add_key,
+    auto_clamped_slopes,
+    delete_key,
+    evaluate_mesh,
+    move_key,
+    quat_slerp,
+    set_interpolation,
+    set_tangents,
+)
+
+W = "weights/up"
+
+
+def track(times, values, interp="bezier", name=W):
+    return Track(name, tuple(Key(t, v, interp) for t, v in zip(times, values, strict=True)))
+
+
+def at(tr: Track, t):
+    return tr.sample(np.atleast_1d(t))[:, 0]
+
+
+# ------------------------------------------------------------------ interpolation
+def test_linear_midpoint_and_quarter():
+    tr = track([0.0, 2.0], [0.0, 1.0], "linear")
+    assert at(tr, [1.0, 0.5]) == pytest.approx([0.5, 0.25])
+
+
+def test_step_holds_until_next_key_and_extrapolates_constant():
+    tr = track([0.0, 1.0, 2.0], [0.2, 0.8, 0.4], "step")
+    assert at(tr, [-1.0, 0.0, 0.999, 1.0, 1.5, 2.0, 5.0]) == pytest.approx(
+        [0.2, 0.2, 0.2, 0.8, 0.8, 0.4, 0.4]
+    )
+
+
+def test_segment_uses_the_interpolation_of_its_first_key():
+    keys = (Key(0.0, 0.0, "step"), Key(1.0, 1.0, "linear"), Key(2.0, 0.0, "step"))
+    tr = Track(W, keys)
+    assert at(tr, [0.5, 1.5]) == pytest.approx([0.0, 0.5])
+
+
+def test_hermite_with_flat_tangents_is_smoothstep():
+    # v = 3u^2 - 2u^3 between 0 and 1 with zero slopes
+    tr = track([0.0, 1.0], [0.0, 1.0])
+    assert at(tr, [0.25, 0.5]) == pytest.approx([0.15625, 0.5])
+
+
+def test_user_tangent_hand_worked():
+    # v(u) = (u^3 - 2u^2 + u) * Δ * m0 with v0 = v1 = 0, m0 = 2, Δ = 1 -> v(0.5) = 0.25
+    keys = (Key(0.0, 0.0, "bezier", 0.0, 2.0, "user"), Key(1.0, 0.0, "bezier", 0.0, 0.0, "user"))
+    assert at(Track(W, keys), 0.5) == pytest.approx([0.25])
+
+
+def test_tangents_are_per_second_not_per_segment():
+    # same curve on a segment twice as long: slope 1/s over 2 s, v(u)=(u^3-2u^2+u)*2*1
+    keys = (Key(0.0, 0.0, "bezier", 0.0, 1.0, "user"), Key(2.0, 0.0, "bezier", 0.0, 0.0, "user"))
+    assert at(Track(W, keys), 1.0) == pytest.approx([0.25])
+
+
+# ---------------------------------------------------------------- auto clamped
+def test_auto_clamped_extremes_and_ends_are_flat():
+    tr = track([0.0, 1.0, 2.0], [0.0, 1.0, 0.0])
+    assert [float(k.out_tangent) for k in tr.keys] == [0.0, 0.0, 0.0]
+    assert tr.derivatives([1.0], "left")[0, 0] == pytest.approx(0.0)
+    assert tr.derivatives([1.0], "right")[0, 0] == pytest.approx(0.0)
+    v = at(tr, np.linspace(0, 2, 201))
+    assert v.max() == pytest.approx(1.0)
+    assert v.min() >= 0.0
+
+
+def test_no_overshoot_between_equal_keys():
+    tr = track([0.0, 1.0, 2.0, 3.0], [0.0, 1.0, 1.0, 0.0])
+    assert at(tr, np.linspace(1.0, 2.0, 51)) == pytest.approx(np.ones(51))
+    assert at(tr, np.linspace(0, 3, 301)).max() <= 1.0
+
+
+def test_collinear_keys_give_a_straight_line_between_interior_keys():
+    tr = track([0.0, 1.0, 2.0, 3.0], [0.0, 1.0, 2.0, 3.0])
+    t = np.linspace(1.0, 2.0, 11)
+    assert at(tr, t) == pytest.approx(t, abs=1e-12)
+
+
+def test_collinear_keys_with_uneven_spacing():
+    # secants both 1 -> slope 1 at the middle key; ends flat
+    assert auto_clamped_slopes([0.0, 1.0, 3.0], [[0.0], [1.0], [3.0]])[:, 0] == pytest.approx(
+        [0.0, 1.0, 0.0]
+    )
+
+
+def test_auto_clamped_slope_hand_worked_clamp():
+    # s_a = 1, s_b = 0.1: mean 0.55 is capped at 3 * 0.1 = 0.3
+    tr = track([0.0, 1.0, 2.0], [0.0, 1.0, 1.1])
+    assert float(tr.keys[1].in_tangent) == pytest.approx(0.3)
+    assert float(tr.keys[1].out_tangent) == pytest.approx(0.3)
+    v = at(tr, np.linspace(0, 2, 401))
+    assert np.all(np.diff(v) >= -1e-12)  # monotone data stays monotone
+    assert v.max() <= 1.1 + 1e-12
+
+
+def test_auto_clamped_never_leaves_segment_range_on_random_data():
+    rng = np.random.default_rng(3)
+    times = np.cumsum(rng.uniform(0.1, 1.0, 12))
+    values = rng.uniform(-1, 1, 12)
+    tr = track(times, values)
+    for i in range(11):
+        v = at(tr, np.linspace(times[i], times[i + 1], 64))
+        lo, hi = sorted((values[i], values[i + 1]))
+        assert v.min() >= lo - 1e-12 and v.max() <= hi + 1e-12
+
+
+def test_derivatives_left_and_right_of_linear_key():
+    tr = track([0.0, 1.0, 3.0], [0.0, 1.0, 0.0], "linear")
+    assert tr.derivatives([1.0], "left")[0, 0] == pytest.approx(1.0)
+    assert tr.derivatives([1.0], "right")[0, 0] == pytest.approx(-0.5)
+
+
+# ------------------------------------------------------------------ vector tracks
+def test_handle_track_interpolates_each_component():
+    a = np.zeros((2, 3))
+    b = np.array([[1.0, 2.0, -1.0], [0.0, 0.0, 4.0]])
+    tr = Track(HANDLES, (Key(0.0, a, "linear"), Key(2.0, b, "linear")))
+    assert tr.evaluate(1.0) == pytest.approx(b / 2)
+    assert tr.value_shape == (2, 3)
+
+
+def test_head_pose_slerp_and_translation():
+    half = math.sqrt(0.5)
+    k0 = Key(0.0, [0, 0, 0, 0, 0, 0, 1], "linear")
+    k1 = Key(1.0, [2, 0, 0, 0, half, 0, half], "linear")  # 90 degrees about +y
+    tl = Timeline(tracks={HEAD_POSE: Track(HEAD_POSE, (k0, k1))})
+    s = tl.evaluate(0.5)
+    assert s.head_translation == pytest.approx([1, 0, 0])
+    angle = math.radians(22.5)  # half of 45 degrees
+    assert s.head_rotation == pytest.approx([0, math.sin(angle), 0, math.cos(angle)])
+    M = s.head_matrix()
+    assert M[:3, :3] @ [1, 0, 0] == pytest.approx([half, 0, -half])
+
+
+def test_slerp_takes_the_short_arc():
+    q = quat_slerp([0, 0, 0, 1], [0, 0, 0, -1], 0.5)
+    assert abs(q[3]) == pytest.approx(1.0)
+
+
+def test_head_pose_quaternion_is_normalized_and_zero_rejected():
+    tr = Track(HEAD_POSE, (Key(0.0, [0, 0, 0, 0, 0, 0, 2]),))
+    assert tr.keys[0].value[3:] == pytest.approx([0, 0, 0, 1])
+    with pytest.raises(TrackError, match="zero quaternion"):
+        Track(HEAD_POSE, (Key(0.0, [0, 0, 0, 0, 0, 0, 0]),))
+
+
+# --------------------------------------------------------------------- errors
+def test_non_increasing_times_are_rejected_with_the_key_index():
+    with pytest.raises(TrackError, match=r"strictly increasing.*key 2 \(t=1\).*key 1 \(t=1\)"):
+        track([0.0, 1.0, 1.0], [0, 1, 2])
+
+
+def test_nan_values_and_tangents_are_rejected():
+    with pytest.raises(TrackError, match="finite"):
+        Key(0.0, float("nan"))
+    with pytest.raises(TrackError, match="out_tangent"):
+        Key(0.0, 0.0, "bezier", 0.0, float("inf"), "user")
+    with pytest.raises(TrackError, match="time must be finite"):
+        Key(float("nan"), 0.0)
+
+
+def test_bad_names_interpolations_and_shapes():
+    with pytest.raises(TrackError, match="track name"):
+        Track("jawOpen", (Key(0.0, 0.0),))
+    with pytest.raises(TrackError, match="interpolation"):
+        Key(0.0, 0.0, "cubic")  # type: ignore[arg-type]
+    with pytest.raises(TrackError, match="value shape"):
+        Track(HANDLES, (Key(0.0, np.zeros((2, 3))), Key(1.0, np.zeros((3, 3)))))
+    with pytest.raises(TrackError, match="values must have shape"):
+        Track(W, (Key(0.0, [1.0, 2.0]),))
+
+
+def test_unknown_shape_names_are_reported(tiny_model):
+    tl = Timeline().add_key("weights/nope", 0.0, 1.0).add_key(W, 0.0, 1.0)
+    with pytest.raises(TrackError, match=r"unknown shape names \['nope'\]"):
+        tl.check_model(tiny_model)
+    with pytest.raises(TrackError, match="unknown shape name 'nope'"):
+        tl.weight_matrix(["up"], [0.0])
+
+
+def test_handle_count_must_match_model(tiny_model):
+    tl = Timeline().add_key(HANDLES, 0.0, np.zeros((2, 3)))
+    with pytest.raises(TrackError, match="keys 2 handles but the model has 0"):
+        tl.check_model(tiny_model)
+
+
+def test_timeline_arguments_checked():
+    with pytest.raises(TrackError, match="fps"):
+        Timeline(fps=0)
+    with pytest.raises(TrackError, match="start <= end"):
+        Timeline(start=2, end=1)
+
+
+# ---------------------------------------------------------------------- edits
+def test_add_key_returns_new_objects_and_replaces_same_time():
+    tl0 = Timeline()
+    tl1 = add_key(tl0, W, 1.0, 0.5, interpolation="linear")
+    tl2 = add_key(tl1, W, 0.0, 0.0, interpolation="linear")
+    tl3 = add_key(tl2, W, 1.0, 0.9, interpolation="linear")
+    assert len(tl0.tracks) == 0 and len(tl1.tracks[W]) == 1
+    assert [k.time for k in tl3.tracks[W].keys] == [0.0, 1.0]
+    assert tl3.tracks[W].keys[1].scalar == 0.9
+    assert tl2.tracks[W].keys[1].scalar == 0.5  # old object unchanged
+
+
+def test_delete_key_and_empty_track_goes():
+    tl = Timeline().add_key(W, 0.0, 0.0).add_key(W, 1.0, 1.0)
+    tl = delete_key(tl, W, 0)
+    assert [k.time for k in tl.tracks[W].keys] == [1.0]
+    assert W not in delete_key(tl, W, 0).tracks
+    with pytest.raises(TrackError, match="out of range"):
+        delete_key(tl, W, 5)
+
+
+def test_move_key_resorts_and_refuses_collisions():
+    tl = Timeline().add_key(W, 0.0, 0.0).add_key(W, 1.0, 1.0).add_key(W, 2.0, 0.0)
+    moved = move_key(tl, W, 0, 3.0)
+    assert [k.time for k in moved.tracks[W].keys] == [1.0, 2.0, 3.0]
+    with pytest.raises(TrackError, match="already there"):
+        move_key(tl, W, 0, 2.0)
+
+
+def test_moving_a_key_recomputes_auto_tangents():
+    tl = Timeline().add_key(W, 0.0, 0.0).add_key(W, 1.0, 1.0).add_key(W, 2.0, 2.0)
+    assert float(tl.tracks[W].keys[1].out_tangent) == pytest.approx(1.0)
+    tl = move_key(tl, W, 2, 2.0, value=1.0)  # now an extreme plateau -> flat
+    assert float(tl.tracks[W].keys[1].out_tangent) == 0.0
+
+
+def test_set_tangents_user_then_back_to_auto():
+    tl = Timeline().add_key(W, 0.0, 0.0).add_key(W, 1.0, 1.0).add_key(W, 2.0, 2.0)
+    tl_user = set_tangents(tl, W, 1, in_tangent=5.0, out_tangent=-1.0)
+    k = tl_user.tracks[W].keys[1]
+    assert (k.tangent_mode, float(k.in_tangent), float(k.out_tangent)) == ("user", 5.0, -1.0)
+    k_auto = set_tangents(tl_user, W, 1, mode="auto_clamped").tracks[W].keys[1]
+    assert float(k_auto.in_tangent) == pytest.approx(1.0)
+
+
+def test_set_interpolation_all_keys():
+    tl = Timeline().add_key(W, 0.0, 0.0).add_key(W, 2.0, 1.0)
+    tl = set_interpolation(tl, W, None, "linear")
+    assert tl.tracks[W].interpolations == ("linear", "linear")
+    assert tl.evaluate(1.0).weights["up"] == pytest.approx(0.5)
+
+
+def test_frame_times_and_fit_range():
+    tl = Timeline(fps=4).add_key(W, 0.5, 0.0).add_key(W, 1.5, 1.0).fit_range()
+    assert (tl.start, tl.end) == (0.5, 1.5)
+    assert tl.frame_times() == pytest.approx([0.5, 0.75, 1.0, 1.25, 1.5])
+
+
+# --------------------------------------------------------------- mesh evaluation
+def test_evaluate_mesh_matches_the_model_with_the_same_weights(tiny_model):
+    tl = (
+        Timeline()
+        .add_key(W, 0.0, 0.0)
+        .add_key(W, 1.0, 1.0)
+        .add_key("weights/left", 0.0, 0.5, interpolation="linear")
+        .add_key("weights/left", 1.0, -0.5, interpolation="linear")
+    )
+    for t in (0.0, 0.3, 1.0):
+        tiny_model.set_weights(tl.evaluate(t).weights)
+        assert evaluate_mesh(tiny_model, tl, t) == pytest.approx(tiny_model.evaluate(), abs=1e-6)
+
+
+def test_head_pose_moves_points_rigidly(tiny_model):
+    half = math.sqrt(0.5)
+    tl = Timeline().add_key(HEAD_POSE, 0.0, [1, 2, 3, 0, 0, half, half])  # 90 deg about z
+    P = evaluate_mesh(tiny_model, tl, 0.0)
+    V = tiny_model.vertices
+    expect = np.stack([-V[:, 1], V[:, 0], V[:, 2]], axis=1) + np.array([1.0, 2.0, 3.0])
+    assert P == pytest.approx(expect, abs=1e-6)
+
+
+def test_muted_shape_contributes_nothing(tiny_model):
+    tiny_model.set_shape_mute("up", True)
+    tl = Timeline().add_key(W, 0.0, 1.0)
+    assert MeshSampler(tiny_model, tl).weights([0.0])[0, 0] == 0.0
+    assert evaluate_mesh(tiny_model, tl, 0.0) == pytest.approx(tiny_model.vertices)
+
+
+def test_json_round_trip_is_exact():
+    import json
+
+    tl = (
+        Timeline(fps=24, start=0.0, end=2.0)
+        .add_key(W, 0.0, 0.1)
+        .add_key(W, 1.0 / 3.0, 0.7, in_tangent=0.25, out_tangent=-1.5)
+        .add_key(HANDLES, 0.5, np.arange(6.0).reshape(2, 3) / 7, interpolation="step")
+        .add_key(HEAD_POSE, 0.0, [0.1, 0, 0, 0, 0, 0, 1], interpolation="linear")
+    )
+    back = Timeline.from_json(json.loads(json.dumps(tl.to_json())))
+    assert (back.fps, back.start, back.end, list(back.tracks)) == (24, 0.0, 2.0, list(tl.tracks))
+    t = np.linspace(-0.5, 2.5, 37)
+    for name, tr in tl.tracks.items():
+        assert np.array_equal(back.tracks[name].sample(t), tr.sample(t))
+        assert [k.tangent_mode for k in back.tracks[name].keys] == [k.tangent_mode for k in tr.keys]
+    with pytest.raises(TrackError, match="malformed"):
+        Timeline.from_json({"tracks": {W: [{"value": 1.0}]}})

@@ -1,0 +1,194 @@
+"""Export an animated face: one module per format behind a small registry.
+
+``export(model, timeline, path)`` picks the writer from the file suffix (or
+``format=``) and returns the files it wrote:
+
+========  ===============  ==========================================================
+format    suffixes         what is written
+========  ===============  ==========================================================
+gltf      .glb, .gltf      mesh + morph targets + weights animation (:mod:`.gltf`)
+usd       .usd/.usda/.usdc UsdSkel blend shapes + per-frame weights (:mod:`.usd`)
+pc2       .pc2             baked point cache, little-endian (:mod:`.pointcache`)
+mdd       .mdd             baked point cache, big-endian (:mod:`.pointcache`)
+obj       .obj             one OBJ per frame, ``<stem>_<frame>.obj`` (:mod:`.pointcache`)
+csv       .csv             per-frame weights, re-importable (:mod:`.csv`)
+========  ===============  ==========================================================
+
+Every file is written to a temporary name in the target folder and renamed
+into place (:func:`atomic_path`), so a crash never leaves a half-written file
+under the final name. Positions are written in metres (the model's units are
+scaled by ``model.metadata.metres_per_unit``), +y up, as glTF and USD expect.
+
+The registry is a dict rather than entry points: the formats are few and all
+live here; writers are imported lazily so ``pxr`` is only needed for USD.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import importlib
+import os
+import tempfile
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+if TYPE_CHECKING:
+    from workbench.model import FaceModel
+    from workbench.tracks import Timeline
+
+__all__ = [
+    "FORMATS",
+    "ExportError",
+    "ExportFormat",
+    "atomic_path",
+    "atomic_write_bytes",
+    "export",
+    "export_times",
+    "format_for_path",
+]
+
+
+class ExportError(ValueError):
+    """The model/timeline cannot be written in the requested format."""
+
+
+@dataclass(frozen=True)
+class ExportFormat:
+    """A registered writer: ``module.write(model, timeline, path, *, bake, **options) -> list[Path]``."""
+
+    name: str
+    suffixes: tuple[str, ...]
+    module: str
+    description: str
+
+    def writer(self) -> Callable[..., list[Path]]:
+        mod = importlib.import_module(self.module)
+        fn: Callable[..., list[Path]] = mod.write
+        return fn
+
+
+FORMATS: dict[str, ExportFormat] = {
+    f.name: f
+    for f in (
+        ExportFormat(
+            "gltf", (".glb", ".gltf"), "workbench.export.gltf", "glTF 2.0 morph targets + weights animation"
+        ),
+        ExportFormat(
+            "usd", (".usd", ".usda", ".usdc"), "workbench.export.usd", "USD with UsdSkel blend shapes"
+        ),
+        ExportFormat("pc2", (".pc2",), "workbench.export.pointcache", "PC2 point cache"),
+        ExportFormat("mdd", (".mdd",), "workbench.export.pointcache", "MDD point cache"),
+        ExportFormat("obj", (".obj",), "workbench.export.pointcache", "OBJ sequence, one file per frame"),
+        ExportFormat("csv", (".csv",), "workbench.export.csv", "CSV of per-frame weights"),
+    )
+}
+
+
+def format_for_path(path: str | Path, format: str | None = None) -> ExportFormat:
+    """The registered format for ``format`` (a name) or for the suffix of ``path``."""
+    if format is not None:
+        if format not in FORMATS:
+            raise ExportError(f"unknown export format {format!r}; known: {sorted(FORMATS)}")
+        return FORMATS[format]
+    suffix = Path(path).suffix.lower()
+    for f in FORMATS.values():
+        if suffix in f.suffixes:
+            return f
+    known = sorted(s for f in FORMATS.values() for s in f.suffixes)
+    raise ExportError(f"{Path(path).name}: cannot tell the format from suffix {suffix!r}; known: {known}")
+
+
+def export(
+    model: FaceModel,
+    timeline: Timeline,
+    path: str | Path,
+    *,
+    fps: float | None = None,
+    bake: bool = False,
+    format: str | None = None,
+    **options: Any,
+) -> list[Path]:
+    """Write ``model`` animated by ``timeline`` to ``path``.
+
+    Parameters
+    ----------
+    model : FaceModel
+    timeline : Timeline
+        Checked against the model (unknown shape names, handle count).
+    path : str or Path
+        Output file; the suffix picks the format unless ``format`` is given.
+    fps : float, optional
+        Frame rate for baked/per-frame output (default ``timeline.fps``).
+    bake : bool
+        glTF: resample every curve at each frame (LINEAR) instead of writing
+        the keys; USD: write plain per-frame points instead of UsdSkel blend
+        shapes. Point caches, OBJ and CSV are always per frame.
+    format : str, optional
+        One of :data:`FORMATS`.
+    **options
+        Format-specific (see each writer's ``write``).
+
+    Returns
+    -------
+    list of Path
+        The files written.
+    """
+    from workbench.tracks import TrackError
+
+    fmt = format_for_path(path, format)
+    tl = timeline
+    if fps is not None:
+        if not fps > 0:
+            raise ExportError(f"fps must be positive, got {fps!r}")
+        tl = tl.replace(fps=float(fps))
+    if tl.end <= tl.start and tl.key_range is not None:
+        tl = tl.fit_range()
+    try:
+        tl.check_model(model)
+    except TrackError as exc:
+        raise ExportError(str(exc)) from None
+    if fmt.name in ("pc2", "mdd", "obj"):
+        options.setdefault("kind", fmt.name)
+    return fmt.writer()(model, tl, Path(path), bake=bake, **options)
+
+
+def export_times(timeline: Timeline) -> NDArray[np.float64]:
+    """(F,) float: the frame times written by per-frame formats (``timeline.frame_times()``)."""
+    return timeline.frame_times()
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | Path) -> Iterator[Path]:
+    """Yield a temporary path next to ``path``; on success rename it onto ``path``.
+
+    The temporary file is removed if the body raises, so ``path`` is either
+    the old file or the complete new one.
+    """
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=f".tmp{p.suffix}", dir=p.parent)
+    os.close(fd)
+    tmp_p = Path(tmp)
+    try:
+        yield tmp_p
+        os.replace(tmp_p, p)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            tmp_p.unlink()
+        raise
+
+
+def atomic_write_bytes(path: str | Path, data: bytes | bytearray | memoryview) -> Path:
+    """Write ``data`` to ``path`` atomically (temp file + fsync + rename)."""
+    p = Path(path)
+    with atomic_path(p) as tmp:
+        with open(tmp, "wb") as fh:
+            fh.write(data)
+            fh.flush()
+            os.fsync(fh.fileno())
+    return p

@@ -1,0 +1,458 @@
+"""glTF 2.0 (.glb / .gltf) export: morph targets and a weights animation.
+
+What is written
+---------------
+* One mesh, one primitive: ``POSITION`` (neutral, metres, with min/max) and
+  ``indices`` (the original polygons fan-triangulated). No normals: viewers
+  compute them, and morphing them correctly would need per-target normals.
+* One morph target per blendshape (its masked delta in metres; stored as a
+  sparse accessor when fewer than half the vertices move), names in
+  ``mesh.extras.targetNames`` (the convention Blender and three.js read).
+* **Handle layer** (when it moves the mesh): the shell displacement is linear
+  in the handle offsets, ``D(o) = Σ_j Σ_a o_ja B_ja`` (:mod:`workbench.shell`),
+  so it is written *exactly* as three extra morph targets per handle,
+  ``handle:<name>:x|y|z`` = ``B_ja`` (metres per model unit of offset), whose
+  weights are the animated offset components (model units). Any interpolation
+  of the offsets carries over unchanged. Caveat: Blender's glTF importer clamps
+  shape-key values to [0, 1], so there the handle layer is right only for
+  offsets in that range; export with ``bake=True`` to USD/PC2 for Blender.
+* One animation: a ``weights`` channel on the mesh node (one sampler for all
+  targets, as glTF requires) and, when the head pose is keyed, ``translation``
+  and ``rotation`` channels on the same node (metres; quaternions slerped).
+
+Sampler construction (exact, no resampling unless ``bake=True``)
+-----------------------------------------------------------------
+glTF has one sampler for all morph weights, so the key times of every weight
+track are merged. The sampler's interpolation is ``STEP`` if every segment is
+step, ``CUBICSPLINE`` if any is Bézier, else ``LINEAR``. At every merged time
+the value and the left/right derivatives of each curve are written; since our
+Bézier segments are cubic polynomials of ``t`` (:mod:`workbench.tracks`),
+splitting one at an extra time with the true derivatives reproduces it
+exactly, and a linear segment is a cubic with both tangents equal to its
+slope. glTF ``CUBICSPLINE`` stores per key ``(a_k, v_k, b_k)`` with
+``p(t) = h00 v_k + h10 Δ b_k + h01 v_{k+1} + h11 Δ a_{k+1}`` (spec, Appendix C),
+so ``b_k`` = our out-slope and ``a_{k+1}`` = our in-slope (value per second).
+A *step* segment inside a LINEAR/CUBICSPLINE sampler is written as a hold
+followed by a ramp over the last ``ε = min(1e-4 s, gap/4)`` before the next
+key (glTF cannot jump inside a non-STEP sampler); that ramp is the only place
+the file differs from :meth:`Timeline.evaluate`. Times are float32 seconds.
+Negative key times are rejected (glTF animations start at 0 or later).
+
+Written with pygltflib (objects + binary blob). Its pitfall: accessors default
+to ``byteOffset=0``, which is invalid for a sparse accessor without a
+bufferView, so it is set to None there.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import pygltflib
+from numpy.typing import NDArray
+
+from workbench.export import ExportError, atomic_write_bytes
+from workbench.tracks import HEAD_POSE, MeshSampler, Timeline, Track
+
+if TYPE_CHECKING:
+    from workbench.model import FaceModel
+
+__all__ = ["Curve", "SamplerData", "build_gltf", "merge_curves", "write"]
+
+_ARRAY_BUFFER = 34962
+_ELEMENT_ARRAY_BUFFER = 34963
+_STEP_EPS = 1e-4
+
+
+@dataclass(frozen=True)
+class Curve:
+    """One scalar curve for a sampler: a component of a track, or a constant.
+
+    ``value(t) = scale * track.sample(t)[:, component]`` (or ``scale * constant``).
+    """
+
+    track: Track | None
+    component: int = 0
+    constant: float = 0.0
+    scale: float = 1.0
+
+
+@dataclass(frozen=True)
+class SamplerData:
+    """Arrays of one glTF animation sampler.
+
+    Attributes
+    ----------
+    times : (K,) float
+    interpolation : {"STEP", "LINEAR", "CUBICSPLINE"}
+    values, in_tangents, out_tangents : (K, m) float
+        Per key and curve (tangents are per second; used for CUBICSPLINE).
+    """
+
+    times: NDArray[np.float64]
+    interpolation: str
+    values: NDArray[np.float64]
+    in_tangents: NDArray[np.float64]
+    out_tangents: NDArray[np.float64]
+
+    def output(self) -> NDArray[np.float32]:
+        """Flat float32 sampler output in glTF order (with in/out tangents for CUBICSPLINE)."""
+        if self.interpolation == "CUBICSPLINE":
+            out = np.stack([self.in_tangents, self.values, self.out_tangents], axis=1)
+            return out.astype(np.float32).reshape(-1)
+        return self.values.astype(np.float32).reshape(-1)
+
+
+def _segment_codes(tr: Track) -> set[str]:
+    # the last key's interpolation governs no segment
+    return set(tr.interpolations[:-1]) if len(tr) > 1 else set()
+
+
+def merge_curves(
+    curves: list[Curve],
+    *,
+    bake_times: NDArray[np.float64] | None = None,
+    rotation_track: Track | None = None,
+) -> SamplerData | None:
+    """Merge scalar curves onto one glTF sampler (see module docstring).
+
+    Parameters
+    ----------
+    curves : list of Curve
+        The sampler's output columns.
+    bake_times : (F,) float, optional
+        Resample at these times with LINEAR instead of merging keys.
+    rotation_track : Track, optional
+        If given, ``curves`` are its quaternion components: interpolation is
+        STEP or LINEAR (glTF slerps rotations, like :class:`Track`).
+
+    Returns
+    -------
+    SamplerData or None
+        None when no curve is animated.
+    """
+    tracks: dict[int, Track] = {id(c.track): c.track for c in curves if c.track is not None}
+    if not tracks:
+        return None
+    if bake_times is not None:
+        times = np.asarray(bake_times, np.float64)
+        mode = "LINEAR"
+    else:
+        orig = set().union(*(_segment_codes(t) for t in tracks.values()))
+        codes = orig
+        if rotation_track is not None:
+            codes = {"step"} if codes <= {"step"} else {"linear"}
+        if not codes or codes == {"step"}:
+            mode = "STEP"
+        elif "bezier" in codes:
+            mode = "CUBICSPLINE"
+        else:
+            mode = "LINEAR"
+        times = np.unique(np.concatenate([t.times for t in tracks.values()]))
+        if mode != "STEP" and "step" in orig:
+            # hold-then-ramp knots just before the end of every step segment
+            gaps = np.diff(times)
+            eps = min(_STEP_EPS, float(gaps.min()) / 4.0) if gaps.size else _STEP_EPS
+            extra = [
+                tr.times[i + 1] - eps
+                for tr in tracks.values()
+                for i in range(len(tr) - 1)
+                if tr.keys[i].interpolation == "step"
+            ]
+            times = np.unique(np.concatenate([times, np.asarray(extra)]))
+    if times.size and times[0] < 0:
+        raise ExportError(f"glTF animation times must be >= 0; the first key is at {times[0]:g} s")
+    K, m = times.size, len(curves)
+    V = np.zeros((K, m))
+    A = np.zeros((K, m))
+    B = np.zeros((K, m))
+    cache: dict[int, tuple[NDArray[np.float64], ...]] = {}
+    for j, c in enumerate(curves):
+        if c.track is None:
+            V[:, j] = c.scale * c.constant
+            continue
+        key = id(c.track)
+        if key not in cache:
+            tr = c.track
+            vals = tr.sample(times)
+            if mode == "CUBICSPLINE":
+                left, right = tr.derivatives(times, "left"), tr.derivatives(times, "right")
+                left, right = _step_ramps(tr, times, vals, left, right)
+            else:
+                left = right = np.zeros_like(vals)
+            cache[key] = (vals, left, right)
+        vals, left, right = cache[key]
+        V[:, j] = c.scale * vals[:, c.component]
+        A[:, j] = c.scale * left[:, c.component]
+        B[:, j] = c.scale * right[:, c.component]
+    return SamplerData(times, mode, V, A, B)
+
+
+def _step_ramps(
+    tr: Track,
+    times: NDArray[np.float64],
+    vals: NDArray[np.float64],
+    left: NDArray[np.float64],
+    right: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Tangents of the short linear ramp that ends each step segment in a cubic sampler."""
+    left, right = left.copy(), right.copy()
+    for i in range(len(tr) - 1):
+        if tr.keys[i].interpolation != "step":
+            continue
+        end = int(np.searchsorted(times, tr.times[i + 1]))
+        if end == 0:
+            continue
+        start = end - 1  # the knot just before the key (inserted by merge_curves)
+        slope = (vals[end] - vals[start]) / (times[end] - times[start])
+        right[start] = slope
+        left[end] = slope
+    return left, right
+
+
+# ------------------------------------------------------------------ file building
+class _Blob:
+    """Accumulates the binary buffer and the bufferViews/accessors that point into it."""
+
+    def __init__(self, gltf: pygltflib.GLTF2) -> None:
+        self.gltf = gltf
+        self.chunks: list[bytes] = []
+        self.size = 0
+
+    def view(self, data: bytes, target: int | None = None) -> int:
+        pad = (-self.size) % 4
+        if pad:
+            self.chunks.append(b"\0" * pad)
+            self.size += pad
+        self.gltf.bufferViews.append(
+            pygltflib.BufferView(buffer=0, byteOffset=self.size, byteLength=len(data), target=target)
+        )
+        self.chunks.append(data)
+        self.size += len(data)
+        return len(self.gltf.bufferViews) - 1
+
+    def accessor(
+        self,
+        array: NDArray[Any],
+        type_: str,
+        *,
+        target: int | None = None,
+        minmax: bool = False,
+    ) -> int:
+        a = np.ascontiguousarray(array)
+        ctype = {np.dtype(np.float32): pygltflib.FLOAT, np.dtype(np.uint32): pygltflib.UNSIGNED_INT}[
+            a.dtype
+        ]
+        count = a.shape[0]
+        acc = pygltflib.Accessor(
+            bufferView=self.view(a.tobytes(), target),
+            componentType=ctype,
+            count=count,
+            type=type_,
+        )
+        if minmax:
+            flat = a.reshape(count, -1)
+            acc.min = [float(x) for x in flat.min(axis=0)]
+            acc.max = [float(x) for x in flat.max(axis=0)]
+        self.gltf.accessors.append(acc)
+        return len(self.gltf.accessors) - 1
+
+    def sparse_vec3(self, delta: NDArray[np.float32]) -> int:
+        """A VEC3 float accessor of ``len(delta)`` elements storing only the non-zero rows."""
+        n = delta.shape[0]
+        nz = np.flatnonzero(np.any(delta != 0, axis=1)).astype(np.uint32)
+        if nz.size == 0:
+            nz = np.zeros(1, np.uint32)  # sparse.count must be >= 1
+        vals = np.ascontiguousarray(delta[nz], np.float32)
+        # min/max over *all* elements, zeros included (validator rule)
+        full_min = np.minimum(vals.min(axis=0), 0.0) if nz.size < n else vals.min(axis=0)
+        full_max = np.maximum(vals.max(axis=0), 0.0) if nz.size < n else vals.max(axis=0)
+        acc = pygltflib.Accessor(
+            componentType=pygltflib.FLOAT,
+            count=n,
+            type=pygltflib.VEC3,
+            min=[float(x) for x in full_min],
+            max=[float(x) for x in full_max],
+            sparse=pygltflib.Sparse(
+                count=int(nz.size),
+                indices=pygltflib.AccessorSparseIndices(
+                    bufferView=self.view(nz.tobytes()), componentType=pygltflib.UNSIGNED_INT
+                ),
+                values=pygltflib.AccessorSparseValues(bufferView=self.view(vals.tobytes())),
+            ),
+        )
+        acc.byteOffset = None  # pygltflib writes 0, invalid without a bufferView
+        acc.sparse.indices.byteOffset = None
+        acc.sparse.values.byteOffset = None
+        self.gltf.accessors.append(acc)
+        return len(self.gltf.accessors) - 1
+
+    def data(self) -> bytes:
+        pad = (-self.size) % 4
+        return b"".join(self.chunks) + b"\0" * pad
+
+
+def build_gltf(
+    model: FaceModel, timeline: Timeline, *, bake: bool = False, sparse: bool = True
+) -> tuple[pygltflib.GLTF2, bytes]:
+    """The glTF document and its binary buffer (see module docstring).
+
+    Returns
+    -------
+    gltf : pygltflib.GLTF2
+    blob : bytes
+        Contents of buffer 0.
+    """
+    sampler = MeshSampler(model, timeline)
+    mpu = model.metadata.metres_per_unit
+    gltf = pygltflib.GLTF2(
+        asset=pygltflib.Asset(version="2.0", generator="Facial Editing Workbench"),
+        scene=0,
+    )
+    blob = _Blob(gltf)
+
+    V = (np.asarray(model.vertices, np.float64) * mpu).astype(np.float32)
+    tris, _ = model.polygons.triangulate()
+    pos = blob.accessor(V, pygltflib.VEC3, target=_ARRAY_BUFFER, minmax=True)
+    idx = blob.accessor(
+        tris.astype(np.uint32).reshape(-1), pygltflib.SCALAR, target=_ELEMENT_ARRAY_BUFFER
+    )
+
+    names: list[str] = []
+    targets: list[dict[str, int]] = []
+    curves: list[Curve] = []
+    n = V.shape[0]
+    weight_tracks = timeline.weight_tracks
+    for k, s in enumerate(model.shapes):
+        d = (sampler.deltas[k].astype(np.float64) * mpu).astype(np.float32)
+        moving = int(np.count_nonzero(np.any(d != 0, axis=1)))
+        if sparse and moving * 2 < n:
+            acc = blob.sparse_vec3(d)
+        else:
+            acc = blob.accessor(d, pygltflib.VEC3, target=_ARRAY_BUFFER, minmax=True)
+        targets.append({"POSITION": acc})
+        names.append(s.name)
+        if s.mute:
+            curves.append(Curve(None, constant=0.0))
+        elif s.name in weight_tracks:
+            curves.append(Curve(weight_tracks[s.name]))
+        else:
+            curves.append(Curve(None, constant=float(sampler.static_weights[k])))
+
+    if sampler.has_handle_layer:
+        basis = sampler.handle_basis()
+        h = model.handles
+        htrack = timeline.handles
+        for j in range(len(h)):
+            for a, axis in enumerate("xyz"):
+                d = (basis[j, a].astype(np.float64) * mpu).astype(np.float32)
+                acc = blob.accessor(d, pygltflib.VEC3, target=_ARRAY_BUFFER, minmax=True)
+                targets.append({"POSITION": acc})
+                names.append(f"handle:{h.names[j]}:{axis}")
+                if htrack is None:
+                    curves.append(Curve(None, constant=float(sampler.static_offsets[j, a])))
+                else:
+                    curves.append(Curve(htrack, component=3 * j + a))
+
+    t0 = timeline.start
+    initial = [c.scale * (c.constant if c.track is None else float(c.track.sample([t0])[0, c.component])) for c in curves]
+    mesh = pygltflib.Mesh(
+        name=model.metadata.name or "face",
+        primitives=[
+            pygltflib.Primitive(
+                attributes=pygltflib.Attributes(POSITION=pos),
+                indices=idx,
+                mode=pygltflib.TRIANGLES,
+                targets=targets or None,
+            )
+        ],
+        weights=initial or None,
+        extras={"targetNames": names} if names else {},
+    )
+    gltf.meshes.append(mesh)
+    node = pygltflib.Node(name=model.metadata.name or "face", mesh=0)
+    gltf.nodes.append(node)
+    gltf.scenes.append(pygltflib.Scene(nodes=[0]))
+
+    bake_times = timeline.frame_times() if bake else None
+    anim = pygltflib.Animation(name="timeline", samplers=[], channels=[])
+
+    def add_channel(data: SamplerData | None, path: str, type_: str, width: int) -> None:
+        if data is None:
+            return
+        inp = blob.accessor(data.times.astype(np.float32), pygltflib.SCALAR, minmax=True)
+        out_flat = data.output()
+        out_arr = out_flat if type_ == pygltflib.SCALAR else out_flat.reshape(-1, width)
+        out = blob.accessor(out_arr, type_)
+        anim.samplers.append(
+            pygltflib.AnimationSampler(input=inp, output=out, interpolation=data.interpolation)
+        )
+        anim.channels.append(
+            pygltflib.AnimationChannel(
+                sampler=len(anim.samplers) - 1,
+                target=pygltflib.AnimationChannelTarget(node=0, path=path),
+            )
+        )
+
+    if names:
+        add_channel(merge_curves(curves, bake_times=bake_times), "weights", pygltflib.SCALAR, 1)
+
+    hp = timeline.tracks.get(HEAD_POSE)
+    if hp is not None:
+        first = hp.sample([t0])[0]
+        node.translation = [float(x) * mpu for x in first[:3]]
+        node.rotation = [float(x) for x in first[3:]]
+        tr_curves = [Curve(hp, component=a, scale=mpu) for a in range(3)]
+        add_channel(merge_curves(tr_curves, bake_times=bake_times), "translation", pygltflib.VEC3, 3)
+        rot_curves = [Curve(hp, component=3 + a) for a in range(4)]
+        add_channel(
+            merge_curves(rot_curves, bake_times=bake_times, rotation_track=hp),
+            "rotation",
+            pygltflib.VEC4,
+            4,
+        )
+    if anim.channels:
+        gltf.animations.append(anim)
+    data = blob.data()
+    gltf.buffers.append(pygltflib.Buffer(byteLength=len(data)))
+    return gltf, data
+
+
+def _glb_bytes(gltf: pygltflib.GLTF2, data: bytes) -> bytes:
+    """Pack a GLB container (12-byte header, padded JSON chunk, BIN chunk)."""
+    import struct
+
+    js = gltf.to_json(separators=(",", ":")).encode("utf-8")
+    js += b" " * ((-len(js)) % 4)
+    body = struct.pack("<II", len(js), 0x4E4F534A) + js + struct.pack("<II", len(data), 0x004E4942) + data
+    return struct.pack("<4sII", b"glTF", 2, 12 + len(body)) + body
+
+
+def write(
+    model: FaceModel,
+    timeline: Timeline,
+    path: Path,
+    *,
+    bake: bool = False,
+    sparse: bool = True,
+) -> list[Path]:
+    """Write a .glb (one file) or .gltf (+ ``<stem>.bin``) atomically.
+
+    Parameters
+    ----------
+    bake : bool
+        Resample every curve at each frame (LINEAR) instead of writing keys.
+    sparse : bool
+        Store blendshape targets that move few vertices as sparse accessors.
+    """
+    gltf, data = build_gltf(model, timeline, bake=bake, sparse=sparse)
+    if path.suffix.lower() == ".gltf":
+        bin_path = path.with_suffix(".bin")
+        gltf.buffers[0].uri = bin_path.name
+        atomic_write_bytes(bin_path, data)
+        atomic_write_bytes(path, gltf.to_json(indent=1).encode("utf-8"))
+        return [path, bin_path]
+    atomic_write_bytes(path, _glb_bytes(gltf, data))
+    return [path]
