@@ -788,6 +788,16 @@ class FaceModel:
         """Zero every handle offset (undoable)."""
         self.set_handle_offsets(np.zeros((len(self.handles), 3)), label="Reset handles")
 
+    def prepare_handles(self) -> None:
+        """Build the shell basis for the current handle set now (else on the first drag).
+
+        Reports through the callback of :meth:`set_handle_progress`; takes ~0.3 s at
+        20k vertices and ~2 s at 80k with CHOLMOD.
+        """
+        with self._lock:
+            if len(self.handles):
+                self._handle_layer.deformer(self)
+
     def handle_displacement(self) -> NDArray[np.float32]:
         """(n, 3) float32: the displacement the handle layer adds (a copy)."""
         with self._lock:

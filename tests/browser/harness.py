@@ -1,0 +1,371 @@
+"""Helpers of the real-browser harness (see conftest.py): JupyterLab process, notebook page, pixels.
+
+Kept out of conftest.py so that tests can import them (``from harness import ...``).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import os
+import socket
+import subprocess
+import sys
+import time
+import urllib.error
+import urllib.request
+import uuid
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[2]
+CHROMIUM = Path("/usr/bin/chromium")
+ARTIFACTS = REPO / "test-artifacts"
+OVERRIDES = REPO / "widgets" / "jupyter_settings" / "overrides.json"
+CHROMIUM_ARGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--no-first-run",
+]
+# Test-only JupyterLab settings on top of the shipped overrides: no news/update pop-ups.
+TEST_SETTINGS = {
+    "@jupyterlab/apputils-extension:notification": {
+        "fetchNews": "false",
+        "checkForUpdates": False,
+    },
+}
+
+
+def in_ci() -> bool:
+    """True when the CI environment variable is set (CI=true on this project's CI)."""
+    return os.environ.get("CI", "").lower() not in ("", "0", "false", "no")
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+# --------------------------------------------------------------------------- JupyterLab
+class LabServer:
+    """A JupyterLab process started by this harness (and the only one it stops)."""
+
+    def __init__(self, base: Path) -> None:
+        self.base = base
+        self.root = base / "root"
+        self.port = _free_port()
+        self.url = f"http://127.0.0.1:{self.port}"
+        self.log_path = base / "jupyterlab.log"
+        self.proc: subprocess.Popen[bytes] | None = None
+
+    def start(self, timeout: float = 90.0) -> None:
+        b = self.base
+        dirs = {
+            name: b / name
+            for name in (
+                "root",
+                "config",
+                "data",
+                "runtime",
+                "workspaces",
+                "user_settings",
+                "app_settings",
+                "ipython",
+            )
+        }
+        for d in dirs.values():
+            d.mkdir(parents=True, exist_ok=True)
+        settings = json.loads(OVERRIDES.read_text())
+        for plugin, values in TEST_SETTINGS.items():
+            settings.setdefault(plugin, {}).update(values)
+        (dirs["app_settings"] / "overrides.json").write_text(json.dumps(settings, indent=1))
+        env = dict(os.environ)
+        env.update(
+            JUPYTER_CONFIG_DIR=str(dirs["config"]),
+            JUPYTER_DATA_DIR=str(dirs["data"]),
+            JUPYTER_RUNTIME_DIR=str(dirs["runtime"]),
+            IPYTHONDIR=str(dirs["ipython"]),
+            JUPYTER_PLATFORM_DIRS="1",
+            PYTHONPATH=os.pathsep.join(p for p in (str(REPO), env.get("PYTHONPATH", "")) if p),
+            VTK_DEFAULT_OPENGL_WINDOW="vtkEGLRenderWindow",
+        )
+        cmd = [
+            sys.executable, "-m", "jupyterlab",
+            "--no-browser",
+            "--ServerApp.ip=127.0.0.1",
+            f"--ServerApp.port={self.port}",
+            "--ServerApp.port_retries=0",
+            "--IdentityProvider.token=",
+            "--ServerApp.password=",
+            "--ServerApp.disable_check_xsrf=True",
+            "--allow-root",
+            f"--ServerApp.root_dir={dirs['root']}",
+            f"--LabApp.workspaces_dir={dirs['workspaces']}",
+            f"--LabApp.user_settings_dir={dirs['user_settings']}",
+            f"--LabApp.app_settings_dir={dirs['app_settings']}",
+            "--LabApp.expose_app_in_browser=True",
+            "--LabApp.news_url=None",
+            "--LabApp.check_for_updates_class=jupyterlab.NeverCheckForUpdate",
+        ]  # fmt: skip
+        self._log = open(self.log_path, "wb")
+        self.proc = subprocess.Popen(cmd, stdout=self._log, stderr=subprocess.STDOUT, env=env)
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if self.proc.poll() is not None:
+                raise RuntimeError(
+                    f"JupyterLab exited with {self.proc.returncode}; log:\n{self.log_tail()}"
+                )
+            try:
+                self.api("GET", "/api/status")
+                return
+            except (urllib.error.URLError, ConnectionError, OSError):
+                time.sleep(0.25)
+        raise RuntimeError(f"JupyterLab did not answer within {timeout} s; log:\n{self.log_tail()}")
+
+    def log_tail(self, n: int = 60) -> str:
+        try:
+            return "\n".join(self.log_path.read_text(errors="replace").splitlines()[-n:])
+        except OSError:
+            return "(no log)"
+
+    def api(self, method: str, path: str, body: Any = None) -> Any:
+        data = None if body is None else json.dumps(body).encode()
+        req = urllib.request.Request(self.url + path, data=data, method=method)
+        req.add_header("Content-Type", "application/json")
+        with urllib.request.urlopen(req, timeout=10) as resp:
+            raw = resp.read()
+        return json.loads(raw) if raw else None
+
+    def kernel_ids(self) -> set[str]:
+        return {k["id"] for k in self.api("GET", "/api/kernels")}
+
+    def shutdown_kernels(self, ids: set[str] | None = None) -> None:
+        for kid in self.kernel_ids() if ids is None else ids:
+            with contextlib.suppress(Exception):
+                self.api("DELETE", f"/api/kernels/{kid}")
+
+    def stop(self) -> None:
+        if self.proc is None:
+            return
+        with contextlib.suppress(Exception):
+            self.shutdown_kernels()
+        if self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(timeout=15)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait(timeout=5)
+        self._log.close()
+        self.proc = None
+
+
+# --------------------------------------------------------------------------- notebook page
+class KernelError(RuntimeError):
+    """Python code run through :meth:`NotebookPage.kernel_eval` raised."""
+
+
+_JS_EXECUTE = """
+async ([code, timeoutMs]) => {
+  const kernel = window.jupyterapp.shell.currentWidget.sessionContext.session.kernel;
+  const out = {stdout: "", stderr: "", error: null};
+  const future = kernel.requestExecute({code, silent: false, store_history: false});
+  future.onIOPub = (msg) => {
+    const t = msg.header.msg_type;
+    if (t === "stream") out[msg.content.name] += msg.content.text;
+    else if (t === "error") out.error = msg.content.ename + ": " + msg.content.evalue + "\\n" +
+      (msg.content.traceback || []).join("\\n").replace(/\\u001b\\[[0-9;]*m/g, "");
+  };
+  const timer = new Promise((_, rej) => setTimeout(() => rej(new Error("timeout")), timeoutMs));
+  await Promise.race([future.done, timer]);
+  return out;
+}
+"""
+
+_JS_NOTEBOOK_STATE = """
+() => {
+  const w = window.jupyterapp && window.jupyterapp.shell.currentWidget;
+  if (!w || !w.sessionContext || !w.content || !w.content.model) return null;
+  const s = w.sessionContext.session;
+  const cells = w.content.model.cells;
+  const out = {kernel: s && s.kernel ? s.kernel.status : null,
+               kernelId: s && s.kernel ? s.kernel.id : null,
+               counts: [], errors: [], pending: 0};
+  for (let i = 0; i < cells.length; i++) {
+    const c = cells.get(i);
+    if (c.type !== "code") continue;
+    out.counts.push(c.executionCount);
+    if (c.executionState === "running") out.pending += 1;
+    const outputs = c.outputs;
+    for (let k = 0; k < outputs.length; k++) {
+      const o = outputs.get(k).toJSON();
+      if (o.output_type === "error") out.errors.push(o.ename + ": " + o.evalue);
+    }
+  }
+  return out;
+}
+"""
+
+
+class NotebookPage:
+    """One notebook open in JupyterLab in a fresh browser context."""
+
+    def __init__(self, page: Any, lab: LabServer, artifacts: Path, name: str) -> None:
+        self.page = page
+        self.lab = lab
+        self.artifacts = artifacts
+        self.name = name
+        self.console: list[str] = []
+        page.on("console", lambda m: self.console.append(f"{m.type}: {m.text}"))
+        page.on("pageerror", lambda e: self.console.append(f"pageerror: {e}"))
+
+    # ---- notebook / kernel
+    def state(self) -> dict[str, Any] | None:
+        return self.page.evaluate(_JS_NOTEBOOK_STATE)  # type: ignore[no-any-return]
+
+    def wait_kernel_idle(self, timeout: float = 90.0) -> None:
+        self.page.wait_for_function(
+            """() => { const w = window.jupyterapp && window.jupyterapp.shell.currentWidget;
+                 return !!(w && w.sessionContext && w.sessionContext.session &&
+                   w.sessionContext.session.kernel &&
+                   w.sessionContext.session.kernel.status === 'idle'); }""",
+            timeout=timeout * 1000,
+        )
+
+    def run_all(self, timeout: float = 180.0) -> dict[str, Any]:
+        """Run every cell; wait until all ran and the kernel is idle; fail on errors."""
+        self.page.evaluate("() => window.jupyterapp.commands.execute('notebook:run-all-cells')")
+        deadline = time.monotonic() + timeout
+        st: dict[str, Any] | None = None
+        while time.monotonic() < deadline:
+            st = self.state()
+            if st and st["errors"]:
+                raise AssertionError(f"notebook {self.name} raised: {st['errors']}")
+            if (
+                st
+                and st["kernel"] == "idle"
+                and st["pending"] == 0
+                and all(c is not None for c in st["counts"])
+            ):
+                return st
+            time.sleep(0.2)
+        raise AssertionError(f"notebook {self.name} did not finish in {timeout} s: {st}")
+
+    def kernel_eval(self, code: str, timeout: float = 60.0) -> Any:
+        """Run ``code`` in the notebook's kernel; return the JSON it prints last.
+
+        The code must ``print(json.dumps(...))`` as its final output line (or print
+        nothing: then None is returned). A Python exception becomes KernelError.
+        """
+        out = self.page.evaluate(_JS_EXECUTE, [code, int(timeout * 1000)])
+        if out["error"]:
+            raise KernelError(f"{out['error']}\n--- code ---\n{code}")
+        lines = [ln for ln in out["stdout"].splitlines() if ln.strip()]
+        return json.loads(lines[-1]) if lines else None
+
+    def kernel_id(self) -> str | None:
+        st = self.state()
+        return st["kernelId"] if st else None
+
+    # ---- viewport hooks
+    def viewports(self) -> Any:
+        return self.page.locator(".fwb-viewport")
+
+    def viewport(self, index: int = 0) -> Any:
+        return self.viewports().nth(index)
+
+    def wait_viewports(self, count: int = 1, timeout: float = 60.0) -> None:
+        """Wait until ``count`` viewports have drawn their first geometry."""
+        self.page.wait_for_function(
+            """(n) => { const els = document.querySelectorAll('.fwb-viewport');
+                 return els.length >= n &&
+                   Array.from(els).slice(0, n).every(e => e.getAttribute('data-ready') === '1'); }""",
+            arg=count,
+            timeout=timeout * 1000,
+        )
+
+    def frame(self, index: int = 0) -> int:
+        return int(self.viewport(index).get_attribute("data-frame") or 0)
+
+    def wait_frame_after(self, index: int, previous: int, timeout: float = 30.0) -> int:
+        """Wait until viewport ``index`` rendered a geometry update after ``previous``."""
+        self.page.wait_for_function(
+            """([i, prev]) => { const e = document.querySelectorAll('.fwb-viewport')[i];
+                 return e && Number(e.getAttribute('data-frame')) > prev; }""",
+            arg=[index, previous],
+            timeout=timeout * 1000,
+        )
+        return self.frame(index)
+
+    def project(self, ids: list[int] | np.ndarray, index: int = 0) -> np.ndarray:
+        """(k, 3) page (x, y, in_front) of vertex ``ids`` in viewport ``index``."""
+        pts = self.viewport(index).evaluate("(e, ids) => e.fwbProject(ids)", [int(i) for i in ids])
+        return np.array([p if p is not None else [np.nan] * 3 for p in pts], dtype=float)
+
+    def canvas_box(self, index: int = 0) -> dict[str, float]:
+        box = self.viewport(index).locator("canvas").bounding_box()
+        assert box is not None, "viewport canvas is not visible"
+        return box  # type: ignore[no-any-return]
+
+    # ---- pixels
+    def screenshot(self, name: str, clip: dict[str, float] | None = None) -> np.ndarray:
+        """Save ``test-artifacts/<test>/<name>.png``; return (h, w, 3) uint8 pixels."""
+        from PIL import Image
+
+        self.artifacts.mkdir(parents=True, exist_ok=True)
+        path = self.artifacts / f"{name}.png"
+        png = self.page.screenshot(path=str(path), clip=clip)
+        return np.asarray(Image.open(io.BytesIO(png)).convert("RGB"))
+
+    def canvas_shot(self, name: str, index: int = 0) -> np.ndarray:
+        return self.screenshot(name, clip=self.canvas_box(index))
+
+
+def clip_around(points: np.ndarray, pad: float = 20.0) -> dict[str, float]:
+    """Screenshot clip (page coordinates) around projected points (k, >=2)."""
+    p = points[np.isfinite(points[:, 0])]
+    x0, y0 = p[:, 0].min() - pad, p[:, 1].min() - pad
+    x1, y1 = p[:, 0].max() + pad, p[:, 1].max() + pad
+    return {"x": max(x0, 0.0), "y": max(y0, 0.0), "width": x1 - x0, "height": y1 - y0}
+
+
+def pixel_change(a: np.ndarray, b: np.ndarray, threshold: int = 12) -> float:
+    """Fraction of pixels whose largest channel difference exceeds ``threshold``."""
+    if a.shape != b.shape:
+        h, w = min(a.shape[0], b.shape[0]), min(a.shape[1], b.shape[1])
+        a, b = a[:h, :w], b[:h, :w]
+    diff = np.abs(a.astype(np.int16) - b.astype(np.int16)).max(axis=2)
+    return float((diff > threshold).mean())
+
+
+def write_notebook(path: Path, cells: list[str]) -> Path:
+    """Write a minimal nbformat-4 notebook of code cells (python3 kernel)."""
+    nb = {
+        "cells": [
+            {
+                "cell_type": "code",
+                "execution_count": None,
+                "id": uuid.uuid4().hex[:8],
+                "metadata": {},
+                "outputs": [],
+                "source": src,
+            }
+            for src in cells
+        ],
+        "metadata": {
+            "kernelspec": {"display_name": "Python 3", "language": "python", "name": "python3"},
+            "language_info": {"name": "python"},
+        },
+        "nbformat": 4,
+        "nbformat_minor": 5,
+    }
+    path.write_text(json.dumps(nb, indent=1))
+    return path

@@ -1,0 +1,372 @@
+"""Kernel-side behaviour of the widgets, without a browser.
+
+What goes over the wire (binary full buffer vs sparse patch), that the viewport
+only observes the model (two viewports agree, closing disconnects), that errors
+in callbacks land in the Output widget, and that a slider drag is one undo step.
+Hand-checked on a tiny 3x3 grid model.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+pytest.importorskip("anywidget")
+pytest.importorskip("ipywidgets")
+
+import widgets
+from widgets.expression_panel import layout_rows
+from widgets.viewport import BUNDLE
+from workbench.model import BlendShape, FaceModel
+from workbench.polygons import Polygons
+
+pytestmark = pytest.mark.skipif(
+    not BUNDLE.exists(), reason="viewport bundle not built (npm --prefix widgets/js run build)"
+)
+
+
+def _grid() -> FaceModel:
+    xs, ys = np.meshgrid(np.arange(3.0), np.arange(3.0))
+    V = np.stack([xs.ravel(), ys.ravel(), np.zeros(9)], axis=1)
+    quads = [[0, 1, 4, 3], [1, 2, 5, 4], [3, 4, 7, 6], [4, 5, 8, 7]]
+    one = np.zeros((9, 3), np.float32)
+    one[4, 2] = 1.0  # moves 1 of 9 vertices: a sparse update
+    allv = np.zeros((9, 3), np.float32)
+    allv[:, 0] = 0.5  # moves every vertex: a full update
+    shapes = [
+        BlendShape("jawOpen", one),
+        BlendShape("shift", allv),
+        BlendShape("eyeBlinkRight", one),
+        BlendShape("eyeBlinkLeft", one),
+    ]
+    return FaceModel(V, None, shapes, polygons=Polygons.from_lists(quads))
+
+
+class _Spy:
+    """Records custom messages a viewport sends (content, buffer sizes, buffers)."""
+
+    def __init__(self, vp: widgets.Viewport) -> None:
+        self.messages: list[tuple[dict, list[bytes]]] = []
+        orig = vp.send
+
+        def send(content, buffers=None):
+            self.messages.append((content, [bytes(b) for b in buffers or []]))
+            return orig(content, buffers)
+
+        vp.send = send  # type: ignore[method-assign]
+
+
+def test_first_frame_is_full_binary_then_sparse_patches():
+    m = _grid()
+    vp = widgets.Viewport(m)
+    spy = _Spy(vp)
+    assert isinstance(vp._positions, bytes) and len(vp._positions) == 9 * 3 * 4
+    assert len(vp._faces) == 8 * 3 * 4  # 4 quads -> 8 triangles, uint32
+    np.testing.assert_array_equal(np.frombuffer(vp._faces, "<u4").reshape(-1, 3), m.faces)
+    assert vp.updates_sent == {"full": 1, "patch": 0}
+
+    m.set_weight("jawOpen", 0.5)  # one vertex moves
+    assert vp.updates_sent == {"full": 1, "patch": 1}
+    content, (ids, values) = spy.messages[-1]
+    assert content["type"] == "patch" and content["count"] == 1
+    assert np.frombuffer(ids, "<u4").tolist() == [4]
+    np.testing.assert_array_equal(np.frombuffer(values, "<f4"), [1.0, 1.0, 0.5])
+    # the stored full state follows silently, so a reloaded page gets the current mesh
+    np.testing.assert_array_equal(np.frombuffer(vp._positions, "<f4").reshape(-1, 3), m.evaluate())
+    assert vp._version == content["version"]
+
+    m.set_weight("shift", 1.0)  # every vertex moves: full buffer
+    assert vp.updates_sent == {"full": 2, "patch": 1}
+    np.testing.assert_array_equal(np.frombuffer(vp._positions, "<f4").reshape(-1, 3), m.evaluate())
+
+    m.set_weight("shift", 1.0)  # no change: nothing sent
+    assert vp.updates_sent == {"full": 2, "patch": 1}
+
+
+def test_two_viewports_follow_the_model_and_close_disconnects():
+    m = _grid()
+    a, b = widgets.Viewport(m), widgets.Viewport(m)
+    m.set_weight("shift", 0.3)
+    assert a._positions == b._positions
+    b.close()
+    m.set_weight("shift", 0.6)
+    assert a.updates_sent["full"] == 3 and b.updates_sent["full"] == 2
+    np.testing.assert_array_equal(np.frombuffer(a._positions, "<f4").reshape(-1, 3), m.evaluate())
+
+
+def test_overlay_and_handles_are_binary_and_validated():
+    m = _grid()
+    vp = widgets.Viewport(m)
+    vp.vertex_colors = np.full((9, 3), 0.5)
+    assert isinstance(vp._vertex_colors, bytes) and len(vp._vertex_colors) == 9 * 3 * 4
+    vp.vertex_colors = None
+    assert vp._vertex_colors is None
+    with pytest.raises(ValueError, match=r"\(9, 3\)"):
+        vp.vertex_colors = np.zeros((8, 3))
+    vp.handles = [0, 8]
+    assert vp.handles.tolist() == [0, 8]
+    with pytest.raises(ValueError, match=r"0\.\.8"):
+        vp.handles = [9]
+
+
+def test_callback_errors_go_to_the_output_widget():
+    m = _grid()
+    vp = widgets.Viewport(m)
+
+    def broken(*_a, **_kw):
+        raise RuntimeError("boom")
+
+    vp._push_geometry = broken  # type: ignore[method-assign]
+    m.set_weight("jawOpen", 0.2)  # must not raise into the model's emit
+    assert vp.errors.count == 1
+    assert "boom" in vp.errors.output.outputs[-1]["text"]
+    assert "boom" in vp._error
+
+
+def test_panel_groups_pairs_left_first():
+    rows = layout_rows(["jawOpen", "eyeBlinkRight", "eyeBlinkLeft", "custom"])
+    assert rows == {
+        "eyes": [("eyeBlinkLeft", "eyeBlinkRight")],
+        "jaw": [("jawOpen",)],
+        "other": [("custom",)],
+    }
+
+
+def test_slider_burst_is_one_undo_step_and_model_edits_move_sliders():
+    m = _grid()
+    panel = widgets.ExpressionPanel(m, idle_s=0.1)
+    for v in (0.1, 0.2, 0.3):  # what a drag sends
+        panel.sliders["jawOpen"].value = v
+    assert m.interacting and m.weights["jawOpen"] == pytest.approx(0.3)
+    deadline = time.monotonic() + 5
+    while m.interacting and time.monotonic() < deadline:
+        time.sleep(0.02)
+    assert m.history.undo_labels == ["Drag jawOpen"]
+    assert not panel.undo_button.disabled and panel.redo_button.disabled
+
+    panel._on_undo()
+    assert m.weights["jawOpen"] == 0.0 and panel.sliders["jawOpen"].value == 0.0
+    assert panel.undo_button.disabled and not panel.redo_button.disabled
+
+    m.set_weight("eyeBlinkLeft", 0.7)  # from Python: slider follows, no extra step
+    assert panel.sliders["eyeBlinkLeft"].value == pytest.approx(0.7)
+    assert m.history.undo_labels == ["Set eyeBlinkLeft"]
+
+    panel.mutes["shift"].value = True
+    assert m.shape("shift").mute and m.history.undo_labels[-1] == "Mute shift"
+    m.undo()
+    assert panel.mutes["shift"].value is False
+
+    panel.search.value = "blink"
+    shown = [row for row, box in panel._rows if box.layout.display != "none"]
+    assert shown == [("eyeBlinkLeft", "eyeBlinkRight")]
+    panel.close()
+    m.set_weight("jawOpen", 0.4)
+    assert panel.sliders["jawOpen"].value == 0.0  # disconnected
+
+
+def test_missing_bundle_error_names_the_build_command(tmp_path):
+    from widgets.viewport import load_bundle
+
+    with pytest.raises(FileNotFoundError, match="npm --prefix widgets/js"):
+        load_bundle(tmp_path / "viewport.js")
+
+
+# --------------------------------------------------------------------------- handle drags
+# The kernel side of the sculpt tool, driven with the messages the front end sends.
+
+
+def _head_with_handles():
+    from workbench import load_sample
+    from workbench.handle_presets import default_face_handles
+
+    m = load_sample("head")
+    m.set_handles(default_face_handles(m))
+    return m
+
+
+def _drag_msg(vp, phase, index, position=None, seq=0):
+    vertex = int(vp.model.handles.vertices[index]) if index < len(vp.model.handles) else -1
+    content = {"type": "handle", "phase": phase, "index": index, "vertex": vertex, "seq": seq}
+    content["position"] = None if position is None else [float(x) for x in position]
+    vp._on_frontend_msg(vp, content, [])
+
+
+def test_handle_drag_is_one_undo_step_and_every_message_is_acknowledged():
+    m = _head_with_handles()
+    vp = widgets.Viewport(m)
+    spy = _Spy(vp)
+    i = m.handles.names.index("mouth_L_1")
+    v = int(m.handles.vertices[i])
+    p0 = m.evaluate()[v].astype(float)
+    _drag_msg(vp, "start", i, p0, seq=1)
+    assert m.interacting and vp.dragging and vp.selected_handle == i
+    targets = [p0 + np.array([0.01 * k, 0.005 * k, 0.0]) for k in range(1, 5)]
+    for k, p in enumerate(targets):
+        _drag_msg(vp, "move", i, p, seq=2 + k)
+        # the handle vertex is exactly where the pointer put it (handles are interpolated)
+        np.testing.assert_allclose(m.evaluate()[v], p, atol=1e-5)
+    _drag_msg(vp, "end", i, targets[-1] + [0.01, 0, 0], seq=9)
+    assert not m.interacting and not vp.dragging
+    assert m.history.undo_labels == ["Edit handles", "Drag handle mouth_L_1"]
+    offsets = np.asarray(m.handles.offsets)
+    np.testing.assert_allclose(offsets[i], targets[-1] + [0.01, 0, 0] - p0, atol=1e-5)
+    assert np.abs(np.delete(offsets, i, axis=0)).max() == 0.0
+    acks = [c for c, _ in spy.messages if c["type"] == "handle_ack"]
+    assert [a["seq"] for a in acks] == [1, 2, 3, 4, 5, 9]
+    # drag-frame patches carry the seq of their move (the front end's early ack)
+    patch_seqs = [c.get("seq") for c, _ in spy.messages if c["type"] == "patch"]
+    assert set(patch_seqs) - {None} <= {2, 3, 4, 5}
+    # after the final (exact) update the front end's copy equals the model
+    np.testing.assert_array_equal(vp._last, m.evaluate())
+    assert vp.last_drag["moves"] == 5 and len(vp.drag_ms) == 5
+    m.undo()
+    assert np.abs(np.asarray(m.handles.offsets)).max() == 0.0
+
+
+def test_drag_frames_skip_invisible_changes_and_the_final_update_is_exact():
+    m = _head_with_handles()
+    vp = widgets.Viewport(m)
+    i = m.handles.names.index("brows_L_1")
+    p0 = m.evaluate()[int(m.handles.vertices[i])].astype(float)
+    _drag_msg(vp, "start", i, p0)
+    _drag_msg(vp, "move", i, p0 + np.array([0.0, 0.05, 0.0]))
+    patches = vp.updates_sent["patch"]
+    _drag_msg(vp, "move", i, p0 + np.array([0.0, 0.051, 0.0]))  # a small step: a sparse patch
+    assert vp.updates_sent["patch"] == patches + 1
+    # mid-drag the front end may lag by at most the tolerance ...
+    lag = np.abs(vp._last - m.evaluate()).max()
+    assert 0 < lag <= vp._tolerance
+    _drag_msg(vp, "end", i)
+    # ... and is exact once the drag ends, including the buffer a reloaded page gets
+    np.testing.assert_array_equal(vp._last, m.evaluate())
+    np.testing.assert_array_equal(np.frombuffer(vp._positions, "<f4").reshape(-1, 3), m.evaluate())
+
+
+def test_symmetric_drag_moves_the_mirror_handle_with_x_reflected():
+    m = _head_with_handles()
+    vp = widgets.Viewport(m)
+    vp.symmetric = True
+    i = m.handles.names.index("mouth_L_1")
+    j = int(m.handles.mirror[i])
+    p0 = m.evaluate()[int(m.handles.vertices[i])].astype(float)
+    _drag_msg(vp, "start", i, p0)
+    _drag_msg(vp, "end", i, p0 + np.array([0.03, 0.02, 0.01]))
+    o = np.asarray(m.handles.offsets)
+    np.testing.assert_array_equal(o[j], o[i] * [-1, 1, 1])
+    assert m.history.undo_labels[-1] == "Drag handle mouth_L_1"
+
+
+def test_a_failed_move_ends_the_interaction_and_cancels_the_drag():
+    m = _head_with_handles()
+    vp = widgets.Viewport(m)
+    spy = _Spy(vp)
+    p0 = m.evaluate()[int(m.handles.vertices[0])].astype(float)
+    _drag_msg(vp, "start", 0, p0)
+    _drag_msg(vp, "move", 0, p0 + np.array([0.02, 0, 0]))
+    _drag_msg(vp, "move", 0, [np.nan, 0.0, 0.0])
+    assert not m.interacting and not vp.dragging
+    assert vp.errors.count == 1 and "finite" in vp._error
+    assert [c["type"] for c, _ in spy.messages][-2:] == ["handle_cancel", "handle_ack"]
+    assert len(m.history.undo_labels) == 2  # the part of the drag before the error
+    _drag_msg(vp, "move", 0, p0)  # stray moves after the cancel are ignored
+    assert not m.interacting
+
+
+def test_handle_set_edited_while_dragging_and_close_mid_drag():
+    m = _head_with_handles()
+    vp = widgets.Viewport(m)
+    spy = _Spy(vp)
+    i = 10
+    v = int(m.handles.vertices[i])
+    p0 = m.evaluate()[v].astype(float)
+    _drag_msg(vp, "start", i, p0)
+    m.remove_handle(0)  # the dragged handle is now index 9: found again by its vertex
+    vp._on_frontend_msg(
+        vp,
+        {
+            "type": "handle",
+            "phase": "move",
+            "index": i,
+            "vertex": v,
+            "position": list(p0 + np.array([0, 0.03, 0])),
+        },
+        [],
+    )
+    assert int(m.handles.vertices[9]) == v
+    np.testing.assert_allclose(m.evaluate()[v], p0 + np.array([0, 0.03, 0]), atol=1e-5)
+    m.remove_handle(9)  # the dragged handle itself goes: the drag is cancelled
+    vp._on_frontend_msg(
+        vp, {"type": "handle", "phase": "move", "index": 9, "vertex": v, "position": list(p0)}, []
+    )
+    assert not m.interacting and "handle_cancel" in [c["type"] for c, _ in spy.messages]
+    # closing the widget mid-drag never leaves the model inside an interaction
+    p1 = m.evaluate()[int(m.handles.vertices[3])].astype(float)
+    _drag_msg(vp, "start", 3, p1)
+    _drag_msg(vp, "move", 3, p1 + np.array([0.01, 0, 0]))
+    vp.close()
+    assert not m.interacting
+    assert m.history.undo_labels[-1].startswith("Drag handle")
+
+
+def test_add_and_remove_handles_by_click_messages():
+    m = _head_with_handles()
+    vp = widgets.Viewport(m)
+    n0 = len(m.handles)
+    skin = m.component_vertices("skin")
+    v = int(skin[np.argmax(m.vertices[skin, 0])])  # far off the mid-plane
+    vp._on_frontend_msg(vp, {"type": "add_handle", "vertex": v}, [])
+    assert len(m.handles) == n0 + 1 and int(m.handles.vertices[-1]) == v
+    assert vp.handles.tolist() == m.handles.vertices.tolist()  # markers follow the model
+    vp.symmetric = True
+    vp._on_frontend_msg(vp, {"type": "add_handle", "vertex": v}, [])  # a mirrored pair
+    h = m.handles
+    assert len(h) == n0 + 3 and m.history.undo_labels[-1].startswith("Add handle pair")
+    a, b = n0 + 1, n0 + 2
+    assert h.mirror[a] == b and h.mirror[b] == a
+    assert m.vertices[h.vertices[b], 0] < 0 < m.vertices[h.vertices[a], 0]
+    assert np.frombuffer(vp._handle_mirror, "<i4").tolist() == h.mirror.tolist()
+    vp._on_frontend_msg(vp, {"type": "remove_handle", "index": a, "vertex": int(h.vertices[a])}, [])
+    assert len(m.handles) == n0 + 1  # the pair went in one step
+    m.undo()
+    assert len(m.handles) == n0 + 3
+    with pytest.raises(Exception, match="tool"):
+        vp.tool = "paint"
+
+
+def test_sculpt_panel_buttons_and_workbench_tabs():
+    m = _grid()
+    wb = widgets.Workbench(m)
+    assert wb.viewport.tool == "orbit"
+    wb.tabs.selected_index = 1
+    assert wb.viewport.tool == "sculpt"
+    wb.viewport.tool = "orbit"
+    assert wb.tabs.selected_index == 0
+    sp = wb.sculpt
+    sp.symmetric.value = True
+    assert wb.viewport.symmetric
+    # the 3x3 grid's blendshapes move only vertex 4 and everything: handles by hand
+    m.add_handle(4, name="centre")
+    assert "<b>1</b> handles" in sp.status.value
+    m.move_handle(0, [0.0, 0.0, 0.5])
+    sp.bake_name.value = "bump"
+    sp._on_bake()
+    assert m.shape_names[-1] == "bump" and sp.bake_name.value == "bump_1"
+    assert np.abs(np.asarray(m.handles.offsets)).max() == 0.0
+    sp._on_undo()
+    assert "bump" not in m.shape_names and m.handles.offsets[0, 2] == pytest.approx(0.5)
+    sp._on_reset()
+    assert np.abs(np.asarray(m.handles.offsets)).max() == 0.0
+    sp._on_clear()
+    assert len(m.handles) == 0
+    sp.k_s.value, sp.k_b.value = 0.1, 100.0
+    assert m.shell_stiffness == (pytest.approx(0.1), pytest.approx(100.0))
+    sp._on_progress(0.4, "solving")
+    assert sp.progress.layout.visibility == "visible" and "solving" in sp.progress_label.value
+    sp._on_progress(1.0, "done")
+    assert sp.progress.layout.visibility == "hidden"
+    wb.close()
+    m.add_handle(4)
+    assert "<b>0</b> handles" in sp.status.value  # disconnected

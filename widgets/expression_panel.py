@@ -1,0 +1,314 @@
+"""``ExpressionPanel``: one slider per blendshape, grouped by face region.
+
+Sliders are grouped with :func:`workbench.arkit.shape_group` (brows, eyes,
+cheeks, nose, mouth, jaw, tongue, other); left/right pairs
+(:func:`workbench.arkit.mirror_name`) sit side by side, subject's left first.
+A search box filters the sliders, a checkbox per shape mutes it, and
+reset / undo / redo buttons call the model.
+
+Undo granularity: ipywidgets sends a stream of value updates while a slider is
+dragged (``continuous_update=True``, needed for a live preview) and never says
+when the drag ended. The panel therefore wraps each burst in
+``model.interaction("Drag <name>")`` and ends it after 0.5 s without updates
+(:class:`widgets._threading.InteractionGrouper`): one drag = one undo step,
+and the viewport sees cheap ``deformed(False)`` events while it lasts. Undo,
+redo, reset and mute end an open burst first.
+
+The panel never keeps weights of its own: slider values follow
+``model.events.weights`` / ``weights_changing``, so edits from Python cells or
+from another panel move the sliders. An update from the model sets a slider to
+the model's value, and the slider handler ignores values equal to the model's,
+which breaks the feedback loop without a (thread-unsafe) "updating" flag.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Mapping
+from typing import Any
+
+import ipywidgets as W
+
+from widgets._threading import ErrorSink, InteractionGrouper
+
+GROUPS = ("brows", "eyes", "cheeks", "nose", "mouth", "jaw", "tongue", "other")
+_LEFT_TOKENS = {"l", "left", "lf", "lft"}
+_TOKEN = re.compile(r"[A-Z]+(?![a-z])|[A-Z]?[a-z]+|\d+")
+
+
+def _arkit() -> Any:
+    import workbench.arkit as arkit
+
+    return arkit
+
+
+def _is_left(name: str) -> bool:
+    """True if the name's side token says (subject's) left."""
+    canon = _arkit().canonical_arkit_name(name)
+    if canon is not None:
+        return bool(canon.endswith("Left"))
+    tokens = [m.group().lower() for m in _TOKEN.finditer(re.split(r"[.:|/]", name)[-1])]
+    return bool(tokens) and (tokens[-1] in _LEFT_TOKENS or tokens[0] in _LEFT_TOKENS)
+
+
+def css_safe(name: str) -> str:
+    """Shape name usable inside a CSS class (``fwb-slider-<name>``)."""
+    return re.sub(r"[^A-Za-z0-9_-]", "_", name)
+
+
+def layout_rows(names: list[str]) -> dict[str, list[tuple[str, ...]]]:
+    """Group shape names into rows: ``{group: [(left, right) or (name,), ...]}``.
+
+    Order within a group follows the model's shape order (first member of a pair
+    decides the row's place). Empty groups are left out.
+    """
+    arkit = _arkit()
+    present = set(names)
+    placed: set[str] = set()
+    groups: dict[str, list[tuple[str, ...]]] = {g: [] for g in GROUPS}
+    for nm in names:
+        if nm in placed:
+            continue
+        group = arkit.shape_group(nm)
+        if group not in groups:
+            group = "other"
+        other = arkit.mirror_name(nm)
+        if other is not None and other in present and other not in placed and other != nm:
+            pair = (nm, other) if _is_left(nm) else (other, nm)
+            groups[group].append(pair)
+            placed.update(pair)
+        else:
+            groups[group].append((nm,))
+            placed.add(nm)
+    return {g: rows for g, rows in groups.items() if rows}
+
+
+class ExpressionPanel(W.VBox):
+    """Blendshape sliders for a FaceModel, with search, mute, reset, undo/redo.
+
+    Parameters
+    ----------
+    model : workbench.FaceModel
+    errors : ipywidgets.Output, optional
+        Where callback errors are shown (``Workbench`` passes a shared one).
+    idle_s : float
+        Idle time that ends a slider drag's undo step (see module docstring).
+    max_height : str
+        CSS max height of the scrolling slider area.
+    """
+
+    def __init__(
+        self,
+        model: Any,
+        *,
+        errors: W.Output | None = None,
+        idle_s: float = 0.5,
+        max_height: str = "440px",
+    ) -> None:
+        self._model = model
+        self.errors = ErrorSink(errors)
+        self.grouper = InteractionGrouper(model, idle_s=idle_s, errors=self.errors)
+        self.sliders: dict[str, W.FloatSlider] = {}
+        self.mutes: dict[str, W.Checkbox] = {}
+        self._rows: list[tuple[tuple[str, ...], W.Widget]] = []
+        self._headers: dict[str, tuple[W.HTML, list[W.Widget]]] = {}
+
+        self.search = W.Text(
+            placeholder="search shapes…", continuous_update=True, layout=W.Layout(width="170px")
+        )
+        self.search.add_class("fwb-search")
+        self.reset_button = W.Button(
+            description="Reset", tooltip="Set every weight to 0", layout=W.Layout(width="70px")
+        )
+        self.undo_button = W.Button(description="Undo", icon="undo", layout=W.Layout(width="80px"))
+        self.redo_button = W.Button(
+            description="Redo", icon="repeat", layout=W.Layout(width="80px")
+        )
+        for b, cls in (
+            (self.reset_button, "fwb-reset"),
+            (self.undo_button, "fwb-undo"),
+            (self.redo_button, "fwb-redo"),
+        ):
+            b.add_class(cls)
+        self.body = W.VBox(
+            layout=W.Layout(max_height=max_height, overflow="auto", padding="0 4px 0 0")
+        )
+        toolbar = W.HBox([self.search, self.reset_button, self.undo_button, self.redo_button])
+        super().__init__([toolbar, self.body], layout=W.Layout(width="620px", min_width="420px"))
+        self.add_class("fwb-expression-panel")
+
+        g = self.errors.guard
+        self.search.observe(g("search")(self._on_search), "value")
+        self.reset_button.on_click(g("reset")(self._on_reset))
+        self.undo_button.on_click(g("undo")(self._on_undo))
+        self.redo_button.on_click(g("redo")(self._on_redo))
+        self._cb_weights = g("ExpressionPanel weights")(self._on_model_weights)
+        self._cb_shapes = g("ExpressionPanel shapes")(self._on_model_shapes)
+        self._cb_history = g("ExpressionPanel history")(self._on_model_history)
+        model.events.weights.connect(self._cb_weights)
+        model.events.weights_changing.connect(self._cb_weights)
+        model.events.shapes.connect(self._cb_shapes)
+        model.events.history.connect(self._cb_history)
+        self._connected = True
+        self._build()
+        self._on_model_history()
+
+    @property
+    def model(self) -> Any:
+        return self._model
+
+    # ------------------------------------------------------------- building
+    def _build(self) -> None:
+        model = self._model
+        with model.lock:
+            shapes = {s.name: s for s in model.shapes}
+            weights = dict(model.weights)
+        for s in self.sliders.values():
+            s.close()
+        for c in self.mutes.values():
+            c.close()
+        self.sliders, self.mutes, self._rows, self._headers = {}, {}, [], {}
+        children: list[W.Widget] = []
+        for group, rows in layout_rows(list(shapes)).items():
+            # flex "0 0 auto": inside the scrolling column, rows must keep their height
+            # instead of being squeezed to fit max_height
+            header = W.HTML(f"<b>{group.capitalize()}</b>", layout=W.Layout(flex="0 0 auto"))
+            header.add_class("fwb-group-header")
+            row_widgets = []
+            for row in rows:
+                cells = [self._make_cell(shapes[nm], weights.get(nm, 0.0)) for nm in row]
+                box = W.HBox(cells, layout=W.Layout(width="100%", flex="0 0 auto"))
+                row_widgets.append(box)
+                self._rows.append((row, box))
+            self._headers[group] = (header, row_widgets)
+            children.append(header)
+            children.extend(row_widgets)
+        self.body.children = children
+        self._on_search()
+
+    def _make_cell(self, shape: Any, value: float) -> W.Widget:
+        name = shape.name
+        slider = W.FloatSlider(
+            value=value,
+            min=shape.slider_min,
+            max=shape.slider_max,
+            step=0.01,
+            description=name,
+            description_allow_html=False,
+            continuous_update=True,
+            readout_format=".2f",
+            style={"description_width": "104px"},
+            tooltip=name,
+            layout=W.Layout(width="100%", min_width="0"),
+        )
+        slider.add_class("fwb-slider")
+        slider.add_class(f"fwb-slider-{css_safe(name)}")
+        mute = W.Checkbox(
+            value=shape.mute,
+            indent=False,
+            description="",
+            tooltip=f"mute {name}",
+            layout=W.Layout(width="20px", min_width="20px"),
+        )
+        mute.add_class("fwb-mute")
+        mute.add_class(f"fwb-mute-{css_safe(name)}")
+        g = self.errors.guard
+        slider.observe(
+            g(f"slider {name}")(lambda ch, nm=name: self._on_slider(nm, ch["new"])), "value"
+        )
+        mute.observe(g(f"mute {name}")(lambda ch, nm=name: self._on_mute(nm, ch["new"])), "value")
+        self.sliders[name] = slider
+        self.mutes[name] = mute
+        return W.HBox([mute, slider], layout=W.Layout(width="50%", min_width="0"))
+
+    # ------------------------------------------------------- UI -> model
+    def _on_slider(self, name: str, value: float) -> None:
+        model = self._model
+        with model.lock:
+            if name not in model.weights or abs(model.weights[name] - value) < 1e-9:
+                return  # an echo of a model update, or a shape that went away
+        self.grouper.touch(f"Drag {name}")
+        model.set_weight(name, value)
+
+    def _on_mute(self, name: str, mute: bool) -> None:
+        model = self._model
+        if name not in model.shape_names or model.shape(name).mute == bool(mute):
+            return
+        self.grouper.flush()
+        model.set_shape_mute(name, bool(mute))
+
+    def _on_reset(self, _button: Any = None) -> None:
+        self.grouper.flush()
+        self._model.reset_weights()
+
+    def _on_undo(self, _button: Any = None) -> None:
+        self.grouper.flush()
+        self._model.undo()
+
+    def _on_redo(self, _button: Any = None) -> None:
+        self.grouper.flush()
+        self._model.redo()
+
+    def _on_search(self, _change: Any = None) -> None:
+        q = self.search.value.strip().lower()
+        visible_rows = set()
+        for row, box in self._rows:
+            show = not q or any(q in nm.lower() for nm in row)
+            box.layout.display = None if show else "none"
+            if show:
+                visible_rows.add(id(box))
+        for header, boxes in self._headers.values():
+            any_visible = any(id(b) in visible_rows for b in boxes)
+            header.layout.display = None if any_visible else "none"
+
+    # ------------------------------------------------------- model -> UI
+    def _on_model_weights(self, values: Mapping[str, float]) -> None:
+        for name, v in values.items():
+            s = self.sliders.get(name)
+            if s is not None and s.value != v:
+                s.value = v
+
+    def _on_model_shapes(self) -> None:
+        model = self._model
+        with model.lock:
+            shapes = {s.name: s for s in model.shapes}
+            weights = dict(model.weights)
+        if list(shapes) != list(self.sliders):
+            self._build()
+            return
+        for name, shape in shapes.items():
+            sl = self.sliders[name]
+            if (sl.min, sl.max) != (shape.slider_min, shape.slider_max):
+                # widen first so the value is never clamped by a stale range
+                sl.min, sl.max = min(sl.min, shape.slider_min), max(sl.max, shape.slider_max)
+                sl.value = weights[name]
+                sl.min, sl.max = shape.slider_min, shape.slider_max
+            self.mutes[name].value = shape.mute
+            if sl.value != weights[name]:
+                sl.value = weights[name]
+
+    def _on_model_history(self) -> None:
+        model = self._model
+        self.undo_button.disabled = not model.can_undo
+        self.redo_button.disabled = not model.can_redo
+        undo_labels = model.history.undo_labels
+        redo_labels = model.history.redo_labels
+        self.undo_button.tooltip = f"Undo {undo_labels[-1]}" if undo_labels else "Nothing to undo"
+        self.redo_button.tooltip = f"Redo {redo_labels[-1]}" if redo_labels else "Nothing to redo"
+
+    # ------------------------------------------------------------ closing
+    def close(self) -> None:
+        """End an open drag, disconnect from the model, close the child widgets."""
+        if getattr(self, "_connected", False):
+            try:
+                self.grouper.flush()
+            finally:
+                ev = self._model.events
+                ev.weights.disconnect(self._cb_weights)
+                ev.weights_changing.disconnect(self._cb_weights)
+                ev.shapes.disconnect(self._cb_shapes)
+                ev.history.disconnect(self._cb_history)
+                self._connected = False
+        for w in [*self.sliders.values(), *self.mutes.values()]:
+            w.close()
+        super().close()

@@ -1,0 +1,332 @@
+"""``SculptPanel``: the controls of handle-based shell editing (Bickel et al. 2008, §4).
+
+Dragging happens in the :class:`widgets.Viewport` (``tool="sculpt"``); this panel
+holds everything else a person needs around it:
+
+* handle sets: the default mocap-like set (:func:`workbench.handle_presets.default_face_handles`),
+  clear, reset offsets (the face goes back to the blend);
+* symmetric drag (the mirror handle follows with x reflected) and "click adds
+  handles" (plain clicks add, without holding Shift);
+* the thin-shell stiffness ``k_s`` (stretching) and ``k_b`` (bending) on log
+  sliders: both change the basis, so they apply on release, not while dragging;
+* "Bake to shape": the handle layer becomes a named blendshape at weight 1;
+* undo / redo, a progress bar for basis precomputes (100k+ vertices take a
+  second or more) and a status line (handle count, kernel time per drag update,
+  updates per second of the last drag).
+
+Like the other widgets it keeps no state of its own: it edits the model through
+its public methods and follows ``model.events``.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections.abc import Callable, Iterable
+from typing import Any
+
+import ipywidgets as W
+import traitlets as t
+
+from widgets._threading import ErrorSink
+
+_HELP = (
+    "<div style='line-height:1.35'>"
+    "<b>Drag</b> a marker to pull the skin (it moves in the view plane). "
+    "<b>Shift-click</b> the face to add a handle, <b>Alt-click</b> a marker to remove it. "
+    "Off the markers the mouse orbits (right button pans, wheel zooms).</div>"
+)
+
+#: log10 range of the stiffness sliders
+_LOG_RANGE = (-3.0, 3.0)
+
+
+def _next_free(name: str, taken: Iterable[str]) -> str:
+    """``sculpt_1`` -> first of ``sculpt_1, sculpt_2, ...`` that is not taken."""
+    used = set(taken)
+    stem, _, num = name.rpartition("_")
+    if not stem or not num.isdigit():
+        stem, num = name, "0"
+    k = max(int(num), 1)
+    cand = name if name not in used else f"{stem}_{k}"
+    while cand in used:
+        k += 1
+        cand = f"{stem}_{k}"
+    return cand
+
+
+class SculptPanel(W.VBox):
+    """Handle-editing controls for a FaceModel (drag happens in the viewport).
+
+    Parameters
+    ----------
+    model : workbench.FaceModel
+    viewport : widgets.Viewport, optional
+        The viewport whose ``symmetric`` / ``add_on_click`` the toggles drive and
+        whose drag statistics the status line shows.
+    errors : ipywidgets.Output, optional
+        Where callback errors are shown (``Workbench`` passes a shared one).
+    before_edit : iterable of callables, optional
+        Called before undo/redo and other whole-model edits, e.g. to close a
+        slider interaction of another panel (``model.undo`` refuses to run
+        inside an interaction).
+    """
+
+    def __init__(
+        self,
+        model: Any,
+        viewport: Any = None,
+        *,
+        errors: W.Output | None = None,
+        before_edit: Iterable[Callable[[], Any]] = (),
+    ) -> None:
+        self._model = model
+        self.viewport = viewport
+        self.errors = ErrorSink(errors)
+        self._before_edit = list(before_edit)
+        if viewport is not None:
+            self._before_edit.append(viewport.end_drag)
+        self._links: list[Any] = []
+        self._status_lock = threading.Lock()
+        self._last_status_t = 0.0
+
+        def button(desc: str, cls: str, tip: str, icon: str = "", width: str = "auto") -> W.Button:
+            b = W.Button(description=desc, tooltip=tip, icon=icon, layout=W.Layout(width=width))
+            b.add_class(cls)
+            return b
+
+        self.default_button = button(
+            "Default handles",
+            "fwb-default-handles",
+            "Mocap-like handle set on brows, lids, cheeks, nose, lips, jaw",
+        )
+        self.clear_button = button("Clear handles", "fwb-clear-handles", "Remove every handle")
+        self.reset_button = button(
+            "Reset offsets", "fwb-reset-offsets", "Put every handle back on the blend (undoable)"
+        )
+        self.undo_button = button("Undo", "fwb-sculpt-undo", "", icon="undo", width="80px")
+        self.redo_button = button("Redo", "fwb-sculpt-redo", "", icon="repeat", width="80px")
+        self.symmetric = W.ToggleButton(
+            value=bool(getattr(viewport, "symmetric", False)),
+            description="Symmetric",
+            icon="arrows-h",
+            tooltip="Drag the mirror handle too (x reflected); Shift-click adds a mirrored pair",
+            layout=W.Layout(width="120px"),
+        )
+        self.symmetric.add_class("fwb-symmetric")
+        self.add_on_click = W.Checkbox(
+            value=bool(getattr(viewport, "add_on_click", False)),
+            description="click adds handles",
+            indent=False,
+            layout=W.Layout(width="170px"),
+        )
+        self.add_on_click.add_class("fwb-add-on-click")
+        k_s, k_b = model.shell_stiffness
+        slider_kw = dict(
+            base=10,
+            min=_LOG_RANGE[0],
+            max=_LOG_RANGE[1],
+            step=0.05,
+            continuous_update=False,  # every value rebuilds the basis
+            readout_format=".3g",
+            style={"description_width": "150px"},
+            layout=W.Layout(width="98%"),
+        )
+        self.k_s = W.FloatLogSlider(
+            value=max(k_s, 10 ** _LOG_RANGE[0]), description="k_s stretching", **slider_kw
+        )
+        self.k_b = W.FloatLogSlider(
+            value=max(k_b, 10 ** _LOG_RANGE[0]), description="k_b bending", **slider_kw
+        )
+        self.k_s.add_class("fwb-ks")
+        self.k_b.add_class("fwb-kb")
+        self.bake_name = W.Text(
+            value=_next_free("sculpt_1", model.shape_names),
+            placeholder="new shape name",
+            layout=W.Layout(width="180px"),
+        )
+        self.bake_name.add_class("fwb-bake-name")
+        self.bake_button = button(
+            "Bake to shape", "fwb-bake", "Turn the handle edit into a blendshape at weight 1"
+        )
+        self.progress = W.FloatProgress(
+            value=0.0,
+            min=0.0,
+            max=1.0,
+            description="",
+            bar_style="info",
+            layout=W.Layout(width="98%", visibility="hidden"),
+        )
+        self.progress.add_class("fwb-progress")
+        self.progress_label = W.HTML("")
+        self.status = W.HTML("")
+        self.status.add_class("fwb-sculpt-status")
+
+        rows = [
+            W.HTML(_HELP),
+            W.HBox([self.default_button, self.clear_button, self.reset_button]),
+            W.HBox([self.symmetric, self.add_on_click]),
+            W.HTML("<b>Shell stiffness</b> (applies on release; rebuilds the basis)"),
+            self.k_s,
+            self.k_b,
+            W.HBox([self.bake_name, self.bake_button]),
+            W.HBox([self.undo_button, self.redo_button]),
+            self.progress,
+            self.progress_label,
+            self.status,
+        ]
+        super().__init__(rows, layout=W.Layout(width="100%", min_width="380px"))
+        self.add_class("fwb-sculpt-panel")
+
+        g = self.errors.guard
+        self.default_button.on_click(g("default handles")(self._on_default))
+        self.clear_button.on_click(g("clear handles")(self._on_clear))
+        self.reset_button.on_click(g("reset offsets")(self._on_reset))
+        self.undo_button.on_click(g("undo")(self._on_undo))
+        self.redo_button.on_click(g("redo")(self._on_redo))
+        self.bake_button.on_click(g("bake to shape")(self._on_bake))
+        self.k_s.observe(g("k_s")(self._on_stiffness), "value")
+        self.k_b.observe(g("k_b")(self._on_stiffness), "value")
+        if viewport is not None:
+            self._links = [
+                t.link((self.symmetric, "value"), (viewport, "symmetric")),
+                t.link((self.add_on_click, "value"), (viewport, "add_on_click")),
+            ]
+            self._cb_drag = g("SculptPanel drag stats")(self._on_drag_end)
+            viewport.drag_listeners.append(self._cb_drag)
+        self._cb_handles = g("SculptPanel handles")(self._on_model_handles)
+        self._cb_handles_changing = g("SculptPanel handles")(self._on_handles_changing)
+        self._cb_history = g("SculptPanel history")(self._on_model_history)
+        self._cb_shapes = g("SculptPanel shapes")(self._on_model_shapes)
+        model.events.handles.connect(self._cb_handles)
+        model.events.handles_changing.connect(self._cb_handles_changing)
+        model.events.history.connect(self._cb_history)
+        model.events.shapes.connect(self._cb_shapes)
+        model.set_handle_progress(self._on_progress)
+        self._connected = True
+        self._on_model_history()
+        self._update_status()
+
+    @property
+    def model(self) -> Any:
+        return self._model
+
+    # ------------------------------------------------------- UI -> model
+    def _flush(self) -> None:
+        for fn in self._before_edit:
+            fn()
+
+    def _on_default(self, _b: Any = None) -> None:
+        from workbench.handle_presets import default_face_handles
+
+        self._flush()
+        self._model.set_handles(default_face_handles(self._model), label="Default handles")
+        self._model.prepare_handles()  # build the basis now, not on the first drag
+
+    def _on_clear(self, _b: Any = None) -> None:
+        from workbench.model import HandleSet
+
+        self._flush()
+        if len(self._model.handles):
+            self._model.set_handles(HandleSet(), label="Clear handles")
+
+    def _on_reset(self, _b: Any = None) -> None:
+        self._flush()
+        if len(self._model.handles):
+            self._model.reset_handle_offsets()
+
+    def _on_undo(self, _b: Any = None) -> None:
+        self._flush()
+        self._model.undo()
+
+    def _on_redo(self, _b: Any = None) -> None:
+        self._flush()
+        self._model.redo()
+
+    def _on_bake(self, _b: Any = None) -> None:
+        name = self.bake_name.value.strip()
+        if not name:
+            raise ValueError("Bake to shape: type a name for the new shape first")
+        self._flush()
+        self._model.bake_handles_to_shape(name)
+        self.bake_name.value = _next_free(name, self._model.shape_names)
+        self._update_status(f"baked <b>{name}</b>")
+
+    def _on_stiffness(self, _change: Any = None) -> None:
+        k_s, k_b = float(self.k_s.value), float(self.k_b.value)
+        if (k_s, k_b) == tuple(self._model.shell_stiffness):
+            return
+        self._flush()
+        self._model.set_shell_stiffness(k_s, k_b)
+
+    # ------------------------------------------------------- model -> UI
+    def _on_progress(self, fraction: float, message: str) -> None:
+        done = fraction >= 1.0
+        self.progress.value = min(max(float(fraction), 0.0), 1.0)
+        self.progress.layout.visibility = "hidden" if done else "visible"
+        self.progress_label.value = "" if done else f"<i>shell basis: {message}</i>"
+
+    def _on_model_handles(self) -> None:
+        self._update_status()
+
+    def _on_handles_changing(self) -> None:
+        # During a drag: at most 4 status updates a second (each one is a comm message).
+        now = time.monotonic()
+        if now - self._last_status_t > 0.25:
+            self._update_status()
+
+    def _on_drag_end(self, stats: dict[str, Any]) -> None:
+        self._update_status()
+
+    def _on_model_shapes(self) -> None:
+        if self.bake_name.value.strip() in self._model.shape_names:
+            self.bake_name.value = _next_free(self.bake_name.value.strip(), self._model.shape_names)
+
+    def _on_model_history(self) -> None:
+        model = self._model
+        self.undo_button.disabled = not model.can_undo
+        self.redo_button.disabled = not model.can_redo
+        u, r = model.history.undo_labels, model.history.redo_labels
+        self.undo_button.tooltip = f"Undo {u[-1]}" if u else "Nothing to undo"
+        self.redo_button.tooltip = f"Redo {r[-1]}" if r else "Nothing to redo"
+
+    def _update_status(self, note: str = "") -> None:
+        with self._status_lock:
+            self._last_status_t = time.monotonic()
+            h = self._model.handles
+            parts = [f"<b>{len(h)}</b> handles"]
+            vp = self.viewport
+            drag = getattr(vp, "last_drag", None) or {}
+            if vp is not None and vp.dragging and vp.drag_ms:
+                parts.append(f"dragging: {vp.drag_ms[-1]:.1f} ms per update")
+            elif drag:
+                ups = drag["updates_per_s"]
+                fps = f"{ups:.0f} updates/s" if math.isfinite(ups) else ""
+                parts.append(
+                    f"last drag <i>{drag['name']}</i>: {drag['last_ms']:.1f} ms per update "
+                    f"(median {drag['median_ms']:.1f}), {drag['moves']} updates, {fps}"
+                )
+            elif not len(h):
+                parts.append("press <i>Default handles</i> or Shift-click the face")
+            if note:
+                parts.append(note)
+            self.status.value = " · ".join(parts)
+
+    # ------------------------------------------------------------ closing
+    def close(self) -> None:
+        """Disconnect from the model and the viewport, then close the child widgets."""
+        if getattr(self, "_connected", False):
+            ev = self._model.events
+            ev.handles.disconnect(self._cb_handles)
+            ev.handles_changing.disconnect(self._cb_handles_changing)
+            ev.history.disconnect(self._cb_history)
+            ev.shapes.disconnect(self._cb_shapes)
+            self._model.set_handle_progress(None)
+            if self.viewport is not None:
+                for link in self._links:
+                    link.unlink()
+                if self._cb_drag in self.viewport.drag_listeners:
+                    self.viewport.drag_listeners.remove(self._cb_drag)
+            self._connected = False
+        super().close()
