@@ -198,3 +198,22 @@ def test_timeline_naming_unknown_shapes_is_refused(saved: Path, tmp_path: Path) 
     _edit_manifest(saved, bad, lambda m: m.update(tracks=tracks))
     with pytest.raises(WorkbenchFileError, match=r"tracks: .*ghost"):
         workbench.load(bad)
+
+
+def test_regions_and_region_weights_round_trip(tmp_path: Path) -> None:
+    from workbench.region_blend import RegionWeights
+
+    m = workbench.load_sample("head")
+    st = m.segment_regions(0.25)
+    m.set_region_level(1)
+    rw = RegionWeights.from_global(m, st.regions, 1).with_region(0, {"browInnerUp": 0.7})
+    m.set_region_weights(rw)
+    m.save(tmp_path / "regions.fwb")
+    g = workbench.load(tmp_path / "regions.fwb")
+    assert g.regions is not None and g.regions.level == 1
+    for lv in range(st.regions.n_levels):
+        np.testing.assert_array_equal(g.regions.regions.labels[lv], st.regions.labels[lv])
+        assert g.regions.regions.names[lv] == st.regions.names[lv]
+    np.testing.assert_array_equal(g.regions.weights.values, rw.values)
+    np.testing.assert_allclose(g.evaluate(), m.evaluate(), atol=1e-6)
+    assert np.abs(g.evaluate() - g.blended()).max() > 1e-3  # the region weights do act

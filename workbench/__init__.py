@@ -11,15 +11,24 @@ __version__ = "0.1.0"
 
 from workbench.io import load
 from workbench.model import BlendShape, FaceModel, HandleSet, ModelError, ModelMetadata
+from workbench.paint import Brush
+from workbench.regions import Regions, segment_blend_regions
 from workbench.samples import load_sample
+from workbench.shell import ShellDeformer
+from workbench.tracks import Timeline
 
 __all__ = [
     "BlendShape",
+    "Brush",
     "FaceModel",
     "HandleSet",
     "ModelError",
     "ModelMetadata",
+    "Regions",
+    "ShellDeformer",
+    "Timeline",
     "__version__",
     "load",
     "load_sample",
+    "segment_blend_regions",
 ]

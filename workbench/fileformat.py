@@ -20,6 +20,9 @@ Layout (a plain zip, members stored uncompressed so large arrays load fast)::
       "expressions": [{"name", "weights", "n_handles"}, ...],      (schema >= 2)
       "paint": ["smile", ...],                                      (schema >= 2)
       "tracks": {"fps", "start", "end", "tracks": {...}},           (schema >= 2)
+      "regions": null | {"level", "threshold", "threshold_value", "overlap_rings",
+                  "n_levels", "names", "kinds", "drivers",
+                  "weights": null | {"level", "region_names", "shape_names"}},  (schema >= 2)
       "arrays": {"neutral": {"file", "dtype", "shape", "sha256"}, ...}
     }
 
@@ -31,6 +34,10 @@ schema 2 adds ``expression_displacements`` (E,n,3) <f4, ``expression_handle_vert
 (sum of n_handles,) <i4 and ``expression_handle_offsets`` (sum of n_handles, 3) <f4
 (expressions in manifest order), and ``paint_maps`` (P,n) <f4 in the order of ``paint``.
 The timeline is JSON in the manifest (:meth:`workbench.tracks.Timeline.to_json`).
+Regions (schema 2): ``regions_deformation`` (n,) <f4 and, per level ``l``,
+``regions_labels_l``, ``regions_weight_rows_l``, ``regions_weight_cols_l`` <i4,
+``regions_weight_vals_l``, ``regions_background_l`` <f4, ``regions_parents_l``
+(levels 0..L-2) <i4; per-region weights ``regions_weight_values`` (R,k) <f4.
 
 Guarantees: saving writes a temporary file beside the target, fsyncs it and
 renames it over the target, so a crash mid-save leaves the previous good file.
@@ -106,6 +113,7 @@ def _model_arrays(model: FaceModel) -> dict[str, np.ndarray]:
         "expression_handle_offsets": np.concatenate(
             [np.zeros((0, 3), "<f4")] + [e.handle_offsets.astype("<f4") for e in exprs]
         ),
+        **_region_arrays(model),
         "paint_maps": (
             np.stack([paint[k] for k in paint]).astype("<f4") if len(paint) else np.zeros((0, n), "<f4")
         ),
@@ -122,6 +130,77 @@ def _model_arrays(model: FaceModel) -> dict[str, np.ndarray]:
         "handle_offsets": h.offsets.astype("<f4"),
         "handle_mirror": h.mirror.astype("<i4"),
     }
+
+
+_REGION_LEVEL_FIELDS = ("labels", "weight_rows", "weight_cols", "weight_vals", "background")
+
+
+def _region_arrays(model: FaceModel) -> dict[str, np.ndarray]:
+    st = model.regions
+    if st is None:
+        return {}
+    r = st.regions
+    out: dict[str, np.ndarray] = {"regions_deformation": r.deformation.astype("<f4")}
+    for f in _REGION_LEVEL_FIELDS:
+        for lv, a in enumerate(getattr(r, f)):
+            out[f"regions_{f}_{lv}"] = a.astype("<f4" if a.dtype.kind == "f" else "<i4")
+    for lv, a in enumerate(r.parents):
+        out[f"regions_parents_{lv}"] = a.astype("<i4")
+    if st.weights is not None:
+        out["regions_weight_values"] = st.weights.values.astype("<f4")
+    return out
+
+
+def _regions_json(model: FaceModel) -> dict[str, Any] | None:
+    st = model.regions
+    if st is None:
+        return None
+    r = st.regions
+    w = st.weights
+    return {
+        "level": st.level,
+        "n_levels": r.n_levels,
+        "threshold": r.threshold,
+        "threshold_value": r.threshold_value,
+        "overlap_rings": r.overlap_rings,
+        "names": [list(x) for x in r.names],
+        "kinds": [list(x) for x in r.kinds],
+        "drivers": [[list(d) for d in x] for x in r.drivers],
+        "weights": None
+        if w is None
+        else {"level": w.level, "region_names": list(w.region_names), "shape_names": list(w.shape_names)},
+    }
+
+
+def _load_regions(path: Path, rj: dict[str, Any], arrays: dict[str, np.ndarray]) -> Any:
+    from workbench.region_blend import RegionState, RegionWeights
+    from workbench.regions import Regions
+
+    L = int(rj["n_levels"])
+
+    def get(name: str) -> np.ndarray:
+        if name not in arrays:
+            raise WorkbenchFileError(path, f"arrays.{name}", "missing (regions are incomplete)")
+        return arrays[name]
+
+    regions = Regions(
+        **{f: tuple(get(f"regions_{f}_{lv}") for lv in range(L)) for f in _REGION_LEVEL_FIELDS},
+        names=tuple(tuple(x) for x in rj["names"]),
+        parents=tuple(get(f"regions_parents_{lv}") for lv in range(L - 1)),
+        kinds=tuple(tuple(x) for x in rj["kinds"]),
+        drivers=tuple(tuple(tuple(d) for d in x) for x in rj["drivers"]),
+        deformation=get("regions_deformation"),
+        threshold=float(rj["threshold"]),
+        threshold_value=float(rj["threshold_value"]),
+        overlap_rings=int(rj["overlap_rings"]),
+    )
+    wj = rj.get("weights")
+    weights = None
+    if wj is not None:
+        weights = RegionWeights(
+            int(wj["level"]), tuple(wj["shape_names"]), tuple(wj["region_names"]), get("regions_weight_values")
+        )
+    return RegionState(regions, int(rj["level"]), weights)
 
 
 def save_model(model: FaceModel, path: str | os.PathLike[str]) -> Path:
@@ -161,6 +240,7 @@ def save_model(model: FaceModel, path: str | os.PathLike[str]) -> Path:
             "expressions": expressions_to_json(model.expressions),
             "paint": list(model.paint_layers),
             "tracks": model.tracks.to_json(),
+            "regions": _regions_json(model),
             "arrays": {},
         }
     payloads = {}
@@ -203,9 +283,9 @@ def save_model(model: FaceModel, path: str | os.PathLike[str]) -> Path:
 
 # -------------------------------------------------------------------- loading
 def _migrate_1_to_2(manifest: dict[str, Any]) -> dict[str, Any]:
-    """Schema 2 added saved expressions, paint layers and the timeline: start them empty."""
+    """Schema 2 added saved expressions, paint layers, the timeline and regions: start them empty."""
     out = dict(manifest)
-    out.update(schema_version=2, expressions=[], paint=[], tracks=None)
+    out.update(schema_version=2, expressions=[], paint=[], tracks=None, regions=None)
     return out
 
 
@@ -396,6 +476,14 @@ def load_model(path: str | os.PathLike[str]) -> FaceModel:
             for w in maps.values():
                 w.setflags(write=False)
             model._slots["paint_layers"] = PaintMix(maps)
+        regions_json = manifest.get("regions")
+        if regions_json:
+            from workbench.regions import RegionError
+
+            try:
+                model._slots["regions"] = _load_regions(path, regions_json, arrays)
+            except RegionError as exc:
+                raise WorkbenchFileError(path, "regions", str(exc)) from None
         if tracks_json:
             try:
                 timeline = Timeline.from_json(tracks_json)

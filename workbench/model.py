@@ -32,6 +32,7 @@ from workbench.handle_layer import HandleLayer
 from workbench.history import Command, History, payload_nbytes
 from workbench.paint import Brush, PaintLayer, PaintMix, apply_dab, flood, normalize
 from workbench.polygons import Polygons
+from workbench.region_blend import RegionState, RegionWeights, region_layer
 from workbench.tracks import Interpolation, Timeline, weight_track_name
 
 
@@ -223,7 +224,7 @@ class FaceModelEvents(SignalGroup):
 #: Fields stored in the generic slots, and whether they change ``evaluate()``.
 _SLOTS: dict[str, bool] = {
     "handles": True,
-    "regions": False,
+    "regions": True,
     "paint_layers": True,
     "expressions": True,
     "tracks": False,
@@ -324,6 +325,8 @@ class FaceModel:
         self._evaluated: NDArray[np.float32] | None = None
         self._blended: NDArray[np.float32] | None = None
         self._layer_providers: dict[str, Callable[[FaceModel], NDArray[np.float32] | None]] = {}
+        # layer order: region blend (a correction of the blend), handles, paint
+        self._layer_providers["regions"] = region_layer
         self._handle_layer = HandleLayer()
         self._layer_providers["handles"] = self._handle_layer
         self._paint_layer = PaintLayer()
@@ -639,8 +642,8 @@ class FaceModel:
         return self._slots["handles"]
 
     @property
-    def regions(self) -> Any:
-        """Blend regions (None until segmented)."""
+    def regions(self) -> RegionState | None:
+        """Blend regions with the level shown and per-region weights (None until segmented)."""
         return self._slots["regions"]
 
     @property
@@ -934,6 +937,44 @@ class FaceModel:
                 self.clear_paint()
             self.events.history.emit()
             return self.shape(name)
+
+    # ------------------------------------------------------------------ regions
+    def segment_regions(self, threshold: float = 0.25, **options: Any) -> RegionState:
+        """Find local blend regions (Joshi et al. 2003) and store them (undoable).
+
+        ``options`` go to :func:`workbench.regions.segment_blend_regions`. The
+        region weights start equal to the global weights (the face does not change).
+        """
+        from workbench.regions import segment_blend_regions
+
+        with self._lock:
+            regions = segment_blend_regions(self, threshold, **options)
+            old = self.regions
+            level = min(old.level, regions.n_levels - 1) if isinstance(old, RegionState) else 0
+            state = RegionState(regions, level, None)
+            self.set_slot("regions", state, f"Segment regions (t={threshold:g})")
+            return state
+
+    def set_region_level(self, level: int) -> None:
+        """Show/edit hierarchy ``level`` (weights are carried over to it); undoable."""
+        with self._lock:
+            st = self._require_regions("set_region_level")
+            lv = st.regions.check_level(level)
+            self.set_slot("regions", RegionState(st.regions, lv, st.weights), f"Region level {lv}")
+
+    def set_region_weights(self, weights: RegionWeights | None, label: str = "Region weights") -> None:
+        """Set per-region blend weights (None: regions follow the global sliders); undoable."""
+        with self._lock:
+            st = self._require_regions("set_region_weights")
+            if weights is not None and tuple(weights.shape_names) != tuple(self.shape_names):
+                raise ModelError("set_region_weights: weights were made for other shapes")
+            self.set_slot("regions", RegionState(st.regions, st.level, weights), label)
+
+    def _require_regions(self, what: str) -> RegionState:
+        st = self.regions
+        if not isinstance(st, RegionState):
+            raise ModelError(f"{what}: no regions yet; call model.segment_regions() first")
+        return st
 
     # ----------------------------------------------------------------- timeline
     @property
