@@ -165,7 +165,11 @@ class TimelineView {
   bind() {
     const m = this.model;
     const redraw = () => this.sync();
-    for (const name of ["_tracks", "_curve", "time", "playing", "loop", "status", "_error", "expressions",
+    // the playhead moves every frame during playback: redraw only the playhead layer
+    const onTime = () => this.requestDraw(false);
+    m.on("change:time", onTime);
+    this.disposers.push(() => m.off("change:time", onTime));
+    for (const name of ["_tracks", "_curve", "playing", "loop", "status", "_error", "expressions",
       "_saved_expressions", "_gallery_selected", "selected_keys", "selected_track", "_has_handles"]) {
       m.on(`change:${name}`, redraw);
       this.disposers.push(() => m.off(`change:${name}`, redraw));
@@ -307,6 +311,12 @@ class TimelineView {
 
   onMessage(msg) {
     if (!msg || typeof msg !== "object") return;
+    if (msg.type === "frame") {
+      // playback flow control: answer once the browser reached its next animation
+      // frame, i.e. after the viewport drew the geometry sent before this message
+      requestAnimationFrame(() => this.send({ type: "frame_ack", seq: msg.seq }));
+      return;
+    }
     if (msg.type === "scrub_ack") {
       if (this.scrub.inflight === msg.seq) this.scrub.inflight = null;
       this.flushScrub();
@@ -383,7 +393,7 @@ class TimelineView {
     const st = this.state();
     this.scrub.pending = clamp(t, st.view[0], st.view[1]);
     this.scrub.local = this.scrub.pending;
-    this.requestDraw();
+    this.requestDraw(false);
     this.flushScrub();
   }
 
@@ -643,7 +653,9 @@ class TimelineView {
   }
 
   // ------------------------------------------------------------- drawing
-  requestDraw() {
+  // base = false: only the playhead moved, the cached track/curve layers are reused
+  requestDraw(base = true) {
+    this.baseDirty = this.baseDirty || base;
     if (this.raf) return;
     this.raf = requestAnimationFrame(() => {
       this.raf = 0;
@@ -657,7 +669,7 @@ class TimelineView {
       canvas.width = Math.round(w * dpr);
       canvas.height = Math.round(h * dpr);
     }
-    canvas.style.height = `${h}px`;
+    if (canvas.style.height !== `${h}px`) canvas.style.height = `${h}px`;
     const ctx = canvas.getContext("2d");
     ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
     ctx.clearRect(0, 0, w, h);
@@ -676,10 +688,37 @@ class TimelineView {
 
   draw() {
     this.draws += 1;
-    const st = this.state();
     const g = this.layout();
     this.geom = g;
+    const size = `${g.w}x${g.h}@${window.devicePixelRatio || 1}`;
+    if (this.baseDirty || size !== this.baseSize || !this.mainBase) {
+      this.mainBase = this.mainBase || document.createElement("canvas");
+      this.curveBase = this.curveBase || document.createElement("canvas");
+      this.drawBase(g);
+      this.drawCurve(g);
+      this.baseDirty = false;
+      this.baseSize = size;
+    }
     const ctx = this.prepCanvas(this.canvas, g.w, g.h);
+    ctx.drawImage(this.mainBase, 0, 0, g.w, g.h);
+    this.drawPlayhead(ctx, g);
+    const cctx = this.prepCanvas(this.curveCanvas, g.w, CURVE_H);
+    cctx.drawImage(this.curveBase, 0, 0, g.w, CURVE_H);
+    if (this.curveTrack()) {
+      const px = Math.round(g.tx(this.playheadTime())) + 0.5;
+      cctx.strokeStyle = COLORS.playhead;
+      cctx.beginPath();
+      cctx.moveTo(px, 0);
+      cctx.lineTo(px, CURVE_H);
+      cctx.stroke();
+    }
+    this.writeHooks();
+  }
+
+  // rows, ruler, keys: redrawn only when the state, the size or a drag preview changes
+  drawBase(g) {
+    const st = this.state();
+    const ctx = this.prepCanvas(this.mainBase, g.w, g.h);
     ctx.font = "11px system-ui, sans-serif";
     ctx.textBaseline = "middle";
     ctx.fillStyle = COLORS.bg;
@@ -749,7 +788,11 @@ class TimelineView {
       ctx.stroke();
       ctx.setLineDash([]);
     }
-    // playhead
+  }
+
+  drawPlayhead(ctx, g) {
+    ctx.font = "11px system-ui, sans-serif";
+    ctx.textBaseline = "middle";
     const t = this.playheadTime();
     const px = Math.round(g.tx(t)) + 0.5;
     ctx.strokeStyle = COLORS.playhead;
@@ -770,8 +813,6 @@ class TimelineView {
     ctx.fill();
     ctx.fillStyle = COLORS.text;
     ctx.fillText(fmtTime(t), Math.min(px + 9, g.w - 52), RULER - 7);
-    this.drawCurve(g);
-    this.writeHooks();
   }
 
   playheadTime() {
@@ -801,7 +842,7 @@ class TimelineView {
   drawCurve(g) {
     const tr = this.curveTrack();
     const w = g.w;
-    const ctx = this.prepCanvas(this.curveCanvas, w, CURVE_H);
+    const ctx = this.prepCanvas(this.curveBase, w, CURVE_H);
     ctx.font = "11px system-ui, sans-serif";
     ctx.textBaseline = "middle";
     ctx.fillStyle = COLORS.bg;
@@ -854,7 +895,6 @@ class TimelineView {
     const dd = this.curveDrag;
     const override = dd && dd.track === tr.name && dd.slope !== null ? dd : null;
     const handles = this.tangentHandles(tr, override);
-    const crect = this.curveCanvas.getBoundingClientRect();
     for (const h of handles) {
       const kx = g.tx(tr.times[h.index]);
       const ky = cl.vy(tr.values[h.index]);
@@ -870,17 +910,11 @@ class TimelineView {
       ctx.arc(hx, hy, HANDLE_R - 1, 0, 2 * Math.PI);
       ctx.fill();
       ctx.stroke();
-      this.tangentHooks.push([tr.name, h.index, h.side, crect.left + hx, crect.top + hy]);
+      this.tangentHooks.push([tr.name, h.index, h.side, hx, hy]); // canvas coordinates
     }
     tr.times.forEach((t, i) => {
       this.diamond(ctx, g.tx(t), cl.vy(tr.values[i]), tr.interp[i], this.isSelected(tr.name, i), false);
     });
-    const px = Math.round(g.tx(this.playheadTime())) + 0.5;
-    ctx.strokeStyle = COLORS.playhead;
-    ctx.beginPath();
-    ctx.moveTo(px, 0);
-    ctx.lineTo(px, CURVE_H);
-    ctx.stroke();
   }
 
   // ------------------------------------------------------------- test hooks
@@ -888,6 +922,7 @@ class TimelineView {
     const g = this.geom;
     if (!g) return null;
     const r = this.canvas.getBoundingClientRect();
+    const cr = this.curveCanvas.getBoundingClientRect();
     const st = this.state();
     const keys = [];
     st.tracks.forEach((tr, row) => {
@@ -900,7 +935,9 @@ class TimelineView {
       "data-ruler-y": String(r.top + RULER / 2),
       "data-axis": JSON.stringify({ x0: r.left + g.x0, x1: r.left + g.x1, t0: g.v0, t1: g.v1 }),
       "data-keys": JSON.stringify(keys),
-      "data-tangents": JSON.stringify(this.tangentHooks || []),
+      "data-tangents": JSON.stringify(
+        (this.tangentHooks || []).map(([tn, i, side, x, y]) => [tn, i, side, cr.left + x, cr.top + y]),
+      ),
       "data-selected": JSON.stringify(this.selected),
       "data-draws": String(this.draws),
     };

@@ -1,0 +1,190 @@
+"""Timeline playback rate in a real browser: frames the viewport actually draws per second.
+
+For each sample resolution it opens a notebook in JupyterLab (Debian Chromium,
+software WebGL) with ``widgets.Viewport`` above ``TimelineWidget`` and three
+keyed expressions (jawOpen 0 s, smile 1 s, browInnerUp 2 s; every frame moves
+the mouth and brows), ticks *Loop*, presses **Play** with the mouse, waits
+``--warmup`` seconds, then measures for ``--seconds``:
+
+* ``kernel fps``: ``model.set_time`` calls per second made by the playback task
+  (counted with a ``model.events.time`` listener in the kernel);
+* ``dropped``: frames the playback task skipped because the previous one was late
+  (share of the frames due);
+* ``viewport fps``: geometry updates the viewport rendered per second
+  (its ``data-frame`` hook, read in the page) — what a user sees move;
+* ``renders/s``: all viewport renders (``data-render-count``; includes renders
+  without new geometry);
+* ``set_time ms`` / ``push ms``: kernel median per frame for ``set_time``
+  (evaluate + every listener, the viewport's diff+send included) and for the
+  viewport's geometry push alone;
+* ``render ms``: the viewport's own JS time per render (``data-render-ms``:
+  upload + normals + draw call), sampled every 0.2 s.
+
+Playback sends a frame only while fewer than ``FRAMES_IN_FLIGHT`` frames are
+not yet drawn by the browser (see ``widgets/timeline.py``), so ``kernel fps``
+equals ``viewport fps`` when the browser is the bottleneck.
+
+Then presses **Pause**. Prints one row per resolution and target fps.
+
+Usage::
+
+    .venv/bin/python benchmarks/bench_playback.py [--resolutions base 25k] [--fps 30 60] [--seconds 6]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO / "tests" / "browser"))
+
+from harness import CHROMIUM, CHROMIUM_ARGS, LabServer, NotebookPage, write_notebook  # noqa: E402
+
+_SETUP = """
+import ipywidgets as W
+import widgets, workbench
+from widgets.timeline import TimelineWidget
+model = workbench.load_sample("head", resolution="{res}")
+model.set_weights({{"mouthSmileLeft": 1.0, "mouthSmileRight": 1.0}})
+model.save_expression("smile")
+model.reset_weights()
+model.key_expression(0.0, "jawOpen")
+model.key_expression(1.0, "smile")
+model.key_expression(2.0, "browInnerUp")
+model.set_time(0.0)
+vp = widgets.Viewport(model, height=360)
+tl = TimelineWidget(model)
+W.VBox([vp, tl])
+"""
+
+_COUNTER = """
+import json, time
+if "_bench_n" not in globals():
+    _bench_n = [0]
+    model.events.time.connect(lambda _t: _bench_n.__setitem__(0, _bench_n[0] + 1))
+print(json.dumps([_bench_n[0], time.perf_counter(), tl.frames_dropped]))
+"""
+
+_PAGE_COUNTERS = """() => {
+  const e = document.querySelector('.fwb-viewport');
+  return [Number(e.getAttribute('data-frame')), Number(e.getAttribute('data-render-count')),
+          performance.now()];
+}"""
+
+
+def _median(xs: list[float]) -> float:
+    s = sorted(xs)
+    return s[len(s) // 2] if s else float("nan")
+
+
+def measure(nb: NotebookPage, fps: float, warmup: float, seconds: float) -> dict[str, float]:
+    page = nb.page
+    root = page.locator(".fwb-timeline")
+    nb.kernel_eval(
+        f"model.set_timeline(model.tracks.replace(fps={fps}), 'bench fps'); model.set_time(0.0)"
+    )
+    if not root.locator(".fwb-tl-loop").is_checked():
+        root.locator(".fwb-tl-loop").check()
+    nb.kernel_eval(_COUNTER)
+    nb.kernel_eval("vp.push_ms.clear()")
+    root.locator(".fwb-tl-play").click()
+    page.wait_for_function("() => document.querySelector('.fwb-timeline')"
+                           ".getAttribute('data-playing') === '1'", timeout=20000)  # fmt: skip
+    time.sleep(warmup)
+    n0, k0, d0 = nb.kernel_eval(_COUNTER)
+    f0, r0, p0 = page.evaluate(_PAGE_COUNTERS)
+    render_ms = []
+    t_end = time.monotonic() + seconds
+    while time.monotonic() < t_end:
+        time.sleep(0.2)
+        render_ms.append(float(nb.viewport(0).get_attribute("data-render-ms") or "nan"))
+    f1, r1, p1 = page.evaluate(_PAGE_COUNTERS)
+    n1, k1, d1 = nb.kernel_eval(_COUNTER)
+    stats = nb.kernel_eval("import json; print(json.dumps(tl.playback_stats))")
+    push = nb.kernel_eval("import json; print(json.dumps(list(vp.push_ms)))")
+    nb.screenshot(f"playing-{fps:g}")
+    root.locator(".fwb-tl-pause").click()
+    page.wait_for_function("() => document.querySelector('.fwb-timeline')"
+                           ".getAttribute('data-playing') === '0'", timeout=20000)  # fmt: skip
+    kernel_fps = (n1 - n0) / (k1 - k0)
+    dropped = d1 - d0
+    return {
+        "kernel_fps": kernel_fps,
+        "dropped": dropped / max(dropped + (n1 - n0), 1),
+        "viewport_fps": (f1 - f0) / ((p1 - p0) / 1e3),
+        "renders": (r1 - r0) / ((p1 - p0) / 1e3),
+        "set_time_ms": float(stats.get("set_time_ms", float("nan"))),
+        "push_ms": _median(push),
+        "render_ms": _median(render_ms),
+    }
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--resolutions", nargs="+", default=["base", "25k"])
+    ap.add_argument("--fps", nargs="+", type=float, default=[30.0])
+    ap.add_argument("--warmup", type=float, default=1.5)
+    ap.add_argument("--seconds", type=float, default=6.0)
+    args = ap.parse_args()
+    if not CHROMIUM.exists():
+        print(f"{CHROMIUM} is missing: apt-get install chromium", file=sys.stderr)
+        return 2
+    from playwright.sync_api import sync_playwright
+
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="fwb-bench-") as tmp:
+        lab = LabServer(Path(tmp))
+        lab.start()
+        try:
+            with sync_playwright() as pw:
+                browser = pw.chromium.launch(
+                    executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS
+                )
+                for res in args.resolutions:
+                    name = f"bench_playback_{res}.ipynb"
+                    write_notebook(lab.root / name, [_SETUP.format(res=res)])
+                    ctx = browser.new_context(viewport={"width": 1400, "height": 1000})
+                    page = ctx.new_page()
+                    nb = NotebookPage(page, lab, REPO / "test-artifacts" / "bench_playback", name)
+                    page.goto(f"{lab.url}/lab/workspaces/bench-pb-{res}/tree/{name}?reset")
+                    try:
+                        nb.wait_kernel_idle()
+                        nb.run_all(timeout=900)
+                        nb.wait_viewports(1, timeout=120)
+                        page.evaluate("() => { const s = window.jupyterapp.shell;"
+                                      " if (!s.leftCollapsed) s.collapseLeft(); }")  # fmt: skip
+                        nb.viewport(0).evaluate("e => e.scrollIntoView({block: 'start'})")
+                        page.wait_for_timeout(500)
+                        n = nb.kernel_eval("import json; print(json.dumps(model.n_vertices))")
+                        for fps in args.fps:
+                            rows.append((res, n, fps, measure(nb, fps, args.warmup, args.seconds)))
+                    except Exception as exc:  # report and go on with the next size
+                        print(f"[{res}] failed: {type(exc).__name__}: {exc}", file=sys.stderr)
+                        nb.screenshot(f"failed-{res}")
+                    finally:
+                        ctx.close()
+                        lab.shutdown_kernels()
+                browser.close()
+        finally:
+            lab.stop()
+
+    print()
+    print(f"Timeline playback in JupyterLab + Chromium (software WebGL), {args.seconds:g} s "
+          "per row after warm-up")  # fmt: skip
+    print("  kernel fps: set_time calls/s; viewport fps: geometry frames the viewport rendered/s")
+    print(f"{'resolution':>10} {'vertices':>9} {'target':>7} {'kernel fps':>10} {'dropped':>8} "
+          f"{'viewport fps':>12} {'renders/s':>9} {'set_time ms':>11} {'push ms':>8} "
+          f"{'render ms':>9}")  # fmt: skip
+    for res, n, fps, m in rows:
+        print(f"{res:>10} {n:>9} {fps:7.0f} {m['kernel_fps']:10.1f} {m['dropped']:8.0%} "
+              f"{m['viewport_fps']:12.1f} {m['renders']:9.1f} {m['set_time_ms']:11.2f} "
+              f"{m['push_ms']:8.2f} {m['render_ms']:9.1f}")  # fmt: skip
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

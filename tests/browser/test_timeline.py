@@ -1,0 +1,265 @@
+"""The keyframe timeline in a real JupyterLab + Chromium, driven with the mouse.
+
+A small notebook shows ``widgets.Viewport`` above ``TimelineWidget`` on the
+sample head with three keyed expressions (jawOpen at 0 s, a saved "smile" at
+1 s, browInnerUp at 2 s). The tests scrub the playhead, drag a key diamond,
+play/pause, drop an expression chip (HTML5 drag and drop), drag a Bézier
+tangent handle and delete a key with the keyboard, checking the Python model
+(read back from the kernel) and the viewport's pixels. The timeline's test
+hooks (``data-playhead-x``, ``data-keys``, ``data-axis``, ``data-tangents``)
+give the screen positions to aim at. Screenshots: ``test-artifacts/<test>/``.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from typing import Any
+
+from harness import NotebookPage, clip_around, pixel_change
+
+CELLS = [
+    """
+import ipywidgets as W
+import widgets
+import workbench
+from widgets.timeline import TimelineWidget
+
+model = workbench.load_sample("head")
+model.set_weights({"mouthSmileLeft": 1.0, "mouthSmileRight": 1.0})
+model.save_expression("smile")
+model.reset_weights()
+model.key_expression(0.0, "jawOpen")
+model.key_expression(1.0, "smile")
+model.key_expression(2.0, "browInnerUp")
+model.set_time(0.0)
+vp = widgets.Viewport(model, height=330)
+tl = TimelineWidget(model)
+W.VBox([vp, tl])
+""",
+]
+
+_PROBE_MOUTH = """
+import json, numpy as np
+_d = np.linalg.norm(model.shape("jawOpen").delta, axis=1)
+_skin = model.component_labels == model.component_names.index("skin")
+_ids = np.argsort(-(_d * _skin))[:80]
+vp.probe_ids = _ids
+print(json.dumps([int(i) for i in _ids]))
+"""
+
+
+def _py(nb: NotebookPage, expr: str) -> Any:
+    return nb.kernel_eval(f"import json; print(json.dumps({expr}))")
+
+
+def _open(open_notebook) -> tuple[NotebookPage, Any, list[int]]:
+    nb = open_notebook(CELLS)
+    nb.page.evaluate(
+        "() => { const s = window.jupyterapp.shell; if (!s.leftCollapsed) s.collapseLeft(); }"
+    )
+    nb.wait_viewports(1)
+    ids = nb.kernel_eval(_PROBE_MOUTH)
+    root = nb.page.locator(".fwb-timeline")
+    root.wait_for()
+    nb.page.wait_for_function(
+        "() => { const e = document.querySelector('.fwb-timeline');"
+        " return e && JSON.parse(e.getAttribute('data-keys') || '[]').length >= 12; }"
+    )
+    nb.viewport(0).evaluate("e => e.scrollIntoView({block: 'start'})")
+    nb.page.wait_for_timeout(400)  # layout settles after the sidebar collapsed
+    return nb, root, ids
+
+
+def _hooks(root: Any) -> dict[str, Any]:
+    h = root.evaluate("e => e.fwbHooks()")
+    return {
+        "time": float(h["data-time"]),
+        "playhead_x": float(h["data-playhead-x"]),
+        "ruler_y": float(h["data-ruler-y"]),
+        "axis": json.loads(h["data-axis"]),
+        "keys": json.loads(h["data-keys"]),
+        "tangents": json.loads(h["data-tangents"]),
+        "selected": json.loads(h["data-selected"]),
+    }
+
+
+def _x_of(h: dict[str, Any], t: float) -> float:
+    a = h["axis"]
+    return a["x0"] + (t - a["t0"]) / (a["t1"] - a["t0"]) * (a["x1"] - a["x0"])
+
+
+def _key(h: dict[str, Any], track: str, index: int) -> tuple[float, float]:
+    for name, i, _t, x, y in h["keys"]:
+        if name == track and i == index:
+            return x, y
+    raise AssertionError(f"no key {track}[{index}] in {h['keys']}")
+
+
+def _wait_py(nb: NotebookPage, expr: str, pred, timeout: float = 15.0) -> Any:
+    deadline = time.monotonic() + timeout
+    value = None
+    while time.monotonic() < deadline:
+        value = _py(nb, expr)
+        if pred(value):
+            return value
+        time.sleep(0.15)
+    raise AssertionError(f"{expr} never satisfied the condition; last value {value!r}")
+
+
+def _drag(nb: NotebookPage, x0: float, y0: float, x1: float, y1: float, steps: int = 12) -> None:
+    m = nb.page.mouse
+    m.move(x0, y0)
+    m.down()
+    m.move(x1, y1, steps=steps)
+    m.up()
+
+
+def test_scrub_drag_key_and_play(open_notebook):
+    nb, root, ids = _open(open_notebook)
+    clip = clip_around(nb.project(ids), pad=40)
+    nb.screenshot("page-start")
+    before = nb.screenshot("mouth-t0", clip=clip)
+    assert _py(nb, "model.time") == 0.0
+    assert _py(nb, 'model.weights["jawOpen"]') == 1.0
+
+    # --- scrub: grab the playhead in the ruler and drag it to t = 1 s (the smile)
+    h = _hooks(root)
+    assert abs(h["playhead_x"] - _x_of(h, 0.0)) < 1.0
+    frame0 = nb.frame(0)
+    _drag(nb, h["playhead_x"], h["ruler_y"], _x_of(h, 1.0), h["ruler_y"], steps=15)
+    t = _wait_py(nb, "model.time", lambda v: abs(v - 1.0) < 1e-9)
+    assert t == 1.0
+    assert int(root.get_attribute("data-scrub-sent")) >= 2  # intermediate positions were sent
+    nb.wait_frame_after(0, frame0)
+    w = _py(nb, "dict(model.weights)")
+    assert w["jawOpen"] == 0.0 and w["mouthSmileLeft"] == 1.0
+    nb.page.wait_for_timeout(300)
+    after = nb.screenshot("mouth-t1", clip=clip)
+    nb.screenshot("page-scrubbed")
+    changed = pixel_change(before, after)
+    assert changed > 0.03, f"only {changed:.1%} of the mouth region changed"
+    h = _hooks(root)
+    assert h["time"] == 1.0 and abs(h["playhead_x"] - _x_of(h, 1.0)) < 1.0
+
+    # --- drag the browInnerUp key at 2 s to 1.5 s: one undo step
+    undo0 = _py(nb, "model.history.undo_labels")
+    x, y = _key(h, "weights/browInnerUp", 2)
+    _drag(nb, x, y, _x_of(h, 1.5), y)
+    times = _wait_py(
+        nb,
+        'model.tracks.tracks["weights/browInnerUp"].times.tolist()',
+        lambda v: v != [0.0, 1.0, 2.0],
+    )
+    assert times == [0.0, 1.0, 1.5]
+    undo1 = _py(nb, "model.history.undo_labels")
+    assert undo1 == [*undo0, "Move key of weights/browInnerUp"]
+    nb.page.wait_for_timeout(300)
+    nb.screenshot("key-dragged")
+    h = _hooks(root)
+    assert abs(_key(h, "weights/browInnerUp", 2)[0] - _x_of(h, 1.5)) < 1.0
+    assert h["selected"] == [["weights/browInnerUp", 2]]
+    nb.kernel_eval("model.undo()")
+    assert _py(nb, 'model.tracks.tracks["weights/browInnerUp"].times.tolist()') == [0.0, 1.0, 2.0]
+    assert _py(nb, "model.history.undo_labels") == undo0
+
+    # --- Play (looping), let several frames go by, Pause
+    root.locator(".fwb-tl-loop").check()
+    _wait_py(nb, "tl.loop", bool)
+    frame1 = nb.frame(0)
+    renders1 = int(nb.viewport(0).get_attribute("data-render-count"))
+    t_start = _py(nb, "model.time")
+    root.locator(".fwb-tl-play").click()
+    _wait_py(nb, "tl.playing", bool, timeout=10)
+    shown = set()  # the playhead follows playback in the front end
+    for _ in range(10):
+        shown.add(root.get_attribute("data-time"))
+        nb.page.wait_for_timeout(150)
+    nb.screenshot("playing")
+    root.locator(".fwb-tl-pause").click()
+    _wait_py(nb, "tl.playing", lambda v: not v, timeout=10)
+    stats = _py(nb, "tl.playback_stats")
+    frames = nb.frame(0) - frame1
+    renders = int(nb.viewport(0).get_attribute("data-render-count")) - renders1
+    assert stats["frames"] >= 5, stats
+    assert frames >= 5, f"the viewport drew only {frames} new frames while playing"
+    assert renders >= frames
+    assert _py(nb, "model.time") != t_start
+    assert len(shown) >= 3, f"the playhead showed only the times {shown}"
+    nb.page.wait_for_timeout(300)
+    assert root.get_attribute("data-playing") == "0"
+    assert "played" in root.locator(".fwb-tl-status").inner_text()
+    nb.screenshot("paused")
+
+
+def test_drop_chip_tangent_and_delete(open_notebook):
+    nb, root, _ids = _open(open_notebook)
+    h = _hooks(root)
+
+    # --- HTML5 drag of the "smile" chip onto the tracks at 0.5 s keys it there
+    undo0 = _py(nb, "model.history.undo_labels")
+    canvas = root.locator(".fwb-tl-canvas")
+    box = canvas.bounding_box()
+    _x, y = _key(h, "weights/jawOpen", 0)
+    chip = root.locator('.fwb-tl-chip[data-name="smile"]')
+    chip.drag_to(canvas, target_position={"x": _x_of(h, 0.5) - box["x"], "y": y - box["y"]})
+    _wait_py(nb, "len(model.history.undo_labels)", lambda n: n == len(undo0) + 1)
+    assert _py(nb, "model.history.undo_labels")[-1] == "Key smile at 0.5s"
+    w = _py(nb, "model.tracks.evaluate(0.5).weights")
+    assert w == {"browInnerUp": 0.0, "jawOpen": 0.0, "mouthSmileLeft": 1.0, "mouthSmileRight": 1.0}
+    nb.page.wait_for_timeout(300)
+    nb.screenshot("chip-dropped")
+
+    # --- click a key: it is selected and its track shown in the curve view
+    h = _hooks(root)
+    x, y = _key(h, "weights/jawOpen", 2)  # jawOpen keys: 0, 0.5, 1, 2 s
+    nb.page.mouse.click(x, y)
+    _wait_py(nb, "tl.selected_keys", lambda v: v == [["weights/jawOpen", 2]])
+    assert _py(nb, "tl.selected_track") == "weights/jawOpen"
+    nb.page.wait_for_timeout(300)
+
+    # --- drag the out-tangent handle of jawOpen's first key (1 at 0 s) downwards
+    h = _hooks(root)
+    handles = {(tn, i, side): (hx, hy) for tn, i, side, hx, hy in h["tangents"]}
+    hx, hy = handles[("weights/jawOpen", 0, "out")]
+    nb.screenshot("curve-before")
+    _drag(nb, hx, hy, hx, hy + 40)
+    key0 = _wait_py(
+        nb,
+        '[model.tracks.tracks["weights/jawOpen"].keys[0].tangent_mode,'
+        ' float(model.tracks.tracks["weights/jawOpen"].keys[0].out_tangent)]',
+        lambda v: v[0] == "user",
+    )
+    assert key0[1] < 0  # dragged down: the curve leaves the key falling
+    nb.page.wait_for_timeout(300)
+    nb.screenshot("curve-after")
+
+    # --- Delete key: selected key 2 of jawOpen (t = 1 s) goes, one undo step
+    undo1 = _py(nb, "model.history.undo_labels")
+    x, y = _key(_hooks(root), "weights/jawOpen", 2)
+    nb.page.mouse.click(x, y)
+    _wait_py(nb, "tl.selected_keys", lambda v: v == [["weights/jawOpen", 2]])
+    nb.page.keyboard.press("Delete")
+    times = _wait_py(
+        nb,
+        'model.tracks.tracks["weights/jawOpen"].times.tolist()',
+        lambda v: len(v) == 3,
+    )
+    assert times == [0.0, 0.5, 2.0]
+    assert _py(nb, "model.history.undo_labels") == [*undo1, "Delete key 2 of weights/jawOpen"]
+    # the notebook itself was untouched by the key press (JupyterLab shortcuts did not fire)
+    assert len(nb.state()["counts"]) == 1
+
+    # --- double-click on the smile row at 1.5 s adds a key with the current weight
+    h = _hooks(root)
+    _x, y = _key(h, "weights/mouthSmileLeft", 0)
+    nb.page.mouse.dblclick(_x_of(h, 1.5), y)
+    times = _wait_py(
+        nb,
+        'model.tracks.tracks["weights/mouthSmileLeft"].times.tolist()',
+        lambda v: 1.5 in v,
+    )
+    assert times == [0.0, 0.5, 1.0, 1.5, 2.0]
+    nb.page.wait_for_timeout(300)
+    nb.screenshot("final")
+    assert root.get_attribute("data-error") == ""

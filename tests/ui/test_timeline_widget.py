@@ -1,0 +1,383 @@
+"""Timeline widget (widgets/timeline.py) without a browser: front-end messages -> model calls.
+
+Each test sends the JSON a click or drag in the front end sends
+(``TimelineWidget.handle_message``) and checks the model, its undo stack and
+the state shipped back to the front end. Playback runs on a real asyncio loop.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import itertools
+
+import pytest
+
+pytest.importorskip("anywidget")
+
+from widgets.timeline import TimelineWidget, curve_samples, timeline_state, view_range
+from workbench.tracks import Timeline
+
+pytestmark = pytest.mark.ui
+
+UP, LEFT = "weights/up", "weights/left"
+
+
+@pytest.fixture
+def keyed(tiny_model):
+    """'up' keyed 0 at 0 s, 1 at 1 s, 0 at 2 s; 30 fps."""
+    m = tiny_model
+    for t, w in ((0.0, 0.0), (1.0, 1.0), (2.0, 0.0)):
+        m.set_weight("up", w)
+        m.key_weights(t, ["up"])
+    m.set_weight("up", 0.0)
+    return m
+
+
+def send(w, **content):
+    w.handle_message(content)
+    assert w._error == "", w._error
+
+
+def test_state_lists_tracks_keys_and_tangents(keyed):
+    w = TimelineWidget(keyed)
+    st = w._tracks
+    assert st["fps"] == 30.0 and (st["start"], st["end"]) == (0.0, 2.0)
+    (tr,) = st["tracks"]
+    assert tr["name"] == UP and tr["label"] == "up"
+    assert tr["times"] == [0.0, 1.0, 2.0] and tr["values"] == [0.0, 1.0, 0.0]
+    # auto-clamped: flat ends, and the middle key is an extreme -> flat too
+    assert tr["in"] == [0.0, 0.0, 0.0] and tr["out"] == [0.0, 0.0, 0.0]
+    assert tr["interp"] == ["bezier"] * 3
+    # the only weight track is shown in the curve view, sampled by the model
+    assert w.selected_track == UP
+    assert w._curve["track"] == UP
+    i = w._curve["times"].index(1.0)
+    assert w._curve["values"][i] == 1.0
+    assert st["view"][0] == 0.0 and st["view"][1] > 2.0
+
+
+def test_view_range_pads_past_the_end():
+    assert view_range(Timeline()) == (0.0, 1.25)
+    assert view_range(Timeline(start=-1.0, end=9.0)) == (-1.0, 10.0)
+
+
+def test_curve_samples_of_a_step_key_jump_at_the_next_key(keyed):
+    tl = keyed.tracks.set_interpolation(UP, 0, "step")
+    c = curve_samples(tl, UP)
+    ts, vs = c["times"], c["values"]
+    j = ts.index(1.0)
+    assert vs[j - 1] == 0.0  # just before the key: still the step's value
+    assert vs[j] == 1.0
+    assert curve_samples(tl, "weights/nope") == {"track": "weights/nope", "times": [], "values": []}
+
+
+def test_scrub_sets_model_time_and_acks(keyed, monkeypatch):
+    w = TimelineWidget(keyed)
+    sent = []
+    monkeypatch.setattr(w, "send", lambda content, buffers=None: sent.append(content))
+    labels = list(keyed.history.undo_labels)
+    send(w, type="scrub", time=1.0, seq=7)
+    assert keyed.time == 1.0 and w.time == 1.0
+    assert keyed.weights["up"] == 1.0
+    assert sent == [{"type": "scrub_ack", "seq": 7}]
+    assert keyed.history.undo_labels == labels  # changing the frame is not an undo step
+
+
+def test_drag_key_is_one_undo_step(keyed):
+    w = TimelineWidget(keyed)
+    n_undo = len(keyed.history.undo_labels)
+    send(w, type="move_key", track=UP, index=1, time=1.5)
+    assert list(keyed.tracks.tracks[UP].times) == [0.0, 1.5, 2.0]
+    assert len(keyed.history.undo_labels) == n_undo + 1
+    assert w._tracks["tracks"][0]["times"] == [0.0, 1.5, 2.0]
+    assert w.selected_keys == [[UP, 1]]
+    keyed.undo()
+    assert list(keyed.tracks.tracks[UP].times) == [0.0, 1.0, 2.0]
+    assert w._tracks["tracks"][0]["times"] == [0.0, 1.0, 2.0]
+
+
+def test_move_key_past_a_neighbour_reorders_and_selects_it(keyed):
+    w = TimelineWidget(keyed)
+    send(w, type="move_key", track=UP, index=0, time=1.5)
+    tr = keyed.tracks.tracks[UP]
+    assert list(tr.times) == [1.0, 1.5, 2.0]
+    assert float(tr.keys[1].value) == 0.0
+    assert w.selected_keys == [[UP, 1]]
+
+
+def test_move_onto_another_key_reports_an_error_and_changes_nothing(keyed):
+    w = TimelineWidget(keyed)
+    before = keyed.tracks
+    w.handle_message({"type": "move_key", "track": UP, "index": 0, "time": 1.0})
+    assert keyed.tracks is before
+    assert "already there" in w._error
+
+
+def test_delete_selected_keys_in_one_step(keyed):
+    w = TimelineWidget(keyed)
+    n_undo = len(keyed.history.undo_labels)
+    send(w, type="delete_keys", keys=[[UP, 0], [UP, 2]])
+    assert list(keyed.tracks.tracks[UP].times) == [1.0]
+    assert len(keyed.history.undo_labels) == n_undo + 1
+    assert w.selected_keys == []
+    send(w, type="delete_keys", keys=[[UP, 0]])
+    assert UP not in keyed.tracks.tracks
+    assert w._tracks["tracks"] == [] and w.selected_track == ""
+
+
+def test_double_click_adds_key_with_current_value(keyed):
+    w = TimelineWidget(keyed)
+    keyed.set_weight("up", 0.25)
+    send(w, type="add_key", track=UP, time=0.5)
+    tr = keyed.tracks.tracks[UP]
+    assert list(tr.times) == [0.0, 0.5, 1.0, 2.0]
+    assert float(tr.keys[1].value) == 0.25
+    assert w.selected_keys == [[UP, 1]]
+
+
+def test_key_button_keys_nonzero_weights_at_the_playhead(tiny_model):
+    w = TimelineWidget(tiny_model)
+    send(w, type="key")
+    assert "nothing to key" in w.status and not tiny_model.tracks.tracks
+    tiny_model.set_time(0.5)
+    tiny_model.set_weight("left", -0.5)
+    send(w, type="key")
+    assert list(tiny_model.tracks.tracks) == [LEFT]
+    assert list(tiny_model.tracks.tracks[LEFT].times) == [0.5]
+
+
+def test_key_expression_drop_and_gallery_button(tiny_model):
+    import ipywidgets
+    import traitlets
+
+    class FakeGallery(ipywidgets.Widget):
+        selected = traitlets.Unicode(None, allow_none=True)
+
+    gal = FakeGallery()
+    w = TimelineWidget(tiny_model, gallery=gal)
+    assert w.expressions == ["up", "left"]
+    send(w, type="key_expression", name="up", time=0.0)
+    assert float(tiny_model.tracks.tracks[UP].keys[0].value) == 1.0
+    gal.selected = "left"
+    assert w._gallery_selected == "left"
+    tiny_model.set_time(1.0)
+    send(w, type="key_gallery")
+    tl = tiny_model.tracks
+    # key_expression: the new expression shows exactly at its time, the older one is 0 there
+    assert tl.evaluate(1.0).weights == {"up": 0.0, "left": 1.0}
+    assert tl.evaluate(0.0).weights == {"up": 1.0, "left": 0.0}
+    # saved expressions come first in the chip list
+    tiny_model.set_weights({"up": 0.5, "left": 0.5})
+    tiny_model.save_expression("half")
+    assert w.expressions == ["half", "up", "left"] and w._saved_expressions == ["half"]
+
+
+def test_interpolation_of_selected_keys(keyed):
+    w = TimelineWidget(keyed)
+    n_undo = len(keyed.history.undo_labels)
+    send(w, type="set_interpolation", keys=[[UP, 0], [UP, 1]], interpolation="linear")
+    assert keyed.tracks.tracks[UP].interpolations == ("linear", "linear", "bezier")
+    assert len(keyed.history.undo_labels) == n_undo + 1
+    assert keyed.tracks.evaluate(0.5).weights["up"] == pytest.approx(0.5)
+
+
+def test_tangent_drag_sets_user_slopes_and_double_click_restores_auto(keyed):
+    w = TimelineWidget(keyed)
+    send(w, type="set_tangent", track=UP, index=1, side="out", slope=-0.6, aligned=True)
+    k = keyed.tracks.tracks[UP].keys[1]
+    assert k.tangent_mode == "user"
+    assert float(k.in_tangent) == float(k.out_tangent) == -0.6
+    tr_state = w._tracks["tracks"][0]
+    assert tr_state["mode"][1] == "user" and tr_state["out"][1] == -0.6
+    # Alt-drag: one side only
+    send(w, type="set_tangent", track=UP, index=1, side="in", slope=0.3, aligned=False)
+    k = keyed.tracks.tracks[UP].keys[1]
+    assert (float(k.in_tangent), float(k.out_tangent)) == (0.3, -0.6)
+    send(w, type="auto_tangent", track=UP, index=1)
+    k = keyed.tracks.tracks[UP].keys[1]
+    assert k.tangent_mode == "auto_clamped" and float(k.out_tangent) == 0.0
+
+
+def test_fps_field_is_undoable(keyed):
+    w = TimelineWidget(keyed)
+    send(w, type="set_fps", fps=24)
+    assert keyed.tracks.fps == 24.0 and w._tracks["fps"] == 24.0
+    keyed.undo()
+    assert keyed.tracks.fps == 30.0
+    w.handle_message({"type": "set_fps", "fps": -1})
+    assert "fps must be a positive number" in w._error
+
+
+def test_unknown_message_is_reported(keyed):
+    w = TimelineWidget(keyed)
+    w.handle_message({"type": "frobnicate"})
+    assert "frobnicate" in w._error
+
+
+def fake_frontend(w, delay=0.0):
+    """Patch ``w.send``: answer each playback "frame" message with a ``frame_ack`` after ``delay``.
+
+    Returns a log of ("frame" | "ack", seq) events in order.
+    """
+    log = []
+
+    def ack(seq):
+        log.append(("ack", seq))
+        w.handle_message({"type": "frame_ack", "seq": seq})
+
+    def send(content, buffers=None):
+        if content.get("type") == "frame":
+            log.append(("frame", content["seq"]))
+            asyncio.get_running_loop().call_later(delay, ack, content["seq"])
+
+    w.send = send
+    return log
+
+
+def test_playback_sets_times_and_stops_at_the_end(keyed):
+    keyed.set_timeline(keyed.tracks.replace(end=0.2), "short range")
+    w = TimelineWidget(keyed)
+    fake_frontend(w)
+    seen: list[float] = []
+    keyed.events.time.connect(seen.append)
+
+    async def main():
+        task = w.play(loop=False)
+        assert w.playing
+        return await task
+
+    stats = asyncio.run(main())
+    assert not w.playing
+    assert keyed.time == 0.2
+    assert seen[0] == 0.0 and seen[-1] == 0.2
+    assert all(b > a for a, b in itertools.pairwise(seen))
+    # every time set is a frame of the 30 fps grid (frames may be dropped, never invented)
+    assert all(abs(s * 30 - round(s * 30)) < 1e-9 for s in seen)
+    assert stats["frames"] == len(seen) and stats["frames"] + stats["dropped"] >= 7
+    assert "played" in w.status
+
+
+def test_pause_stops_looping_playback(keyed):
+    w = TimelineWidget(keyed)
+    fake_frontend(w)
+    seen: list[float] = []
+    keyed.events.time.connect(seen.append)
+
+    async def main():
+        task = w.play(loop=True)
+        await asyncio.sleep(0.25)
+        w.pause()
+        await asyncio.wait_for(task, 5)
+
+    asyncio.run(main())
+    assert not w.playing
+    n = len(seen)
+    assert n >= 2
+    assert w.playback_stats["frames"] == n
+
+
+def test_slow_browser_gets_one_frame_at_a_time_and_frames_are_dropped(keyed):
+    # a browser that needs 0.2 s per frame, with the timeline at 30 fps
+    w = TimelineWidget(keyed)
+    log = fake_frontend(w, delay=0.2)
+
+    async def main():
+        task = w.play(loop=True)
+        await asyncio.sleep(1.0)
+        w.pause()
+        await asyncio.wait_for(task, 5)
+
+    asyncio.run(main())
+    in_flight = 0
+    for kind, _seq in log:
+        in_flight += 1 if kind == "frame" else -1
+        assert in_flight <= 2, "a third frame was sent before the first one was drawn"
+    shown, dropped = w.frames_shown, w.frames_dropped
+    assert shown >= 3
+    # frame k + 2 waits for the ack of frame k (>= 0.2 s = 6 frames at 30 fps later),
+    # so every second frame shown comes after at least 4 skipped ones
+    assert dropped >= 4 * ((shown - 1) // 2), (shown, dropped)
+
+
+def test_playback_without_any_view_stops_waiting_for_acks(keyed):
+    keyed.set_timeline(keyed.tracks.replace(end=0.3), "short range")
+    w = TimelineWidget(keyed)
+    w.frame_ack_timeout = 0.05
+    w.send = lambda content, buffers=None: None  # nothing displayed: no acks ever
+
+    async def main():
+        return await asyncio.wait_for(w.play(loop=False), 5)
+
+    stats = asyncio.run(main())
+    assert keyed.time == 0.3
+    assert stats["frames"] >= 5  # only the first frame waited
+
+
+def test_pause_message_during_playback_without_a_loop_thread(keyed):
+    # no running loop in this thread: playback runs on its own thread
+    w = TimelineWidget(keyed)
+    fut = w.play(loop=True)
+    w.handle_message({"type": "pause"})
+    fut.result(timeout=5)
+    assert not w.playing
+
+
+def test_timeline_state_orders_weight_tracks_before_others(keyed):
+    tl = keyed.tracks.add_key("head_pose", 0.0, [0, 0, 0, 0, 0, 0, 1])
+    st = timeline_state(tl)
+    assert [d["name"] for d in st["tracks"]] == [UP, "head_pose"]
+    assert st["tracks"][1]["values"] is None and st["tracks"][1]["label"] == "head pose"
+
+
+# ------------------------------------------------------------------ export panel
+def test_export_panel_writes_files_and_imports_csv_back(keyed, tmp_path):
+    from widgets.export_panel import ExportPanel
+
+    p = ExportPanel(keyed, path=str(tmp_path / "anim.glb"))
+    written = p.do_export()
+    assert written == [tmp_path / "anim.glb"] and written[0].stat().st_size > 0
+    assert "anim.glb" in p.result.value and "Wrote 1 file" in p.result.value
+    # the dropdown changes the suffix; the CSV re-imports as the same curve at the frames
+    p.format.value = "CSV weights (.csv)"
+    assert p.path.value == str(tmp_path / "anim.csv")
+    p.fps.value = 10
+    (csv_path,) = p.do_export()
+    old = keyed.tracks
+    n_undo = len(keyed.history.undo_labels)
+    p.import_path.value = str(csv_path)
+    assert p.do_import(), p.import_result.value
+    assert len(keyed.history.undo_labels) == n_undo + 1
+    new = keyed.tracks
+    for s in (0.0, 0.3, 1.0, 1.7, 2.0):
+        assert new.evaluate(s).weights["up"] == pytest.approx(
+            old.evaluate(s).weights["up"], abs=1e-6
+        )
+
+
+def test_export_panel_obj_sequence_lists_files(keyed, tmp_path):
+    from widgets.export_panel import ExportPanel
+
+    p = ExportPanel(keyed, path=str(tmp_path / "seq.glb"))
+    p.format.value = "OBJ sequence (one .obj per frame)"
+    p.fps.value = 5
+    written = p.do_export()
+    assert len(written) == 11  # 0..2 s at 5 fps
+    assert "Wrote 11 files" in p.result.value and "more" in p.result.value
+
+
+def test_export_panel_shows_errors(keyed, tmp_path):
+    from widgets.export_panel import ExportPanel
+
+    p = ExportPanel(keyed)
+    p.import_path.value = str(tmp_path / "missing.csv")
+    assert not p.do_import()
+    assert "Import failed" in p.import_result.value
+    bad = tmp_path / "bad.csv"
+    bad.write_text("time,notAShape\n0,1\n")
+    p.import_path.value = str(bad)
+    assert not p.do_import()
+    assert "notAShape" in p.import_result.value
+    p.path.value = str(tmp_path / "a_file_not_a_dir" / "x.glb")
+    (tmp_path / "a_file_not_a_dir").write_text("")
+    assert p.do_export() == []
+    assert "Export failed" in p.result.value

@@ -1,0 +1,214 @@
+"""``ExportPanel``: write the model's animation to glTF/USD/point caches/CSV, or import one.
+
+A thin form over :func:`workbench.export.export` (Export) and
+:func:`workbench.animation_io.read_animation` + ``model.set_timeline`` (Import):
+format, fps, bake and path fields, a button, and a result area listing the
+files written (with sizes) or the error message. Nothing here knows a file
+format; the panel only picks the suffix the export registry dispatches on.
+
+Exports run synchronously in the comm handler (the kernel is busy meanwhile):
+they take well under a few seconds for the sample head, the files are complete
+when the result is shown, and there is no second writer to race with.
+
+Why hand-written: a handful of ipywidgets; no file-dialog widget exists that
+works in every front end without an extension, so paths are typed (relative
+paths are relative to the kernel's working directory; the result shows the
+absolute path).
+"""
+
+from __future__ import annotations
+
+import html
+from pathlib import Path
+from typing import Any
+
+import ipywidgets as W
+
+from widgets._threading import ErrorSink
+
+__all__ = ["FORMAT_CHOICES", "ExportPanel"]
+
+#: dropdown label -> (format key, file suffix)
+FORMAT_CHOICES: dict[str, tuple[str, str]] = {
+    "glTF binary (.glb)": ("glb", ".glb"),
+    "USD crate (.usdc)": ("usdc", ".usdc"),
+    "USD text (.usda)": ("usda", ".usda"),
+    "PC2 point cache (.pc2)": ("pc2", ".pc2"),
+    "MDD point cache (.mdd)": ("mdd", ".mdd"),
+    "OBJ sequence (one .obj per frame)": ("obj", ".obj"),
+    "CSV weights (.csv)": ("csv", ".csv"),
+}
+_SUFFIXES = {suffix for _, suffix in FORMAT_CHOICES.values()} | {".gltf", ".usd"}
+_MAX_LISTED = 6
+
+
+def _size(n: int) -> str:
+    for unit in ("B", "kB", "MB", "GB"):
+        if n < 1024 or unit == "GB":
+            return f"{n:.0f} {unit}" if unit == "B" else f"{n:.1f} {unit}"
+        n /= 1024  # type: ignore[assignment]
+    return f"{n} B"
+
+
+def files_html(paths: list[Path]) -> str:
+    """HTML list of written files with sizes (long sequences shortened)."""
+    shown = paths if len(paths) <= _MAX_LISTED else [*paths[:3], None, *paths[-2:]]
+    items = []
+    for p in shown:
+        if p is None:
+            items.append(f"<li>… {len(paths) - 5} more …</li>")
+            continue
+        size = _size(p.stat().st_size) if p.exists() else "missing"
+        items.append(f"<li><code>{html.escape(str(p))}</code> ({size})</li>")
+    total = sum(p.stat().st_size for p in paths if p.exists())
+    return (
+        f"<div class='fwb-export-files'>Wrote {len(paths)} file{'s' if len(paths) != 1 else ''}"
+        f" ({_size(total)}):<ul style='margin:2px 0'>{''.join(items)}</ul></div>"
+    )
+
+
+def _error_html(text: str) -> str:
+    return f"<div class='fwb-export-error' style='color:#b42318'>{html.escape(text)}</div>"
+
+
+class ExportPanel(W.VBox):
+    """Export / import panel for ``model.tracks``.
+
+    Parameters
+    ----------
+    model : workbench.FaceModel
+    path : str
+        Initial output path (its suffix follows the format dropdown).
+    errors : ipywidgets.Output, optional
+        Where unexpected tracebacks go (expected errors show in the panel).
+
+    Attributes
+    ----------
+    last_written : list of Path
+        Files written by the last successful export.
+    """
+
+    def __init__(
+        self, model: Any, *, path: str = "animation.glb", errors: W.Output | None = None
+    ) -> None:
+        self.model = model
+        self.errors = ErrorSink(errors)
+        self.last_written: list[Path] = []
+        self.format = W.Dropdown(
+            options=list(FORMAT_CHOICES), value="glTF binary (.glb)", description="Format"
+        )
+        self.fps = W.BoundedFloatText(
+            value=float(model.tracks.fps), min=1.0, max=1000.0, step=1.0, description="fps",
+            layout=W.Layout(width="160px"),
+        )  # fmt: skip
+        self.bake = W.Checkbox(
+            value=False,
+            description="Bake (resample every frame)",
+            indent=False,
+            layout=W.Layout(width="auto"),
+        )
+        self.path = W.Text(value=path, description="Path", layout=W.Layout(width="420px"))
+        self.export_button = W.Button(description="Export", button_style="primary", icon="download")
+        self.result = W.HTML("")
+        self.import_path = W.Text(
+            value="", placeholder="animation.csv or .glb/.gltf", description="Import",
+            layout=W.Layout(width="420px"),
+        )  # fmt: skip
+        self.import_button = W.Button(
+            description="Import animation", icon="upload", layout=W.Layout(width="auto")
+        )
+        self.import_result = W.HTML("")
+        for w, cls in (
+            (self.format, "fwb-export-format"),
+            (self.fps, "fwb-export-fps"),
+            (self.bake, "fwb-export-bake"),
+            (self.path, "fwb-export-path"),
+            (self.export_button, "fwb-export-button"),
+            (self.result, "fwb-export-result"),
+            (self.import_path, "fwb-import-path"),
+            (self.import_button, "fwb-import-button"),
+            (self.import_result, "fwb-import-result"),
+        ):
+            w.add_class(cls)
+        g = self.errors.guard
+        self.format.observe(g("export format")(self._on_format), "value")
+        self.export_button.on_click(g("export")(lambda _b: self.do_export()))
+        self.import_button.on_click(g("import animation")(lambda _b: self.do_import()))
+        self._on_tracks = g("export panel fps")(self._sync_fps)
+        model.events.tracks.connect(self._on_tracks)
+        super().__init__(
+            [
+                W.HTML("<b>Export animation</b>"),
+                W.HBox([self.format, self.fps, self.bake]),
+                W.HBox([self.path, self.export_button]),
+                self.result,
+                W.HTML(
+                    "<b>Import animation</b> (CSV of per-frame weights, glTF weights animation)"
+                ),
+                W.HBox([self.import_path, self.import_button]),
+                self.import_result,
+            ]
+        )
+        self.add_class("fwb-export-panel")
+
+    def close(self) -> None:
+        self.model.events.tracks.disconnect(self._on_tracks)
+        super().close()
+
+    # ----------------------------------------------------------------- actions
+    @property
+    def suffix(self) -> str:
+        return FORMAT_CHOICES[self.format.value][1]
+
+    def _on_format(self, change: Any) -> None:
+        p = Path(self.path.value or "animation")
+        stem = p.with_suffix("") if p.suffix.lower() in _SUFFIXES else p
+        self.path.value = str(stem) + self.suffix
+
+    def _sync_fps(self, *_args: Any) -> None:
+        # follow the timeline's fps until the user typed another one
+        self.fps.value = float(self.model.tracks.fps)
+
+    def do_export(self) -> list[Path]:
+        """Export ``model.tracks`` as the form says; show and return the files (or the error)."""
+        from workbench.export import ExportError, export
+        from workbench.tracks import TrackError
+
+        path = Path(self.path.value.strip() or f"animation{self.suffix}").expanduser()
+        if path.suffix.lower() != self.suffix:
+            path = path.with_suffix(self.suffix)
+        self.result.value = f"Exporting {html.escape(str(path))} …"
+        try:
+            written = export(
+                self.model, self.model.tracks, path, fps=float(self.fps.value), bake=self.bake.value
+            )
+        except (ExportError, TrackError, OSError, ValueError) as exc:
+            self.result.value = _error_html(f"Export failed: {exc}")
+            self.last_written = []
+            return []
+        self.last_written = [Path(p).resolve() for p in written]
+        self.result.value = files_html(self.last_written)
+        return self.last_written
+
+    def do_import(self) -> bool:
+        """Read the animation file and make it the model's timeline (one undo step)."""
+        from workbench.animation_io import AnimationImportError, read_animation
+        from workbench.tracks import TrackError
+
+        text = self.import_path.value.strip()
+        if not text:
+            self.import_result.value = _error_html("Type the path of a .csv, .glb or .gltf file.")
+            return False
+        path = Path(text).expanduser()
+        try:
+            tl = read_animation(path, self.model.shape_names)
+            self.model.set_timeline(tl, f"Import animation {path.name}")
+        except (AnimationImportError, TrackError, OSError, ValueError) as exc:
+            self.import_result.value = _error_html(f"Import failed: {exc}")
+            return False
+        n_keys = sum(len(tr) for tr in tl.tracks.values())
+        self.import_result.value = (
+            f"Imported {len(tl.tracks)} tracks, {n_keys} keys, {tl.start:g}–{tl.end:g} s "
+            f"at {tl.fps:g} fps from <code>{html.escape(str(path))}</code> (undo restores the old keys)"
+        )
+        return True
