@@ -1,0 +1,168 @@
+"""Region sculpting (Joshi et al. 2003 §4) in a real JupyterLab + Chromium.
+
+A notebook shows a :class:`widgets.Viewport` beside a :class:`widgets.RegionsPanel`.
+The test uses the mouse like a person: "Find regions", "Drag to sculpt", then
+drags the left mouth-corner marker up and out. Checked on both sides: in the
+kernel the region weights under the pin changed (one undo step) and no vertex
+outside those regions (``Regions.members``) moved; on screen the mouth pixels
+changed and the forehead's did not. Screenshots go to ``test-artifacts/<test>/``.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+from harness import NotebookPage, clip_around, pixel_change
+
+CELLS = [
+    """
+import ipywidgets as W
+from workbench import load_sample
+from widgets.viewport import Viewport
+from widgets.regions_panel import RegionsPanel
+model = load_sample("head")
+vp = Viewport(model, height=560)
+vp.layout = W.Layout(flex="1 1 auto", min_width="320px")
+panel = RegionsPanel(model, vp)
+panel.layout.width = "520px"
+W.HBox([vp, panel], layout=W.Layout(width="100%"))
+""",
+]
+
+# The left mouth corner: among the skin vertices mouthSmileLeft moves most, the one
+# farthest out in +x; its pin is the drag-mode marker nearest to it.
+_FIND = """
+import json, numpy as np
+_skin = model.component_labels == model.component_names.index("skin")
+_V = np.asarray(model.vertices)
+_d = np.linalg.norm(model.shape("mouthSmileLeft").delta, axis=1) * _skin
+_top = np.argsort(-_d)[:40]
+_corner = int(_top[np.argmax(_V[_top, 0])])
+_pins = panel.pins
+_k = int(np.argmin(np.linalg.norm(_V[_pins] - _V[_corner], axis=1)))
+_v = int(_pins[_k])
+_st = model.regions
+_touched = sorted(_st.regions.regions_at(_st.level, _v))
+_inside = np.unique(np.concatenate([_st.regions.members(_st.level, r) for r in _touched]))
+_brow = np.argsort(-np.linalg.norm(model.shape("browInnerUp").delta, axis=1) * _skin)[:20]
+_by = _V[_brow, 1].mean()
+_front = _skin & (np.abs(_V[:, 0]) < 0.35) & (_V[:, 2] > _V[_skin, 2].max() - 0.35)
+_fh = np.flatnonzero(_front & (_V[:, 1] > _by + 0.2) & (_V[:, 1] < _by + 0.5))
+_X0 = np.array(model.evaluate(), dtype=np.float64)
+print(json.dumps({"index": _k, "vertex": _v, "n_pins": int(len(_pins)), "level": _st.level,
+                  "touched": [_st.regions.names[_st.level][r] for r in _touched],
+                  "n_inside": int(_inside.size), "mouth": [int(i) for i in _top],
+                  "forehead": [int(i) for i in _fh[::3]]}))
+"""
+
+_AFTER = """
+import json, numpy as np
+_st = model.regions
+_X1 = np.array(model.evaluate(), dtype=np.float64)
+_out = np.setdiff1d(np.arange(model.n_vertices), _inside)
+_rw = _st.weights
+_g = np.array([model.weights[n] for n in model.shape_names])
+_dw = (np.abs(_rw.values - _g[None, :]).max(axis=1) if _rw is not None
+       else np.zeros(_st.regions.n_regions(_st.level)))
+print(json.dumps({"undo": model.history.undo_labels, "interacting": model.interacting,
+                  "dragging": panel.drag_handler.dragging,
+                  "changed_regions": [_st.regions.names[_st.level][r] for r in np.flatnonzero(_dw > 0)],
+                  "max_dw": float(_dw.max()),
+                  "outside_max": float(np.abs(_X1[_out] - _X0[_out]).max()),
+                  "pin_moved": float(np.linalg.norm(_X1[_v] - _X0[_v])),
+                  "pin_disp": (_X1[_v] - _X0[_v]).tolist(),
+                  "errors": panel.errors.count + vp.errors.count,
+                  "status": panel.status.value}))
+"""
+
+
+def _wait(nb: NotebookPage, code: str, ok: Any, timeout: float = 30.0) -> Any:
+    deadline = time.monotonic() + timeout
+    val = nb.kernel_eval(code)
+    while not ok(val) and time.monotonic() < deadline:
+        time.sleep(0.2)
+        val = nb.kernel_eval(code)
+    assert ok(val), f"timed out waiting: {code!r} -> {val!r}"
+    return val
+
+
+def test_drag_mouth_corner_in_region_mode_moves_only_its_region(open_notebook):
+    nb = open_notebook(CELLS)
+    page = nb.page
+    page.evaluate(
+        "() => { const s = window.jupyterapp.shell; if (!s.leftCollapsed) s.collapseLeft(); }"
+    )
+    nb.wait_viewports(1)
+    page.locator(".fwb-viewport").evaluate("e => e.scrollIntoView({block: 'start'})")
+    nb.screenshot("page-start")
+
+    # Find regions: the overlay appears (the face is no longer one skin colour)
+    face0 = nb.canvas_shot("face-before-regions")
+    page.locator(".fwb-find-regions").click()
+    _wait(nb, "import json; print(json.dumps(model.regions is not None))", bool)
+    page.wait_for_function(
+        "() => document.querySelector('.fwb-region-status').innerText.includes('segmentation')"
+    )
+    page.wait_for_timeout(800)
+    face1 = nb.canvas_shot("face-regions")
+    assert pixel_change(face0, face1) > 0.05, "the region colours did not show"
+
+    # Drag mode: the viewport switches to its sculpt tool with one marker per pin
+    page.locator(".fwb-region-drag").click()
+    page.wait_for_function(
+        "() => document.querySelector('.fwb-viewport').getAttribute('data-tool') === 'sculpt'"
+    )
+    info = nb.kernel_eval(_FIND)
+    assert info["touched"] and all(t.startswith("mouth") for t in info["touched"]), info
+    page.wait_for_function(
+        "(n) => JSON.parse(document.querySelector('.fwb-viewport').getAttribute('data-handles')"
+        " || '[]').length === n",
+        arg=info["n_pins"],
+    )
+    page.mouse.move(5, 5)
+    page.wait_for_timeout(300)
+    mouth_clip = clip_around(nb.project([*info["mouth"], info["vertex"]]), pad=60)
+    forehead_clip = clip_around(nb.project(info["forehead"]), pad=10)
+    mouth0 = nb.screenshot("mouth-before", clip=mouth_clip)
+    forehead0 = nb.screenshot("forehead-before", clip=forehead_clip)
+    nb.screenshot("page-before")
+
+    # Drag the mouth-corner marker up and out (viewer's right = subject's left)
+    start = np.array(page.locator(".fwb-viewport").evaluate("e => e.fwbHandles()"), float)
+    start = start.reshape(-1, 3)[info["index"]]
+    assert start[2] == 1, "the mouth-corner marker is hidden"
+    frame0 = nb.frame(0)
+    page.mouse.move(start[0], start[1])
+    page.mouse.down()
+    page.mouse.move(start[0] + 40, start[1] - 32, steps=15)
+    page.mouse.up()
+    nb.wait_frame_after(0, frame0)
+    st = _wait(nb, _AFTER, lambda s: not s["interacting"] and not s["dragging"])
+    page.wait_for_timeout(500)
+
+    # Python side: region weights of the touched regions changed, nothing outside moved
+    assert st["errors"] == 0, st
+    assert st["undo"][-1].startswith("Region drag mouth"), st["undo"]
+    assert st["undo"][-2].startswith("Segment regions"), "the drag was not ONE undo step"
+    assert st["changed_regions"] and set(st["changed_regions"]) <= set(info["touched"]), st
+    assert st["max_dw"] > 0.02, st
+    assert st["outside_max"] == 0.0, st
+    assert st["pin_moved"] > 0.01, st
+    dx, dy, _ = st["pin_disp"]
+    assert dx > 0 and dy > 0, st["pin_disp"]  # right and up on screen = +x, +y
+    assert "solve" in st["status"], st["status"]
+
+    # Pixels: the mouth changed, the forehead did not
+    mouth1 = nb.screenshot("mouth-after", clip=mouth_clip)
+    forehead1 = nb.screenshot("forehead-after", clip=forehead_clip)
+    page.mouse.move(5, 5)
+    page.wait_for_timeout(200)
+    nb.screenshot("page-after")
+    changed = pixel_change(mouth0, mouth1)
+    assert changed > 0.03, f"only {changed:.1%} of the mouth region changed"
+    still = pixel_change(forehead0, forehead1)
+    assert still < 0.01, f"{still:.1%} of the forehead changed"
+    console = "\n".join(nb.console)
+    assert "pageerror" not in console, console
