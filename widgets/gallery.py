@@ -14,6 +14,11 @@ each picture works in every Jupyter front end and in Voila.
 Thumbnails are cached in-process by (shape name, delta hash, neutral-mesh hash,
 size, camera), so rebuilding the gallery or editing one shape re-renders only
 what changed.
+
+With ``expressions=True`` (the paint palette of :class:`widgets.PaintPanel`) the
+gallery shows every *expression* (:func:`workbench.expressions.expression_names`):
+the saved expressions first, then the blendshapes, and follows
+``model.events.expressions`` so an expression saved from any cell appears at once.
 """
 
 from __future__ import annotations
@@ -27,8 +32,9 @@ import ipywidgets as ipw
 import numpy as np
 import traitlets
 
-from widgets.render import delta_hash, expression_thumbnails
+from widgets.render import delta_hash, expression_thumbnails, render_png
 from workbench import FaceModel
+from workbench.expressions import expression_names
 
 __all__ = ["ExpressionGallery", "cached_thumbnails", "clear_thumbnail_cache"]
 
@@ -95,6 +101,35 @@ def cached_thumbnails(
     return out
 
 
+def saved_expression_thumbnails(
+    model: FaceModel,
+    names: Sequence[str],
+    size: tuple[int, int] = (96, 96),
+    *,
+    camera: str = "face",
+) -> dict[str, bytes]:
+    """Cached thumbnails of saved expressions (``model.expressions``), in the order of ``names``.
+
+    Rendered like the blendshape thumbnails (same camera framed on the neutral,
+    same lights), from the expression's stored displacement.
+    """
+    mesh_key = _mesh_key(model)
+    neutral = np.asarray(model.vertices, dtype=np.float64)
+    out = {}
+    for name in names:
+        disp = model.expressions[name].displacement
+        key = ("expression:" + name, delta_hash(disp), mesh_key, tuple(size), camera)
+        if key not in _CACHE:
+            _CACHE[key] = render_png(
+                model, points=neutral + disp.astype(np.float64), size=size, camera=camera
+            )
+        _CACHE.move_to_end(key)
+        out[name] = _CACHE[key]
+    while len(_CACHE) > _CACHE_LIMIT:
+        _CACHE.popitem(last=False)
+    return out
+
+
 class ExpressionGallery(ipw.VBox):
     """Grid of blendshape thumbnails; click a name to select that shape.
 
@@ -109,6 +144,12 @@ class ExpressionGallery(ipw.VBox):
         Shapes to show (default: all, in model order, following shape edits).
     camera : str
         Camera preset for the thumbnails (see :func:`widgets.render.render_png`).
+    label_size : str, optional
+        CSS font size of the name buttons (e.g. ``"10px"`` so long names fit
+        small thumbnails); default the theme's.
+    expressions : bool
+        Also show the saved expressions (first, marked with a star) and follow
+        ``model.events.expressions``; ``names`` may then name them too.
 
     Attributes
     ----------
@@ -128,6 +169,8 @@ class ExpressionGallery(ipw.VBox):
         columns: int = 8,
         names: Sequence[str] | None = None,
         camera: str = "face",
+        expressions: bool = False,
+        label_size: str | None = None,
         **kwargs: Any,
     ) -> None:
         if columns < 1:
@@ -136,9 +179,12 @@ class ExpressionGallery(ipw.VBox):
         self.size = (int(size[0]), int(size[1]))
         self.columns = int(columns)
         self.camera = camera
+        self.expressions = bool(expressions)
+        self.label_size = label_size
         self._names_fixed = list(names) if names is not None else None
         self.thumbnails: dict[str, bytes] = {}
         self._cells: dict[str, tuple[ipw.Image, ipw.Button]] = {}
+        self._tiles: dict[str, ipw.VBox] = {}
         self._handlers: dict[Callable, Callable] = {}
         self._title = ipw.HTML("<b>Expressions</b>")
         self._grid = ipw.GridBox(
@@ -152,6 +198,8 @@ class ExpressionGallery(ipw.VBox):
         self.refresh()
         # shape edits (added/removed/renamed/new deltas) re-render what changed
         model.events.shapes.connect(self.refresh)
+        if self.expressions:
+            model.events.expressions.connect(self.refresh)
 
     # ---------------------------------------------------------------- public
     @property
@@ -161,22 +209,53 @@ class ExpressionGallery(ipw.VBox):
 
     def refresh(self) -> None:
         """Re-read the model's shapes and rebuild the grid (cached thumbnails are reused)."""
+        model = self.model
+        available = expression_names(model) if self.expressions else list(model.shape_names)
         names = self._names_fixed
         if names is None:
-            names = list(self.model.shape_names)
+            names = available
         else:
-            names = [n for n in names if n in self.model.shape_names]
-        self.thumbnails = cached_thumbnails(self.model, names, self.size, camera=self.camera)
+            names = [n for n in names if n in available]
+        saved = [n for n in names if self.expressions and n in model.expressions]
+        shapes = [n for n in names if n not in saved]
+        pngs = cached_thumbnails(model, shapes, self.size, camera=self.camera)
+        if saved:
+            pngs.update(saved_expression_thumbnails(model, saved, self.size, camera=self.camera))
+        self.thumbnails = {n: pngs[n] for n in names}
+        # Reuse the tiles of names still shown (a saved expression must not re-send
+        # every picture to the browser); only new or changed pictures are sent.
+        old_cells, old_tiles = self._cells, self._tiles
         cells = []
-        self._cells = {}
+        self._cells, self._tiles = {}, {}
         w, h = self.size
         for name, png in self.thumbnails.items():
-            img = ipw.Image(value=png, format="png", width=w, height=h)
-            img.layout = ipw.Layout(width=f"{w}px", height=f"{h}px", border="2px solid transparent")
-            btn = ipw.Button(description=name, tooltip=name, layout=ipw.Layout(width=f"{w + 4}px"))
-            btn.on_click(lambda _b, n=name: self.select(n))
+            label = f"★ {name}" if name in saved else name
+            if name in old_tiles and old_cells[name][1].description == label:
+                img, btn = old_cells[name]
+                tile = old_tiles[name]
+                if img.value != png:
+                    img.value = png
+            else:
+                img = ipw.Image(value=png, format="png", width=w, height=h)
+                img.layout = ipw.Layout(
+                    width=f"{w}px", height=f"{h}px", border="2px solid transparent"
+                )
+                tip = f"saved expression {name}" if name in saved else name
+                btn = ipw.Button(
+                    description=label,
+                    tooltip=tip,
+                    layout=ipw.Layout(
+                        width=f"{w + 4}px", padding="0 2px" if self.label_size else None
+                    ),
+                )
+                if self.label_size:
+                    btn.style.font_size = self.label_size
+                btn.add_class("fw-thumb-button")
+                btn.on_click(lambda _b, n=name: self.select(n))
+                tile = ipw.VBox([img, btn], layout=ipw.Layout(align_items="center"))
             self._cells[name] = (img, btn)
-            cells.append(ipw.VBox([img, btn], layout=ipw.Layout(align_items="center")))
+            self._tiles[name] = tile
+            cells.append(tile)
         self._grid.children = cells
         self._title.value = f"<b>Expressions</b> ({len(cells)})"
         if self.selected is not None and self.selected not in self._cells:
@@ -207,6 +286,8 @@ class ExpressionGallery(ipw.VBox):
 
     def close(self) -> None:
         self.model.events.shapes.disconnect(self.refresh)
+        if self.expressions:
+            self.model.events.expressions.disconnect(self.refresh)
         super().close()
 
     # --------------------------------------------------------------- private

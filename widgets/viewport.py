@@ -42,6 +42,31 @@ The markers are the model's handles (``model.handles``), re-sent whenever the
 handle *set* changes; ``Viewport.handles = ids`` draws other markers until the
 model's handle set next changes.
 
+Painterly blending (``tool="paint"``, Pighin et al. 1998 §4.2): a left press on
+the face starts a stroke, every move raycasts the surface and the hit triangle's
+nearest corner becomes a brush dab; release ends the stroke. Messages:
+
+* ``{"type": "paint", "phase": "start" | "move" | "end", "vertices": [v, ...],
+  "seq"}`` — Python wraps the stroke in ``model.interaction("Paint <expr>")``
+  (one undo step) and calls ``model.paint_dab(paint_expression, v, brush)`` for
+  every vertex (the front end queues the hit vertices spaced a quarter of the
+  brush radius apart while a message is in flight, at most 8 per message, so a
+  fast stroke has no gaps and a slow kernel still gets one message at a time).
+  Every message is answered with ``{"type": "paint_ack", "seq", "version",
+  "kernel_ms"}`` and its geometry patch carries the same ``seq``.
+* The weight-map overlay (the selected expression's painted weights, tinted
+  magenta over the skin) is the binary trait ``_paint_weights`` (float32 n, or
+  empty = nothing painted / overlay off) plus ``{"type": "paint_patch",
+  "version"}`` messages with buffers ``[ids uint32, weights float32]`` for the
+  vertices whose weight changed — the same full/patch scheme as the geometry,
+  with its own version counter ``_paint_version``.
+
+The brush (``brush_radius`` in model units along the surface, ``brush_opacity``,
+``brush_falloff``, ``brush_mode``, ``brush_mirror``) lives on the viewport so the
+front end can draw the brush cursor (a ring on the surface under the pointer, and
+its mirror image with ``brush_mirror``); :class:`widgets.PaintPanel` links its
+controls to these traits.
+
 Why hand-written rather than pythreejs / pyvista: see ``widgets/js/src/viewport.js``.
 """
 
@@ -72,11 +97,19 @@ SPARSE_FRACTION = 1.0 / 3.0
 #: 1/4 pixel zoomed in 10x); the interaction's final update is exact.
 DRAG_TOLERANCE = 5e-5
 
-#: A handle drag with no message from the front end for this long is ended (the
-#: page was closed mid-drag): the model must never be left inside an interaction.
+#: A handle drag or paint stroke with no message from the front end for this long is
+#: ended (the page was closed mid-drag): the model must never be left inside an interaction.
 DRAG_WATCHDOG_S = 30.0
 
-TOOLS = ("orbit", "sculpt")
+TOOLS = ("orbit", "sculpt", "paint")
+FALLOFFS = ("smooth", "linear", "constant", "sphere")
+BRUSH_MODES = ("add", "subtract", "smooth")
+
+#: Default brush radius as a fraction of the face height (the skin's extent along up).
+BRUSH_RADIUS_FRACTION = 0.03
+
+#: Most dabs one "paint" message may carry (the front end sends at most 8).
+MAX_DABS_PER_MESSAGE = 32
 
 _bundle_cache: dict[str, Any] = {}
 
@@ -117,6 +150,27 @@ def _as_ids(value: Any, n: int, what: str) -> np.ndarray:
     if ids.size and (ids.min() < 0 or ids.max() >= n):
         raise ValueError(f"Viewport.{what}: vertex ids must be in 0..{n - 1}")
     return ids.astype(np.uint32)
+
+
+def face_height(model: Any) -> float:
+    """Extent of the skin (or of the whole mesh) along the model's up axis, model units."""
+    V = np.asarray(model.vertices)
+    if not V.size:
+        return 1.0
+    names = list(getattr(model, "component_names", []) or [])
+    labels = np.asarray(getattr(model, "component_labels", np.zeros(0)))
+    if "skin" in names and labels.size == V.shape[0]:
+        skin = V[labels == names.index("skin")]
+        V = skin if skin.size else V
+    up = str(getattr(getattr(model, "metadata", None), "up_axis", "+y") or "+y")
+    axis = {"x": 0, "y": 1, "z": 2}.get(up[-1:].lower(), 1)
+    h = float(np.ptp(V[:, axis]))
+    return h if h > 0 else float(np.linalg.norm(np.ptp(V, axis=0))) or 1.0
+
+
+def default_brush_radius(model: Any) -> float:
+    """:data:`BRUSH_RADIUS_FRACTION` of the face height (about a third of the mouth width)."""
+    return BRUSH_RADIUS_FRACTION * face_height(model)
 
 
 def _changed_rows(new: np.ndarray, old: np.ndarray, tolerance: float) -> np.ndarray:
@@ -162,10 +216,13 @@ class Viewport(anywidget.AnyWidget):
     probe_ids : (p,) int
         Test hook: the front end writes the screen positions of these vertices
         to the ``data-probe`` attribute of its root element after each render.
-    tool : {"orbit", "sculpt"}
+    tool : {"orbit", "sculpt", "paint"}
         ``"sculpt"``: left-drag a handle marker to move it in the view plane,
         Shift-click the surface to add a handle, Alt-click a marker to remove it;
-        orbit/zoom/pan still work off the markers. ``"orbit"``: camera only.
+        orbit/zoom/pan still work off the markers. ``"paint"``: left-drag on the
+        face paints :attr:`paint_expression` with the brush (one undo step per
+        stroke); off the face, or with Alt held, the left button orbits.
+        ``"orbit"``: camera only.
     symmetric : bool
         Handle drags also move the mirror handle (x reflected); Shift-click adds
         a mirrored pair; the mirror marker is highlighted.
@@ -173,6 +230,15 @@ class Viewport(anywidget.AnyWidget):
         In sculpt mode, a plain click (no modifier) on the surface adds a handle.
     selected_handle : int
         Index of the last dragged handle (highlighted), or -1.
+    paint_expression : str
+        The expression the brush paints (a blendshape or saved expression name;
+        "" = none: the left button then orbits in paint mode).
+    brush_radius, brush_opacity, brush_falloff, brush_mode, brush_mirror
+        The brush (:class:`workbench.paint.Brush`); the radius is a surface
+        distance in model units (default :func:`default_brush_radius`).
+    paint_overlay : bool
+        Tint the surface by the painted weight of :attr:`paint_expression`
+        (white skin -> magenta at weight 1).
 
     The front end writes the markers' screen positions to ``data-handles``
     (JSON ``[[x, y, in_front], ...]`` in page pixels) after every render.
@@ -192,11 +258,20 @@ class Viewport(anywidget.AnyWidget):
     _probe_ids = t.Bytes(b"").tag(sync=True)
     _error = t.Unicode("").tag(sync=True)
     _handle_mirror = t.Bytes(b"").tag(sync=True)
+    _paint_weights = t.Bytes(b"").tag(sync=True)
+    _paint_version = t.Int(0).tag(sync=True)
 
     tool = t.Unicode("orbit").tag(sync=True)
     symmetric = t.Bool(False).tag(sync=True)
     add_on_click = t.Bool(False).tag(sync=True)
     selected_handle = t.Int(-1).tag(sync=True)
+    paint_expression = t.Unicode("").tag(sync=True)
+    brush_radius = t.Float(0.1).tag(sync=True)
+    brush_opacity = t.Float(0.5).tag(sync=True)
+    brush_falloff = t.Unicode("smooth").tag(sync=True)
+    brush_mode = t.Unicode("add").tag(sync=True)
+    brush_mirror = t.Bool(False).tag(sync=True)
+    paint_overlay = t.Bool(True).tag(sync=True)
     wireframe = t.Bool(False).tag(sync=True)
     component_visible = t.Dict(value_trait=t.Bool()).tag(sync=True)
     height = t.Int(480).tag(sync=True)
@@ -210,6 +285,7 @@ class Viewport(anywidget.AnyWidget):
         **kwargs: Any,
     ) -> None:
         esm = load_bundle()  # clear error before any widget state exists
+        kwargs.setdefault("brush_radius", default_brush_radius(model))
         super().__init__(_esm=esm, _uid=uuid.uuid4().hex, height=height, **kwargs)
         self._model = model
         self._send_lock = threading.RLock()
@@ -237,19 +313,40 @@ class Viewport(anywidget.AnyWidget):
         self._last_drag_msg = 0.0
         self._drag_seq: Any = None  # seq of the move being applied (sent with its patch)
         self._last_push_ms = 0.0
+        # paint strokes (tool="paint")
+        self._stroke: dict[str, Any] | None = None
+        self._stroke_cm: Any = None
+        #: core ms per brush dab (model.paint_dab), for the status line and benchmarks
+        self.dab_ms: deque[float] = deque(maxlen=2048)
+        #: kernel ms per paint message (its dabs + overlay + geometry send)
+        self.paint_ms: deque[float] = deque(maxlen=512)
+        #: called after each stroke ends with a dict of stats (PaintPanel status line)
+        self.stroke_listeners: list[Any] = []
+        self.last_stroke: dict[str, Any] = {}
+        # While a message's dabs run, model events only mark the view stale; one
+        # overlay + geometry update is sent after the last dab of the message.
+        self._hold_pushes = 0
+        self._push_pending = False
+        self._paint_last: np.ndarray | None = None  # weights the front end has (None = empty)
+        self._paint_last_ref: Any = None  # the model's array they came from
+        self.paint_updates_sent = {"full": 0, "patch": 0}
         size = np.ptp(np.asarray(model.vertices), axis=0) if model.n_vertices else np.zeros(3)
         self._tolerance = float(DRAG_TOLERANCE * np.linalg.norm(size))
         self._on_deformed = self.errors.guard("Viewport update")(self._push_geometry_event)
         self._on_shapes = self.errors.guard("Viewport shapes update")(self._push_geometry_event)
         self._on_handles = self.errors.guard("Viewport handles update")(self._sync_handles)
+        self._on_paint = self.errors.guard("Viewport paint overlay")(self._sync_paint)
         self.on_msg(self._on_frontend_msg)
         model.events.deformed.connect(self._on_deformed)
         model.events.shapes.connect(self._on_shapes)
         model.events.handles.connect(self._on_handles)
         model.events.handles_changing.connect(self._on_handles)
+        model.events.paint_layers.connect(self._on_paint)
+        model.events.paint_layers_changing.connect(self._on_paint)
         self._connected = True
         self._push_geometry(force_full=True)
         self._sync_handles()
+        self._sync_paint()
 
     # ------------------------------------------------------------------ public
     @property
@@ -315,24 +412,235 @@ class Viewport(anywidget.AnyWidget):
             raise t.TraitError(f"Viewport.tool must be one of {TOOLS}, got {value!r}")
         return value
 
+    @t.validate("brush_falloff")
+    def _valid_falloff(self, proposal: Any) -> str:
+        value = str(proposal["value"])
+        if value not in FALLOFFS:
+            raise t.TraitError(f"Viewport.brush_falloff must be one of {FALLOFFS}, got {value!r}")
+        return value
+
+    @t.validate("brush_mode")
+    def _valid_mode(self, proposal: Any) -> str:
+        value = str(proposal["value"])
+        if value not in BRUSH_MODES:
+            raise t.TraitError(f"Viewport.brush_mode must be one of {BRUSH_MODES}, got {value!r}")
+        return value
+
+    @t.validate("brush_radius")
+    def _valid_radius(self, proposal: Any) -> float:
+        value = float(proposal["value"])
+        if not (np.isfinite(value) and value > 0):
+            raise t.TraitError(f"Viewport.brush_radius must be > 0 (model units), got {value!r}")
+        return value
+
+    @t.validate("brush_opacity")
+    def _valid_opacity(self, proposal: Any) -> float:
+        value = float(proposal["value"])
+        if not 0.0 <= value <= 1.0:
+            raise t.TraitError(f"Viewport.brush_opacity must be in [0, 1], got {value!r}")
+        return value
+
+    @property
+    def brush(self) -> Any:
+        """The current :class:`workbench.paint.Brush` (built from the brush traits)."""
+        from workbench.paint import Brush
+
+        return Brush(
+            radius=self.brush_radius,
+            opacity=self.brush_opacity,
+            falloff=self.brush_falloff,  # type: ignore[arg-type]
+            mode=self.brush_mode,  # type: ignore[arg-type]
+            mirror=self.brush_mirror,
+        )
+
     @property
     def dragging(self) -> bool:
         """True while a handle drag from the front end is open."""
         return self._drag is not None
 
+    @property
+    def painting(self) -> bool:
+        """True while a paint stroke from the front end is open."""
+        return self._stroke is not None
+
     def close(self) -> None:
-        """End an open handle drag, disconnect from the model, then close the widget."""
+        """End an open handle drag or stroke, disconnect from the model, then close the widget."""
         if getattr(self, "_connected", False):
             try:
                 self.end_drag()
+                self.end_stroke()
             finally:
                 ev = self._model.events
                 ev.deformed.disconnect(self._on_deformed)
                 ev.shapes.disconnect(self._on_shapes)
                 ev.handles.disconnect(self._on_handles)
                 ev.handles_changing.disconnect(self._on_handles)
+                ev.paint_layers.disconnect(self._on_paint)
+                ev.paint_layers_changing.disconnect(self._on_paint)
                 self._connected = False
         super().close()
+
+    # ------------------------------------------------------------ paint strokes
+    def begin_stroke(self, expression: str | None = None) -> None:
+        """Start a paint stroke (what the front end's "start" message does).
+
+        Enters ``model.interaction("Paint <expression>")``; an open drag or stroke
+        is ended first. ``expression`` defaults to :attr:`paint_expression`.
+        """
+        from workbench.expressions import expression_names
+
+        model = self._model
+        expr = expression if expression is not None else self.paint_expression
+        with self._drag_lock:
+            self.end_drag()
+            self.end_stroke()
+            if not expr:
+                raise ValueError(
+                    "Viewport: pick an expression to paint with first "
+                    "(click a thumbnail in the Paint tab's palette, or set paint_expression)"
+                )
+            with model.lock:
+                if expr not in model.expressions and expr not in model.shape_names:
+                    raise KeyError(
+                        f"Viewport: cannot paint {expr!r}: no such expression; "
+                        f"have {expression_names(model)[:8]}..."
+                    )
+                cm = model.interaction(f"Paint {expr}")
+                cm.__enter__()
+            self._stroke_cm = cm
+            self._stroke = {
+                "expression": expr,
+                "brush": self.brush,
+                "t0": time.perf_counter(),
+                "dabs": 0,
+                "messages": 0,
+                "dab_ms": [],
+                "ms": [],
+            }
+            self._arm_watchdog()
+
+    def paint_at(self, vertices: Any) -> float:
+        """Brush dabs at vertex ids ``vertices`` (int or sequence) within the open stroke.
+
+        One overlay + geometry update is sent after the last dab. Returns the
+        kernel time in ms (dabs + updates); 0 without an open stroke.
+        """
+        ids = np.asarray(vertices, dtype=np.int64).reshape(-1)
+        model = self._model
+        if ids.size > MAX_DABS_PER_MESSAGE:
+            ids = ids[-MAX_DABS_PER_MESSAGE:]
+        if ids.size and (ids.min() < 0 or ids.max() >= model.n_vertices):
+            raise ValueError(
+                f"Viewport.paint_at: vertex ids must be in 0..{model.n_vertices - 1}, got {ids}"
+            )
+        with self._drag_lock:
+            stroke = self._stroke
+            if stroke is None or not ids.size:
+                return 0.0
+            t0 = time.perf_counter()
+            # The brush of the press is used for the whole stroke: slider changes made
+            # mid-stroke (another view) apply to the next one.
+            brush = stroke["brush"]
+            self._hold_pushes += 1
+            try:
+                with model.lock:
+                    for v in ids:
+                        td = time.perf_counter()
+                        model.paint_dab(stroke["expression"], int(v), brush)
+                        ms = (time.perf_counter() - td) * 1e3
+                        stroke["dab_ms"].append(ms)
+                        self.dab_ms.append(ms)
+            finally:
+                self._hold_pushes -= 1
+            if self._push_pending and not self._hold_pushes:
+                self._push_pending = False
+                self._sync_paint()
+                self._push_geometry_event(False)
+            ms = (time.perf_counter() - t0) * 1e3
+            stroke["dabs"] += int(ids.size)
+            stroke["messages"] += 1
+            stroke["ms"].append(ms)
+            self.paint_ms.append(ms)
+            self._arm_watchdog()
+            return ms
+
+    def end_stroke(self) -> None:
+        """End the open paint stroke (one undo step); no-op without one."""
+        with self._drag_lock:
+            if self._drag is None:
+                self._cancel_watchdog()
+            cm, stroke = self._stroke_cm, self._stroke
+            self._stroke_cm, self._stroke = None, None
+            if cm is None or stroke is None:
+                return
+            # Model lock first: the same order as edits (model lock, then events).
+            with self._model.lock:
+                cm.__exit__(None, None, None)
+            dur = time.perf_counter() - stroke["t0"]
+            dab, ms = stroke["dab_ms"], stroke["ms"]
+            self.last_stroke = {
+                "expression": stroke["expression"],
+                "dabs": stroke["dabs"],
+                "messages": stroke["messages"],
+                "seconds": dur,
+                "median_dab_ms": float(np.median(dab)) if dab else float("nan"),
+                "median_ms": float(np.median(ms)) if ms else float("nan"),
+                "updates_per_s": stroke["messages"] / dur if dur > 0 else float("nan"),
+            }
+        for fn in list(self.stroke_listeners):
+            self.errors.guard("stroke listener")(fn)(dict(self.last_stroke))
+
+    def _sync_paint(self, *_args: Any) -> None:
+        """Send the selected expression's painted weights: full buffer or changed vertices."""
+        if self._hold_pushes:
+            self._push_pending = True
+            return
+        model = self._model
+        with model.lock, self._send_lock:
+            if not getattr(self, "_connected", False):
+                return
+            expr = self.paint_expression if self.paint_overlay else ""
+            w = model.paint_layers.get(expr) if expr else None
+            last = self._paint_last
+            if w is None:
+                if last is not None:
+                    self._send_paint_full(None)
+                return
+            if last is None or last.shape != w.shape:
+                self._send_paint_full(w)
+                return
+            if w is self._paint_last_ref:
+                return
+            changed = np.flatnonzero(w != last)
+            self._paint_last_ref = w
+            if changed.size == 0:
+                return
+            if changed.size >= SPARSE_FRACTION * w.shape[0]:
+                self._send_paint_full(w)
+                return
+            last[changed] = w[changed]
+            version = self._paint_version + 1
+            # Silent: a reloaded page gets the current weights without a full sync here.
+            self._trait_values["_paint_version"] = version
+            self._trait_values["_paint_weights"] = _f32_bytes(last)
+            self.send(
+                {"type": "paint_patch", "version": version, "count": int(changed.size)},
+                buffers=[_u32_bytes(changed), _f32_bytes(w[changed])],
+            )
+            self.paint_updates_sent["patch"] += 1
+
+    def _send_paint_full(self, w: np.ndarray | None) -> None:
+        self._paint_last = None if w is None else np.array(w, dtype=np.float32)
+        self._paint_last_ref = w
+        with self.hold_sync():
+            self._paint_weights = b"" if w is None else _f32_bytes(w)
+            self._paint_version = self._paint_version + 1
+        self.paint_updates_sent["full"] += 1
+
+    @t.observe("paint_expression", "paint_overlay")
+    def _on_paint_settings(self, _change: Any) -> None:
+        if getattr(self, "_connected", False):
+            self.errors.guard("Viewport paint overlay")(self._sync_paint)()
 
     # ------------------------------------------------------------ handle drags
     def begin_drag(self, index: int, vertex: int | None = None) -> None:
@@ -343,6 +651,7 @@ class Viewport(anywidget.AnyWidget):
         model = self._model
         with self._drag_lock:
             self.end_drag()
+            self.end_stroke()
             with model.lock:
                 h = model.handles
                 resolved = self._resolve_handle(index, vertex)
@@ -406,9 +715,8 @@ class Viewport(anywidget.AnyWidget):
     def end_drag(self) -> None:
         """End the open handle drag (one undo step); no-op without one."""
         with self._drag_lock:
-            if self._watchdog is not None:
-                self._watchdog.cancel()
-                self._watchdog = None
+            if self._stroke is None:
+                self._cancel_watchdog()
             cm, drag = self._drag_cm, self._drag
             self._drag_cm, self._drag = None, None
             if cm is None or drag is None:
@@ -437,6 +745,11 @@ class Viewport(anywidget.AnyWidget):
         if self._watchdog is None:
             self._start_watchdog(DRAG_WATCHDOG_S)
 
+    def _cancel_watchdog(self) -> None:
+        if self._watchdog is not None:
+            self._watchdog.cancel()
+            self._watchdog = None
+
     def _start_watchdog(self, delay: float) -> None:
         self._watchdog = threading.Timer(delay, self._on_watchdog)
         self._watchdog.daemon = True
@@ -445,15 +758,18 @@ class Viewport(anywidget.AnyWidget):
     def _on_watchdog(self) -> None:
         try:
             with self._drag_lock:
-                if self._drag is None:
+                if self._drag is None and self._stroke is None:
+                    self._watchdog = None
                     return
                 idle = time.monotonic() - self._last_drag_msg
                 if idle < DRAG_WATCHDOG_S:
                     self._start_watchdog(DRAG_WATCHDOG_S - idle)
                     return
+                self._watchdog = None
             self.end_drag()
+            self.end_stroke()
         except Exception as exc:
-            self.errors.report("ending an abandoned handle drag", exc)
+            self.errors.report("ending an abandoned handle drag or paint stroke", exc)
 
     def _resolve_handle(self, index: int, vertex: int | None) -> int | None:
         """The model handle ``index`` if it sits on ``vertex``, else the handle on ``vertex``."""
@@ -571,8 +887,38 @@ class Viewport(anywidget.AnyWidget):
         kind = content.get("type")
         if kind == "request_full":
             self.errors.guard("Viewport resync")(self._push_geometry)(force_full=True)
+        # --- drag_handler hook (RegionsPanel drag mode, widgets/regions_panel.py) ---
+        # While an object is set as ``viewport.drag_handler`` (plain attribute, default
+        # unset/None), marker drags call its begin(index, vertex) / move(index, position)
+        # -> kernel ms / end() instead of moving model handles; acks are the same.
+        elif kind == "handle" and getattr(self, "drag_handler", None) is not None:
+            handler, phase, ms = self.drag_handler, content.get("phase"), 0.0
+            try:
+                if phase == "start":
+                    v = content.get("vertex")
+                    handler.begin(int(content["index"]), None if v is None else int(v))
+                elif phase in ("move", "end") and content.get("position") is not None:
+                    ms = float(handler.move(int(content["index"]), content["position"]) or 0.0)
+                if phase == "end":
+                    handler.end()
+            except Exception as exc:
+                try:
+                    handler.end()  # never leave the model inside an interaction
+                finally:
+                    self.errors.report(f"drag handler ({phase})", exc)
+                    self.send({"type": "handle_cancel"})
+            finally:
+                ack = {"type": "handle_ack", "seq": content.get("seq"), "phase": phase}
+                self.send({**ack, "version": self._version, "kernel_ms": round(ms, 3)})
+        # --- end drag_handler hook ---
         elif kind == "handle":
             self._on_handle_msg(content)
+        elif kind == "paint":
+            self._on_paint_msg(content)
+        elif kind == "request_paint":
+            with self._model.lock, self._send_lock:
+                self._paint_last = None
+            self.errors.guard("Viewport paint resync")(self._sync_paint)()
         elif kind == "add_handle":
             self.errors.guard("add handle")(self.add_handle_at)(int(content["vertex"]))
         elif kind == "remove_handle":
@@ -622,7 +968,45 @@ class Viewport(anywidget.AnyWidget):
                 }
             )
 
+    def _on_paint_msg(self, content: dict[str, Any]) -> None:
+        phase = content.get("phase")
+        ms = 0.0
+        verts = content.get("vertices") or []
+        try:
+            if phase == "start":
+                self.begin_stroke()
+            # The geometry patch of these dabs carries the seq (see _on_handle_msg).
+            self._drag_seq = content.get("seq")
+            try:
+                if verts:
+                    ms = self.paint_at([int(v) for v in verts])
+            finally:
+                self._drag_seq = None
+            if phase == "end":
+                self.end_stroke()
+        except Exception as exc:
+            # Never leave the model inside an interaction after a failed dab.
+            try:
+                self.end_stroke()
+            finally:
+                self.errors.report(f"paint stroke ({phase})", exc)
+                self.send({"type": "paint_cancel"})
+        finally:
+            self.send(
+                {
+                    "type": "paint_ack",
+                    "seq": content.get("seq"),
+                    "phase": phase,
+                    "version": self._version,
+                    "paint_version": self._paint_version,
+                    "kernel_ms": round(ms, 3),
+                }
+            )
+
     def _push_geometry_event(self, final: bool = True, *_args: Any) -> None:
+        if self._hold_pushes:
+            self._push_pending = True
+            return
         t0 = time.perf_counter()
         self._push_geometry(force_full=False, tolerance=0.0 if final else self._tolerance)
         ms = (time.perf_counter() - t0) * 1e3

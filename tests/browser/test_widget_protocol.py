@@ -333,7 +333,7 @@ def test_add_and_remove_handles_by_click_messages():
     m.undo()
     assert len(m.handles) == n0 + 3
     with pytest.raises(Exception, match="tool"):
-        vp.tool = "paint"
+        vp.tool = "brush"
 
 
 def test_sculpt_panel_buttons_and_workbench_tabs():
@@ -370,3 +370,137 @@ def test_sculpt_panel_buttons_and_workbench_tabs():
     wb.close()
     m.add_handle(4)
     assert "<b>0</b> handles" in sp.status.value  # disconnected
+
+
+def test_paint_stroke_messages_are_one_undo_step_with_overlay_patches_and_acks():
+    m = _grid()
+    vp = widgets.Viewport(m)
+    vp.tool = "paint"
+    spy = _Spy(vp)
+    # a stroke with nothing picked is refused, acked, cancelled, and leaves no interaction
+    vp._on_frontend_msg(vp, {"type": "paint", "phase": "start", "vertices": [4], "seq": 1}, [])
+    kinds = [c["type"] for c, _ in spy.messages]
+    assert kinds == ["paint_cancel", "paint_ack"] and not m.interacting
+    assert "pick an expression" in vp._error
+
+    vp.paint_expression = "jawOpen"  # moves vertex 4 by +1 in z
+    vp.brush_radius, vp.brush_opacity, vp.brush_falloff = 0.5, 1.0, "constant"
+    assert vp._paint_weights == b""  # nothing painted yet: empty overlay
+    spy.messages.clear()
+    vp._on_frontend_msg(vp, {"type": "paint", "phase": "start", "vertices": [4], "seq": 2}, [])
+    assert m.interacting and vp.painting
+    # the first paint of the picked expression goes as a full overlay buffer
+    w = np.frombuffer(vp._paint_weights, "<f4")
+    assert w.tolist() == [0, 0, 0, 0, 1, 0, 0, 0, 0]
+    (patch, (ids, vals)), (ack, _) = spy.messages
+    assert patch["type"] == "patch" and patch["seq"] == 2  # the geometry patch carries the seq
+    assert np.frombuffer(ids, "<u4").tolist() == [4]
+    assert np.frombuffer(vals, "<f4").tolist() == [1.0, 1.0, 1.0]  # z: 0 + 1 * delta
+    assert ack == {"type": "paint_ack", "seq": 2, "phase": "start", "version": vp._version,
+                   "paint_version": vp._paint_version, "kernel_ms": ack["kernel_ms"]}  # fmt: skip
+    spy.messages.clear()
+    vp._on_frontend_msg(vp, {"type": "paint", "phase": "move", "vertices": [0], "seq": 3}, [])
+    # vertex 0 and its grid neighbours within 0.5 (only itself): a sparse overlay patch
+    (pp, (pids, pvals)), (ack, _) = spy.messages
+    assert pp["type"] == "paint_patch" and pp["version"] == vp._paint_version
+    assert np.frombuffer(pids, "<u4").tolist() == [0]
+    assert np.frombuffer(pvals, "<f4").tolist() == [1.0]
+    assert ack["type"] == "paint_ack" and ack["seq"] == 3
+    # the silent full state follows, so a reloaded page gets the current overlay
+    assert np.frombuffer(vp._paint_weights, "<f4")[[0, 4]].tolist() == [1.0, 1.0]
+    vp._on_frontend_msg(vp, {"type": "paint", "phase": "end", "vertices": [], "seq": 4}, [])
+    assert not m.interacting and not vp.painting
+    assert m.history.undo_labels == ["Paint jawOpen"]
+    assert vp.last_stroke["dabs"] == 2 and vp.last_stroke["messages"] == 2
+    np.testing.assert_array_equal(np.frombuffer(vp._positions, "<f4").reshape(-1, 3), m.evaluate())
+
+    # undo: the overlay goes back to empty, the geometry to the neutral
+    m.undo()
+    assert vp._paint_weights == b"" and len(m.paint_layers) == 0
+    np.testing.assert_array_equal(np.frombuffer(vp._positions, "<f4").reshape(-1, 3), m.vertices)
+    # overlay off: nothing is sent for the picked expression
+    vp.paint_overlay = False
+    m.paint_flood("jawOpen", 0.5)
+    assert vp._paint_weights == b""
+    vp.paint_overlay = True
+    assert np.frombuffer(vp._paint_weights, "<f4").tolist() == [0.5] * 9
+
+    # closing mid-stroke ends the interaction (one undo step)
+    vp._on_frontend_msg(vp, {"type": "paint", "phase": "start", "vertices": [8], "seq": 5}, [])
+    assert m.interacting
+    vp.close()
+    assert not m.interacting and m.history.undo_labels[-1] == "Paint jawOpen"
+
+
+def test_paint_watchdog_ends_an_abandoned_stroke(monkeypatch):
+    import widgets.viewport as vpmod
+
+    monkeypatch.setattr(vpmod, "DRAG_WATCHDOG_S", 0.2)
+    m = _grid()
+    vp = widgets.Viewport(m, paint_expression="jawOpen")
+    vp._on_frontend_msg(vp, {"type": "paint", "phase": "start", "vertices": [4], "seq": 1}, [])
+    assert m.interacting
+    deadline = time.monotonic() + 5
+    while m.interacting and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not m.interacting and not vp.painting
+    assert m.history.undo_labels == ["Paint jawOpen"]
+    vp.close()
+
+
+def test_paint_panel_brush_links_blends_save_and_bake():
+    m = _grid()
+    wb = widgets.Workbench(m)
+    assert wb._paint is None  # built lazily
+    wb.tabs.selected_index = 2
+    assert wb.viewport.tool == "paint" and wb._paint is not None
+    p, vp = wb.paint, wb.viewport
+    # brush controls drive the viewport's brush
+    p.radius.value, p.opacity.value, p.falloff.value = 0.6, 0.25, "linear"
+    p.mode.value, p.mirror.value = "subtract", True
+    assert vp.brush == type(vp.brush)(0.6, 0.25, "linear", "subtract", True)
+    assert p.brush == vp.brush
+    p.mode.value = "add"
+    # picking in the palette sets the viewport's expression
+    p.pick("jawOpen")
+    assert vp.paint_expression == "jawOpen"
+    p.overlay.value = False
+    assert vp.paint_overlay is False
+    p.overlay.value = True
+    # global blend: one region, weight 0.5 everywhere, one undo step
+    assert list(p.region_sliders) == ["all"]
+    p.set_region_weight("all", 0.5)
+    np.testing.assert_allclose(m.paint_layers["jawOpen"], 0.5)
+    assert m.history.undo_labels[-1] == "Global blend"
+    np.testing.assert_allclose(m.evaluate()[4], [1.0, 1.0, 0.5], atol=1e-6)
+    # a second expression in the same region is scaled so the sum stays <= 1
+    p.set_region_weight("all", 0.8, expression="eyeBlinkLeft")
+    total = m.paint_layers.total(m.n_vertices)
+    assert total.max() <= 1.0 + 1e-6
+    np.testing.assert_allclose(m.paint_layers["jawOpen"], 0.2, atol=1e-6)
+    # upper/lower preset: a slider per region; the mix is per preset
+    p.preset.value = "upper_lower"
+    assert list(p.region_sliders) == ["upper", "lower"]
+    p.region_sliders["lower"].value = 1.0  # a slider drag: one undo step once it idles
+    p.grouper.flush()
+    assert m.history.undo_labels[-1] == "Blend jawOpen (upper_lower)"
+    # flood / normalize / clear / undo
+    p._on_clear()
+    assert len(m.paint_layers) == 0
+    p.opacity.value = 0.5
+    p._on_flood()
+    np.testing.assert_allclose(m.paint_layers["jawOpen"], 0.5)
+    p._on_normalize()
+    np.testing.assert_allclose(m.paint_layers["jawOpen"], 1.0)
+    # save as expression: appears first in the palette, name box moves on
+    p.save_name.value = "open"
+    p._on_save()
+    assert "open" in m.expressions and p.gallery.names[0] == "open"
+    assert p.save_name.value == "open_1"
+    # bake: the paint becomes a shape at weight 1, paint cleared
+    p.bake_name.value = "openBaked"
+    p._on_bake()
+    assert "openBaked" in m.shape_names and len(m.paint_layers) == 0
+    p._on_undo()
+    assert "openBaked" not in m.shape_names and len(m.paint_layers) == 1
+    wb.close()
