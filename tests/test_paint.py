@@ -180,3 +180,15 @@ def test_bad_brush_and_paint_arguments() -> None:
     with pytest.raises(ModelError, match="PaintMix"):
         m.set_paint({"x": np.zeros(3)})  # type: ignore[arg-type]
     assert isinstance(m.paint_layers, PaintMix)
+
+
+def test_a_stroke_never_paints_beyond_the_brush_opacity(head: FaceModel) -> None:
+    c = _mouth_corner(head)
+    brush = Brush(radius=0.3, opacity=0.5, falloff="constant")
+    head.paint_stroke("mouthSmileLeft", [c] * 6, brush)  # six dabs on one spot, one stroke
+    assert head.paint_layers["mouthSmileLeft"][c] == pytest.approx(0.5)
+    head.paint_stroke("mouthSmileLeft", [c], brush)  # a second stroke builds on the first
+    assert head.paint_layers["mouthSmileLeft"][c] == pytest.approx(0.75)
+    for _ in range(2):  # outside a stroke, dabs compound
+        head.paint_dab("eyeBlinkLeft", c, brush)
+    assert head.paint_layers["eyeBlinkLeft"][c] == pytest.approx(0.75)

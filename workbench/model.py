@@ -30,7 +30,7 @@ from psygnal import Signal, SignalGroup
 from workbench.expressions import Expression, expression_from_state
 from workbench.handle_layer import HandleLayer
 from workbench.history import Command, History, payload_nbytes
-from workbench.paint import Brush, PaintLayer, PaintMix, apply_dab, flood, normalize
+from workbench.paint import Brush, PaintLayer, PaintMix, Stroke, apply_dab, flood, normalize
 from workbench.polygons import Polygons
 from workbench.region_blend import RegionState, RegionWeights, region_layer
 from workbench.tracks import Interpolation, Timeline, weight_track_name
@@ -236,6 +236,7 @@ class _Interaction:
     label: str
     weights_before: dict[str, float] = field(default_factory=dict)
     slots_before: dict[str, Any] = field(default_factory=dict)
+    paint_stroke: tuple[str, Stroke] | None = None
 
 
 class FaceModel:
@@ -881,11 +882,21 @@ class FaceModel:
         """One brush dab of ``expression`` at vertex ``center``.
 
         Undoable; call inside ``model.interaction("Paint ...")`` so that a
-        stroke (press, move, release) is one undo step.
+        stroke (press, move, release) is one undo step — and so that the stroke
+        never paints beyond the brush opacity where its dabs overlap
+        (:class:`~workbench.paint.Stroke`).
         """
         with self._lock:
             self._check_expression(expression)
-            mix = apply_dab(self.paint_layers, expression, self.paint_surface, brush or Brush(), int(center))
+            stroke = None
+            inter = self._interaction
+            if inter is not None:
+                if inter.paint_stroke is None or inter.paint_stroke[0] != expression:
+                    inter.paint_stroke = (expression, Stroke(self.paint_layers, self.n_vertices))
+                stroke = inter.paint_stroke[1]
+            mix = apply_dab(
+                self.paint_layers, expression, self.paint_surface, brush or Brush(), int(center), stroke
+            )
             self.set_slot("paint_layers", mix, f"Paint {expression}")
 
     def paint_stroke(self, expression: str, centers: Iterable[int], brush: Brush | None = None) -> None:

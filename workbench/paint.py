@@ -174,39 +174,89 @@ class PaintSurface:
         return ids, d[ids]
 
 
+@dataclass
+class Stroke:
+    """State of one stroke (press, move, release) so its opacity is capped.
+
+    Within a stroke every vertex is blended from its weights *before* the
+    stroke with the largest brush strength any dab of the stroke gave it, so
+    painting over the same spot again in one stroke never exceeds the brush
+    opacity (as with an airbrush at that opacity). A new stroke builds on the
+    result of the previous ones.
+
+    Parameters
+    ----------
+    base : PaintMix
+        The mix when the stroke started.
+    n : int
+        Number of vertices.
+    """
+
+    base: PaintMix
+    n: int
+    strength: NDArray[np.float32] = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.strength = np.zeros(self.n, np.float32)
+
+
 def apply_dab(
     mix: PaintMix,
     expression: str,
     surface: PaintSurface,
     brush: Brush,
     center: int,
+    stroke: Stroke | None = None,
 ) -> PaintMix:
-    """One brush dab at vertex ``center``; returns the new mix (``mix`` is unchanged)."""
+    """One brush dab at vertex ``center``; returns the new mix (``mix`` is unchanged).
+
+    With ``stroke`` (add / subtract modes) the strength at each vertex is the
+    maximum over the stroke's dabs, applied to the weights from before the
+    stroke; without it, dabs compound.
+    """
     if not 0 <= center < surface.n:
         raise ValueError(f"dab centre must be a vertex id in 0..{surface.n - 1}, got {center}")
     centers = [int(center)]
     if brush.mirror and surface.mirror[center] != center:
         centers.append(int(surface.mirror[center]))
-    maps = {k: v.copy() for k, v in mix.maps.items()}
+    # copy-on-write: only the maps this dab changes are copied
+    maps: dict[str, NDArray[np.float32]] = dict(mix.maps)
+    copied: set[str] = set()
+
+    def writable(name: str) -> NDArray[np.float32]:
+        if name not in copied:
+            maps[name] = maps[name].copy() if name in maps else np.zeros(surface.n, np.float32)
+            copied.add(name)
+        return maps[name]
+
     touched_all = []
+    capped = stroke is not None and brush.mode in ("add", "subtract")
     for c in centers:
         ids, dist = surface.within(c, brush.radius)
         s = (brush.opacity * falloff_curve(dist / brush.radius, brush.falloff)).astype(np.float32)
+        if capped:
+            assert stroke is not None
+            s = np.maximum(s, stroke.strength[ids])
+            stroke.strength[ids] = s
+            for name in set(maps) | set(stroke.base.maps) | {expression}:
+                base = stroke.base.maps.get(name)
+                writable(name)[ids] = 0.0 if base is None else base[ids]
         if brush.mode == "add":
-            for w in maps.values():
-                w[ids] *= 1.0 - s
-            target = maps.setdefault(expression, np.zeros(surface.n, np.float32))
-            target[ids] += s
+            for name in list(maps):
+                writable(name)[ids] *= 1.0 - s
+            writable(expression)[ids] += s
         elif brush.mode == "subtract":
             if expression in maps:
-                maps[expression][ids] *= 1.0 - s
+                writable(expression)[ids] *= 1.0 - s
         else:  # smooth every map toward its 1-ring mean
-            for w in maps.values():
+            for name in list(maps):
+                w = writable(name)
                 ring = surface.ring_mean[ids] @ w
                 w[ids] = (1.0 - s) * w[ids] + s * ring.astype(np.float32)
         touched_all.append(ids)
-    _clip_convex(maps, np.concatenate(touched_all))
-    return PaintMix(_freeze(maps))
+    _clip_convex({k: maps[k] for k in copied}, np.concatenate(touched_all))
+    # drop maps that became all zero so the layer skips them
+    return PaintMix(_freeze({k: v for k, v in maps.items() if k not in copied or np.any(v)}))
 
 
 def _clip_convex(maps: dict[str, NDArray[np.float32]], ids: NDArray[np.int64]) -> None:
@@ -214,7 +264,7 @@ def _clip_convex(maps: dict[str, NDArray[np.float32]], ids: NDArray[np.int64]) -
     if not maps:
         return
     for w in maps.values():
-        np.clip(w, 0.0, 1.0, out=w)
+        w[ids] = np.clip(w[ids], 0.0, 1.0)
     total = np.zeros(ids.size, np.float32)
     for w in maps.values():
         total += w[ids]
