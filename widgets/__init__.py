@@ -8,62 +8,112 @@ this package.
 - :class:`ExpressionPanel`: blendshape sliders grouped by face region.
 - :class:`SculptPanel`: handle-based shell editing controls (the drag itself
   happens in the viewport's "sculpt" tool).
+- :class:`RegionsPanel`: blend regions, region-weight sliders and marker drags.
 - :class:`PaintPanel`: painterly expression blending (palette of expression
   thumbnails, brush, global/regional blend, save as expression, bake); the
   strokes happen in the viewport's "paint" tool.
+- :class:`TimelineWidget`: keyframe tracks and playback.
+- :class:`ExportPanel`: write the animation (.glb, .usd, ...).
 - :class:`ExpressionGallery`: the thumbnail grid (also the paint palette).
-- :class:`Workbench` / :func:`show_workbench`: the viewport beside a tab of
-  the panels ("Shapes", "Sculpt", "Paint"), plus an error log that callback
-  errors go to.
+- :class:`Workbench` / :func:`show_workbench`: the composed app: one viewport
+  beside a tab of the panels ("Shapes", "Sculpt", "Regions", "Paint",
+  "Export"), the timeline under it, undo/redo and a status line on top, and a
+  shared Output that callback errors go to.
+- :func:`recovery_prompt`: offer to recover an autosaved session after a
+  kernel crash or restart.
 """
 
 from __future__ import annotations
 
+import math
+import time
+from collections.abc import Callable
 from typing import Any
 
 import ipywidgets as W
 
+from widgets._threading import ErrorSink
+from widgets.export_panel import ExportPanel
 from widgets.expression_panel import ExpressionPanel
 from widgets.gallery import ExpressionGallery
 from widgets.paint_panel import PaintPanel
+from widgets.regions_panel import RegionsPanel
 from widgets.sculpt_panel import SculptPanel
+from widgets.timeline import TimelineWidget
 from widgets.viewport import Viewport
 
 __all__ = [
+    "TAB_TITLES",
+    "ExportPanel",
     "ExpressionGallery",
     "ExpressionPanel",
     "PaintPanel",
+    "RecoveryPrompt",
+    "RegionsPanel",
     "SculptPanel",
+    "TimelineWidget",
     "Viewport",
     "Workbench",
+    "recovery_prompt",
     "show_workbench",
 ]
 
-#: tab index -> viewport tool
-_TAB_TOOLS = ("orbit", "sculpt", "paint")
-_PAINT_TAB = 2
+#: tab titles, in order, and the viewport tool each tab selects
+TAB_TITLES = ("Shapes", "Sculpt", "Regions", "Paint", "Export")
+_TAB_TOOLS = ("orbit", "sculpt", "orbit", "paint", "orbit")
+_SHAPES, _SCULPT, _REGIONS, _PAINT, _EXPORT = range(5)
 
 
 class Workbench(W.VBox):
-    """Viewport beside a tab of panels ("Shapes", "Sculpt", "Paint"), with a shared error Output.
+    """The composed app: one viewport over one model, tabs of tools, timeline, status line.
 
-    Selecting the "Sculpt" tab switches the viewport to its sculpt tool (drag
-    handle markers), "Paint" to its paint tool (brush strokes on the face);
-    "Shapes" switches back to plain orbiting. The Paint panel (and its palette
-    of thumbnails, a few seconds of offscreen rendering) is built the first time
-    its tab is opened or :attr:`paint` is read.
+    Layout: a top bar (Undo / Redo and the status line), then the viewport
+    beside a tab of panels ("Shapes", "Sculpt", "Regions", "Paint", "Export"),
+    the :class:`TimelineWidget` under the viewport, and the shared error
+    Output at the bottom (every panel reports callback errors there).
+
+    Selecting "Sculpt" switches the viewport to its sculpt tool (drag handle
+    markers), "Paint" to its paint tool (brush strokes); the other tabs orbit.
+    "Regions" activates its panel (colour overlay, and the pin drag mode, which
+    itself switches the viewport to the sculpt tool without leaving the tab)
+    and deactivates it when another tab is selected. The Regions and Paint
+    panels are built the first time their tab is opened (segmentation and the
+    palette thumbnails take seconds), or when :attr:`regions` / :attr:`paint`
+    is read.
 
     Parameters
     ----------
     model : workbench.FaceModel
+    autosave : str, optional
+        Session name: creates a :class:`workbench.autosave.Autosaver` saving the
+        model atomically a few seconds after each edit; :meth:`close` stops it.
+    autosave_delay : float
+        Seconds of quiet before an autosave.
+    autosave_folder : path, optional
+        Default: the recovery folder (``$WORKBENCH_RECOVERY_DIR``).
     height : int
         Viewport height in pixels.
+
+    Attributes
+    ----------
+    status : ipywidgets.HTML
+        "N vertices · last drag X ms (Y updates/s) · undo depth D · saved 12:03:04".
+    autosaver : workbench.autosave.Autosaver or None
     """
 
-    def __init__(self, model: Any, *, height: int = 520) -> None:
+    def __init__(
+        self,
+        model: Any,
+        *,
+        autosave: str | None = None,
+        autosave_delay: float = 2.0,
+        autosave_folder: Any = None,
+        height: int = 520,
+    ) -> None:
         self.model = model
         self.errors = W.Output(layout=W.Layout(max_height="160px", overflow="auto"))
         self.errors.add_class("fwb-errors")
+        self.sink = ErrorSink(self.errors)
         self.viewport = Viewport(model, height=height, errors=self.errors)
         self.viewport.layout = W.Layout(flex="1 1 auto", min_width="320px")
         self.panel = ExpressionPanel(
@@ -72,19 +122,75 @@ class Workbench(W.VBox):
         self.sculpt = SculptPanel(
             model, self.viewport, errors=self.errors, before_edit=[self.panel.grouper.flush]
         )
+        self.timeline = TimelineWidget(model, errors=self.errors)
+        self.export = ExportPanel(model, errors=self.errors)
+        self._regions: RegionsPanel | None = None
+        self._switching = False
         self._paint: PaintPanel | None = None
+        self._regions_slot = W.VBox([W.HTML("<i>finding the blend regions ...</i>")])
         self._paint_slot = W.VBox([W.HTML("<i>building the expression palette ...</i>")])
         self.tabs = W.Tab(
-            children=[self.panel, self.sculpt, self._paint_slot],
-            titles=("Shapes", "Sculpt", "Paint"),
+            children=[self.panel, self.sculpt, self._regions_slot, self._paint_slot, self.export],
+            titles=TAB_TITLES,
             layout=W.Layout(flex="0 0 650px", width="650px"),
         )
         self.tabs.add_class("fwb-tabs")
-        self.tabs.observe(self._on_tab, "selected_index")
-        self.viewport.observe(self._on_tool, "tool")
-        row = W.HBox([self.viewport, self.tabs], layout=W.Layout(width="100%"))
-        super().__init__([row, self.errors], layout=W.Layout(width="100%"))
+
+        g = self.sink.guard
+        self.undo_button = W.Button(description="Undo", icon="undo", layout=W.Layout(width="auto"))
+        self.redo_button = W.Button(
+            description="Redo", icon="repeat", layout=W.Layout(width="auto")
+        )
+        self.undo_button.add_class("fwb-wb-undo")
+        self.redo_button.add_class("fwb-wb-redo")
+        self.undo_button.on_click(g("undo")(self._on_undo))
+        self.redo_button.on_click(g("redo")(self._on_redo))
+        self.status = W.HTML()
+        self.status.add_class("fwb-wb-status")
+        top = W.HBox(
+            [self.undo_button, self.redo_button, self.status],
+            layout=W.Layout(width="100%", align_items="center", grid_gap="6px"),
+        )
+        top.add_class("fwb-topbar")
+
+        self.autosaver: Any = None
+        if autosave is not None:
+            from workbench.autosave import Autosaver
+
+            self.autosaver = Autosaver(
+                model, autosave, delay=autosave_delay, folder=autosave_folder
+            )
+            self._cb_autosave = g("Workbench autosave status")(self._on_autosave)
+            self.autosaver.changed.connect(self._cb_autosave)
+
+        self.tabs.observe(g("switching tabs")(self._on_tab), "selected_index")
+        self.viewport.observe(g("viewport tool")(self._on_tool), "tool")
+        self._cb_history = g("Workbench history")(self._on_history)
+        model.events.history.connect(self._cb_history)
+        self._cb_drag = g("Workbench drag stats")(self._on_drag)
+        self.viewport.drag_listeners.append(self._cb_drag)
+
+        left = W.VBox(
+            [self.viewport, self.timeline], layout=W.Layout(flex="1 1 auto", min_width="320px")
+        )
+        row = W.HBox([left, self.tabs], layout=W.Layout(width="100%"))
+        super().__init__([top, row, self.errors], layout=W.Layout(width="100%"))
         self.add_class("fwb-workbench")
+        self._on_history()
+
+    # ------------------------------------------------------------ lazy panels
+    @property
+    def regions(self) -> RegionsPanel:
+        """The Regions tab's :class:`RegionsPanel` (built on first use)."""
+        if self._regions is None:
+            self._regions = RegionsPanel(
+                self.model,
+                self.viewport,
+                errors=self.errors,
+                before_edit=[self.panel.grouper.flush],
+            )
+            self._regions_slot.children = [self._regions]
+        return self._regions
 
     @property
     def paint(self) -> PaintPanel:
@@ -99,25 +205,136 @@ class Workbench(W.VBox):
             self._paint_slot.children = [self._paint]
         return self._paint
 
+    # ------------------------------------------------------------ tabs <-> tool
     def _on_tab(self, change: dict) -> None:
-        i = change["new"]
-        if i == _PAINT_TAB:
+        self._switching = True  # tool changes made here must not move the tab again
+        try:
+            self._switch_tab(change["old"], change["new"])
+        finally:
+            self._switching = False
+
+    def _switch_tab(self, old: int | None, new: int | None) -> None:
+        if old == _REGIONS and self._regions is not None:
+            # First: leaving drag mode gives the viewport its previous tool back.
+            self._regions.deactivate()
+        if new is None or not 0 <= new < len(_TAB_TOOLS):
+            return
+        self.viewport.tool = _TAB_TOOLS[new]
+        if new == _REGIONS:
+            try:
+                self.regions.activate()
+            except Exception as exc:
+                self.sink.report("building the Regions panel", exc)
+        elif new == _PAINT:
             try:
                 self.paint  # noqa: B018 - builds the panel
             except Exception as exc:
-                self.viewport.errors.report("building the Paint panel", exc)
-        if i is not None and 0 <= i < len(_TAB_TOOLS):
-            self.viewport.tool = _TAB_TOOLS[i]
+                self.sink.report("building the Paint panel", exc)
 
     def _on_tool(self, change: dict) -> None:
-        i = _TAB_TOOLS.index(change["new"])
-        if self.tabs.selected_index != i:
-            self.tabs.selected_index = i
+        # The tool changed from elsewhere (front end, code, Regions' drag mode):
+        # follow it with the tab, unless the current tab already explains it.
+        i = self.tabs.selected_index
+        if self._switching or i == _REGIONS or (i is not None and _TAB_TOOLS[i] == change["new"]):
+            return
+        if change["new"] in _TAB_TOOLS:
+            self.tabs.selected_index = _TAB_TOOLS.index(change["new"])
 
-    def close(self) -> None:
+    # ------------------------------------------------------------ undo / redo
+    def _before_edit(self) -> None:
+        # model.undo refuses to run inside an interaction: close any open one.
+        self.panel.grouper.flush()
+        self.viewport.end_drag()
+        if self._regions is not None:
+            self._regions.grouper.flush()
+            self._regions.drag_handler.end()
+
+    def _on_undo(self, _b: Any = None) -> None:
+        self._before_edit()
+        if self.model.can_undo:
+            self.model.undo()
+
+    def _on_redo(self, _b: Any = None) -> None:
+        self._before_edit()
+        if self.model.can_redo:
+            self.model.redo()
+
+    # ------------------------------------------------------------ status line
+    def _on_history(self) -> None:
+        m = self.model
+        u, r = m.history.undo_labels, m.history.redo_labels
+        self.undo_button.disabled = not m.can_undo
+        self.redo_button.disabled = not m.can_redo
+        self.undo_button.tooltip = f"Undo {u[-1]}" if u else "Nothing to undo"
+        self.redo_button.tooltip = f"Redo {r[-1]}" if r else "Nothing to redo"
+        self.update_status()
+
+    def _on_drag(self, _stats: dict) -> None:
+        self.update_status()
+
+    def _on_autosave(self, _state: str) -> None:
+        self.update_status()
+
+    def autosave_text(self) -> str:
+        """ "saved 12:03:04", "pending", "error: ...", "not saved yet" or "off"."""
+        a = self.autosaver
+        if a is None:
+            return "off"
+        state = a.state
+        if state == "saved" and a.last_saved is not None:
+            return "saved " + time.strftime("%H:%M:%S", time.localtime(a.last_saved))
+        if state == "idle":
+            return "no edits yet"
+        return str(state)
+
+    def status_text(self) -> str:
+        """The status line as plain text (also what :attr:`status` shows)."""
+        parts = [f"{self.model.n_vertices} vertices"]
+        drag = getattr(self.viewport, "last_drag", None) or {}
+        if drag:
+            ms, ups = drag.get("last_ms", math.nan), drag.get("updates_per_s", math.nan)
+            fps = f" ({ups:.0f} updates/s)" if math.isfinite(ups) else ""
+            parts.append(f"last drag {ms:.1f} ms{fps}")
+        else:
+            parts.append("last drag –")
+        parts.append(f"undo depth {len(self.model.history.undo_labels)}")
+        parts.append(f"autosave: {self.autosave_text()}")
+        return " · ".join(parts)
+
+    def update_status(self) -> None:
+        """Recompute :attr:`status` (called on history, drag and autosave events)."""
+        text = self.status_text()
+        colour = "#b00" if "error" in text else "#555"
+        self.status.value = f"<span style='color:{colour};font-size:12px'>{text}</span>"
+
+    # ------------------------------------------------------------ closing
+    def close(self, *, discard_autosave: bool = False) -> None:
+        """Disconnect everything and close the widgets.
+
+        The autosaver is stopped after a last save of pending edits, and its
+        recovery file is kept unless ``discard_autosave`` (the user saved the
+        model properly).
+        """
+        if getattr(self, "_closed", False):
+            return
+        self._closed = True
+        a = self.autosaver
+        if a is not None:
+            a.changed.disconnect(self._cb_autosave)
+            if a.state == "pending" and not discard_autosave:
+                a.save_now()
+            a.close(discard=discard_autosave)
+        self.model.events.history.disconnect(self._cb_history)
+        if self._cb_drag in self.viewport.drag_listeners:
+            self.viewport.drag_listeners.remove(self._cb_drag)
+        if self._regions is not None:
+            self._regions.deactivate()
+            self._regions.close()
         if self._paint is not None:
             self._paint.close()
         self.sculpt.close()
+        self.export.close()
+        self.timeline.close()
         self.viewport.close()
         self.panel.close()
         self.errors.close()
@@ -135,3 +352,105 @@ def show_workbench(model: Any, **kwargs: Any) -> Workbench:
     wb = Workbench(model, **kwargs)
     display(wb)
     return wb
+
+
+class RecoveryPrompt(W.VBox):
+    """ "Recover <session>" / "Start fresh" buttons; the chosen model then opens in place.
+
+    A notebook cell cannot wait for a click (the kernel is busy until the cell
+    ends), so the choice is a callback: ``build(model)`` returns the widget
+    (usually a :class:`Workbench`) that replaces the buttons.
+
+    Attributes
+    ----------
+    found : list of workbench.autosave.Recoverable
+    model : FaceModel or None
+        The chosen model (None until a button is pressed).
+    app : widget or None
+        What ``build`` returned.
+    """
+
+    def __init__(
+        self,
+        default_loader: Callable[[], Any],
+        found: list[Any],
+        *,
+        build: Callable[[Any], Any] | None = None,
+    ) -> None:
+        self.default_loader = default_loader
+        self.found = list(found)
+        self.build = build
+        self.model: Any = None
+        self.app: Any = None
+        self.errors = W.Output()
+        self.sink = ErrorSink(self.errors)
+        self.recover_buttons = []
+        for i, item in enumerate(self.found):
+            b = W.Button(
+                description=f"Recover {item.describe()}",
+                icon="history",
+                button_style="warning",
+                layout=W.Layout(width="auto"),
+            )
+            b.add_class("fwb-recover")
+            b.on_click(self.sink.guard("recovering")(lambda _b, i=i: self.choose(i)))
+            self.recover_buttons.append(b)
+        self.fresh_button = W.Button(description="Start fresh", layout=W.Layout(width="auto"))
+        self.fresh_button.add_class("fwb-start-fresh")
+        self.fresh_button.on_click(self.sink.guard("starting fresh")(lambda _b: self.choose(None)))
+        note = W.HTML(
+            "<b>An earlier session did not close cleanly.</b> Recover its last autosave, or start fresh"
+            " (the next autosave then overwrites it)."
+        )
+        super().__init__([note, *self.recover_buttons, self.fresh_button, self.errors])
+        self.add_class("fwb-recovery")
+
+    def choose(self, index: int | None) -> Any:
+        """Load ``found[index]`` (``None``: ``default_loader()``), build the app, return the model."""
+        if index is None:
+            model = self.default_loader()
+        else:
+            from workbench.autosave import recover
+
+            model = recover(self.found[index])
+        self.model = model
+        if self.build is not None:
+            self.app = self.build(model)
+            self.children = [self.app] if self.app is not None else []
+        else:
+            self.children = [
+                W.HTML(f"Loaded {'recovered session' if index is not None else 'fresh model'}.")
+            ]
+        return model
+
+
+def recovery_prompt(
+    default_loader: Callable[[], Any],
+    *,
+    build: Callable[[Any], Any] | None = None,
+    folder: Any = None,
+) -> RecoveryPrompt:
+    """Offer to recover autosaved sessions left by a crashed or restarted kernel.
+
+    Parameters
+    ----------
+    default_loader : callable () -> FaceModel
+        Loads the model to start fresh with (e.g. ``lambda: load_sample("head")``).
+    build : callable (FaceModel) -> widget, optional
+        Opens the chosen model, e.g. ``lambda m: Workbench(m, autosave="workbench")``;
+        its widget replaces the buttons.
+    folder : path, optional
+        Recovery folder (default ``$WORKBENCH_RECOVERY_DIR`` or the user cache).
+
+    Returns
+    -------
+    RecoveryPrompt
+        Display it. With nothing to recover the default model is loaded (and
+        built) at once, so ``.model`` / ``.app`` are set before it is shown.
+    """
+    from workbench.autosave import find_recoverable
+
+    prompt = RecoveryPrompt(default_loader, find_recoverable(folder), build=build)
+    if not prompt.found:
+        prompt.choose(None)
+    return prompt

@@ -96,6 +96,8 @@ class LabServer:
             JUPYTER_PLATFORM_DIRS="1",
             PYTHONPATH=os.pathsep.join(p for p in (str(REPO), env.get("PYTHONPATH", "")) if p),
             VTK_DEFAULT_OPENGL_WINDOW="vtkEGLRenderWindow",
+            # autosave/recovery files of test kernels stay in this server's temp dirs
+            WORKBENCH_RECOVERY_DIR=str(base / "recovery"),
         )
         cmd = [
             sys.executable, "-m", "jupyterlab",

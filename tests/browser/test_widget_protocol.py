@@ -452,7 +452,7 @@ def test_paint_panel_brush_links_blends_save_and_bake():
     m = _grid()
     wb = widgets.Workbench(m)
     assert wb._paint is None  # built lazily
-    wb.tabs.selected_index = 2
+    wb.tabs.selected_index = widgets.TAB_TITLES.index("Paint")
     assert wb.viewport.tool == "paint" and wb._paint is not None
     p, vp = wb.paint, wb.viewport
     # brush controls drive the viewport's brush

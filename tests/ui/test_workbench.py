@@ -1,0 +1,211 @@
+"""The composed Workbench (widgets/__init__.py) without a browser.
+
+Tabs are switched and buttons clicked from Python; the checks are on the
+viewport's tool, the Regions panel's activation, the status line text, the
+shared error Output and the autosaver. Runs on the sample head (5k vertices).
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("anywidget")
+
+import widgets
+from widgets import TAB_TITLES, RecoveryPrompt, Workbench, recovery_prompt
+from workbench import load_sample
+from workbench.autosave import Autosaver, find_recoverable
+
+pytestmark = pytest.mark.ui
+
+
+def _wait(pred, timeout: float = 10.0) -> None:
+    end = time.monotonic() + timeout
+    while not pred():
+        if time.monotonic() > end:
+            raise AssertionError("condition not reached in time")
+        time.sleep(0.01)
+
+
+@pytest.fixture
+def wb():
+    w = Workbench(load_sample("head"))
+    yield w
+    w.close()
+
+
+def _select(wb: Workbench, title: str) -> None:
+    wb.tabs.selected_index = TAB_TITLES.index(title)
+
+
+def test_exports_the_tool_widgets() -> None:
+    for name in ("TimelineWidget", "ExportPanel", "RegionsPanel", "PaintPanel", "SculptPanel"):
+        assert name in widgets.__all__ and hasattr(widgets, name)
+
+
+def test_tabs_exist_and_heavy_panels_wait_for_their_tab(wb: Workbench) -> None:
+    assert tuple(wb.tabs.titles) == ("Shapes", "Sculpt", "Regions", "Paint", "Export")
+    assert wb._regions is None and wb._paint is None
+    assert wb.timeline in wb.children[1].children[0].children  # under the viewport
+    _select(wb, "Regions")
+    assert wb._regions is not None and wb._paint is None
+    assert wb.tabs.children[2].children == (wb.regions,)
+
+
+def test_tabs_set_the_viewport_tool(wb: Workbench) -> None:
+    _select(wb, "Sculpt")
+    assert wb.viewport.tool == "sculpt"
+    _select(wb, "Export")
+    assert wb.viewport.tool == "orbit"
+    _select(wb, "Paint")
+    assert wb.viewport.tool == "paint" and wb._paint is not None
+    _select(wb, "Shapes")
+    assert wb.viewport.tool == "orbit"
+    assert wb.tabs.selected_index == 0
+    assert wb.errors.outputs == ()
+
+
+def test_regions_tab_activates_and_its_drag_mode_keeps_the_tab(wb: Workbench) -> None:
+    _select(wb, "Regions")
+    regions = wb.regions
+    assert regions._active and wb.viewport.tool == "orbit"
+    regions.drag_mode.value = True  # drag mode uses the viewport's sculpt tool ...
+    assert wb.viewport.tool == "sculpt"
+    assert wb.viewport.drag_handler is regions.drag_handler
+    assert wb.tabs.selected_index == TAB_TITLES.index("Regions")  # ... without leaving the tab
+    _select(wb, "Sculpt")
+    assert not regions._active and wb.viewport.drag_handler is None
+    assert wb.viewport.tool == "sculpt" and wb.tabs.selected_index == 1
+    _select(wb, "Regions")  # drag mode is still on: back to the pins
+    assert regions._active and wb.viewport.drag_handler is regions.drag_handler
+    _select(wb, "Shapes")
+    assert not regions._active and wb.viewport.tool == "orbit" and wb.tabs.selected_index == 0
+    assert wb.errors.outputs == ()
+
+
+def test_a_tool_change_from_elsewhere_follows_with_the_tab(wb: Workbench) -> None:
+    wb.viewport.tool = "paint"
+    assert wb.tabs.selected_index == TAB_TITLES.index("Paint")
+    _select(wb, "Export")
+    wb.viewport.tool = "orbit"  # Export orbits too: stays
+    assert wb.tabs.selected_index == TAB_TITLES.index("Export")
+
+
+def test_status_line_and_undo_redo_buttons_follow_edits(wb: Workbench) -> None:
+    n = wb.model.n_vertices
+    assert f"{n} vertices" in wb.status.value and "undo depth 0" in wb.status.value
+    assert "autosave: off" in wb.status.value
+    assert wb.undo_button.disabled and wb.redo_button.disabled
+    wb.model.set_weight("jawOpen", 0.3)
+    assert "undo depth 1" in wb.status.value
+    assert not wb.undo_button.disabled
+    wb.undo_button.click()
+    assert wb.model.weights["jawOpen"] == 0.0
+    assert "undo depth 0" in wb.status.value and not wb.redo_button.disabled
+    wb.redo_button.click()
+    assert wb.model.weights["jawOpen"] == pytest.approx(0.3)
+
+
+def test_last_drag_stats_are_shown(wb: Workbench) -> None:
+    wb.viewport.last_drag = {
+        "name": "h",
+        "moves": 10,
+        "seconds": 0.5,
+        "median_ms": 8.0,
+        "last_ms": 12.5,
+        "updates_per_s": 20.0,
+    }
+    wb._on_drag(dict(wb.viewport.last_drag))
+    assert "last drag 12.5 ms (20 updates/s)" in wb.status.value
+
+
+def test_callback_errors_show_in_the_shared_output(wb: Workbench, monkeypatch) -> None:
+    wb.model.set_weight("jawOpen", 0.3)
+
+    def broken() -> None:
+        raise RuntimeError("undo exploded")
+
+    monkeypatch.setattr(wb.model, "undo", broken)
+    wb.undo_button.click()  # must not raise
+    text = "".join(o.get("text", "") for o in wb.errors.outputs)
+    assert "[undo]" in text and "undo exploded" in text
+
+
+def test_autosave_state_in_status_line_and_close_stops_it(tmp_path: Path) -> None:
+    model = load_sample("head")
+    wb = Workbench(model, autosave="wbtest", autosave_delay=0.0, autosave_folder=tmp_path)
+    assert isinstance(wb.autosaver, Autosaver)
+    assert "autosave: no edits yet" in wb.status.value
+    model.set_weight("jawOpen", 0.4)
+    _wait(lambda: wb.autosaver.state == "saved")
+    _wait(lambda: "autosave: saved " in wb.status.value)
+    assert (tmp_path / "wbtest.recovery.fwb").is_file()
+    saver = wb.autosaver
+    wb.close()
+    assert saver._closed
+    saves = saver.saves
+    model.set_weight("jawOpen", 0.1)
+    time.sleep(0.1)
+    assert saver.saves == saves and saver.state == "saved"
+
+
+def test_close_with_discard_removes_the_recovery_file(tmp_path: Path) -> None:
+    model = load_sample("head")
+    wb = Workbench(model, autosave="gone", autosave_delay=0.0, autosave_folder=tmp_path)
+    model.set_weight("jawOpen", 0.4)
+    _wait(lambda: wb.autosaver.state == "saved")
+    wb.close(discard_autosave=True)
+    assert not (tmp_path / "gone.recovery.fwb").exists()
+
+
+# ---------------------------------------------------------------- recovery prompt
+def _crashed_session(folder: Path, name: str, weight: float) -> None:
+    """A recovery file whose owner process is gone, as a crashed kernel leaves it."""
+    model = load_sample("head")
+    saver = Autosaver(model, name, delay=60.0, folder=folder)
+    model.set_weight("jawOpen", weight)
+    saver.save_now()
+    saver.close()
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    owner = folder / f"{name}.recovery.fwb.owner"
+    owner.write_text(owner.read_text().replace(f'"pid": {os.getpid()}', f'"pid": {dead.pid}'))
+
+
+def test_recovery_prompt_without_recoverables_loads_the_default(tmp_path, monkeypatch) -> None:
+    monkeypatch.setenv("WORKBENCH_RECOVERY_DIR", str(tmp_path))
+    sentinel = object()
+    built = []
+    prompt = recovery_prompt(lambda: sentinel, build=lambda m: built.append(m))
+    assert isinstance(prompt, RecoveryPrompt)
+    assert prompt.model is sentinel and built == [sentinel]
+    assert prompt.recover_buttons == []
+
+
+def test_recovery_prompt_offers_and_recovers_a_crashed_session(tmp_path, monkeypatch) -> None:
+    monkeypatch.setenv("WORKBENCH_RECOVERY_DIR", str(tmp_path))
+    _crashed_session(tmp_path, "crashed", 0.7)
+    assert [r.name for r in find_recoverable()] == ["crashed"]
+    loads = []
+    prompt = recovery_prompt(lambda: loads.append(1), build=lambda m: None)
+    assert prompt.model is None and loads == []  # nothing loaded before the choice
+    assert len(prompt.recover_buttons) == 1
+    assert prompt.recover_buttons[0].description.startswith("Recover crashed: autosaved")
+    prompt.recover_buttons[0].click()
+    assert prompt.errors.outputs == ()
+    assert prompt.model.weights["jawOpen"] == pytest.approx(0.7)
+    assert loads == []
+
+
+def test_recovery_prompt_start_fresh(tmp_path, monkeypatch) -> None:
+    monkeypatch.setenv("WORKBENCH_RECOVERY_DIR", str(tmp_path))
+    _crashed_session(tmp_path, "crashed", 0.7)
+    prompt = recovery_prompt(lambda: "fresh")
+    prompt.fresh_button.click()
+    assert prompt.model == "fresh"
