@@ -97,7 +97,7 @@ class LabServer:
             PYTHONPATH=os.pathsep.join(p for p in (str(REPO), env.get("PYTHONPATH", "")) if p),
             VTK_DEFAULT_OPENGL_WINDOW="vtkEGLRenderWindow",
             # autosave/recovery files of test kernels stay in this server's temp dirs
-            WORKBENCH_RECOVERY_DIR=str(base / "recovery"),
+            WORKBENCH_RECOVERY_DIR=str(self.base / "recovery"),
         )
         cmd = [
             sys.executable, "-m", "jupyterlab",
