@@ -8,6 +8,7 @@ the state shipped back to the front end. Playback runs on a real asyncio loop.
 from __future__ import annotations
 
 import asyncio
+import concurrent.futures
 import itertools
 
 import pytest
@@ -36,6 +37,17 @@ def keyed(tiny_model):
 def send(w, **content):
     w.handle_message(content)
     assert w._error == "", w._error
+
+
+
+def run_on_fresh_thread(fn, *args):
+    """Run ``fn(*args)`` on a new thread, as a script with no event loop would.
+
+    The session-wide Playwright fixture keeps an asyncio loop registered on the
+    main thread, so ``asyncio.run`` there would refuse to start.
+    """
+    with concurrent.futures.ThreadPoolExecutor(max_workers=1) as pool:
+        return pool.submit(fn, *args).result(timeout=30)
 
 
 def test_state_lists_tracks_keys_and_tangents(keyed):
@@ -246,7 +258,7 @@ def test_playback_sets_times_and_stops_at_the_end(keyed):
         assert w.playing
         return await task
 
-    stats = asyncio.run(main())
+    stats = run_on_fresh_thread(lambda: asyncio.run(main()))
     assert not w.playing
     assert keyed.time == 0.2
     assert seen[0] == 0.0 and seen[-1] == 0.2
@@ -269,7 +281,7 @@ def test_pause_stops_looping_playback(keyed):
         w.pause()
         await asyncio.wait_for(task, 5)
 
-    asyncio.run(main())
+    run_on_fresh_thread(lambda: asyncio.run(main()))
     assert not w.playing
     n = len(seen)
     assert n >= 2
@@ -287,7 +299,7 @@ def test_slow_browser_gets_one_frame_at_a_time_and_frames_are_dropped(keyed):
         w.pause()
         await asyncio.wait_for(task, 5)
 
-    asyncio.run(main())
+    run_on_fresh_thread(lambda: asyncio.run(main()))
     in_flight = 0
     for kind, _seq in log:
         in_flight += 1 if kind == "frame" else -1
@@ -308,18 +320,22 @@ def test_playback_without_any_view_stops_waiting_for_acks(keyed):
     async def main():
         return await asyncio.wait_for(w.play(loop=False), 5)
 
-    stats = asyncio.run(main())
+    stats = run_on_fresh_thread(lambda: asyncio.run(main()))
     assert keyed.time == 0.3
     assert stats["frames"] >= 5  # only the first frame waited
 
 
 def test_pause_message_during_playback_without_a_loop_thread(keyed):
     # no running loop in this thread: playback runs on its own thread
-    w = TimelineWidget(keyed)
-    fut = w.play(loop=True)
-    w.handle_message({"type": "pause"})
-    fut.result(timeout=5)
-    assert not w.playing
+    def script():
+        w = TimelineWidget(keyed)
+        fut = w.play(loop=True)
+        assert isinstance(fut, concurrent.futures.Future)
+        w.handle_message({"type": "pause"})
+        fut.result(timeout=5)
+        return w
+
+    assert not run_on_fresh_thread(script).playing
 
 
 def test_timeline_state_orders_weight_tracks_before_others(keyed):

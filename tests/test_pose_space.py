@@ -1,0 +1,201 @@
+"""Pose-space details (Bickel et al. 2008, §5): identities on small meshes and the sample head."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+
+import workbench
+from workbench.handle_presets import default_face_handles
+from workbench.pose_space import (
+    FeatureGraph,
+    HybridDeformer,
+    compare_methods,
+    edge_weights,
+    extract_details,
+    fit_pose_space,
+    greedy_fit,
+    local_frames,
+    tangent_neighbours,
+    to_world,
+)
+from workbench.shell import ShellDeformer
+from workbench.wrinkle_examples import EXAMPLE_POSES, WrinkleSculptor, performance_weights
+
+
+def _rot(axis: np.ndarray, deg: float) -> np.ndarray:
+    a = axis / np.linalg.norm(axis)
+    t = np.radians(deg)
+    K = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+    return np.eye(3) + np.sin(t) * K + (1 - np.cos(t)) * K @ K
+
+
+@pytest.fixture(scope="module")
+def head():
+    m = workbench.load_sample("head")
+    h = default_face_handles(m, per_side=40).vertices
+    shell = ShellDeformer(m.vertices, m.faces, h, component_labels=m.component_labels, component_names=m.component_names)
+    sculptor = WrinkleSculptor(m)
+    examples = np.stack(list(sculptor.examples().values()))
+    return m, h, shell, sculptor, examples
+
+
+def test_strain_hand_worked() -> None:
+    P = np.array([[0.0, 0, 0], [1, 0, 0], [0, 2, 0]])
+    g = FeatureGraph(np.array([[0, 1], [0, 2]]), np.array([1.0, 2.0]))
+    np.testing.assert_allclose(g.strain(P), [0, 0])
+    Q = P * np.array([1.5, 0.5, 1.0])  # x stretched 50 %, y compressed 50 %
+    np.testing.assert_allclose(g.strain(Q), [0.5, -0.5])
+    R = _rot(np.array([1.0, 2, 3]), 40)
+    np.testing.assert_allclose(g.strain(Q @ R.T + 3.0), [0.5, -0.5], atol=1e-12)
+
+
+def test_feature_graph_from_handles_and_editing() -> None:
+    rng = np.random.default_rng(0)
+    P = rng.normal(size=(30, 3))
+    g = FeatureGraph.from_handles(P, neighbours=4)
+    assert 2 * 30 <= len(g) <= 4 * 30
+    assert np.all(g.edges[:, 0] < g.edges[:, 1])
+    assert len(np.unique(g.edges, axis=0)) == len(g)
+    np.testing.assert_allclose(g.rest_lengths, np.linalg.norm(P[g.edges[:, 0]] - P[g.edges[:, 1]], axis=1))
+    missing = next((i, j) for i in range(30) for j in range(i + 1, 30) if not np.any((g.edges == [i, j]).all(1)))
+    g2 = g.with_edge(*missing, P)
+    assert len(g2) == len(g) + 1
+    g3 = g2.without_edge(*missing)
+    np.testing.assert_array_equal(g3.edges, g.edges)
+    with pytest.raises(KeyError):
+        g3.without_edge(*missing)
+
+
+def test_alpha_rows_sum_to_one_with_at_most_16_edges(head) -> None:
+    m, h, *_ = head
+    V = m.vertices
+    g = FeatureGraph.from_handles(V[h])
+    a = edge_weights(V, V[h], g)
+    np.testing.assert_allclose(np.asarray(a.matrix.sum(1)).ravel(), 1.0, atol=1e-9)
+    assert np.diff(a.matrix.indptr).max() <= 16
+    assert a.matrix.data.min() > 0
+    # on an edge's endpoint-to-endpoint segment the excess is 0: that edge has the largest weight
+    i0, i1 = g.edges[0]
+    mid = 0.5 * (V[h[i0]] + V[h[i1]])
+    one = edge_weights(mid[None], V[h], g, beta=a.beta)
+    assert one.matrix[0, 0] == one.matrix.max()
+
+
+def test_local_frames_are_orthonormal_and_rotate_with_the_mesh(head) -> None:
+    m, *_ = head
+    nb = tangent_neighbours(m.faces, m.n_vertices)
+    R = local_frames(m.vertices, m.faces, nb)
+    used = np.zeros(m.n_vertices, bool)
+    used[m.faces.ravel()] = True
+    gram = np.einsum("nji,njk->nik", R[used], R[used])
+    np.testing.assert_allclose(gram, np.broadcast_to(np.eye(3), gram.shape), atol=1e-9)
+    Q = _rot(np.array([0.3, 1.0, -0.2]), 70)
+    R2 = local_frames(m.vertices @ Q.T + 1.0, m.faces, nb)
+    np.testing.assert_allclose(R2[used], Q @ R[used], atol=1e-9)
+
+
+def test_rotation_invariance_of_details(head) -> None:
+    m, h, shell, _sculptor, examples = head
+    hd = HybridDeformer(shell)
+    hd.fit(examples)
+    X = examples[0]
+    ds = hd.details_of(X)
+    Q = _rot(np.array([1.0, 0.4, 0.2]), 25)
+    c = m.vertices.mean(0)
+    Xr = (X - c) @ Q.T + c
+    # the same pose rigidly rotated: same features; details in frames of the rotated large-scale mesh.
+    # (the shell is linear, so it is only rotation-equivariant for the rotated *rest*; compare with
+    # frames built on the rotated large-scale mesh of the unrotated pose instead.)
+    np.testing.assert_allclose(hd.graph.strain(Xr[h]), ds.features[0], atol=1e-6)
+    ls = ds.large_scale[0].astype(np.float64)
+    lsr = (ls - c) @ Q.T + c
+    nb = hd.neighbours
+    d = extract_details(X, ls, local_frames(ls, m.faces, nb))
+    dr = extract_details(Xr, lsr, local_frames(lsr, m.faces, nb))
+    np.testing.assert_allclose(dr, d, atol=1e-5)  # local details identical
+    world = to_world(local_frames(lsr, m.faces, nb), dr)
+    np.testing.assert_allclose(world, (X - ls) @ Q.T, atol=1e-5)  # world details rotated
+
+
+def test_interpolation_reproduces_training_details_exactly(head) -> None:
+    m, _h, shell, _sculptor, examples = head
+    for weighted in (False, True):
+        hd = HybridDeformer(shell, weighted=weighted)
+        ds = hd.details_of(examples)
+        ps = fit_pose_space(ds.features, ds.details, alpha=hd.alpha, mode="interp")
+        ok = np.ones(m.n_vertices, bool) if ps.singular is None else ~ps.singular
+        assert ok.sum() > 0.3 * m.n_vertices
+        for j in range(len(examples)):
+            pred = ps.evaluate(ds.features[j])
+            scale = np.abs(ds.details[j]).max()
+            np.testing.assert_allclose(pred[ok], ds.details[j][ok], atol=1e-4 * scale)
+
+
+def test_zero_strain_gives_zero_detail_and_handles_are_exact(head) -> None:
+    m, h, shell, _sculptor, examples = head
+    hd = HybridDeformer(shell)
+    ps = hd.fit(examples)
+    np.testing.assert_allclose(ps.evaluate(np.zeros(len(hd.graph))), 0.0, atol=1e-6)
+    np.testing.assert_allclose(hd.deform(m.vertices[h]), m.vertices, atol=1e-5)
+    # handle vertices follow the handles exactly (details there are zero)
+    out = hd.deform(examples[3][h])
+    np.testing.assert_allclose(out[h], examples[3][h], atol=1e-5)
+
+
+def test_least_squares_with_all_poses_equals_interpolation(head) -> None:
+    _m, _h, shell, _sculptor, examples = head
+    hd = HybridDeformer(shell, weighted=False)
+    ds = hd.details_of(examples)
+    interp = fit_pose_space(ds.features, ds.details, mode="interp")
+    lsq, errors = greedy_fit(ds.features, ds.details, mode="lsq", tolerance=0.0)
+    assert len(lsq.basis) == len(examples) + 1
+    assert errors[-1] < 1e-6
+    f = ds.features.mean(0)
+    np.testing.assert_allclose(lsq.evaluate(f), interp.evaluate(f), atol=1e-5)
+    # and the error decreases as poses are added; a tolerance stops early
+    assert all(b <= a + 1e-9 for a, b in itertools.pairwise(errors))
+    short, _e2 = greedy_fit(ds.features, ds.details, mode="lsq", tolerance=errors[2] * 1.0001)
+    assert len(short.basis) == 3
+
+
+def test_numba_frame_matches_numpy(head) -> None:
+    _m, h, shell, _sculptor, examples = head
+    hd = HybridDeformer(shell)
+    hd.fit(examples)
+    p = examples[2][h]
+    np.testing.assert_allclose(hd.frame(p), hd.deform(p), atol=2e-5)
+    np.testing.assert_allclose(hd.frame(p, backend="numpy"), hd.deform(p), atol=2e-5)
+
+
+def test_editing_one_example_propagates(head) -> None:
+    m, _h, shell, _sculptor, examples = head
+    hd = HybridDeformer(shell, weighted=False)
+    ds = hd.details_of(examples)
+    ps = fit_pose_space(ds.features, ds.details, mode="interp")
+    j = list(EXAMPLE_POSES).index("brow_raise")
+    fore = m.vertices[:, 1] > 7.5
+    ps2 = ps.edited(j, mask=fore.astype(float))
+    np.testing.assert_allclose(ps2.evaluate(ds.features[j])[fore], 0.0, atol=1e-6)
+    np.testing.assert_allclose(ps2.evaluate(ds.features[j])[~fore], ps.evaluate(ds.features[j])[~fore], atol=1e-5)
+    # a pose near the brow raise (70 % of it) loses most of its forehead detail too
+    f = 0.7 * ds.features[j]
+    before = np.abs(ps.evaluate(f)[fore]).max()
+    after = np.abs(ps2.evaluate(f)[fore]).max()
+    assert after < 0.5 * before
+    ps3 = ps.edited(j, scale=2.0)
+    np.testing.assert_allclose(ps3.evaluate(ds.features[j]), 2 * ps.evaluate(ds.features[j]), atol=1e-5)
+
+
+def test_comparison_ordering_on_held_out_frames(head) -> None:
+    _m, _h, shell, sculptor, _examples = head
+    seq = sculptor.sequence(performance_weights(40))
+    hd = HybridDeformer(shell)
+    rows = compare_methods(hd, seq[:20], seq[20:], max_basis=6, modes=("lsq",))
+    err = {r["method"]: r["test_rms"] for r in rows if r["basis"] == 6}
+    assert err["WPSD"] < err["PSD"] < err["local blend shapes"] < err["global blend shapes"]
+    hmax = {r["method"]: r["test_handle_max"] for r in rows if r["basis"] == 6}
+    assert hmax["WPSD"] < 1e-5 and hmax["PSD"] < 1e-5
+    assert hmax["global blend shapes"] > 1e-3

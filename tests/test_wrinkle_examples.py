@@ -1,0 +1,105 @@
+"""Procedural wrinkle examples and the FaceModel wrinkle layer (base-resolution sample head)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import workbench
+from workbench.wrinkle_examples import EXAMPLE_POSES, WrinkleSculptor, performance_weights
+from workbench.wrinkle_layer import WrinkleLayer, fit_sample_wrinkles
+
+
+@pytest.fixture(scope="module")
+def sculpted():
+    m = workbench.load_sample("head")
+    return m, WrinkleSculptor(m)
+
+
+def _forehead(V: np.ndarray) -> np.ndarray:
+    return (V[:, 1] > 7.5) & (V[:, 1] < 7.85) & (np.abs(V[:, 0]) < 0.4) & (V[:, 2] > 1.2)
+
+
+def test_neutral_has_no_wrinkles(sculpted) -> None:
+    m, s = sculpted
+    np.testing.assert_allclose(s.detailed({}), m.vertices, atol=1e-6)
+    assert all(np.abs(c).max() < 1e-9 for c in s.compression(m.vertices).values())
+
+
+def test_wrinkles_follow_compression(sculpted) -> None:
+    m, s = sculpted
+    fore = _forehead(m.vertices)
+    raise_ = s.height(s.blend(EXAMPLE_POSES["brow_raise"]))
+    down = s.height(s.blend(EXAMPLE_POSES["brow_down"]))
+    pucker = s.height(s.blend(EXAMPLE_POSES["pucker"]))
+    assert np.abs(raise_[fore]).max() > 2e-3  # > 0.2 mm of furrow on the forehead
+    assert np.abs(pucker[fore]).max() < 0.1 * np.abs(raise_[fore]).max()
+    glabella = (np.abs(m.vertices[:, 0]) < 0.1) & (np.abs(m.vertices[:, 1] - 7.4) < 0.08) & (m.vertices[:, 2] > 1.2)
+    assert np.abs(down[glabella]).max() > np.abs(raise_[glabella]).max()
+    # half the expression -> less compression -> smaller wrinkles
+    half = s.height(s.blend({k: 0.5 * w for k, w in EXAMPLE_POSES["brow_raise"].items()}))
+    assert np.abs(half[fore]).max() < np.abs(raise_[fore]).max()
+
+
+def test_performance_weights_are_smooth_bounded_and_deterministic() -> None:
+    a = performance_weights(60, seed=3)
+    b = performance_weights(60, seed=3)
+    assert a == b and len(a) == 60
+    W = np.array([[f[k] for k in sorted(a[0])] for f in a])
+    assert W.min() >= 0 and W.max() <= 1
+    assert np.abs(np.diff(W, axis=0)).max() < 0.5  # no jumps between frames
+    first = W[:30]
+    for pose in EXAMPLE_POSES.values():  # every example expression appears in the first half
+        cols = [sorted(a[0]).index(k) for k in pose]
+        assert first[:, cols].max() > 0.2
+
+
+def test_layer_drag_raises_forehead_detail_and_return_removes_it(sculpted) -> None:
+    m, s = sculpted
+    layer = fit_sample_wrinkles(m, sculptor=s)
+    assert layer.fitted and len(m.handles) > 0
+    assert layer(m) is None  # rest pose: nothing to add, no work
+    V = m.vertices
+    hv = V[m.handles.vertices]
+    brow = np.argsort(hv[:, 1])[-6:]  # the highest handles sit on the brows
+    fore = _forehead(V)
+    before = m.evaluate().copy()
+    with m.interaction("Drag brows"):
+        o = np.zeros((len(m.handles), 3), np.float32)
+        o[brow, 1] = 0.05
+        m.set_handle_offsets(o)
+    d = layer(m)
+    assert d is not None and np.abs(d[fore]).max() > 1e-3
+    after = m.evaluate()
+    large = np.asarray(m.blended()) + m.handle_displacement()
+    np.testing.assert_allclose(after, large + d, atol=1e-6)  # one evaluate = large + fine scale
+    m.reset_handle_offsets()
+    assert layer(m) is None
+    np.testing.assert_allclose(m.evaluate(), before, atol=1e-6)
+
+
+def test_layer_strength_and_slider_example(sculpted) -> None:
+    _m, s = sculpted
+    m2 = workbench.load_sample("head")
+    layer = fit_sample_wrinkles(m2, sculptor=WrinkleSculptor(m2))
+    w = EXAMPLE_POSES["brow_raise"]
+    m2.set_weights(w)
+    # dialling an example in with the sliders reproduces the sculpted example on the skin
+    skin = np.asarray(m2.component_labels) == m2.component_names.index("skin")
+    ok = skin & ~layer.pose_space.singular
+    np.testing.assert_allclose(m2.evaluate()[ok], s.detailed(w)[ok], atol=2e-4)
+    full = layer(m2)
+    layer.set_strength(0.5)
+    np.testing.assert_allclose(layer(m2), 0.5 * full, atol=1e-6)
+    layer.set_enabled(False)
+    assert layer(m2) is None
+    layer.set_enabled(True)
+    layer.edit_example("brow_raise", scale=0.0)
+    assert np.abs(layer(m2)).max() < 0.2 * np.abs(full).max()
+
+
+def test_layer_without_fit_is_a_no_op() -> None:
+    m = workbench.load_sample("head")
+    layer = WrinkleLayer().attach(m)
+    assert layer(m) is None
+    np.testing.assert_array_equal(m.evaluate(), m.blended())

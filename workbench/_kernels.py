@@ -1,0 +1,211 @@
+"""numba kernels for the per-frame pose-space pipeline (optional; numpy fallbacks elsewhere).
+
+Why numba: a frame of pose-space wrinkles at 100k vertices is ``u = B·u_H``
+(89 columns), vertex normals, local frames and WPSD (16 edges × 6–7 poses per
+vertex). In numpy these are ~10 separate passes with temporaries and a
+single-threaded sparse gather, ≈ 20 ms at 100k (``benchmarks/bench_wrinkles.py``,
+``shared/notes/performance-anchors.md``); the frame budget is 6 ms. Fused,
+two-thread loops over vertices reach it. BLAS is deliberately *not* used in
+the frame loop: spinning OpenBLAS threads next to numba threads on 2 cores was
+3–13× slower, so ``B·u_H`` is a numba kernel too.
+
+Every kernel writes into a caller-provided output (no allocation per frame)
+and uses float32 storage with float32 arithmetic, like a GPU implementation.
+numba's threads follow ``numba.set_num_threads`` (default: all cores).
+``AVAILABLE`` is False when numba is not installed; callers then use numpy.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+try:
+    from numba import njit, prange
+
+    AVAILABLE = True
+except ImportError:  # pragma: no cover - numba is optional
+    AVAILABLE = False
+
+    def njit(*args: Any, **kwargs: Any) -> Any:  # type: ignore[no-redef]
+        def wrap(f: Any) -> Any:
+            return f
+
+        return wrap if not (len(args) == 1 and callable(args[0])) else args[0]
+
+    prange = range  # type: ignore[misc]
+
+_BLOCK = 2048
+
+
+@njit(parallel=True, fastmath=True, cache=True)
+def bmul_add(B, uH, rest, out):
+    """``out = rest + B @ uH``; B (n, H) float32 in Fortran order, uH (H, 3), rest/out (n, 3).
+
+    Blocks of rows, one contiguous accumulator per coordinate (vectorizes; the
+    columns of the Fortran-ordered basis are read contiguously, no copy of B).
+    """
+    n, H = B.shape
+    nblocks = (n + _BLOCK - 1) // _BLOCK
+    for bi in prange(nblocks):
+        s = bi * _BLOCK
+        e = min(n, s + _BLOCK)
+        a0 = np.empty(e - s, np.float32)
+        a1 = np.empty(e - s, np.float32)
+        a2 = np.empty(e - s, np.float32)
+        for i in range(s, e):
+            a0[i - s] = rest[i, 0]
+            a1[i - s] = rest[i, 1]
+            a2[i - s] = rest[i, 2]
+        for j in range(H):
+            u0, u1, u2 = uH[j, 0], uH[j, 1], uH[j, 2]
+            if u0 == 0.0 and u1 == 0.0 and u2 == 0.0:
+                continue
+            for i in range(s, e):
+                b = B[i, j]
+                a0[i - s] += b * u0
+                a1[i - s] += b * u1
+                a2[i - s] += b * u2
+        for i in range(s, e):
+            out[i, 0] = a0[i - s]
+            out[i, 1] = a1[i - s]
+            out[i, 2] = a2[i - s]
+
+
+@njit(parallel=True, fastmath=True, cache=True)
+def vertex_normals(X, faces, vf_ptr, vf_idx, fbuf, out):
+    """Area-weighted unit vertex normals of X into ``out`` (n, 3); fbuf (m, 3) scratch."""
+    m = faces.shape[0]
+    for f in prange(m):
+        a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
+        e1x, e1y, e1z = X[b, 0] - X[a, 0], X[b, 1] - X[a, 1], X[b, 2] - X[a, 2]
+        e2x, e2y, e2z = X[c, 0] - X[a, 0], X[c, 1] - X[a, 1], X[c, 2] - X[a, 2]
+        fbuf[f, 0] = e1y * e2z - e1z * e2y
+        fbuf[f, 1] = e1z * e2x - e1x * e2z
+        fbuf[f, 2] = e1x * e2y - e1y * e2x
+    n = X.shape[0]
+    for v in prange(n):
+        sx = np.float32(0.0)
+        sy = np.float32(0.0)
+        sz = np.float32(0.0)
+        for k in range(vf_ptr[v], vf_ptr[v + 1]):
+            f = vf_idx[k]
+            sx += fbuf[f, 0]
+            sy += fbuf[f, 1]
+            sz += fbuf[f, 2]
+        ln = np.sqrt(sx * sx + sy * sy + sz * sz)
+        if ln > 0:
+            out[v, 0] = sx / ln
+            out[v, 1] = sy / ln
+            out[v, 2] = sz / ln
+        else:
+            out[v, 0] = 0.0
+            out[v, 1] = 0.0
+            out[v, 2] = 0.0
+
+
+@njit(inline="always", fastmath=True)
+def _frame_apply(X, N, nb, v, d0, d1, d2):
+    """World vector of local (d0, d1, d2) in the frame [t, b, n] of vertex v."""
+    nx, ny, nz = N[v, 0], N[v, 1], N[v, 2]
+    w = nb[v]
+    tx, ty, tz = X[w, 0] - X[v, 0], X[w, 1] - X[v, 1], X[w, 2] - X[v, 2]
+    dot = tx * nx + ty * ny + tz * nz
+    tx -= dot * nx
+    ty -= dot * ny
+    tz -= dot * nz
+    ln = np.sqrt(tx * tx + ty * ty + tz * tz)
+    if ln < 1e-12:  # same fallback as pose_space.local_frames
+        if abs(nx) < 0.9:
+            tx, ty, tz = 1.0 - nx * nx, -nx * ny, -nx * nz
+        else:
+            tx, ty, tz = -ny * nx, 1.0 - ny * ny, -ny * nz
+        ln = np.sqrt(tx * tx + ty * ty + tz * tz)
+    tx /= ln
+    ty /= ln
+    tz /= ln
+    bx, by, bz = ny * tz - nz * ty, nz * tx - nx * tz, nx * ty - ny * tx
+    return (
+        tx * d0 + bx * d1 + nx * d2,
+        ty * d0 + by * d1 + ny * d2,
+        tz * d0 + bz * d1 + nz * d2,
+    )
+
+
+@njit(parallel=True, fastmath=True, cache=True)
+def wpsd_apply(X, N, nb, a_idx, a_val, FS, f, W, strength, add_base, out, scratch):
+    """WPSD (eq. 3, 5) + local frames: ``out = [X +] strength · R_v Σ_j W[v, j] ‖f − FS_j‖_v``.
+
+    X, N (n, 3) float32: large-scale positions and their unit normals; nb (n,)
+    tangent neighbours; a_idx/a_val (n, K) edge weights; FS (P, F) basis
+    features; f (F,) current features; W (n, P, 3) RBF weights; scratch (n, P)
+    float32 (no allocation inside the parallel loop).
+    """
+    n, K = a_idx.shape
+    P = FS.shape[0]
+    for v in prange(n):
+        # edge-major: each edge's weight and strain are gathered once for all P poses
+        r2 = scratch[v]
+        for j in range(P):
+            r2[j] = 0.0
+        for k in range(K):
+            a = a_val[v, k]
+            if a == 0.0:
+                break  # weights are sorted strongest first, zeros only pad the row
+            i = a_idx[v, k]
+            fi = f[i]
+            for j in range(P):
+                diff = fi - FS[j, i]
+                r2[j] += a * diff * diff
+        d0 = np.float32(0.0)
+        d1 = np.float32(0.0)
+        d2 = np.float32(0.0)
+        for j in range(P):
+            r = np.sqrt(r2[j])
+            d0 += W[v, j, 0] * r
+            d1 += W[v, j, 1] * r
+            d2 += W[v, j, 2] * r
+        wx, wy, wz = _frame_apply(X, N, nb, v, d0 * strength, d1 * strength, d2 * strength)
+        if add_base:
+            out[v, 0] = X[v, 0] + wx
+            out[v, 1] = X[v, 1] + wy
+            out[v, 2] = X[v, 2] + wz
+        else:
+            out[v, 0] = wx
+            out[v, 1] = wy
+            out[v, 2] = wz
+
+
+@njit(parallel=True, fastmath=True, cache=True)
+def psd_apply(X, N, nb, phi, W, strength, add_base, out):
+    """Global PSD (eq. 2) + local frames: ``out = [X +] strength · R_v Σ_j φ_j W[j, v]``; W (P, n, 3)."""
+    P, n = W.shape[0], W.shape[1]
+    for v in prange(n):
+        d0 = np.float32(0.0)
+        d1 = np.float32(0.0)
+        d2 = np.float32(0.0)
+        for j in range(P):
+            d0 += W[j, v, 0] * phi[j]
+            d1 += W[j, v, 1] * phi[j]
+            d2 += W[j, v, 2] * phi[j]
+        wx, wy, wz = _frame_apply(X, N, nb, v, d0 * strength, d1 * strength, d2 * strength)
+        if add_base:
+            out[v, 0] = X[v, 0] + wx
+            out[v, 1] = X[v, 1] + wy
+            out[v, 2] = X[v, 2] + wz
+        else:
+            out[v, 0] = wx
+            out[v, 1] = wy
+            out[v, 2] = wz
+
+
+def vertex_face_csr(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Vertex -> incident faces as CSR (ptr (n+1,) int64, idx (3m,) int32)."""
+    Fa = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    corner = Fa.ravel()
+    order = np.argsort(corner, kind="stable")
+    idx = (order // 3).astype(np.int32)
+    ptr = np.zeros(n + 1, np.int64)
+    np.cumsum(np.bincount(corner, minlength=n), out=ptr[1:])
+    return ptr, idx
