@@ -35,16 +35,10 @@ from __future__ import annotations
 
 import argparse
 import statistics
-import sys
-import tempfile
 import time
-from pathlib import Path
 from typing import Any
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO / "tests" / "browser"))
-
-from harness import CHROMIUM, CHROMIUM_ARGS, LabServer, NotebookPage, write_notebook  # noqa: E402
+from browser_session import NotebookPage, chromium_missing, each_resolution
 
 _SETUP = """
 import json, time
@@ -165,52 +159,24 @@ def main() -> int:
     ap.add_argument("--trials", type=int, default=20)
     ap.add_argument("--resolutions", nargs="+", default=["base", "25k", "100k"])
     args = ap.parse_args()
-    if not CHROMIUM.exists():
-        print(f"{CHROMIUM} is missing: apt-get install chromium", file=sys.stderr)
+    if chromium_missing():
         return 2
-    from playwright.sync_api import sync_playwright
 
-    rows = []
-    with tempfile.TemporaryDirectory(prefix="fwb-bench-") as tmp:
-        lab = LabServer(Path(tmp))
-        lab.start()
-        try:
-            with sync_playwright() as pw:
-                browser = pw.chromium.launch(
-                    executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS
-                )
-                for res in args.resolutions:
-                    name = f"bench_drag_{res}.ipynb"
-                    write_notebook(lab.root / name, [_SETUP.replace("{res}", res)])
-                    ctx = browser.new_context(viewport={"width": 1400, "height": 1000})
-                    page = ctx.new_page()
-                    nb = NotebookPage(page, lab, REPO / "test-artifacts" / "bench-drag", name)
-                    page.goto(f"{lab.url}/lab/workspaces/bench-drag-{res}/tree/{name}?reset")
-                    try:
-                        nb.wait_kernel_idle()
-                        nb.run_all(timeout=900)
-                        nb.wait_viewports(1, timeout=120)
-                        n, pre = nb.kernel_eval(
-                            "import json; print(json.dumps([model.n_vertices, PRECOMPUTE_S]))"
-                        )
-                        results = measure(nb, args.trials)
-                        for mode, (lat, rms, (total, push), (eps, ups), parts) in results.items():
-                            core = [t - p for t, p in zip(total, push, strict=False)]
-                            split = [_med([p[i] for p in parts]) for i in range(3)]
-                            rows.append(
-                                (res, n, pre, mode, _med(lat), _pct(lat, 0.9), len(lat), eps, ups,
-                                 *split, _med(rms), _med(total), _med(core), _med(push))
-                            )  # fmt: skip
-                        nb.screenshot(f"after-{res}")
-                    except Exception as exc:  # report and go on with the next size
-                        print(f"[{res}] failed: {type(exc).__name__}: {exc}", file=sys.stderr)
-                        nb.screenshot(f"failed-{res}")
-                    finally:
-                        ctx.close()
-                        lab.shutdown_kernels()
-                browser.close()
-        finally:
-            lab.stop()
+    def run(res: str, nb: NotebookPage) -> list[tuple[Any, ...]]:
+        rows: list[tuple[Any, ...]] = []
+        n, pre = nb.kernel_eval("import json; print(json.dumps([model.n_vertices, PRECOMPUTE_S]))")
+        results = measure(nb, args.trials)
+        for mode, (lat, rms, (total, push), (eps, ups), parts) in results.items():
+            core = [t - p for t, p in zip(total, push, strict=False)]
+            split = [_med([p[i] for p in parts]) for i in range(3)]
+            rows.append(
+                (res, n, pre, mode, _med(lat), _pct(lat, 0.9), len(lat), eps, ups,
+                 *split, _med(rms), _med(total), _med(core), _med(push))
+            )  # fmt: skip
+        nb.screenshot(f"after-{res}")
+        return rows
+
+    rows = each_resolution("drag", args.resolutions, lambda res: _SETUP.replace("{res}", res), run)
 
     print()
     print("Handle drag latency, pointer move -> first render showing the new geometry (ms)")

@@ -33,19 +33,11 @@ from __future__ import annotations
 
 import argparse
 import statistics
-import sys
-import tempfile
 import time
-from pathlib import Path
 from typing import Any
 
 import numpy as np
-
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
-sys.path.insert(0, str(REPO / "tests" / "browser"))
-
-from harness import CHROMIUM, CHROMIUM_ARGS, LabServer, NotebookPage, write_notebook  # noqa: E402
+from browser_session import NotebookPage, chromium_missing, each_resolution
 
 
 def _med(values: list[float]) -> float:
@@ -212,55 +204,30 @@ def measure(nb: NotebookPage, trials: int, left: int, right: int) -> dict[str, A
 
 
 def bench_browser(resolutions: list[str], trials: int) -> list[tuple[Any, ...]]:
-    from playwright.sync_api import sync_playwright
+    def run(res: str, nb: NotebookPage) -> list[tuple[Any, ...]]:
+        rows: list[tuple[Any, ...]] = []
+        page = nb.page
+        n, left, right = nb.kernel_eval(
+            "import json\n"
+            "_s = model.component_labels == model.component_names.index('skin')\n"
+            "_d = np.linalg.norm(model.expressions['smile'].displacement, axis=1) * _s\n"
+            "_t = np.argsort(-_d)[:80]; _V = np.asarray(model.vertices)\n"
+            "print(json.dumps([model.n_vertices, int(_t[np.argmax(_V[_t, 0])]),"
+            " int(_t[np.argmin(_V[_t, 0])])]))"
+        )
+        for mode, (lat, parts, (msg_ms, dab_ms), eps, ups) in measure(
+            nb, trials, left, right
+        ).items():
+            split = [_med([p[i] for p in parts]) for i in range(3)]
+            rows.append(
+                (res, n, mode, _med(lat), _pct(lat, 0.9), len(lat), eps, ups,
+                 *split, _med(msg_ms), _med(dab_ms))
+            )  # fmt: skip
+        page.mouse.move(5, 5)
+        nb.screenshot(f"after-{res}")
+        return rows
 
-    rows = []
-    with tempfile.TemporaryDirectory(prefix="fwb-bench-") as tmp:
-        lab = LabServer(Path(tmp))
-        lab.start()
-        try:
-            with sync_playwright() as pw:
-                browser = pw.chromium.launch(
-                    executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS
-                )
-                for res in resolutions:
-                    name = f"bench_paint_{res}.ipynb"
-                    write_notebook(lab.root / name, [_SETUP.replace("{res}", res)])
-                    ctx = browser.new_context(viewport={"width": 1400, "height": 1000})
-                    page = ctx.new_page()
-                    nb = NotebookPage(page, lab, REPO / "test-artifacts" / "bench-paint", name)
-                    page.goto(f"{lab.url}/lab/workspaces/bench-paint-{res}/tree/{name}?reset")
-                    try:
-                        nb.wait_kernel_idle()
-                        nb.run_all(timeout=900)
-                        nb.wait_viewports(1, timeout=120)
-                        n, left, right = nb.kernel_eval(
-                            "import json\n"
-                            "_s = model.component_labels == model.component_names.index('skin')\n"
-                            "_d = np.linalg.norm(model.expressions['smile'].displacement, axis=1) * _s\n"
-                            "_t = np.argsort(-_d)[:80]; _V = np.asarray(model.vertices)\n"
-                            "print(json.dumps([model.n_vertices, int(_t[np.argmax(_V[_t, 0])]),"
-                            " int(_t[np.argmin(_V[_t, 0])])]))"
-                        )
-                        for mode, (lat, parts, (msg_ms, dab_ms), eps, ups) in measure(
-                            nb, trials, left, right
-                        ).items():
-                            split = [_med([p[i] for p in parts]) for i in range(3)]
-                            rows.append(
-                                (res, n, mode, _med(lat), _pct(lat, 0.9), len(lat), eps, ups,
-                                 *split, _med(msg_ms), _med(dab_ms))
-                            )  # fmt: skip
-                        page.mouse.move(5, 5)
-                        nb.screenshot(f"after-{res}")
-                    except Exception as exc:  # report and go on with the next size
-                        print(f"[{res}] failed: {type(exc).__name__}: {exc}", file=sys.stderr)
-                        nb.screenshot(f"failed-{res}")
-                    finally:
-                        ctx.close()
-                        lab.shutdown_kernels()
-                browser.close()
-        finally:
-            lab.stop()
+    rows = each_resolution("paint", resolutions, lambda res: _SETUP.replace("{res}", res), run)
     return rows
 
 
@@ -284,8 +251,7 @@ def main() -> int:
                   f"{dmed:8.2f} {dp90:8.2f} {emed:9.2f}")  # fmt: skip
 
     if args.browser:
-        if not CHROMIUM.exists():
-            print(f"{CHROMIUM} is missing: apt-get install chromium", file=sys.stderr)
+        if chromium_missing():
             return 2
         rows = bench_browser(args.browser, args.trials)
         print()

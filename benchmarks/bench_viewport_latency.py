@@ -25,15 +25,9 @@ from __future__ import annotations
 
 import argparse
 import statistics
-import sys
-import tempfile
 import time
-from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO / "tests" / "browser"))
-
-from harness import CHROMIUM, CHROMIUM_ARGS, LabServer, NotebookPage, write_notebook  # noqa: E402
+from browser_session import NotebookPage, chromium_missing, each_resolution
 
 _HOOK = """() => {
   if (window.__fwbHook) return;
@@ -129,59 +123,33 @@ def main() -> int:
     ap.add_argument("--trials", type=int, default=20)
     ap.add_argument("--resolutions", nargs="+", default=["base", "25k", "100k"])
     args = ap.parse_args()
-    if not CHROMIUM.exists():
-        print(f"{CHROMIUM} is missing: apt-get install chromium", file=sys.stderr)
+    if chromium_missing():
         return 2
-    from playwright.sync_api import sync_playwright
 
-    rows = []
-    with tempfile.TemporaryDirectory(prefix="fwb-bench-") as tmp:
-        lab = LabServer(Path(tmp))
-        lab.start()
-        try:
-            with sync_playwright() as pw:
-                browser = pw.chromium.launch(
-                    executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS
-                )
-                for res in args.resolutions:
-                    name = f"bench_{res}.ipynb"
-                    write_notebook(
-                        lab.root / name,
-                        [
-                            "import workbench, widgets\n"
-                            f'model = workbench.load_sample("head", resolution="{res}")\n'
-                            "wb = widgets.show_workbench(model)",
-                        ],
-                    )
-                    ctx = browser.new_context(viewport={"width": 1400, "height": 1000})
-                    page = ctx.new_page()
-                    nb = NotebookPage(page, lab, REPO / "test-artifacts" / "bench", name)
-                    page.goto(f"{lab.url}/lab/workspaces/bench-{res}/tree/{name}?reset")
-                    try:
-                        nb.wait_kernel_idle()
-                        nb.run_all(timeout=900)
-                        nb.wait_viewports(1, timeout=120)
-                        n = nb.kernel_eval("import json; print(json.dumps(model.n_vertices))")
-                        moved = nb.kernel_eval(
-                            "import json, numpy as np; print(json.dumps({s.name: int("
-                            "(np.abs(s.delta).sum(1) > 0).sum()) for s in model.shapes}))"
-                        )
-                        for mode, (lat, rms, wms, pms) in measure(nb, args.trials).items():
-                            shape = mode.split()[-1]
-                            rows.append(
-                                (res, n, f"{moved[shape] / n:.0%}", mode, statistics.median(lat),
-                                 _pct(lat, 0.9), len(lat), statistics.median(rms), statistics.median(wms),
-                                 statistics.median(pms) if pms else float("nan"))
-                            )  # fmt: skip
-                    except Exception as exc:  # report and go on with the next size
-                        print(f"[{res}] failed: {type(exc).__name__}: {exc}", file=sys.stderr)
-                        nb.screenshot(f"failed-{res}")
-                    finally:
-                        ctx.close()
-                        lab.shutdown_kernels()
-                browser.close()
-        finally:
-            lab.stop()
+    def setup_cell(res: str) -> str:
+        return (
+            "import workbench, widgets\n"
+            f'model = workbench.load_sample("head", resolution="{res}")\n'
+            "wb = widgets.show_workbench(model)"
+        )
+
+    def run(res: str, nb: NotebookPage) -> list[tuple]:
+        rows = []
+        n = nb.kernel_eval("import json; print(json.dumps(model.n_vertices))")
+        moved = nb.kernel_eval(
+            "import json, numpy as np; print(json.dumps({s.name: int("
+            "(np.abs(s.delta).sum(1) > 0).sum()) for s in model.shapes}))"
+        )
+        for mode, (lat, rms, wms, pms) in measure(nb, args.trials).items():
+            shape = mode.split()[-1]
+            rows.append(
+                (res, n, f"{moved[shape] / n:.0%}", mode, statistics.median(lat),
+                 _pct(lat, 0.9), len(lat), statistics.median(rms), statistics.median(wms),
+                 statistics.median(pms) if pms else float("nan"))
+            )  # fmt: skip
+        return rows
+
+    rows = each_resolution("viewport", args.resolutions, setup_cell, run)
 
     print()
     print("Viewport latency, input -> first render showing the new geometry (ms)")

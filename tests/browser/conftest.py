@@ -104,14 +104,24 @@ def open_notebook(
     """Factory: ``open_notebook(path_or_cells, run=True) -> NotebookPage``.
 
     ``path_or_cells`` is a notebook file (copied into the server root) or a list
-    of code-cell sources. The page is 1400x1000 CSS px in a fresh context.
+    of code-cell sources. The page is 1400x1000 CSS px in a fresh context. The
+    server's recovery folder is emptied first unless ``keep_recovery=True``.
     """
     opened: list[tuple[Any, NotebookPage]] = []
     before = lab.kernel_ids()
 
     def _open(
-        source: Path | list[str], *, run: bool = True, viewport_size: tuple[int, int] = (1400, 1000)
+        source: Path | list[str],
+        *,
+        run: bool = True,
+        viewport_size: tuple[int, int] = (1400, 1000),
+        keep_recovery: bool = False,
     ) -> NotebookPage:
+        if not keep_recovery:
+            # Kernels of earlier tests were shut down mid-session: their autosaves would
+            # make notebooks/workbench.ipynb offer recovery instead of opening the app.
+            for f in (lab.base / "recovery").glob("*"):
+                f.unlink()
         name = f"t_{uuid.uuid4().hex[:10]}.ipynb"
         target = lab.root / name
         if isinstance(source, list):
