@@ -1,0 +1,115 @@
+"""Every tutorial notebook in ``notebooks/`` runs headless, top to bottom, without errors.
+
+Each ``notebooks/*.ipynb`` is executed with nbclient in a fresh ``python3``
+kernel of this venv (jupyter_client starts ``sys.executable -m ipykernel``),
+the way CI's full test run has it. So that executing a notebook can never
+rewrite a file tracked in git (e.g. ``wrinkles_comparison.ipynb`` saves PNGs
+into ``notebooks/images/``), the ``notebooks/`` folder is copied into a
+temporary directory and the copy is executed there (cwd = the copy). The
+kernel also gets a private ``TMPDIR`` and ``WORKBENCH_RECOVERY_DIR`` (the
+workbench notebook autosaves) and renders through EGL
+(``VTK_DEFAULT_OPENGL_WINDOW=vtkEGLRenderWindow``).
+
+The executed notebooks and a table of run times are kept in
+``test-artifacts/tutorials/``.
+
+Lives in ``tests/ui`` because it needs the ``ui`` and ``test`` extras (nbclient,
+ipykernel, pyvista); the core-only CI job does not collect ``tests/ui``.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+NOTEBOOKS = REPO / "notebooks"
+ARTIFACTS = REPO / "test-artifacts" / "tutorials"
+#: one cell may take this long (the slowest cells fit WPSD on the 100k head)
+CELL_TIMEOUT_S = 900
+
+pytestmark = [pytest.mark.ui, pytest.mark.slow]
+
+
+def _notebooks() -> list[Path]:
+    return sorted(NOTEBOOKS.glob("*.ipynb"))
+
+
+@pytest.fixture(scope="module")
+def timings() -> Iterator[dict[str, float]]:
+    found: dict[str, float] = {}
+    yield found
+    if found:
+        ARTIFACTS.mkdir(parents=True, exist_ok=True)
+        lines = [f"{name:40s} {secs:7.1f} s" for name, secs in sorted(found.items())]
+        (ARTIFACTS / "timings.txt").write_text("\n".join(lines) + "\n")
+        print("\ntutorial notebook run times:\n" + "\n".join(lines))
+
+
+def test_there_are_tutorials() -> None:
+    names = {p.name for p in _notebooks()}
+    for required in ("quick_start.ipynb", "workbench.ipynb", "timeline_export.ipynb"):
+        assert required in names, f"notebooks/{required} is missing"
+
+
+@pytest.mark.parametrize("notebook", _notebooks(), ids=lambda p: p.stem)
+def test_notebook_runs_without_errors(
+    notebook: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, timings: dict[str, float]
+) -> None:
+    import nbformat
+    from nbclient import NotebookClient
+    from nbclient.exceptions import CellExecutionError
+
+    work = tmp_path / "notebooks"
+    shutil.copytree(NOTEBOOKS, work, ignore=shutil.ignore_patterns(".ipynb_checkpoints"))
+    private_tmp = tmp_path / "tmp"
+    private_tmp.mkdir()
+    # The kernel inherits this process's environment when nbclient starts it.
+    monkeypatch.setenv("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
+    monkeypatch.setenv("WORKBENCH_RECOVERY_DIR", str(tmp_path / "recovery"))
+    monkeypatch.setenv("TMPDIR", str(private_tmp))
+    monkeypatch.setenv("MPLBACKEND", "Agg")
+    monkeypatch.setenv(
+        "PYTHONPATH", os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")]))
+    )
+    vtk_wasm = tmp_path / "vtk-wasm"  # trame-vtklocal must not try to download anything
+    vtk_wasm.mkdir()
+    monkeypatch.setenv("VTK_WASM_DIR_OVERRIDE", str(vtk_wasm))
+
+    nb = nbformat.read(work / notebook.name, as_version=4)
+    client = NotebookClient(
+        nb,
+        timeout=CELL_TIMEOUT_S,
+        kernel_name="python3",
+        resources={"metadata": {"path": str(work)}},
+    )
+    t0 = time.perf_counter()
+    error: CellExecutionError | None = None
+    try:
+        client.execute()
+    except CellExecutionError as exc:
+        error = exc
+    finally:
+        elapsed = time.perf_counter() - t0
+        timings[notebook.name] = elapsed
+        ARTIFACTS.mkdir(parents=True, exist_ok=True)
+        nbformat.write(nb, ARTIFACTS / notebook.name)
+    if error is not None:
+        pytest.fail(f"{notebook.name} raised after {elapsed:.0f} s:\n{error}", pytrace=False)
+
+    code = [c for c in nb.cells if c.cell_type == "code" and c.source.strip()]
+    outputs = [o for c in code for o in c.get("outputs", [])]
+    errors = [f"{o.get('ename')}: {o.get('evalue')}" for o in outputs if o.output_type == "error"]
+    assert errors == [], f"{notebook.name}: {errors}"
+    # a traceback printed by a callback (widgets report errors instead of raising)
+    tracebacks = [
+        o.text for o in outputs if o.output_type == "stream" and "Traceback (most recent" in o.text
+    ]
+    assert tracebacks == [], f"{notebook.name} printed tracebacks:\n" + "\n".join(tracebacks)
+    unexecuted = [i for i, c in enumerate(code) if c.get("execution_count") is None]
+    assert unexecuted == [], f"{notebook.name}: code cells {unexecuted} did not run"
