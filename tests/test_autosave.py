@@ -76,6 +76,10 @@ def test_crashed_session_is_recoverable(tmp_path: Path) -> None:
     assert "9 vertices, 1 shapes, 1 keyed tracks" in found[0].describe()
     m = recover(found[0])
     assert m.weights["up"] == 0.75 and "weights/up" in m.tracks.tracks
+    # the recovering session takes the file over at once: nobody else is offered it
+    saver = Autosaver(m, "crashy", delay=10.0, folder=tmp_path)
+    assert find_recoverable(tmp_path) == []
+    saver.close()
 
 
 def test_live_sessions_are_not_offered(tiny_model: FaceModel, tmp_path: Path) -> None:

@@ -122,6 +122,15 @@ class Autosaver:
         self._closed = False
         model.events.history.connect(self._on_edit)
         model.events.tracks.connect(self._on_edit)
+        if self.path.exists():
+            # This session takes the name over (it was just recovered, or the user chose
+            # to start fresh): a second kernel must not offer the same file again.
+            self._write_owner()
+
+    def _write_owner(self) -> None:
+        tmp = self.owner_path.with_suffix(".tmp")
+        tmp.write_text(json.dumps({"pid": os.getpid(), "saved_at": time.time()}))
+        os.replace(tmp, self.owner_path)
 
     def _set_state(self, state: str) -> None:
         self.state = state
@@ -156,9 +165,7 @@ class Autosaver:
                     return
                 try:
                     save_model(self.model, self.path)
-                    tmp = self.owner_path.with_suffix(".tmp")
-                    tmp.write_text(json.dumps({"pid": os.getpid(), "saved_at": time.time()}))
-                    os.replace(tmp, self.owner_path)
+                    self._write_owner()
                 except Exception as exc:  # report, keep running: autosave must not break editing
                     error = f"error: {exc}"
                 else:
