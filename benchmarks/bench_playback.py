@@ -18,7 +18,9 @@ the mouth and brows), ticks *Loop*, presses **Play** with the mouse, waits
   (evaluate + every listener, the viewport's diff+send included) and for the
   viewport's geometry push alone;
 * ``render ms``: the viewport's own JS time per render (``data-render-ms``:
-  upload + normals + draw call), sampled every 0.2 s.
+  upload + normals + draw call), sampled every 0.2 s;
+* ``draft``: whether the viewport drew at half resolution while playing (it does
+  on software WebGL, see ``softwareWebGL()`` in ``widgets/js/src/viewport.js``).
 
 Playback sends a frame only while fewer than ``FRAMES_IN_FLIGHT`` frames are
 not yet drawn by the browser (see ``widgets/timeline.py``), so ``kernel fps``
@@ -34,15 +36,9 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import sys
-import tempfile
 import time
-from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO / "tests" / "browser"))
-
-from harness import CHROMIUM, CHROMIUM_ARGS, LabServer, NotebookPage, write_notebook  # noqa: E402
+from browser_session import NotebookPage, chromium_missing, each_resolution
 
 _SETUP = """
 import ipywidgets as W
@@ -95,6 +91,7 @@ def measure(nb: NotebookPage, fps: float, warmup: float, seconds: float) -> dict
     page.wait_for_function("() => document.querySelector('.fwb-timeline')"
                            ".getAttribute('data-playing') === '1'", timeout=20000)  # fmt: skip
     time.sleep(warmup)
+    draft = nb.viewport(0).get_attribute("data-draft") == "1"
     n0, k0, d0 = nb.kernel_eval(_COUNTER)
     f0, r0, p0 = page.evaluate(_PAGE_COUNTERS)
     render_ms = []
@@ -120,6 +117,7 @@ def measure(nb: NotebookPage, fps: float, warmup: float, seconds: float) -> dict
         "set_time_ms": float(stats.get("set_time_ms", float("nan"))),
         "push_ms": _median(push),
         "render_ms": _median(render_ms),
+        "draft": draft,
     }
 
 
@@ -130,47 +128,19 @@ def main() -> int:
     ap.add_argument("--warmup", type=float, default=1.5)
     ap.add_argument("--seconds", type=float, default=6.0)
     args = ap.parse_args()
-    if not CHROMIUM.exists():
-        print(f"{CHROMIUM} is missing: apt-get install chromium", file=sys.stderr)
+    if chromium_missing():
         return 2
-    from playwright.sync_api import sync_playwright
 
-    rows = []
-    with tempfile.TemporaryDirectory(prefix="fwb-bench-") as tmp:
-        lab = LabServer(Path(tmp))
-        lab.start()
-        try:
-            with sync_playwright() as pw:
-                browser = pw.chromium.launch(
-                    executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS
-                )
-                for res in args.resolutions:
-                    name = f"bench_playback_{res}.ipynb"
-                    write_notebook(lab.root / name, [_SETUP.format(res=res)])
-                    ctx = browser.new_context(viewport={"width": 1400, "height": 1000})
-                    page = ctx.new_page()
-                    nb = NotebookPage(page, lab, REPO / "test-artifacts" / "bench_playback", name)
-                    page.goto(f"{lab.url}/lab/workspaces/bench-pb-{res}/tree/{name}?reset")
-                    try:
-                        nb.wait_kernel_idle()
-                        nb.run_all(timeout=900)
-                        nb.wait_viewports(1, timeout=120)
-                        page.evaluate("() => { const s = window.jupyterapp.shell;"
-                                      " if (!s.leftCollapsed) s.collapseLeft(); }")  # fmt: skip
-                        nb.viewport(0).evaluate("e => e.scrollIntoView({block: 'start'})")
-                        page.wait_for_timeout(500)
-                        n = nb.kernel_eval("import json; print(json.dumps(model.n_vertices))")
-                        for fps in args.fps:
-                            rows.append((res, n, fps, measure(nb, fps, args.warmup, args.seconds)))
-                    except Exception as exc:  # report and go on with the next size
-                        print(f"[{res}] failed: {type(exc).__name__}: {exc}", file=sys.stderr)
-                        nb.screenshot(f"failed-{res}")
-                    finally:
-                        ctx.close()
-                        lab.shutdown_kernels()
-                browser.close()
-        finally:
-            lab.stop()
+    def run(res: str, nb: NotebookPage) -> list[tuple]:
+        page = nb.page
+        page.evaluate("() => { const s = window.jupyterapp.shell;"
+                      " if (!s.leftCollapsed) s.collapseLeft(); }")  # fmt: skip
+        nb.viewport(0).evaluate("e => e.scrollIntoView({block: 'start'})")
+        page.wait_for_timeout(500)
+        n = nb.kernel_eval("import json; print(json.dumps(model.n_vertices))")
+        return [(res, n, fps, measure(nb, fps, args.warmup, args.seconds)) for fps in args.fps]
+
+    rows = each_resolution("playback", args.resolutions, lambda res: _SETUP.format(res=res), run)
 
     print()
     print(f"Timeline playback in JupyterLab + Chromium (software WebGL), {args.seconds:g} s "
@@ -178,11 +148,11 @@ def main() -> int:
     print("  kernel fps: set_time calls/s; viewport fps: geometry frames the viewport rendered/s")
     print(f"{'resolution':>10} {'vertices':>9} {'target':>7} {'kernel fps':>10} {'dropped':>8} "
           f"{'viewport fps':>12} {'renders/s':>9} {'set_time ms':>11} {'push ms':>8} "
-          f"{'render ms':>9}")  # fmt: skip
+          f"{'render ms':>9} {'draft':>5}")  # fmt: skip
     for res, n, fps, m in rows:
         print(f"{res:>10} {n:>9} {fps:7.0f} {m['kernel_fps']:10.1f} {m['dropped']:8.0%} "
               f"{m['viewport_fps']:12.1f} {m['renders']:9.1f} {m['set_time_ms']:11.2f} "
-              f"{m['push_ms']:8.2f} {m['render_ms']:9.1f}")  # fmt: skip
+              f"{m['push_ms']:8.2f} {m['render_ms']:9.1f} {'yes' if m['draft'] else 'no':>5}")  # fmt: skip
     return 0
 
 

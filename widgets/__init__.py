@@ -8,6 +8,9 @@ this package.
 - :class:`ExpressionPanel`: blendshape sliders grouped by face region.
 - :class:`SculptPanel`: handle-based shell editing controls (the drag itself
   happens in the viewport's "sculpt" tool).
+- :class:`WrinklePanel`: pose-space wrinkles while dragging (fit from example
+  poses, on/off, strength, feature graph coloured by strain, example editing);
+  shown in the Sculpt tab under the SculptPanel.
 - :class:`RegionsPanel`: blend regions, region-weight sliders and marker drags.
 - :class:`PaintPanel`: painterly expression blending (palette of expression
   thumbnails, brush, global/regional blend, save as expression, bake); the
@@ -41,6 +44,7 @@ from widgets.regions_panel import RegionsPanel
 from widgets.sculpt_panel import SculptPanel
 from widgets.timeline import TimelineWidget
 from widgets.viewport import Viewport
+from widgets.wrinkle_panel import WrinklePanel
 
 __all__ = [
     "TAB_TITLES",
@@ -54,6 +58,7 @@ __all__ = [
     "TimelineWidget",
     "Viewport",
     "Workbench",
+    "WrinklePanel",
     "recovery_prompt",
     "show_workbench",
 ]
@@ -74,6 +79,8 @@ class Workbench(W.VBox):
 
     Selecting "Sculpt" switches the viewport to its sculpt tool (drag handle
     markers), "Paint" to its paint tool (brush strokes); the other tabs orbit.
+    The Sculpt tab holds the :class:`SculptPanel` and, under it, the
+    :class:`WrinklePanel` (pose-space wrinkles while dragging).
     "Regions" activates its panel (colour overlay, and the pin drag mode, which
     itself switches the viewport to the sculpt tool without leaving the tab)
     and deactivates it when another tab is selected. The Regions and Paint
@@ -93,9 +100,13 @@ class Workbench(W.VBox):
         Default: the recovery folder (``$WORKBENCH_RECOVERY_DIR``).
     height : int
         Viewport height in pixels.
+    wrinkle_layer : workbench.wrinkle_layer.WrinkleLayer, optional
+        An already fitted wrinkle layer of ``model`` for the Sculpt tab's
+        :class:`WrinklePanel` (default: none until its *Fit* button).
 
     Attributes
     ----------
+    wrinkles : WrinklePanel
     status : ipywidgets.HTML
         "N vertices · last drag X ms (Y updates/s) · undo depth D · saved 12:03:04".
     autosaver : workbench.autosave.Autosaver or None
@@ -109,6 +120,7 @@ class Workbench(W.VBox):
         autosave_delay: float = 2.0,
         autosave_folder: Any = None,
         height: int = 520,
+        wrinkle_layer: Any = None,
     ) -> None:
         self.model = model
         self.errors = W.Output(layout=W.Layout(max_height="160px", overflow="auto"))
@@ -122,6 +134,15 @@ class Workbench(W.VBox):
         self.sculpt = SculptPanel(
             model, self.viewport, errors=self.errors, before_edit=[self.panel.grouper.flush]
         )
+        self.wrinkles = WrinklePanel(
+            model,
+            self.viewport,
+            layer=wrinkle_layer,
+            errors=self.errors,
+            before_edit=[self.panel.grouper.flush],
+        )
+        self._sculpt_tab = W.VBox([self.sculpt, self.wrinkles], layout=W.Layout(width="100%"))
+        self._sculpt_tab.add_class("fwb-sculpt-tab")
         self.timeline = TimelineWidget(model, errors=self.errors)
         self.export = ExportPanel(model, errors=self.errors)
         self._regions: RegionsPanel | None = None
@@ -130,7 +151,13 @@ class Workbench(W.VBox):
         self._regions_slot = W.VBox([W.HTML("<i>finding the blend regions ...</i>")])
         self._paint_slot = W.VBox([W.HTML("<i>building the expression palette ...</i>")])
         self.tabs = W.Tab(
-            children=[self.panel, self.sculpt, self._regions_slot, self._paint_slot, self.export],
+            children=[
+                self.panel,
+                self._sculpt_tab,
+                self._regions_slot,
+                self._paint_slot,
+                self.export,
+            ],
             titles=TAB_TITLES,
             layout=W.Layout(flex="0 0 650px", width="650px"),
         )
@@ -332,6 +359,7 @@ class Workbench(W.VBox):
             self._regions.close()
         if self._paint is not None:
             self._paint.close()
+        self.wrinkles.close()
         self.sculpt.close()
         self.export.close()
         self.timeline.close()

@@ -67,6 +67,17 @@ front end can draw the brush cursor (a ring on the surface under the pointer, an
 its mirror image with ``brush_mirror``); :class:`widgets.PaintPanel` links its
 controls to these traits.
 
+Feature-graph overlay (pose-space wrinkles, Bickel et al. 2008 §5.1): the edges
+between handles on which a :class:`workbench.wrinkle_layer.WrinkleLayer` measures
+skin strain, drawn as line segments coloured by their relative stretch (blue =
+compressed, grey = rest, red = stretched, full colour at ±:attr:`Viewport.strain_range`).
+Two binary traits, each sent only when it changes: ``_feature_edges`` (uint32,
+F*2 vertex ids: :meth:`Viewport.set_feature_graph`) and ``_feature_strain``
+(float32, F: :meth:`Viewport.set_feature_strain`, called by
+:class:`widgets.WrinklePanel` on every model change). The end points follow the
+drawn geometry in the browser, so a drag sends only the F strain values
+(~0.7 kB for ~175 edges). Hidden (``feature_graph = False``), no strain is sent.
+
 Why hand-written rather than pythreejs / pyvista: see ``widgets/js/src/viewport.js``.
 """
 
@@ -110,6 +121,12 @@ BRUSH_RADIUS_FRACTION = 0.03
 
 #: Most dabs one "paint" message may carry (the front end sends at most 8).
 MAX_DABS_PER_MESSAGE = 32
+
+#: Relative stretch drawn in full colour by the feature-graph overlay (±20 %).
+STRAIN_RANGE = 0.2
+
+#: A strain update is sent only when some edge changed by more than this (0.01 %).
+STRAIN_TOLERANCE = 1e-4
 
 _bundle_cache: dict[str, Any] = {}
 
@@ -239,6 +256,12 @@ class Viewport(anywidget.AnyWidget):
     paint_overlay : bool
         Tint the surface by the painted weight of :attr:`paint_expression`
         (white skin -> magenta at weight 1).
+    feature_graph : bool
+        Draw the feature-graph edges given to :meth:`set_feature_graph`, coloured
+        by the strain given to :meth:`set_feature_strain` (blue compressed, grey
+        rest, red stretched), with a colour-scale legend.
+    strain_range : float
+        Relative stretch drawn in full colour (default ``0.2``: ±20 %).
 
     The front end writes the markers' screen positions to ``data-handles``
     (JSON ``[[x, y, in_front], ...]`` in page pixels) after every render.
@@ -275,6 +298,11 @@ class Viewport(anywidget.AnyWidget):
     wireframe = t.Bool(False).tag(sync=True)
     component_visible = t.Dict(value_trait=t.Bool()).tag(sync=True)
     height = t.Int(480).tag(sync=True)
+    # feature-graph overlay (see "Feature graph overlay" below)
+    _feature_edges = t.Bytes(b"").tag(sync=True)
+    _feature_strain = t.Bytes(b"").tag(sync=True)
+    feature_graph = t.Bool(True).tag(sync=True)
+    strain_range = t.Float(STRAIN_RANGE).tag(sync=True)
 
     def __init__(
         self,
@@ -1083,3 +1111,82 @@ class Viewport(anywidget.AnyWidget):
             self._positions = _f32_bytes(pos)
             self._version = self._version + 1
         self.updates_sent["full"] += 1
+
+    # ------------------------------------------------------- feature graph overlay
+    # Pose-space wrinkles (Bickel et al. 2008 §5.1): the edges between handles on
+    # which strain is measured, coloured by strain. Self-contained: the viewport does
+    # not know about wrinkle layers; widgets.WrinklePanel feeds it.
+
+    #: (F,) float32 strain the front end has (None: nothing sent yet)
+    _strain_sent: np.ndarray | None = None
+    #: newest strain given while the overlay was hidden (sent when it is shown)
+    _strain_pending: np.ndarray | None = None
+    #: strain updates sent (tests, benchmarks)
+    feature_updates_sent: int = 0
+
+    @property
+    def feature_edges(self) -> np.ndarray:
+        """(F, 2) uint32 vertex ids of the drawn feature-graph edges (empty: none)."""
+        return np.frombuffer(self._feature_edges, dtype="<u4").reshape(-1, 2).copy()
+
+    @property
+    def feature_strain(self) -> np.ndarray:
+        """(F,) float32 strain of each edge as last sent to the front end."""
+        return np.frombuffer(self._feature_strain, dtype="<f4").copy()
+
+    def set_feature_graph(self, vertex_pairs: Any) -> None:
+        """Draw line segments between vertex pairs (F, 2) (None or empty: no graph).
+
+        Resets the strain to zero (every edge grey) until :meth:`set_feature_strain`.
+        """
+        n = self._model.n_vertices
+        pairs = np.zeros((0, 2), np.int64) if vertex_pairs is None else np.asarray(vertex_pairs)
+        pairs = pairs.astype(np.int64).reshape(-1, 2)
+        if pairs.size and (pairs.min() < 0 or pairs.max() >= n):
+            raise ValueError(f"Viewport.set_feature_graph: vertex ids must be in 0..{n - 1}")
+        edges = _u32_bytes(pairs.reshape(-1))
+        zero = np.zeros(pairs.shape[0], np.float32)
+        with self._send_lock:
+            self._strain_pending = None
+            self._strain_sent = zero
+            with self.hold_sync():
+                if edges != self._feature_edges:
+                    self._feature_edges = edges
+                self._feature_strain = _f32_bytes(zero)
+
+    def set_feature_strain(self, strain: Any) -> bool:
+        """Colour the edges by ``strain`` (F,): relative stretch ``(l - l0) / l0``.
+
+        Sent only when some edge changed by more than :data:`STRAIN_TOLERANCE`
+        (or returned to exactly zero) and the overlay is shown; returns True when
+        an update was sent.
+        """
+        f = np.asarray(strain, dtype=np.float32).reshape(-1)
+        count = len(self._feature_edges) // 8
+        if f.size != count:
+            raise ValueError(
+                f"Viewport.set_feature_strain: expected {count} values (one per edge), got {f.size}"
+            )
+        if not np.isfinite(f).all():
+            raise ValueError("Viewport.set_feature_strain: strain contains NaN/inf")
+        with self._send_lock:
+            if not self.feature_graph:
+                self._strain_pending = f.copy()
+                return False
+            self._strain_pending = None
+            last = self._strain_sent
+            if last is not None and last.shape == f.shape:
+                moved = bool(f.size) and float(np.abs(f - last).max()) > STRAIN_TOLERANCE
+                settled = not f.any() and bool(last.any())
+                if not (moved or settled):
+                    return False
+            self._strain_sent = f.copy()
+            self._feature_strain = _f32_bytes(f)
+            self.feature_updates_sent += 1
+            return True
+
+    @t.observe("feature_graph")
+    def _on_feature_graph_shown(self, change: Any) -> None:
+        pending = self._strain_pending
+        if change["new"] and pending is not None and pending.size == len(self._feature_edges) // 8:
+            self.errors.guard("Viewport feature graph")(self.set_feature_strain)(pending)

@@ -232,7 +232,17 @@ class TimelineView {
     this.root.fwbHooks = () => this.writeHooks();
   }
 
+  // Viewports on the page draw in draft resolution while a timeline plays (software
+  // WebGL only, see softwareWebGL() in viewport.js): tell them when playback starts/stops.
+  announcePlayback(playing) {
+    if (playing === !!this.announcedPlaying) return;
+    this.announcedPlaying = playing;
+    if (!this.playbackId) this.playbackId = `tl-${Math.random().toString(36).slice(2)}`;
+    window.dispatchEvent(new CustomEvent("fwb-playback", { detail: { id: this.playbackId, playing } }));
+  }
+
   dispose() {
+    this.announcePlayback(false);
     for (const d of this.disposers) d();
     this.disposers = [];
     if (this.raf) cancelAnimationFrame(this.raf);
@@ -277,6 +287,7 @@ class TimelineView {
     this.root.setAttribute("data-error", err);
     this.root.setAttribute("data-status", m.get("status") || "");
     this.root.setAttribute("data-playing", playing ? "1" : "0");
+    this.announcePlayback(playing);
     // interpolation selector shows the common interpolation of the selection
     const kinds = new Set(this.selected.map(([tn, i]) => this.track(tn).interp[i]));
     this.selInterp.value = kinds.size === 1 ? [...kinds][0] : "";

@@ -39,11 +39,21 @@
 //       drawn as a magenta tint over the component colours (weight-map overlay).
 //   brush_radius (model units along the surface) sets the size of the brush cursor: a
 //   ring lying on the surface under the pointer (and at the x-mirror with brush_mirror).
+// Feature-graph overlay (pose-space wrinkles, Bickel et al. 2008 §5.1), Python -> front end:
+//   _feature_edges   bytes, uint32 (F*2): vertex ids of the edges between handles
+//   _feature_strain  bytes, float32 (F): relative stretch of each edge
+//   feature_graph (bool, draw it), strain_range (|strain| drawn in full colour)
+//   Fat line segments over the surface, blue (compressed) - grey (rest) - red (stretched),
+//   end points following the drawn geometry; a colour-scale legend in the corner.
 // All views of one widget model share one geometry store (state lives in the model,
 // not in the view), so a second display of the same widget shows the same frame.
 
 import * as THREE from "three";
 import { OrbitControls } from "three/examples/jsm/controls/OrbitControls.js";
+// feature-graph overlay (section "Feature-graph overlay" below)
+import { LineSegments2 } from "three/examples/jsm/lines/LineSegments2.js";
+import { LineSegmentsGeometry } from "three/examples/jsm/lines/LineSegmentsGeometry.js";
+import { LineMaterial } from "three/examples/jsm/lines/LineMaterial.js";
 
 // ---------------------------------------------------------------------------------------
 // binary helpers: the widget protocol hands us DataView (state) or DataView/ArrayBuffer
@@ -121,6 +131,32 @@ function colorForComponent(name) {
 function srgbToLinear(c) {
   return c <= 0.04045 ? c / 12.92 : Math.pow((c + 0.055) / 1.055, 2.4);
 }
+
+// ---------------------------------------------------------------------------------------
+// Software WebGL (SwiftShader, llvmpipe: a machine without a GPU) is fill-rate bound:
+// measured on the 2-core reference machine (benchmarks/bench_playback.py), MSAA doubles
+// the time the GPU process needs per frame and every frame is read back for software
+// compositing. There the view draws without MSAA and, while a timeline plays, at half
+// resolution ("draft"); the full-resolution frame is drawn again as soon as playback stops.
+let SOFTWARE_WEBGL = null;
+function softwareWebGL() {
+  if (SOFTWARE_WEBGL !== null) return SOFTWARE_WEBGL;
+  SOFTWARE_WEBGL = false;
+  try {
+    const gl = document.createElement("canvas").getContext("webgl2");
+    if (gl) {
+      const info = gl.getExtension("WEBGL_debug_renderer_info");
+      const name = String(gl.getParameter(info ? info.UNMASKED_RENDERER_WEBGL : gl.RENDERER));
+      SOFTWARE_WEBGL = /swiftshader|llvmpipe|softpipe|software/i.test(name);
+      const lose = gl.getExtension("WEBGL_lose_context");
+      if (lose) lose.loseContext();
+    }
+  } catch (err) { /* no WebGL2: the renderer below reports it */ }
+  return SOFTWARE_WEBGL;
+}
+const DRAFT_PIXEL_RATIO = 0.5; // of the device pixel ratio, while a timeline plays
+// timeline.js dispatches this window event when playback starts or stops
+const PLAYBACK_EVENT = "fwb-playback";
 
 // ---------------------------------------------------------------------------------------
 // Geometry store: one per widget model, shared by its views.
@@ -262,7 +298,7 @@ class View {
     let renderer;
     try {
       renderer = new THREE.WebGLRenderer({
-        antialias: true,
+        antialias: !softwareWebGL(), // see softwareWebGL()
         // Keeps the last frame readable (screenshots, toDataURL) after compositing.
         preserveDrawingBuffer: true,
       });
@@ -273,6 +309,17 @@ class View {
       return;
     }
     renderer.setPixelRatio(window.devicePixelRatio || 1);
+    el.setAttribute("data-software-webgl", softwareWebGL() ? "1" : "0");
+    el.setAttribute("data-draft", "0");
+    // Draft resolution while any timeline of the page plays (software WebGL only).
+    this.playingTimelines = new Set();
+    this.onPlayback = (ev) => {
+      const { id, playing } = ev.detail || {};
+      if (playing) this.playingTimelines.add(id);
+      else this.playingTimelines.delete(id);
+      this.setDraft(this.playingTimelines.size > 0 && softwareWebGL());
+    };
+    window.addEventListener(PLAYBACK_EVENT, this.onPlayback);
     renderer.setClearColor(0x2b2f36, 1);
     renderer.outputColorSpace = THREE.SRGBColorSpace;
     this.renderer = renderer;
@@ -1217,6 +1264,15 @@ class View {
     this.requestRender(false);
   }
 
+  setDraft(on) {
+    if (!this.renderer || on === !!this.draft) return;
+    this.draft = on;
+    const dpr = window.devicePixelRatio || 1;
+    this.renderer.setPixelRatio(on ? dpr * DRAFT_PIXEL_RATIO : dpr);
+    this.el.setAttribute("data-draft", on ? "1" : "0");
+    this.resize(); // re-applies the size at the new ratio and redraws
+  }
+
   renderNow() {
     const t0 = performance.now();
     let newGeometry = false;
@@ -1233,6 +1289,7 @@ class View {
       newGeometry = true; // new pixels: counts as a frame for the test hooks and latency
       this.el.setAttribute("data-paint-version", String(this.store.paintVersion));
     }
+    if (this.featureGraph) this.featureGraph.beforeRender(); // feature-graph overlay
     this.renderer.render(this.scene, this.camera);
     this.renders += 1;
     const el = this.el;
@@ -1309,6 +1366,7 @@ class View {
       this.brushMirrorRing.material.dispose();
     }
     if (this.resizeObserver) this.resizeObserver.disconnect();
+    if (this.onPlayback) window.removeEventListener(PLAYBACK_EVENT, this.onPlayback);
     if (this.controls) this.controls.dispose();
     if (this.handleMesh) this.handleMesh.geometry.dispose();
     if (this.geometry) this.geometry.dispose();
@@ -1323,6 +1381,192 @@ class View {
     delete this.el.fwbHandles;
     delete this.el.fwbPaintStats;
     delete this.el.fwbBrush;
+  }
+}
+
+// =======================================================================================
+// Feature-graph overlay (pose-space wrinkles, Bickel et al. 2008 §5.1).
+// Self-contained: a View gets one in render() below and calls beforeRender() once per
+// render; nothing else in this file depends on it. Python side: the "feature graph
+// overlay" section of widgets/viewport.py, fed by widgets/wrinkle_panel.py.
+
+const STRAIN_REST = [0.72, 0.72, 0.72]; // sRGB grey: edge at its rest length
+const STRAIN_STRETCH = [0.93, 0.16, 0.12]; // red: longer than at rest
+const STRAIN_COMPRESS = [0.16, 0.42, 1.0]; // blue: shorter than at rest
+const FEATURE_LINE_PX = 3; // line width in CSS pixels
+
+// sRGB colour of a relative stretch s, full colour at |s| >= range.
+function strainColor(s, range) {
+  const t = Math.max(-1, Math.min(1, s / (range > 0 ? range : 0.2)));
+  const end = t >= 0 ? STRAIN_STRETCH : STRAIN_COMPRESS;
+  const a = Math.abs(t);
+  return STRAIN_REST.map((c, i) => c + a * (end[i] - c));
+}
+
+class FeatureGraphOverlay {
+  constructor(view, model) {
+    this.view = view;
+    this.model = model;
+    this.edges = new Uint32Array(0);
+    this.strain = new Float32Array(0);
+    this.edgesDirty = true;
+    this.colorsDirty = true;
+    this.seenPositions = -1;
+    this.line = null;
+    if (!view.renderer) return; // no WebGL: the view shows its error text
+    this.geometry = new LineSegmentsGeometry();
+    this.material = new LineMaterial({
+      vertexColors: true,
+      linewidth: FEATURE_LINE_PX,
+      worldUnits: false,
+      // Drawn over the surface (straight chords between handles dip under the curved
+      // skin), before the handle markers (opaque, renderOrder 1), which stay on top.
+      depthTest: false,
+      depthWrite: false,
+      transparent: false,
+    });
+    this.line = new LineSegments2(this.geometry, this.material);
+    this.line.frustumCulled = false;
+    this.line.renderOrder = 0.5;
+    this.line.visible = false;
+    view.scene.add(this.line);
+    this.legend = this.buildLegend();
+    view.el.appendChild(this.legend);
+    this.handlers = {
+      "change:_feature_edges": () => { this.loadEdges(); view.requestRender(); },
+      "change:_feature_strain": () => { this.loadStrain(); view.requestRender(); },
+      "change:feature_graph": () => view.requestRender(),
+      "change:strain_range": () => { this.colorsDirty = true; this.updateLegend(); view.requestRender(); },
+    };
+    for (const [ev, fn] of Object.entries(this.handlers)) model.on(ev, fn);
+    // Test hook: what is drawn, {count, visible, strain: [...], colors: [[r, g, b] sRGB]}.
+    view.el.fwbFeatureGraph = () => this.describe();
+    this.loadEdges();
+    this.loadStrain();
+  }
+
+  buildLegend() {
+    const box = document.createElement("div");
+    box.className = "fwb-strain-legend";
+    Object.assign(box.style, {
+      position: "absolute", right: "8px", top: "8px", padding: "4px 6px",
+      background: "rgba(20,22,26,0.72)", color: "#eee", font: "11px sans-serif",
+      borderRadius: "3px", pointerEvents: "none", display: "none",
+    });
+    const title = document.createElement("div");
+    title.textContent = "feature-graph strain";
+    const bar = document.createElement("div");
+    const css = (c) => `rgb(${c.map((x) => Math.round(255 * x)).join(",")})`;
+    Object.assign(bar.style, {
+      width: "150px", height: "8px", margin: "3px 0",
+      background: `linear-gradient(to right, ${css(STRAIN_COMPRESS)}, ${css(STRAIN_REST)}, ${css(STRAIN_STRETCH)})`,
+    });
+    const labels = document.createElement("div");
+    Object.assign(labels.style, { display: "flex", justifyContent: "space-between", width: "150px" });
+    this.legendLabels = [0, 1, 2].map(() => labels.appendChild(document.createElement("span")));
+    box.append(title, bar, labels);
+    this.updateLegendLabels = () => {
+      const r = Number(this.model.get("strain_range")) || 0.2;
+      const pct = Math.round(100 * r);
+      this.legendLabels[0].textContent = `\u2212${pct}% compressed`;
+      this.legendLabels[1].textContent = "rest";
+      this.legendLabels[2].textContent = `+${pct}% stretched`;
+    };
+    this.updateLegendLabels();
+    return box;
+  }
+
+  updateLegend() {
+    if (this.updateLegendLabels) this.updateLegendLabels();
+  }
+
+  loadEdges() {
+    const e = typed(this.model.get("_feature_edges"), Uint32Array);
+    this.edges = e && e.length ? new Uint32Array(e) : new Uint32Array(0);
+    this.edgesDirty = true;
+    this.colorsDirty = true;
+    this.view.el.setAttribute("data-feature-edges", String(this.edges.length / 2));
+  }
+
+  loadStrain() {
+    const f = typed(this.model.get("_feature_strain"), Float32Array);
+    this.strain = f && f.length ? new Float32Array(f) : new Float32Array(0);
+    this.colorsDirty = true;
+  }
+
+  visible() {
+    return !!this.model.get("feature_graph") && this.edges.length > 0 && !!this.view.store.positions;
+  }
+
+  // Called by View.renderNow before each render: end points from the drawn geometry,
+  // colours from the strain, line width in pixels of the current canvas size.
+  beforeRender() {
+    if (!this.line) return;
+    const show = this.visible();
+    this.line.visible = show;
+    this.legend.style.display = show ? "block" : "none";
+    this.view.el.setAttribute("data-feature-visible", show ? "1" : "0");
+    if (!show) return;
+    const s = this.view.store;
+    const F = this.edges.length / 2;
+    if (this.edgesDirty || this.seenPositions !== s.positionsVersion) {
+      const P = s.positions;
+      const n = P.length / 3;
+      const attr = this.geometry.getAttribute("instanceStart");
+      const reuse = !this.edgesDirty && attr && attr.data.array.length === F * 6;
+      const buf = reuse ? attr.data.array : new Float32Array(F * 6);
+      const E = this.edges;
+      for (let k = 0; k < E.length; k++) {
+        const i = Math.min(E[k], n - 1);
+        buf[3 * k] = P[3 * i]; buf[3 * k + 1] = P[3 * i + 1]; buf[3 * k + 2] = P[3 * i + 2];
+      }
+      if (reuse) attr.data.needsUpdate = true;
+      else this.geometry.setPositions(buf);
+      if (!reuse) this.colorsDirty = true; // new instance buffers need their colours
+      this.edgesDirty = false;
+      this.seenPositions = s.positionsVersion;
+    }
+    if (this.colorsDirty) {
+      const range = Number(this.model.get("strain_range")) || 0.2;
+      const C = new Float32Array(F * 6);
+      let maxAbs = 0;
+      for (let k = 0; k < F; k++) {
+        const v = k < this.strain.length ? this.strain[k] : 0;
+        maxAbs = Math.max(maxAbs, Math.abs(v));
+        const rgb = strainColor(v, range).map(srgbToLinear);
+        C.set(rgb, 6 * k);
+        C.set(rgb, 6 * k + 3);
+      }
+      this.geometry.setColors(C);
+      this.colorsDirty = false;
+      this.view.el.setAttribute("data-feature-strain-max", maxAbs.toFixed(4));
+    }
+    const size = this.view.renderer.getSize(new THREE.Vector2());
+    this.material.resolution.set(size.x, size.y);
+  }
+
+  describe() {
+    const range = Number(this.model.get("strain_range")) || 0.2;
+    const F = this.edges.length / 2;
+    const strain = Array.from({ length: F }, (_, k) => (k < this.strain.length ? this.strain[k] : 0));
+    return {
+      count: F,
+      visible: !!(this.line && this.line.visible),
+      strain,
+      colors: strain.map((v) => strainColor(v, range)),
+    };
+  }
+
+  dispose() {
+    if (this.handlers) for (const [ev, fn] of Object.entries(this.handlers)) this.model.off(ev, fn);
+    if (this.line) {
+      this.view.scene.remove(this.line);
+      this.geometry.dispose();
+      this.material.dispose();
+    }
+    if (this.legend) this.legend.remove();
+    delete this.view.el.fwbFeatureGraph;
+    this.view.featureGraph = null;
   }
 }
 
@@ -1383,6 +1627,8 @@ export default {
     store.loadPaintFull();
     const view = new View(store, model, el);
     store.views.add(view);
+    const featureGraph = new FeatureGraphOverlay(view, model); // feature-graph overlay
+    view.featureGraph = featureGraph;
     const handlers = {
       "change:wireframe": () => { view.updateWireframe(); view.requestRender(); },
       "change:_vertex_colors": () => { view.updateColors(); view.requestRender(); },
@@ -1402,6 +1648,7 @@ export default {
     return () => {
       for (const [ev, fn] of Object.entries(handlers)) model.off(ev, fn);
       store.views.delete(view);
+      featureGraph.dispose();
       view.dispose();
     };
   },

@@ -1,0 +1,301 @@
+"""WrinklePanel (widgets/wrinkle_panel.py) and the viewport's feature-graph overlay, without a browser.
+
+Buttons are clicked and widgets set from Python; the checks are on the model
+(weights, undo history, evaluated mesh), the wrinkle layer (strength, on/off,
+fitted examples, details) and the viewport's binary traits. Runs on the 5k
+sample head (fit ~1 s).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip("anywidget")
+
+import ipywidgets as W
+
+from widgets import Viewport, Workbench, WrinklePanel
+from widgets.wrinkle_panel import example_detailed, set_wrinkle_strength
+from workbench import load_sample
+from workbench.model import HandleSet
+from workbench.wrinkle_examples import EXAMPLE_POSES
+
+pytestmark = pytest.mark.ui
+
+
+def _errors(out: W.Output) -> str:
+    return "".join(o.get("text", "") for o in out.outputs)
+
+
+@pytest.fixture
+def setup():
+    model = load_sample("head")
+    errors = W.Output()
+    vp = Viewport(model, errors=errors)
+    panel = WrinklePanel(model, vp, errors=errors, thumbnails=False)
+    yield model, vp, panel, errors
+    panel.close()
+    vp.close()
+
+
+@pytest.fixture
+def fitted(setup):
+    _, _, panel, errors = setup
+    panel.fit_button.click()
+    assert _errors(errors) == ""
+    return setup
+
+
+def _lift_brows(model, amount: float = 0.05) -> None:
+    names = list(model.handles.names)
+    o = np.zeros((len(names), 3), np.float32)
+    for i, n in enumerate(names):
+        if n.startswith("brows"):
+            o[i, 1] = amount
+    model.set_handle_offsets(o, label="Lift brows")
+
+
+def _near(a, b, ref, rel: float = 0.25) -> bool:
+    """``a`` matches ``b`` up to ``rel`` of the size of ``ref`` (WPSD reproduces its examples
+    only approximately: per-vertex weights use each vertex's strongest edges and a pinv cut-off)."""
+    return float(np.linalg.norm(np.asarray(a, float) - b)) <= rel * float(np.linalg.norm(ref))
+
+
+def _detail(model, panel) -> np.ndarray:
+    d = panel.layer.details(model)
+    return np.zeros((model.n_vertices, 3), np.float32) if d is None else d
+
+
+def test_fit_button_sets_handles_fits_and_draws_the_feature_graph(setup) -> None:
+    model, vp, panel, errors = setup
+    assert panel.layer is None and len(model.handles) == 0
+    assert panel.controls.layout.display == "none"  # nothing to control before the fit
+    assert "not fitted" in panel.status.value
+    panel.fit_button.click()
+    assert _errors(errors) == "" and panel.error_line.value == ""
+    layer = panel.layer
+    assert layer is not None and layer.fitted and panel.fresh
+    assert layer.example_names == list(EXAMPLE_POSES)
+    assert model.history.undo_labels == ["Default handles"]  # the fit itself is not an undo step
+    assert panel.progress.layout.visibility == "hidden" and panel.progress.value == 1.0
+    assert panel.controls.layout.display == ""
+    assert panel.fit_button.description == "Refit from examples"
+    assert (
+        list(panel.example.options) == layer.example_names and panel.example.value == "brow_raise"
+    )
+    assert len(panel.cards.children) == len(layer.example_names)
+    assert f"<b>{len(layer.graph)}</b> feature edges" in panel.status.value
+    # the overlay: one segment per feature edge between handle vertices, grey (zero strain)
+    pairs = vp.feature_edges
+    np.testing.assert_array_equal(pairs, model.handles.vertices[layer.graph.edges])
+    assert vp.feature_strain.shape == (len(layer.graph),) and not vp.feature_strain.any()
+    assert panel.last_fit_s > 0
+
+
+def test_dragging_sends_the_strain_only_when_it_changes(fitted) -> None:
+    model, vp, panel, _ = fitted
+    sent = vp.feature_updates_sent
+    with model.interaction("Drag"):
+        _lift_brows(model, 0.02)
+        _lift_brows(model, 0.05)
+    layer = panel.layer
+    assert layer.last_strain is not None and np.abs(layer.last_strain).max() > 0.05
+    np.testing.assert_allclose(vp.feature_strain, layer.last_strain, atol=1e-6)
+    assert vp.feature_updates_sent > sent
+    assert "strain" in panel.status.value
+    # the same state again: nothing new to send
+    sent = vp.feature_updates_sent
+    model.register_layer("wrinkles", layer)  # invalidates the cache; same strain
+    model.events.deformed.emit(True)
+    assert vp.feature_updates_sent == sent
+    # hidden: kept, not sent; shown again: sent at once
+    panel.show_graph.value = False
+    assert vp.feature_graph is False
+    model.reset_handle_offsets()
+    assert vp.feature_updates_sent == sent
+    panel.show_graph.value = True
+    assert vp.feature_updates_sent == sent + 1 and np.abs(vp.feature_strain).max() < 1e-5
+
+
+def test_wrinkles_toggle_and_strength_are_undoable(fitted) -> None:
+    model, _, panel, _ = fitted
+    _lift_brows(model)
+    d1 = _detail(model, panel)
+    assert np.abs(d1).max() > 0.002  # > 0.2 mm on the 5k head (units: dm)
+    shell = np.asarray(model.blended()) + model.handle_displacement()
+    np.testing.assert_allclose(model.evaluate(), shell + d1, atol=1e-5)
+
+    panel.enabled.value = False
+    assert panel.layer.enabled is False and model.history.undo_labels[-1] == "Wrinkles off"
+    np.testing.assert_allclose(model.evaluate(), shell, atol=1e-6)
+    model.undo()
+    assert panel.layer.enabled is True and panel.enabled.value is True
+    np.testing.assert_allclose(model.evaluate(), shell + d1, atol=1e-5)
+
+    panel.strength.value = 0.5
+    assert panel.layer.strength == 0.5 and model.history.undo_labels[-1] == "Wrinkle strength 0.5"
+    np.testing.assert_allclose(_detail(model, panel), 0.5 * d1, atol=1e-6)
+    model.undo()
+    assert panel.layer.strength == 1.0 and panel.strength.value == 1.0
+    model.redo()
+    assert panel.layer.strength == 0.5 and panel.strength.value == 0.5
+    # from code: the same command, and the slider follows
+    assert set_wrinkle_strength(model, panel.layer, 1.5)
+    assert panel.strength.value == 1.5
+    assert not set_wrinkle_strength(model, panel.layer, 1.5)  # no change, no step
+    with pytest.raises(ValueError, match=">= 0"):
+        set_wrinkle_strength(model, panel.layer, -1)
+
+
+def test_view_and_scale_an_example_propagates(fitted) -> None:
+    model, _, panel, _ = fitted
+    panel.cards.children[0].children[0].click()  # the "brow_raise" button of the first card
+    assert model.history.undo_labels[-1] == "View example brow_raise"
+    w = {k: v for k, v in model.weights.items() if v}
+    assert w == EXAMPLE_POSES["brow_raise"]
+    d0 = _detail(model, panel)
+    # at the example pose the fit reproduces the example's detail
+    X, D = example_detailed(model, panel.layer, "brow_raise")
+    assert _near(model.evaluate(), D, D - X)
+    assert np.abs(d0).max() > 0.002
+    # a pose near it: surprise shares the brow raise
+    panel.view_example("surprise")
+    s0 = _detail(model, panel)
+
+    panel.example.value = "brow_raise"
+    panel.scale.value = 0.5
+    panel.scale_button.click()
+    assert panel.error_line.value == ""
+    assert "×0.50" in panel.cards.children[0].children[-1].value
+    s1 = _detail(model, panel)
+    assert not np.allclose(s1, s0, atol=1e-5)  # the edit reached a neighbouring pose
+    panel.view_example("brow_raise")
+    ratio = np.linalg.norm(_detail(model, panel)) / np.linalg.norm(d0)
+    assert abs(ratio - 0.5) < 0.1, ratio
+    # the smile is far from the brow raise in strain space: still its own wrinkles
+    panel.view_example("smile")
+    X, D = example_detailed(model, panel.layer, "smile")
+    assert _near(_detail(model, panel), D - X, D - X)
+
+
+def test_add_current_pose_as_example_keeps_edits(fitted) -> None:
+    model, _, panel, _ = fitted
+    panel.layer.edit_example("smile", scale=2.0)
+    smile_before = example_detailed(model, panel.layer, "smile")[1]
+    model.set_weights({"mouthSmileLeft": 0.8, "jawOpen": 0.3})
+    panel.new_name.value = "half_smile"
+    panel.add_button.click()
+    assert panel.error_line.value == ""
+    layer = panel.layer
+    assert layer.example_names[-1] == "half_smile" and len(panel.cards.children) == 7
+    assert layer.example_weights[-1] == {"mouthSmileLeft": 0.8, "jawOpen": 0.3}
+    assert panel.new_name.value == "half_smile_1"
+    # the new pose is reproduced: blend + the sculptor's wrinkles for these weights
+    want = panel.sculptor().detailed({"mouthSmileLeft": 0.8, "jawOpen": 0.3})
+    assert _near(model.evaluate(), want, want - np.asarray(model.blended()))
+    # the earlier edit survived the refit
+    np.testing.assert_allclose(example_detailed(model, layer, "smile")[1], smile_before, atol=2e-5)
+
+
+def test_errors_are_reported_in_the_panel(setup) -> None:
+    model, _, panel, errors = setup
+    panel.scale_button.click()  # before any fit
+    assert "Fit wrinkles from examples" in panel.error_line.value
+    assert "scale wrinkles" in _errors(errors)
+    panel.fit_button.click()
+    panel.error_line.value = ""
+    panel.add_button.click()  # the rest pose
+    assert "rest pose" in panel.error_line.value
+    panel.view_example("smile")
+    panel.new_name.value = "smile_again"
+    panel.add_button.click()  # the weights of an example
+    assert "example &#x27;smile&#x27;" in panel.error_line.value
+    _lift_brows(model)
+    model.set_weight("jawOpen", 0.4)
+    panel.add_button.click()  # handle offsets are not part of an example
+    assert "bake the handle edit" in panel.error_line.value
+    panel.scale.value = 0.0
+    panel.example.value = "pucker"
+    panel.scale_button.click()  # 0 is allowed: paints the example's wrinkles out
+    assert "pucker" in panel.status.value
+
+
+def test_a_failing_fit_shows_the_error_and_leaves_the_panel_usable() -> None:
+    model = load_sample("head")
+    model.remove_shape("browInnerUp")  # the brow-raise example needs it
+    errors = W.Output()
+    panel = WrinklePanel(model, errors=errors, thumbnails=False)
+    try:
+        panel.fit_button.click()
+        assert "browInnerUp" in panel.error_line.value and "browInnerUp" in _errors(errors)
+        assert panel.progress.bar_style == "danger" and "failed" in panel.progress_label.value
+        assert panel.fit_button.disabled is False
+        assert panel.layer is None
+    finally:
+        panel.close()
+
+
+def test_changed_handles_make_the_fit_stale(fitted) -> None:
+    model, vp, panel, _ = fitted
+    n = len(panel.layer.graph)
+    model.add_handle(int(np.flatnonzero(model.component_labels == 0)[0]))
+    assert not panel.fresh
+    assert vp.feature_edges.shape == (0, 2)
+    assert "handles changed" in panel.status.value
+    assert panel.layer.details(model) is None  # the core ignores a stale fit
+    model.undo()
+    assert panel.fresh and vp.feature_edges.shape == (n, 2)
+    model.set_handles(HandleSet(), label="Clear")
+    assert not panel.fresh and panel.current_strain() is None
+
+
+def test_thumbnails_are_rendered_and_follow_edits() -> None:
+    model = load_sample("head")
+    panel = WrinklePanel(model)
+    try:
+        panel.fit()
+        imgs = [c.children[0] for c in panel.cards.children]
+        assert all(isinstance(i, W.Image) and i.value[:4] == b"\x89PNG" for i in imgs)
+        before = {c.children[1].description: c.children[0].value for c in panel.cards.children}
+        panel.scale_example("brow_raise", 0.0)
+        after = {c.children[1].description: c.children[0].value for c in panel.cards.children}
+        assert after["brow_raise"] != before["brow_raise"]
+        assert after["smile"] == before["smile"]  # cached: its details did not change
+    finally:
+        panel.close()
+
+
+def test_viewport_feature_graph_validation() -> None:
+    model = load_sample("head")
+    vp = Viewport(model)
+    try:
+        with pytest.raises(ValueError, match="vertex ids"):
+            vp.set_feature_graph([[0, model.n_vertices]])
+        vp.set_feature_graph([[0, 1], [1, 2]])
+        assert vp.feature_edges.tolist() == [[0, 1], [1, 2]]
+        with pytest.raises(ValueError, match="expected 2 values"):
+            vp.set_feature_strain([0.1])
+        with pytest.raises(ValueError, match="NaN"):
+            vp.set_feature_strain([0.1, np.nan])
+        assert vp.set_feature_strain([0.1, -0.1])
+        assert not vp.set_feature_strain([0.1 + 1e-6, -0.1])  # below the tolerance
+        assert vp.set_feature_strain([0.0, 0.0])  # back to rest is always sent
+        vp.set_feature_graph(None)
+        assert vp.feature_edges.shape == (0, 2)
+    finally:
+        vp.close()
+
+
+def test_workbench_shows_the_wrinkle_panel_in_the_sculpt_tab() -> None:
+    wb = Workbench(load_sample("head"))
+    try:
+        assert wb.tabs.children[1].children == (wb.sculpt, wb.wrinkles)
+        assert wb.wrinkles.viewport is wb.viewport
+        wb.wrinkles.fit()
+        _lift_brows(wb.model)
+        wb.wrinkles.enabled.value = False
+        wb._on_undo()  # the top bar's Undo
+        assert wb.wrinkles.layer.enabled is True and wb.wrinkles.enabled.value is True
+    finally:
+        wb.close()
