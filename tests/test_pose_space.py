@@ -170,6 +170,35 @@ def test_numba_frame_matches_numpy(head) -> None:
     np.testing.assert_allclose(hd.frame(p, backend="numpy"), hd.deform(p), atol=2e-5)
 
 
+@pytest.mark.parametrize("poses", [3, 8, 11])
+def test_numba_wpsd_matches_numpy_for_any_number_of_poses(head, poses) -> None:
+    # the numba kernel sums poses in groups of eight (zero padded): 3, 8 and 11 poses
+    # exercise a partial group, an exact one and two groups
+    pytest.importorskip("numba")
+    from workbench.pose_space import DetailEvaluator
+
+    m, h, _shell, _sculptor, _examples = head
+    V = np.asarray(m.vertices, np.float64)
+    g = FeatureGraph.from_handles(V[h])
+    rng = np.random.default_rng(poses)
+    Ft = rng.normal(0.0, 0.05, (poses, len(g)))
+    Ft[0] = 0.0
+    D = rng.normal(0.0, 1e-3, (poses, len(V), 3)).astype(np.float32)
+    D[0] = 0.0
+    ps = fit_pose_space(Ft, D, alpha=edge_weights(V, V[h], g), mode="interp")
+    nb = tangent_neighbours(m.faces, len(V))
+    f = rng.normal(0.0, 0.05, len(g))
+    fast = DetailEvaluator(ps, m.faces, nb, "numba").apply(V, f, 0.7, add_base=False)
+    ref = DetailEvaluator(ps, m.faces, nb, "numpy").apply(V, f, 0.7, add_base=False)
+    np.testing.assert_allclose(fast, ref, atol=1e-6 + 1e-4 * np.abs(ref).max())
+    # exact interpolation at a training pose, through the fast path too
+    np.testing.assert_allclose(
+        DetailEvaluator(ps, m.faces, nb, "numba").apply(V, Ft[-1], add_base=False),
+        DetailEvaluator(ps, m.faces, nb, "numpy").apply(V, Ft[-1], add_base=False),
+        atol=1e-6,
+    )
+
+
 def test_editing_one_example_propagates(head) -> None:
     m, _h, shell, _sculptor, examples = head
     hd = HybridDeformer(shell, weighted=False)

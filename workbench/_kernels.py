@@ -133,39 +133,73 @@ def _frame_apply(X, N, nb, v, d0, d1, d2):
     )
 
 
+#: WPSD evaluates the pose distances in groups of this many poses (see wpsd_apply)
+POSE_GROUP = 8
+
+
+def wpsd_pose_table(FS: np.ndarray, f: np.ndarray, out: np.ndarray) -> np.ndarray:
+    """``out[i, j] = (f_i − FS[j, i])²``, (F, P8) float32, zero in the padding columns.
+
+    The only per-frame work that depends on the pose: F·P numbers (a few kB),
+    computed once so the per-vertex loop only weights and sums table rows.
+    """
+    P = FS.shape[0]
+    np.subtract(f[:, None], FS.T, out=out[:, :P])
+    np.square(out[:, :P], out=out[:, :P])
+    out[:, P:] = 0.0
+    return out
+
+
+def pad_poses(W: np.ndarray) -> np.ndarray:
+    """(n, P, 3) RBF weights -> (n, P8, 3) float32, P8 the next multiple of :data:`POSE_GROUP`."""
+    n, P, _ = W.shape
+    P8 = -(-P // POSE_GROUP) * POSE_GROUP
+    out = np.zeros((n, P8, 3), np.float32)
+    out[:, :P] = W
+    return out
+
+
 @njit(parallel=True, fastmath=True, cache=True)
-def wpsd_apply(X, N, nb, a_idx, a_val, FS, f, W, strength, add_base, out, scratch):
+def wpsd_apply(X, N, nb, a_idx, a_val, D, W, strength, add_base, out):
     """WPSD (eq. 3, 5) + local frames: ``out = [X +] strength · R_v Σ_j W[v, j] ‖f − FS_j‖_v``.
 
     X, N (n, 3) float32: large-scale positions and their unit normals; nb (n,)
-    tangent neighbours; a_idx/a_val (n, K) edge weights; FS (P, F) basis
-    features; f (F,) current features; W (n, P, 3) RBF weights; scratch (n, P)
-    float32 (no allocation inside the parallel loop).
+    tangent neighbours; a_idx/a_val (n, K) edge weights (strongest first, zero
+    padded); D (F, P8) the table of :func:`wpsd_pose_table`; W (n, P8, 3) RBF
+    weights padded by :func:`pad_poses`.
+
+    Eight poses at a time in eight scalar accumulators: the sums over a
+    vertex's edges are then eight independent chains (twice as fast as one
+    accumulator array per vertex, which serializes on store-to-load latency).
     """
     n, K = a_idx.shape
-    P = FS.shape[0]
+    P8 = D.shape[1]
     for v in prange(n):
-        # edge-major: each edge's weight and strain are gathered once for all P poses
-        r2 = scratch[v]
-        for j in range(P):
-            r2[j] = 0.0
-        for k in range(K):
-            a = a_val[v, k]
-            if a == 0.0:
-                break  # weights are sorted strongest first, zeros only pad the row
-            i = a_idx[v, k]
-            fi = f[i]
-            for j in range(P):
-                diff = fi - FS[j, i]
-                r2[j] += a * diff * diff
         d0 = np.float32(0.0)
         d1 = np.float32(0.0)
         d2 = np.float32(0.0)
-        for j in range(P):
-            r = np.sqrt(r2[j])
-            d0 += W[v, j, 0] * r
-            d1 += W[v, j, 1] * r
-            d2 += W[v, j, 2] * r
+        for j0 in range(0, P8, 8):
+            r0 = r1 = r2 = r3 = r4 = r5 = r6 = r7 = np.float32(0.0)
+            for k in range(K):
+                a = a_val[v, k]
+                if a == 0.0:
+                    break  # weights are sorted strongest first, zeros only pad the row
+                i = a_idx[v, k]
+                r0 += a * D[i, j0]
+                r1 += a * D[i, j0 + 1]
+                r2 += a * D[i, j0 + 2]
+                r3 += a * D[i, j0 + 3]
+                r4 += a * D[i, j0 + 4]
+                r5 += a * D[i, j0 + 5]
+                r6 += a * D[i, j0 + 6]
+                r7 += a * D[i, j0 + 7]
+            rs = (np.sqrt(r0), np.sqrt(r1), np.sqrt(r2), np.sqrt(r3),
+                  np.sqrt(r4), np.sqrt(r5), np.sqrt(r6), np.sqrt(r7))  # fmt: skip
+            for q in range(8):
+                r = rs[q]
+                d0 += W[v, j0 + q, 0] * r
+                d1 += W[v, j0 + q, 1] * r
+                d2 += W[v, j0 + q, 2] * r
         wx, wy, wz = _frame_apply(X, N, nb, v, d0 * strength, d1 * strength, d2 * strength)
         if add_base:
             out[v, 0] = X[v, 0] + wx

@@ -754,7 +754,9 @@ class DetailEvaluator:
         self.vf_ptr, self.vf_idx = _kernels.vertex_face_csr(self.faces, n)
         self._fbuf = np.empty((self.faces.shape[0], 3), np.float32)
         self._normals = np.empty((n, 3), np.float32)
-        self._scratch = np.empty((n, self.FS.shape[0]), np.float32)
+        if pose_space.alpha is not None:
+            self._W8 = _kernels.pad_poses(self.W)  # WPSD weights in groups of 8 poses
+            self._D = np.empty((self.FS.shape[1], self._W8.shape[1]), np.float32)
 
     def normals(self, X: NDArray[np.float32]) -> NDArray[np.float32]:
         """Unit area-weighted normals of X (n, 3) float32 (an internal buffer; copy to keep)."""
@@ -790,9 +792,10 @@ class DetailEvaluator:
         if self.backend == "numba":
             N = self.normals(X32)
             if ps.alpha is not None:
+                D = _kernels.wpsd_pose_table(self.FS, f, self._D)
                 _kernels.wpsd_apply(
-                    X32, N, self.neighbours, self.a_idx, self.a_val, self.FS, f, self.W,
-                    np.float32(strength), add_base, out, self._scratch,
+                    X32, N, self.neighbours, self.a_idx, self.a_val, D, self._W8,
+                    np.float32(strength), add_base, out,
                 )
             else:
                 phi = np.ascontiguousarray(ps.distances(f), np.float32)
