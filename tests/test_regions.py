@@ -244,3 +244,276 @@ def test_stored_in_the_model_slot_is_undoable(head: FaceModel, regions: Regions)
     assert m.regions is regions
     m.undo()
     assert m.regions is None
+
+
+# --------------------------------------------------------------- user edits
+from workbench.regions import (  # noqa: E402
+    RegionTopology,
+    adjacent_regions,
+    merge_regions,
+    paint_region,
+    recompute_region_weights,
+    region_adjacency,
+    region_topology,
+    rename_region,
+    split_region,
+)
+
+_ARRAYS = ("labels", "weight_rows", "weight_cols", "weight_vals", "background", "parents")
+
+
+@pytest.fixture(scope="module")
+def topo(head: FaceModel) -> RegionTopology:
+    return region_topology(head)
+
+
+def assert_same_regions(a: Regions, b: Regions, names: bool = True) -> None:
+    """Bit-exact equality of every array (and the tables)."""
+    for f in _ARRAYS:
+        for x, y in zip(getattr(a, f), getattr(b, f), strict=True):
+            assert x.dtype == y.dtype and np.array_equal(x, y), f
+    assert a.kinds == b.kinds
+    if names:
+        assert a.names == b.names and a.drivers == b.drivers
+
+
+def assert_invariants(R: Regions, topo: RegionTopology) -> None:
+    """What the segmentation guarantees: connected skin regions, nesting, one-ring overlaps, unity."""
+    A, skin = topo.adjacency, topo.skin
+    for lv in range(R.n_levels):
+        W = R.weights_dense(lv)
+        np.testing.assert_allclose(W.sum(axis=1), 1.0, atol=1e-6)
+        for r in range(R.n_regions(lv)):
+            if R.kinds[lv][r] != "skin":
+                continue
+            c = np.zeros(R.n_vertices, bool)
+            c[R.core(lv, r)] = True
+            c &= skin
+            core = np.flatnonzero(c)
+            assert core.size > 0, (lv, R.names[lv][r])
+            assert connected_components(A[core][:, core], directed=False)[0] == 1, (lv, R.names[lv][r])
+            ring = (A @ c.astype(np.int32) > 0) & ~c & skin
+            members = np.zeros(R.n_vertices, bool)
+            members[R.members(lv, r)] = True
+            assert np.array_equal(members & skin, c | ring), (lv, R.names[lv][r])
+    for lv in range(R.n_levels - 1):
+        fine, coarse, par = R.labels[lv], R.labels[lv + 1], R.parents[lv]
+        has = fine >= 0
+        assert np.array_equal(coarse >= 0, has)
+        assert np.array_equal(coarse[has], par[fine[has]])
+    # attachments copy their nearest skin vertex on every level
+    for lv in range(R.n_levels):
+        assert np.array_equal(R.labels[lv][topo.attached], R.labels[lv][topo.nearest])
+
+
+def _far_pair(R: Regions, topo: RegionTopology, level: int, region: str, axis: int) -> tuple[int, int]:
+    core = R.core(level, region)
+    core = core[topo.skin[core]]
+    x = topo.vertices[core, axis]
+    return int(core[np.argmin(x)]), int(core[np.argmax(x)])
+
+
+def test_recomputing_the_weights_of_a_segmentation_is_bit_exact(regions: Regions, topo: RegionTopology) -> None:
+    assert_same_regions(recompute_region_weights(regions, topo), regions)
+    assert region_topology(workbench.load_sample("head")).n_vertices == regions.n_vertices
+
+
+def test_rename_keeps_labels_and_weights(regions: Regions) -> None:
+    e = rename_region(regions, 0, "mouth_L_2", "lip_corner_L")
+    assert e.regions.names[0][regions.region_index(0, "mouth_L_2")] == "lip_corner_L"
+    for f in _ARRAYS:
+        for x, y in zip(getattr(e.regions, f), getattr(regions, f), strict=True):
+            assert x is y or np.array_equal(x, y)
+    assert all(np.array_equal(o, np.arange(regions.n_regions(lv))) for lv, o in enumerate(e.origins))
+
+
+def test_merge_adjacent_regions(regions: Regions, topo: RegionTopology) -> None:
+    a = regions.region_index(0, "mouth_L_2")
+    b = adjacent_regions(regions, topo, 0, a)[0]
+    e = merge_regions(regions, topo, 0, a, b)
+    R = e.regions
+    assert R.n_regions(0) == regions.n_regions(0) - 1
+    keep = min(a, b)
+    merged = np.flatnonzero((regions.labels[0] == a) | (regions.labels[0] == b))
+    assert np.array_equal(np.flatnonzero(R.labels[0] == keep), merged)
+    # name, drivers and weights of the larger region
+    sizes = {r: int(((regions.labels[0] == r) & topo.skin).sum()) for r in (a, b)}
+    big = max((a, b), key=lambda r: (sizes[r], -(r == b)))
+    assert R.names[0][keep] == regions.names[0][big]
+    assert R.drivers[0][keep] == regions.drivers[0][big]
+    assert e.origins[0][keep] == big
+    assert_invariants(R, topo)
+
+
+def test_merge_across_coarse_parents_merges_the_parents_too(regions: Regions, topo: RegionTopology) -> None:
+    C = region_adjacency(regions, topo, 0)
+    assert np.array_equal(C, C.T) and np.all(np.diag(C) == 0)
+    par = regions.parents[0]
+    pairs = [(a, b) for a, b in zip(*np.nonzero(np.triu(C)), strict=True) if par[a] != par[b]]
+    a, b = (int(x) for x in pairs[0])
+    e = merge_regions(regions, topo, 0, a, b, name="merged")
+    R = e.regions
+    assert "merged" in R.names[0]
+    assert R.n_regions(1) == regions.n_regions(1) - 1
+    lab1 = R.labels[1]
+    assert len(set(lab1[(regions.labels[1] == par[a]) | (regions.labels[1] == par[b])].tolist())) == 1
+    assert_invariants(R, topo)
+
+
+def test_merge_errors_name_the_argument(regions: Regions, topo: RegionTopology) -> None:
+    a = regions.region_index(0, "brow_eye_L")
+    far = regions.region_index(0, "jaw_R_1")
+    with pytest.raises(RegionError, match="b: region 'jaw_R_1' does not touch 'brow_eye_L'"):
+        merge_regions(regions, topo, 0, a, far)
+    with pytest.raises(RegionError, match="b: cannot merge"):
+        merge_regions(regions, topo, 0, a, "brow_eye_L")
+    with pytest.raises(RegionError, match=r"a: .*rigid"):
+        merge_regions(regions, topo, 0, "eyeball_L", a)
+    with pytest.raises(RegionError, match="b: region 'nope'"):
+        merge_regions(regions, topo, 0, a, "nope")
+    with pytest.raises(RegionError, match="level"):
+        merge_regions(regions, topo, 5, a, far)
+    b = adjacent_regions(regions, topo, 0, a)[0]
+    with pytest.raises(RegionError, match="name 'jaw_R_1' is already used"):
+        merge_regions(regions, topo, 0, a, b, name="jaw_R_1")
+    with pytest.raises(RegionError, match="topology"):
+        merge_regions(regions, "mesh", 0, a, b)  # type: ignore[arg-type]
+
+
+def test_split_then_merge_restores_the_partition_on_level_0(regions: Regions, topo: RegionTopology) -> None:
+    r = regions.region_index(0, "cheek_mouth_L")
+    sa, sb = _far_pair(regions, topo, 0, "cheek_mouth_L", 1)
+    e = split_region(regions, topo, 0, r, sa, sb)
+    R = e.regions
+    assert R.names[0][r : r + 2] == ("cheek_mouth_L_a", "cheek_mouth_L_b")
+    assert R.labels[0][sa] == r and R.labels[0][sb] == r + 1
+    assert e.origins[0][r] == e.origins[0][r + 1] == r  # both halves inherit
+    # geodesic Voronoi: the two halves partition the old core, both non-empty
+    old = regions.labels[0] == r
+    assert np.array_equal((R.labels[0] == r) | (R.labels[0] == r + 1), old)
+    assert R.n_regions(1) == regions.n_regions(1)  # coarser levels unchanged
+    assert np.array_equal(R.labels[1], regions.labels[1])
+    assert_invariants(R, topo)
+    back = merge_regions(R, topo, 0, r + 1, r, name="cheek_mouth_L").regions
+    assert_same_regions(back, regions)
+
+
+def test_split_on_a_coarse_level_groups_children_and_merge_undoes_it(
+    regions: Regions, topo: RegionTopology
+) -> None:
+    r = regions.region_index(2, "mouth")
+    sa, sb = _far_pair(regions, topo, 2, "mouth", 0)
+    e = split_region(regions, topo, 2, r, sa, sb, names=("mouth_right", "mouth_left"))
+    R = e.regions
+    assert R.names[2][r : r + 2] == ("mouth_right", "mouth_left")
+    for lv in (0, 1):  # whole children: finer levels unchanged
+        assert np.array_equal(R.labels[lv], regions.labels[lv])
+    assert_invariants(R, topo)
+    back = merge_regions(R, topo, 2, r, r + 1, name="mouth").regions
+    assert_same_regions(back, regions)
+
+
+def test_split_with_both_seeds_in_one_child_splits_the_child_first(
+    regions: Regions, topo: RegionTopology
+) -> None:
+    lv0 = regions.region_index(0, "mouth_L_2")
+    r1 = int(regions.parents[0][lv0])
+    sa, sb = _far_pair(regions, topo, 0, "mouth_L_2", 1)
+    e = split_region(regions, topo, 1, r1, sa, sb)
+    R = e.regions
+    assert R.n_regions(0) == regions.n_regions(0) + 1
+    assert R.n_regions(1) == regions.n_regions(1) + 1
+    assert R.labels[1][sa] != R.labels[1][sb] and R.labels[0][sa] != R.labels[0][sb]
+    assert_invariants(R, topo)
+
+
+def test_split_errors_name_the_argument(regions: Regions, topo: RegionTopology) -> None:
+    sa, sb = _far_pair(regions, topo, 0, "cheek_mouth_L", 1)
+    other = int(regions.core(0, "brow_eye_R")[0])
+    with pytest.raises(RegionError, match=r"seeds_b: vertices .* not in the core of region 'cheek_mouth_L'"):
+        split_region(regions, topo, 0, "cheek_mouth_L", sa, other)
+    with pytest.raises(RegionError, match=r"seeds_b: vertices .* also in seeds_a"):
+        split_region(regions, topo, 0, "cheek_mouth_L", [sa, sb], sb)
+    with pytest.raises(RegionError, match="seeds_a must hold at least one vertex"):
+        split_region(regions, topo, 0, "cheek_mouth_L", [], sb)
+    with pytest.raises(RegionError, match="seeds_a: vertex ids must be in"):
+        split_region(regions, topo, 0, "cheek_mouth_L", -3, sb)
+    with pytest.raises(RegionError, match="region: 'eyeball_L' is a rigid part"):
+        split_region(regions, topo, 0, "eyeball_L", sa, sb)
+    with pytest.raises(RegionError, match=r"names\[1\] 'brow_eye_R' is already used"):
+        split_region(regions, topo, 0, "cheek_mouth_L", sa, sb, names=("x", "brow_eye_R"))
+    # seeds of one half on both sides of the other half's seed: that half is in two pieces
+    core = regions.core(0, "cheek_mouth_L")
+    core = core[topo.skin[core]]
+    y = topo.vertices[core, 1]
+    mid = int(core[np.argsort(y)[core.size // 2]])
+    with pytest.raises(RegionError, match="seeds_a: the half around these seeds would be in 2 pieces"):
+        split_region(regions, topo, 0, "cheek_mouth_L", [sa, sb], mid)
+
+
+def _ring(R: Regions, topo: RegionTopology, level: int, r: int) -> np.ndarray:
+    c = np.zeros(R.n_vertices, bool)
+    c[R.core(level, r)] = True
+    c &= topo.skin
+    return np.flatnonzero((topo.adjacency @ c.astype(np.int32) > 0) & ~c & topo.skin)
+
+
+def test_paint_assigns_vertices_and_keeps_regions_connected(regions: Regions, topo: RegionTopology) -> None:
+    r = regions.region_index(0, "mouth_L_2")
+    ring = _ring(regions, topo, 0, r)
+    T = ring[:12]
+    e = paint_region(regions, topo, 0, r, T)
+    R = e.regions
+    assert (R.labels[0][T] == r).all()
+    for lv in (1, 2):  # the ancestors follow
+        assert (R.labels[lv][T] == regions.ancestor(0, r, lv)).all()
+    changed = np.flatnonzero(R.labels[0] != regions.labels[0])
+    assert set(changed.tolist()) <= set(T.tolist()) | set(topo.attached.tolist())
+    assert_invariants(R, topo)
+    # painting on a coarse level: the painted vertices join a child of the region on finer levels
+    r2 = regions.region_index(1, "mouth_L")
+    T2 = _ring(regions, topo, 1, r2)[:12]
+    R2 = paint_region(regions, topo, 1, r2, T2).regions
+    assert (R2.labels[1][T2] == r2).all()
+    assert (R2.parents[0][R2.labels[0][T2]] == r2).all()
+    assert_invariants(R2, topo)
+
+
+def test_paint_erase_returns_vertices_to_the_background_on_every_level(
+    regions: Regions, topo: RegionTopology
+) -> None:
+    r = regions.region_index(0, "cheek_mouth_L")
+    core = regions.core(0, r)
+    core = core[topo.skin[core]]
+    border = np.intersect1d(core, _ring(regions, topo, 0, regions.region_index(0, "mouth_L_2")))[:4]
+    e = paint_region(regions, topo, 0, r, border, add=False)
+    for lv in range(regions.n_levels):
+        assert (e.regions.labels[lv][border] == -1).all()
+    assert_invariants(e.regions, topo)
+
+
+def test_paint_no_change_is_the_same_object_and_errors_name_vertices(
+    regions: Regions, topo: RegionTopology
+) -> None:
+    r = regions.region_index(0, "mouth_L_2")
+    core = regions.core(0, r)
+    e = paint_region(regions, topo, 0, r, core[:5])
+    assert e.regions is regions
+    far = regions.core(0, "brow_eye_R")[:3]
+    with pytest.raises(RegionError, match="vertices: 3 painted vertices do not touch region 'mouth_L_2'"):
+        paint_region(regions, topo, 0, r, far)
+    eye = regions.core(0, "eyeball_L")[:3]
+    with pytest.raises(RegionError, match="vertices: none of them is on the segmented skin"):
+        paint_region(regions, topo, 0, r, eye)
+    with pytest.raises(RegionError, match="region: 'eyeball_L' is a rigid part"):
+        paint_region(regions, topo, 0, "eyeball_L", core[:3])
+    with pytest.raises(RegionError, match="vertices must be integer"):
+        paint_region(regions, topo, 0, r, [0.5])
+    # erasing a band across a region cuts it in two: refused
+    q = regions.region_index(0, "cheek_mouth_L")
+    cq = regions.core(0, q)
+    cq = cq[topo.skin[cq]]
+    y = topo.vertices[cq, 1]
+    band = cq[np.abs(y - np.median(y)) < 0.15 * np.ptp(y)]
+    with pytest.raises(RegionError, match="vertices: painting would cut region 'cheek_mouth_L'"):
+        paint_region(regions, topo, 0, q, band, add=False)

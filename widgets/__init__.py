@@ -35,7 +35,7 @@ from typing import Any
 
 import ipywidgets as W
 
-from widgets._threading import ErrorSink
+from widgets._threading import ErrorSink, close_interactions
 from widgets.export_panel import ExportPanel
 from widgets.expression_panel import ExpressionPanel
 from widgets.gallery import ExpressionGallery
@@ -269,12 +269,9 @@ class Workbench(W.VBox):
 
     # ------------------------------------------------------------ undo / redo
     def _before_edit(self) -> None:
-        # model.undo refuses to run inside an interaction: close any open one.
-        self.panel.grouper.flush()
-        self.viewport.end_drag()
-        if self._regions is not None:
-            self._regions.grouper.flush()
-            self._regions.drag_handler.end()
+        # model.undo refuses to run inside an interaction: end every open one (slider
+        # bursts of all panels, a handle drag or paint stroke, a region pin drag).
+        close_interactions(self.model)
 
     def _on_undo(self, _b: Any = None) -> None:
         self._before_edit()

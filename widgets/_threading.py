@@ -14,6 +14,18 @@ to the ``widgets`` logger.
 tell Python when a slider drag ends, so the interaction ends after a short
 idle time. Hand-written because neither ipywidgets nor psygnal offers an
 "idle timeout around a context manager".
+
+:func:`close_interactions` ends every interaction that widgets hold open on a
+model (a slider burst waiting for its idle timer, a handle drag, a paint
+stroke): each widget that keeps one open across messages registers its closer
+with :func:`register_interaction_closer`, and every widget calls
+``close_interactions(model)`` before a discrete edit (Key, Import, a handle
+drag's start, undo ...). Without it such an edit made within the idle time of
+a slider drag would join the drag's interaction and share its undo step
+("Drag jawOpen" swallowing "Key 1 weights"), and ``set_time`` / ``undo``,
+which refuse to run inside an interaction, would fail. The registry lives
+here, not in :class:`workbench.FaceModel`, because the interactions it closes
+are the widgets' (the model only knows the innermost ``interaction()``).
 """
 
 from __future__ import annotations
@@ -22,6 +34,7 @@ import functools
 import logging
 import threading
 import traceback
+import weakref
 from collections.abc import Callable
 from contextlib import AbstractContextManager
 from typing import Any, TypeVar
@@ -82,13 +95,78 @@ class ErrorSink:
         return deco
 
 
+# model -> [(weak reference to a bound method ending an interaction held open on it,
+#            True for a slider burst)]
+_closers: weakref.WeakKeyDictionary[Any, list[tuple[weakref.WeakMethod[Any], bool]]] = (
+    weakref.WeakKeyDictionary()
+)
+_closers_lock = threading.Lock()
+
+
+def register_interaction_closer(
+    model: Any, closer: Callable[[], Any], *, burst: bool = False
+) -> None:
+    """Have :func:`close_interactions` call ``closer`` (a bound method, held weakly).
+
+    ``closer`` ends an interaction its widget may keep open on ``model`` between
+    messages (and is a no-op when none is open), e.g. ``grouper.flush`` or
+    ``viewport.end_drag``. ``burst``: it closes a slider burst (an
+    :class:`InteractionGrouper`), not a pointer drag. It is dropped when its
+    object is garbage collected, or by :func:`unregister_interaction_closer`.
+    """
+    ref = weakref.WeakMethod(closer)  # type: ignore[arg-type]
+    with _closers_lock:
+        refs = _closers.setdefault(model, [])
+        refs[:] = [(r, b) for r, b in refs if r() is not None and r != ref]
+        refs.append((ref, bool(burst)))
+
+
+def unregister_interaction_closer(model: Any, closer: Callable[[], Any]) -> None:
+    """Forget ``closer`` (a widget being closed); no-op if it was not registered."""
+    ref = weakref.WeakMethod(closer)  # type: ignore[arg-type]
+    with _closers_lock:
+        refs = _closers.get(model)
+        if refs is not None:
+            refs[:] = [(r, b) for r, b in refs if r() is not None and r != ref]
+
+
+def close_interactions(
+    model: Any, *, skip: Callable[[], Any] | None = None, bursts_only: bool = False
+) -> None:
+    """End every interaction the widgets hold open on ``model`` (each becomes its undo step).
+
+    Call before a discrete edit (a key, an import, undo, the start of a drag),
+    so the edit is an undo step of its own instead of joining a slider drag
+    whose idle timer has not fired yet. ``skip``: a closer not to call (the
+    caller's own); ``bursts_only``: only slider bursts (pointer drags stay
+    open). Every closer runs; the first exception is raised after.
+    """
+    with _closers_lock:
+        refs = list(_closers.get(model, ()))
+    first: BaseException | None = None
+    for ref, burst in refs:
+        fn = ref()
+        if fn is None or (bursts_only and not burst) or (skip is not None and fn == skip):
+            continue
+        try:
+            fn()
+        except Exception as exc:
+            if first is None:
+                first = exc
+    if first is not None:
+        raise first
+
+
 class InteractionGrouper:
     """Wraps bursts of edits in one ``model.interaction(label)``.
 
     The first :meth:`touch` enters the interaction; every further touch within
     ``idle_s`` seconds extends it; ``idle_s`` after the last touch a timer
     thread exits it, which records ONE undo step and emits the final events.
-    :meth:`flush` ends it at once (before undo/redo, reset, closing).
+    :meth:`flush` ends it at once (before undo/redo, reset, closing), and so does
+    :func:`close_interactions` (any other widget's edit of the model): the
+    grouper registers its :meth:`flush`. A new burst first closes the other
+    groupers' bursts on the model (another panel's slider).
 
     Parameters
     ----------
@@ -111,6 +189,7 @@ class InteractionGrouper:
         self._cm: AbstractContextManager[None] | None = None
         self._label = ""
         self._timer: threading.Timer | None = None
+        register_interaction_closer(model, self.flush, burst=True)
 
     @property
     def active(self) -> bool:
@@ -122,6 +201,10 @@ class InteractionGrouper:
         A different label (another slider) ends the current burst first, so
         each slider drag is its own undo step.
         """
+        if self._cm is None or label != self._label:
+            # A new burst must not nest into another panel's burst. Pointer drags stay
+            # open: a slider update during one is a model echo, not the user's edit.
+            close_interactions(self.model, skip=self.flush, bursts_only=True)
         with self._lock:
             if self._cm is not None and label != self._label:
                 self._end_locked()

@@ -19,12 +19,13 @@ absolute path).
 from __future__ import annotations
 
 import html
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
 import ipywidgets as W
 
-from widgets._threading import ErrorSink
+from widgets._threading import ErrorSink, close_interactions
 
 __all__ = ["FORMAT_CHOICES", "ExportPanel"]
 
@@ -67,6 +68,31 @@ def files_html(paths: list[Path]) -> str:
     )
 
 
+_ENCODING_TEXT = {
+    "linear": "exact, as morph targets / blend shapes",
+    "baked": "baked frame by frame (exact at every frame)",
+    "omitted": "not in this format",
+}
+
+
+def layers_html(layers: Any) -> str:
+    """HTML list of how each active editing layer went into the file (inactive ones left out)."""
+    items = [
+        f"<li><b>{html.escape(r.name)}</b>: {html.escape(_ENCODING_TEXT.get(r.encoding, r.encoding))}"
+        f"<span style='color:#667085'> — {html.escape(r.detail)}</span></li>"
+        for r in layers
+        if r.encoding != "inactive"
+    ]
+    if not items:
+        return ""
+    warn = any(r.encoding == "omitted" for r in layers)
+    colour = "#b54708" if warn else "inherit"
+    return (
+        f"<div class='fwb-export-layers' style='color:{colour}'>Editing layers:"
+        f"<ul style='margin:2px 0'>{''.join(items)}</ul></div>"
+    )
+
+
 def _error_html(text: str) -> str:
     return f"<div class='fwb-export-error' style='color:#b42318'>{html.escape(text)}</div>"
 
@@ -81,6 +107,11 @@ class ExportPanel(W.VBox):
         Initial output path (its suffix follows the format dropdown).
     errors : ipywidgets.Output, optional
         Where unexpected tracebacks go (expected errors show in the panel).
+    before_edit : iterable of callables, optional
+        Called before an export or import, after
+        :func:`widgets._threading.close_interactions` ended the interactions
+        other widgets hold open on the model (an import right after a slider
+        drag is an undo step of its own; an export writes the settled state).
 
     Attributes
     ----------
@@ -89,9 +120,15 @@ class ExportPanel(W.VBox):
     """
 
     def __init__(
-        self, model: Any, *, path: str = "animation.glb", errors: W.Output | None = None
+        self,
+        model: Any,
+        *,
+        path: str = "animation.glb",
+        errors: W.Output | None = None,
+        before_edit: Iterable[Callable[[], Any]] = (),
     ) -> None:
         self.model = model
+        self._before_edit = list(before_edit)
         self.errors = ErrorSink(errors)
         self.last_written: list[Path] = []
         self.format = W.Dropdown(
@@ -165,6 +202,11 @@ class ExportPanel(W.VBox):
         stem = p.with_suffix("") if p.suffix.lower() in _SUFFIXES else p
         self.path.value = str(stem) + self.suffix
 
+    def _flush(self) -> None:
+        close_interactions(self.model)
+        for fn in self._before_edit:
+            fn()
+
     def _sync_fps(self, *_args: Any) -> None:
         # follow the timeline's fps until the user typed another one
         self.fps.value = float(self.model.tracks.fps)
@@ -177,6 +219,7 @@ class ExportPanel(W.VBox):
         path = Path(self.path.value.strip() or f"animation{self.suffix}").expanduser()
         if path.suffix.lower() != self.suffix:
             path = path.with_suffix(self.suffix)
+        self._flush()
         self.result.value = f"Exporting {html.escape(str(path))} …"
         try:
             written = export(
@@ -187,7 +230,7 @@ class ExportPanel(W.VBox):
             self.last_written = []
             return []
         self.last_written = [Path(p).resolve() for p in written]
-        self.result.value = files_html(self.last_written)
+        self.result.value = files_html(self.last_written) + layers_html(getattr(written, "layers", ()))
         return self.last_written
 
     def do_import(self) -> bool:
@@ -200,6 +243,7 @@ class ExportPanel(W.VBox):
             self.import_result.value = _error_html("Type the path of a .csv, .glb or .gltf file.")
             return False
         path = Path(text).expanduser()
+        self._flush()
         try:
             tl = read_animation(path, self.model.shape_names)
             self.model.set_timeline(tl, f"Import animation {path.name}")

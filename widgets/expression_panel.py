@@ -12,7 +12,10 @@ when the drag ended. The panel therefore wraps each burst in
 ``model.interaction("Drag <name>")`` and ends it after 0.5 s without updates
 (:class:`widgets._threading.InteractionGrouper`): one drag = one undo step,
 and the viewport sees cheap ``deformed(False)`` events while it lasts. Undo,
-redo, reset and mute end an open burst first.
+redo, reset and mute end an open burst first, and so does any other widget's
+edit of the model (a timeline key, an import, a handle drag:
+:func:`widgets._threading.close_interactions`), so an edit made within the
+idle time is an undo step of its own.
 
 The panel never keeps weights of its own: slider values follow
 ``model.events.weights`` / ``weights_changing``, so edits from Python cells or
@@ -29,7 +32,7 @@ from typing import Any
 
 import ipywidgets as W
 
-from widgets._threading import ErrorSink, InteractionGrouper
+from widgets._threading import ErrorSink, InteractionGrouper, close_interactions
 
 GROUPS = ("brows", "eyes", "cheeks", "nose", "mouth", "jaw", "tongue", "other")
 _LEFT_TOKENS = {"l", "left", "lf", "lft"}
@@ -234,19 +237,19 @@ class ExpressionPanel(W.VBox):
         model = self._model
         if name not in model.shape_names or model.shape(name).mute == bool(mute):
             return
-        self.grouper.flush()
+        close_interactions(model)
         model.set_shape_mute(name, bool(mute))
 
     def _on_reset(self, _button: Any = None) -> None:
-        self.grouper.flush()
+        close_interactions(self._model)
         self._model.reset_weights()
 
     def _on_undo(self, _button: Any = None) -> None:
-        self.grouper.flush()
+        close_interactions(self._model)
         self._model.undo()
 
     def _on_redo(self, _button: Any = None) -> None:
-        self.grouper.flush()
+        close_interactions(self._model)
         self._model.redo()
 
     def _on_search(self, _change: Any = None) -> None:

@@ -42,7 +42,7 @@ import ipywidgets as W
 import numpy as np
 import traitlets as t
 
-from widgets._threading import ErrorSink, InteractionGrouper
+from widgets._threading import ErrorSink, InteractionGrouper, close_interactions
 from widgets.gallery import ExpressionGallery
 from widgets.viewport import BRUSH_MODES, FALLOFFS, default_brush_radius, face_height
 from workbench.expressions import expression_names
@@ -419,6 +419,7 @@ class PaintPanel(W.VBox):
 
     # ------------------------------------------------------- UI -> model
     def _flush(self) -> None:
+        close_interactions(self._model)
         for fn in self._before_edit:
             fn()
 

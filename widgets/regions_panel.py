@@ -28,6 +28,21 @@ The numerics live in the headless core (:mod:`workbench.regions`,
   (:func:`workbench.region_blend.damp_drag`); the face follows while dragging and
   the drag is one undo step. Optionally the other pins of the touched regions are
   held where they are ("hold other pins");
+* **Edit regions** (the selected region, on the shown level; each one undo step
+  through ``model.rename_region`` / ``merge_regions`` / ``split_region`` /
+  ``paint_region``, see :mod:`workbench.regions` for the rules): *Rename* (text +
+  button); *Merge* with a touching region chosen in a dropdown (the merged region
+  keeps the larger one's name and weights); *Split…*: markers spread over the
+  region, click two and the region is cut halfway between them along the surface
+  (geodesic Voronoi; on coarser levels whole finer regions are grouped);
+  *Paint region*: markers over and around the region, drag from one and a round
+  brush (radius slider, "erase" to take vertices out) assigns the skin under it
+  to the region, one undo step per stroke. Split seeds and brush strokes come
+  through the viewport's ``drag_handler`` hook (:class:`RegionSeedPicker`,
+  :class:`RegionBrushHandler`), as the pin drags do: the viewport has no hook
+  that reports a plain click on the surface without adding a model handle;
+  :meth:`RegionsPanel.pick_seed` and :meth:`RegionsPanel.paint_at` take a vertex
+  id for when it has;
 * a status line: regions per level, segmentation time, solve time per drag update.
 
 The drag messages reach :class:`RegionDragHandler` through the viewport's
@@ -42,6 +57,7 @@ widgets are ipywidgets.
 from __future__ import annotations
 
 import colorsys
+import html
 import threading
 import time
 from collections import deque
@@ -51,7 +67,12 @@ from typing import Any
 import ipywidgets as W
 import numpy as np
 
-from widgets._threading import ErrorSink, InteractionGrouper
+from widgets._threading import (
+    ErrorSink,
+    InteractionGrouper,
+    close_interactions,
+    register_interaction_closer,
+)
 
 #: Colour of vertices in no region (sRGB, [0, 1]).
 BACKGROUND_GREY = (0.62, 0.62, 0.62)
@@ -64,12 +85,20 @@ _HELP = (
     "<b>Find regions</b> splits the face where its shapes bend the skin (Joshi et al. 2003). "
     "Move <b>t</b> for bigger/smaller regions and <b>level</b> for coarse/fine. "
     "In <b>Drag to sculpt</b> mode drag a marker: the weights of the region(s) under it are "
-    "solved so the point follows the mouse; Shift-click the face to add a marker.</div>"
+    "solved so the point follows the mouse; Shift-click the face to add a marker. "
+    "<b>Edit regions</b>: rename, merge with a neighbour, split between two clicked markers, "
+    "or paint the region with a brush (each one undo step).</div>"
 )
 
 
 #: Step of the per-region weight sliders.
 SLIDER_STEP = 0.01
+
+#: Markers shown over the selected region in split mode (click two of them).
+SPLIT_MARKERS = 24
+
+#: Markers shown over and around the selected region in paint mode (drag from one).
+PAINT_MARKERS = 40
 
 
 def _snap(value: float, lo: float) -> float:
@@ -105,7 +134,10 @@ def region_palette(n: int) -> np.ndarray:
 
 
 def region_colors(
-    regions: Any, level: int, background: Iterable[float] = BACKGROUND_GREY
+    regions: Any,
+    level: int,
+    background: Iterable[float] = BACKGROUND_GREY,
+    slots: Any = None,
 ) -> np.ndarray:
     """Per-vertex overlay colours of one level's regions.
 
@@ -115,6 +147,9 @@ def region_colors(
     level : int
     background : (3,) float
         Colour of the background (weight ``regions.background[level]``).
+    slots : (R,) int, optional
+        Palette entry of each region (default: its index). The panel keeps the
+        colours of untouched regions across region edits this way.
 
     Returns
     -------
@@ -123,7 +158,11 @@ def region_colors(
         region's core has exactly that region's colour, overlap vertices a blend.
     """
     lv = regions.check_level(level)
-    pal = region_palette(regions.n_regions(lv)).astype(np.float64)
+    R = regions.n_regions(lv)
+    idx = np.arange(R) if slots is None else np.asarray(slots, np.int64).reshape(-1)
+    if idx.shape != (R,):
+        raise ValueError(f"region_colors: slots must have one entry per region ({R}), got {idx.shape}")
+    pal = region_palette(int(idx.max()) + 1 if R else 0)[idx].astype(np.float64)
     W = regions.weight_matrix(lv)
     bg = (
         np.asarray(regions.background[lv], np.float64)[:, None]
@@ -133,7 +172,53 @@ def region_colors(
     return np.clip(c, 0.0, 1.0).astype(np.float32)
 
 
-class RegionDragHandler:
+class _DragWatchdog:
+    """An abandoned pointer drag (page closed mid-drag) must not leave the model
+    inside an interaction: one self-re-arming timer per drag, as the viewport does.
+
+    Subclasses set ``_lock``, ``_watchdog = None`` and ``_last_msg`` and define
+    :meth:`_drag_open` and :meth:`end`.
+    """
+
+    _lock: threading.RLock
+    _watchdog: threading.Timer | None
+    _last_msg: float
+
+    def _drag_open(self) -> bool:  # pragma: no cover - overridden
+        raise NotImplementedError
+
+    def end(self) -> None:  # pragma: no cover - overridden
+        raise NotImplementedError
+
+    def _arm_watchdog(self) -> None:
+        self._last_msg = time.monotonic()
+        if self._watchdog is None:
+            self._start_watchdog(DRAG_WATCHDOG_S)
+
+    def _start_watchdog(self, delay: float) -> None:
+        self._watchdog = threading.Timer(delay, self._on_watchdog)
+        self._watchdog.daemon = True
+        self._watchdog.start()
+
+    def _cancel_watchdog(self) -> None:
+        if self._watchdog is not None:
+            self._watchdog.cancel()
+            self._watchdog = None
+
+    def _on_watchdog(self) -> None:
+        with self._lock:
+            if not self._drag_open():
+                self._watchdog = None
+                return
+            idle = time.monotonic() - self._last_msg
+            if idle < DRAG_WATCHDOG_S:
+                self._start_watchdog(DRAG_WATCHDOG_S - idle)
+                return
+            self._watchdog = None
+            self.end()
+
+
+class RegionDragHandler(_DragWatchdog):
     """Turns pin drags in the viewport into region-weight solves (paper §4).
 
     Installed as ``viewport.drag_handler`` by :class:`RegionsPanel` in drag mode;
@@ -180,6 +265,8 @@ class RegionDragHandler:
         self._cm: Any = None
         self._watchdog: threading.Timer | None = None
         self._last_msg = 0.0
+        # other widgets' edits end an open pin drag first (one undo step each)
+        register_interaction_closer(model, self.end)
 
     @property
     def dragging(self) -> bool:
@@ -317,34 +404,260 @@ class RegionDragHandler:
         for fn in list(self.listeners):
             fn(dict(self.last_drag))
 
-    # An abandoned drag (page closed mid-drag) must not leave the model inside an
-    # interaction: one self-re-arming timer per drag, as the viewport does.
-    def _arm_watchdog(self) -> None:
-        self._last_msg = time.monotonic()
-        if self._watchdog is None:
-            self._start_watchdog(DRAG_WATCHDOG_S)
+    def _drag_open(self) -> bool:
+        return self._drag is not None
 
-    def _start_watchdog(self, delay: float) -> None:
-        self._watchdog = threading.Timer(delay, self._on_watchdog)
-        self._watchdog.daemon = True
-        self._watchdog.start()
 
-    def _cancel_watchdog(self) -> None:
-        if self._watchdog is not None:
-            self._watchdog.cancel()
-            self._watchdog = None
+def spread_vertices(ids: Any, positions: Any, k: int) -> np.ndarray:
+    """Up to ``k`` of ``ids`` spread over their extent (farthest-point sampling).
 
-    def _on_watchdog(self) -> None:
+    Parameters
+    ----------
+    ids : (m,) int
+        Candidate vertex ids.
+    positions : (n, 3) float
+        Vertex positions (indexed by id).
+    k : int
+
+    Returns
+    -------
+    (min(k, m),) int64
+        Starts at the candidate nearest the centroid; each next one is the
+        candidate farthest from those chosen.
+    """
+    ids = np.asarray(ids, dtype=np.int64).reshape(-1)
+    if ids.size == 0 or k <= 0:
+        return np.zeros(0, np.int64)
+    P = np.asarray(positions, dtype=np.float64)[ids]
+    first = int(np.argmin(np.linalg.norm(P - P.mean(axis=0), axis=1)))
+    chosen = [first]
+    d = np.linalg.norm(P - P[first], axis=1)
+    for _ in range(min(k, ids.size) - 1):
+        j = int(np.argmax(d))
+        if d[j] <= 0:
+            break
+        chosen.append(j)
+        d = np.minimum(d, np.linalg.norm(P - P[j], axis=1))
+    return ids[np.array(chosen, np.int64)]
+
+
+def brush_vertices(model: Any, center: int, radius: float) -> np.ndarray:
+    """Skin vertices a round region brush at ``center`` covers.
+
+    The segmented skin vertices within ``radius`` (model units, neutral mesh)
+    of ``center`` that are connected to it inside that ball, so a brush at the
+    upper lip does not reach across the mouth opening to the lower lip.
+
+    Returns
+    -------
+    (m,) int64
+        Sorted; empty if ``center`` is not a skin vertex.
+    """
+    from scipy.sparse.csgraph import connected_components
+
+    from workbench.regions import region_topology
+
+    topo = region_topology(model)
+    c = int(center)
+    if not 0 <= c < topo.n_vertices or not topo.skin[c]:
+        return np.zeros(0, np.int64)
+    V = topo.vertices
+    near = np.flatnonzero(topo.skin & (np.linalg.norm(V - V[c], axis=1) <= float(radius)))
+    if near.size <= 1:
+        return np.array([c], np.int64)
+    _, comp = connected_components(topo.adjacency[near][:, near], directed=False)
+    return near[comp == comp[int(np.searchsorted(near, c))]].astype(np.int64)
+
+
+class RegionSeedPicker:
+    """``viewport.drag_handler`` of split mode: a press on a marker picks its vertex.
+
+    The viewport's drag hook (see :class:`RegionDragHandler`) is the only
+    per-vertex pick the viewport offers a panel without adding model handles,
+    so split mode shows candidate markers over the selected region and a click
+    on one calls ``on_pick(vertex)``; the drag itself does nothing.
+    """
+
+    def __init__(self, on_pick: Callable[[int], Any], markers: Callable[[], np.ndarray]) -> None:
+        self.on_pick = on_pick
+        self.markers = markers
+
+    @property
+    def dragging(self) -> bool:
+        return False
+
+    def begin(self, index: int, vertex: int | None = None) -> None:
+        if vertex is None:
+            m = np.asarray(self.markers(), np.int64).reshape(-1)
+            if not 0 <= index < m.size:
+                raise ValueError(f"RegionSeedPicker.begin: no marker {index} (have {m.size})")
+            vertex = int(m[index])
+        self.on_pick(int(vertex))
+
+    def move(self, index: int, position: Any) -> float:
+        return 0.0
+
+    def end(self) -> None:
+        return None
+
+
+class RegionBrushHandler(_DragWatchdog):
+    """Paints a region with a round brush (``viewport.drag_handler`` of paint mode).
+
+    A press on a marker opens ``model.interaction("Paint region <name>")`` and
+    paints a dab there; while dragging, the brush sits on the skin vertex
+    nearest to the pointer (the viewport sends the pointer on the view plane
+    through the pressed marker; the nearest vertex of the face shown is the
+    one under it for the front of the face); release ends the stroke: one undo
+    step. Every dab is ``model.paint_region(level, region, brush_vertices(...),
+    add=not erase)``; a dab the model refuses (not touching the region, or one
+    that would cut another region in pieces) is skipped and its message kept
+    in :attr:`last_error`, so the stroke goes on. Usable without a viewport
+    (tests call :meth:`begin` / :meth:`move` / :meth:`end`, or :meth:`dab`).
+
+    Parameters
+    ----------
+    model : workbench.FaceModel
+    target : callable returning (level, region name) or None
+        The region to paint (the panel's selection).
+    radius : float
+        Brush radius in model units.
+    erase : bool
+        Take the brushed vertices out of the region (to the background).
+    """
+
+    def __init__(
+        self,
+        model: Any,
+        target: Callable[[], tuple[int, str] | None],
+        *,
+        radius: float = 0.05,
+        erase: bool = False,
+    ) -> None:
+        self.model = model
+        self.target = target
+        self.radius = float(radius)
+        self.erase = bool(erase)
+        self.listeners: list[Callable[[dict[str, Any]], Any]] = []
+        self.last_stroke: dict[str, Any] = {}
+        self.last_error = ""
+        self._lock = threading.RLock()
+        self._stroke: dict[str, Any] | None = None
+        self._cm: Any = None
+        self._watchdog: threading.Timer | None = None
+        self._last_msg = 0.0
+        register_interaction_closer(model, self.end)
+
+    @property
+    def dragging(self) -> bool:
+        return self._stroke is not None
+
+    def _drag_open(self) -> bool:
+        return self._stroke is not None
+
+    def dab(self, center: int) -> int:
+        """Paint (or erase) the brush at vertex ``center``; returns the vertices that changed label."""
+        from workbench.regions import RegionError
+
+        tgt = self.target()
+        if tgt is None:
+            raise ValueError("region brush: select a region first")
+        level, name = tgt
+        verts = brush_vertices(self.model, int(center), self.radius)
+        if verts.size == 0:
+            self.last_error = f"vertex {int(center)} is not on the segmented skin"
+            return 0
+        model = self.model
+        with model.lock:
+            st = model.regions
+            if st is None:
+                raise ValueError("region brush: no regions yet; press 'Find regions' first")
+            before = st.regions.labels[level]
+            try:
+                after = model.paint_region(level, name, verts, add=not self.erase)
+            except RegionError as exc:
+                self.last_error = str(exc)
+                return 0
+            self.last_error = ""
+            changed = int(np.count_nonzero(after.regions.labels[level][verts] != before[verts]))
+        if self._stroke is not None:
+            self._stroke["dabs"] += 1
+            self._stroke["changed"] += changed
+        return changed
+
+    def begin(self, index: int, vertex: int | None = None) -> None:
+        """Start a stroke at marker ``index`` (vertex ``vertex``); enters ``model.interaction``."""
+        from scipy.spatial import cKDTree
+
+        if vertex is None:
+            raise ValueError("region brush: the press needs the marker's vertex")
+        model = self.model
         with self._lock:
-            if self._drag is None:
-                self._watchdog = None
-                return
-            idle = time.monotonic() - self._last_msg
-            if idle < DRAG_WATCHDOG_S:
-                self._start_watchdog(DRAG_WATCHDOG_S - idle)
-                return
-            self._watchdog = None
             self.end()
+            tgt = self.target()
+            if tgt is None or model.regions is None:
+                raise ValueError("region brush: find regions and select a region first")
+            from workbench.regions import region_topology
+
+            skin = np.flatnonzero(region_topology(model).skin)
+            with model.lock:
+                X = np.asarray(model.evaluate(), dtype=np.float64)
+                verb = "Erase from region" if self.erase else "Paint region"
+                cm = model.interaction(f"{verb} {tgt[1]}")
+                cm.__enter__()
+            self._cm = cm
+            self._stroke = {
+                "name": tgt[1],
+                "tree": cKDTree(X[skin]),
+                "skin": skin,
+                "X": X,
+                "last": int(vertex),
+                "dabs": 0,
+                "changed": 0,
+                "t0": time.perf_counter(),
+            }
+            self._arm_watchdog()
+        self.dab(int(vertex))
+
+    def move(self, index: int, position: Any) -> float:
+        """Move the brush to the skin vertex nearest ``position`` (3,); returns kernel ms."""
+        p = np.asarray(position, dtype=np.float64).reshape(-1)
+        if p.shape != (3,) or not np.isfinite(p).all():
+            raise ValueError(f"RegionBrushHandler.move: position must be 3 finite numbers, got {position!r}")
+        with self._lock:
+            st = self._stroke
+            if st is None:
+                return 0.0
+            t0 = time.perf_counter()
+            _, j = st["tree"].query(p)
+            v = int(st["skin"][int(j)])
+            self._arm_watchdog()
+            if v == st["last"] or np.linalg.norm(st["X"][v] - st["X"][st["last"]]) < 0.25 * self.radius:
+                return 0.0
+            st["last"] = v
+        self.dab(v)
+        return (time.perf_counter() - t0) * 1e3
+
+    def end(self) -> None:
+        """End the open stroke (one undo step); no-op without one."""
+        with self._lock:
+            self._cancel_watchdog()
+            cm, st = self._cm, self._stroke
+            self._cm, self._stroke = None, None
+            if cm is None or st is None:
+                return
+            with self.model.lock:
+                cm.__exit__(None, None, None)
+            self.last_stroke = {
+                "name": st["name"],
+                "dabs": st["dabs"],
+                "changed": st["changed"],
+                "erase": self.erase,
+                "seconds": time.perf_counter() - st["t0"],
+                "error": self.last_error,
+            }
+        for fn in list(self.listeners):
+            fn(dict(self.last_stroke))
 
 
 class RegionsPanel(W.VBox):
@@ -393,6 +706,14 @@ class RegionsPanel(W.VBox):
         self.grouper = InteractionGrouper(model, idle_s=idle_s, errors=self.errors)
         self._before_edit = list(before_edit)
         self.drag_handler = RegionDragHandler(model, self._pin_vertices)
+        # region edits: split seeds are picked, and the region brush painted, through
+        # the same viewport drag hook as the pin drags (markers over the region)
+        self.seed_picker = RegionSeedPicker(self.pick_seed, lambda: self._edit_markers)
+        self.brush_handler = RegionBrushHandler(model, self._brush_target)
+        self._edit_markers = np.zeros(0, np.int64)
+        self._split_seeds: list[int] = []
+        self._slot_memory: Any = None  # (deformation, {level: (labels, names, {name: slot})})
+        self.edit_message = ""
         self._default_pins: np.ndarray | None = None
         self._active = False
         self._saved_colors: Any = None
@@ -464,6 +785,53 @@ class RegionsPanel(W.VBox):
             value=False, description="hold other pins", indent=False, layout=W.Layout(width="140px")
         )
         self.hold.add_class("fwb-region-hold")
+        # ---- region edits (merge / split / rename / paint)
+        self.rename_text = W.Text(
+            value="", placeholder="new name", layout=W.Layout(width="180px"), disabled=True
+        )
+        self.rename_text.add_class("fwb-region-rename-text")
+        self.rename_button = button("Rename", "fwb-region-rename", "Rename the selected region")
+        self.merge_with = W.Dropdown(options=[], description="merge with",
+                                     style={"description_width": "80px"},
+                                     layout=W.Layout(width="260px"), disabled=True)  # fmt: skip
+        self.merge_with.add_class("fwb-region-merge-with")
+        self.merge_button = button(
+            "Merge", "fwb-region-merge", "Merge the selected region with the touching one chosen"
+        )
+        self.split_mode = W.ToggleButton(value=False, description="Split…", icon="scissors",
+                                         tooltip="Click two markers on the selected region: it is "
+                                         "cut halfway between them along the surface",
+                                         layout=W.Layout(width="110px"))  # fmt: skip
+        self.split_mode.add_class("fwb-region-split")
+        self.paint_mode = W.ToggleButton(value=False, description="Paint region", icon="paint-brush",
+                                         tooltip="Drag from a marker to paint the selected region "
+                                         "over the face (one undo step per stroke)",
+                                         layout=W.Layout(width="130px"))  # fmt: skip
+        self.paint_mode.add_class("fwb-region-paint")
+        r0 = self._default_brush_radius()
+        self.paint_radius = W.FloatSlider(
+            value=r0, min=r0 / 4, max=r0 * 4, step=r0 / 20, description="radius",
+            readout_format=".3f", continuous_update=False,
+            style={"description_width": "50px"}, layout=W.Layout(width="230px"),
+        )  # fmt: skip
+        self.paint_radius.add_class("fwb-region-paint-radius")
+        self.paint_erase = W.Checkbox(
+            value=False, description="erase", indent=False, layout=W.Layout(width="80px")
+        )
+        self.paint_erase.add_class("fwb-region-paint-erase")
+        self.edit_status = W.HTML("")
+        self.edit_status.add_class("fwb-region-edit-status")
+        self.edit_box = W.VBox(
+            [
+                W.HTML("<b>Edit regions</b> (the selected region, on the shown level)"),
+                W.HBox([self.rename_text, self.rename_button]),
+                W.HBox([self.merge_with, self.merge_button]),
+                W.HBox([self.split_mode, self.paint_mode, self.paint_radius, self.paint_erase]),
+                self.edit_status,
+            ],
+            layout=W.Layout(width="100%", border="1px solid #ddd", padding="4px"),
+        )
+        self.edit_box.add_class("fwb-region-edit")
         self.undo_button = button("Undo", "fwb-region-undo", "", "undo")
         self.redo_button = button("Redo", "fwb-region-redo", "", "repeat")
         self.status = W.HTML("")
@@ -481,6 +849,7 @@ class RegionsPanel(W.VBox):
                 self.sliders_box,
                 self.add_shape,
                 W.HBox([self.drag_mode, self.damping, self.hold]),
+                self.edit_box,
                 W.HBox([self.undo_button, self.redo_button]),
                 self.status,
             ],
@@ -493,9 +862,7 @@ class RegionsPanel(W.VBox):
         self.threshold.observe(g("threshold")(self._on_threshold), "value")
         self.level.observe(g("region level")(self._on_level), "value")
         self.overlay.observe(g("region overlay")(lambda _c: self._update_overlay()), "value")
-        self.region.observe(
-            g("region select")(lambda _c: None if self._syncing else self._build_sliders()), "value"
-        )
+        self.region.observe(g("region select")(self._on_region_select), "value")
         self.reset_region_button.on_click(g("reset region")(self._on_reset_region))
         self.reset_all_button.on_click(g("reset all regions")(self._on_reset_all))
         self.add_shape.observe(g("add shape slider")(self._on_add_shape), "value")
@@ -504,6 +871,13 @@ class RegionsPanel(W.VBox):
         self.hold.observe(g("hold pins")(self._on_drag_options), "value")
         self.undo_button.on_click(g("undo")(self._on_undo))
         self.redo_button.on_click(g("redo")(self._on_redo))
+        self.rename_button.on_click(g("rename region")(self._on_rename))
+        self.merge_button.on_click(g("merge regions")(self._on_merge))
+        self.split_mode.observe(g("split mode")(self._on_split_mode), "value")
+        self.paint_mode.observe(g("paint mode")(self._on_paint_mode), "value")
+        self.paint_radius.observe(g("brush radius")(self._on_brush_options), "value")
+        self.paint_erase.observe(g("brush erase")(self._on_brush_options), "value")
+        self.brush_handler.listeners.append(g("region brush stats")(self._on_stroke_end))
         self.drag_handler.listeners.append(g("region drag stats")(self._on_drag_end))
         self._cb_regions = g("RegionsPanel regions")(self._on_model_regions)
         self._cb_weights = g("RegionsPanel weights")(self._on_model_weights)
@@ -542,12 +916,15 @@ class RegionsPanel(W.VBox):
         self._update_overlay()
         if self.drag_mode.value:
             self._enter_drag_mode()
+        elif self.split_mode.value or self.paint_mode.value:
+            self._enter_edit_mode()
 
     def deactivate(self) -> None:
         """Leave drag mode and give the viewport its previous colours back."""
         if not self._active:
             return
         self._leave_drag_mode()
+        self._leave_edit_mode()
         self._active = False
         vp = self.viewport
         if vp is not None and self._overlay_key is not None:
@@ -556,8 +933,7 @@ class RegionsPanel(W.VBox):
 
     # ------------------------------------------------------- UI -> model
     def _flush(self) -> None:
-        self.grouper.flush()
-        self.drag_handler.end()
+        close_interactions(self._model)  # this panel's grouper and pin drag too
         for fn in self._before_edit:
             fn()
 
@@ -698,6 +1074,9 @@ class RegionsPanel(W.VBox):
         self.drag_handler.hold_others = bool(self.hold.value)
 
     def _on_drag_mode(self, change: Any) -> None:
+        if change["new"]:  # one pointer mode at a time
+            self.split_mode.value = False
+            self.paint_mode.value = False
         if not self._active:
             return
         if change["new"]:
@@ -738,6 +1117,8 @@ class RegionsPanel(W.VBox):
         vp = self.viewport
         if vp is not None and getattr(vp, "drag_handler", None) is self.drag_handler:
             vp.handles = self._pin_vertices()
+        elif vp is not None and self._edit_handler_installed():
+            vp.handles = self._edit_markers  # the viewport re-sent the model's handles
 
     def _on_drag_end(self, stats: dict[str, Any]) -> None:
         self._select_region(stats["name"])
@@ -748,6 +1129,291 @@ class RegionsPanel(W.VBox):
             if label == name:
                 self.region.value = idx
                 return
+
+    # ------------------------------------------------------- region edits
+    def _default_brush_radius(self) -> float:
+        from widgets.viewport import default_brush_radius
+
+        try:
+            return float(default_brush_radius(self._model))
+        except Exception:  # a degenerate mesh
+            return 0.05
+
+    def _topology(self) -> Any:
+        from workbench.regions import region_topology
+
+        return region_topology(self._model)
+
+    def _selected(self) -> tuple[Any, int, int] | None:
+        """(Regions, level, region index) of the selection, or None."""
+        st = self._model.regions
+        if st is None or self.region.value is None:
+            return None
+        r = int(self.region.value)
+        if not 0 <= r < st.regions.n_regions(st.level):
+            return None
+        return st.regions, st.level, r
+
+    def _brush_target(self) -> tuple[int, str] | None:
+        sel = self._selected()
+        if sel is None:
+            return None
+        R, lv, r = sel
+        return lv, R.names[lv][r]
+
+    def _say(self, text: str, error: bool = False) -> None:
+        self.edit_message = text
+        esc = html.escape(text, quote=False)
+        self.edit_status.value = f"<span style='color:#b00020'>{esc}</span>" if error else esc
+
+    def _select_index(self, r: int) -> None:
+        if any(idx == r for _label, idx in self.region.options):
+            self.region.value = r
+
+    def _on_region_select(self, _change: Any = None) -> None:
+        if self._syncing:
+            return
+        self._build_sliders()
+        self._refresh_edit_controls()
+
+    def _refresh_edit_controls(self) -> None:
+        """Merge candidates, rename placeholder and edit-mode markers for the selection."""
+        from workbench.regions import adjacent_regions
+
+        self._split_seeds = []
+        sel = self._selected()
+        if sel is None:
+            self.merge_with.options = []
+            self.merge_button.disabled = True
+            self.rename_text.placeholder = "new name"
+            self._refresh_edit_markers()
+            return
+        R, lv, r = sel
+        nb = adjacent_regions(R, self._topology(), lv, r) if R.kinds[lv][r] == "skin" else []
+        self.merge_with.options = [(R.names[lv][i], i) for i in nb]
+        self.merge_with.value = nb[0] if nb else None
+        self.merge_button.disabled = not nb
+        self.rename_text.placeholder = R.names[lv][r]
+        self._refresh_edit_markers()
+
+    def rename(self, name: str | None = None) -> None:
+        """Rename the selected region to ``name`` (default: the text box); one undo step."""
+        sel = self._selected()
+        new = (self.rename_text.value if name is None else name).strip()
+        if sel is None or not new:
+            self._say("select a region and type its new name", error=True)
+            return
+        R, lv, r = sel
+        self._flush()
+        old = R.names[lv][r]
+        try:
+            self._model.rename_region(lv, r, new)
+        except ValueError as exc:
+            self._say(str(exc), error=True)
+            return
+        self.rename_text.value = ""
+        self._select_index(r)
+        self._say(f"renamed {old} to {new}")
+
+    def _on_rename(self, _b: Any = None) -> None:
+        self.rename()
+
+    def merge(self, other: int | str | None = None) -> None:
+        """Merge the selected region with ``other`` (default: the "merge with" choice); one undo step.
+
+        The merged region keeps the lower index and the name and weights of the
+        larger of the two (:meth:`workbench.FaceModel.merge_regions`).
+        """
+        sel = self._selected()
+        b = self.merge_with.value if other is None else other
+        if sel is None or b is None:
+            self._say("select a region and a touching region to merge with", error=True)
+            return
+        R, lv, r = sel
+        self._flush()
+        try:
+            bi = R.region_index(lv, b)
+            st = self._model.merge_regions(lv, r, bi)
+        except ValueError as exc:
+            self._say(str(exc), error=True)
+            return
+        keep = min(r, bi)
+        self._select_index(keep)
+        self._say(f"merged {R.names[lv][r]} and {R.names[lv][bi]} into {st.regions.names[lv][keep]}")
+
+    def _on_merge(self, _b: Any = None) -> None:
+        self.merge()
+
+    def split(self, seed_a: int, seed_b: int) -> None:
+        """Split the selected region between two vertices (geodesic Voronoi); one undo step."""
+        sel = self._selected()
+        if sel is None:
+            self._say("select a region to split", error=True)
+            return
+        R, lv, r = sel
+        self._flush()
+        try:
+            st = self._model.split_region(lv, r, int(seed_a), int(seed_b))
+        except ValueError as exc:
+            self._say(str(exc), error=True)
+            return
+        self._select_index(r)
+        names = st.regions.names[lv]
+        self._say(f"split {R.names[lv][r]} into {names[r]} and {names[r + 1]}")
+        self.split_mode.value = False
+
+    def pick_seed(self, vertex: int) -> None:
+        """A click on the face in split mode: the first picks seed A, the second splits.
+
+        What a click on a split-mode marker does (and what a future viewport
+        click hook would call with the vertex under the pointer).
+        """
+        sel = self._selected()
+        if sel is None:
+            self._say("select a region to split", error=True)
+            return
+        R, lv, r = sel
+        v = int(vertex)
+        if R.labels[lv][v] != r:
+            self._say(f"vertex {v} is not in {R.names[lv][r]}: click a marker on it", error=True)
+            return
+        if self._split_seeds and self._split_seeds[0] == v:
+            return  # the same marker again
+        self._split_seeds.append(v)
+        if len(self._split_seeds) == 1:
+            self._say(f"split {R.names[lv][r]}: first point at vertex {v}; click a second marker")
+            return
+        a, b = self._split_seeds[:2]
+        self._split_seeds = []
+        self.split(a, b)
+
+    def paint_at(self, vertex: int) -> int:
+        """One brush dab of the region brush at ``vertex`` (its own undo step outside a stroke).
+
+        Returns the number of vertices whose label changed; a refused dab shows
+        its reason in the edit status and returns 0.
+        """
+        self._flush()
+        changed = self.brush_handler.dab(int(vertex))
+        if self.brush_handler.last_error:
+            self._say(self.brush_handler.last_error, error=True)
+        else:
+            tgt = self._brush_target()
+            verb = "erased from" if self.brush_handler.erase else "painted into"
+            self._say(f"{changed} vertices {verb} {tgt[1] if tgt else '?'}")
+        return changed
+
+    def _on_stroke_end(self, stats: dict[str, Any]) -> None:
+        verb = "erased from" if stats["erase"] else "painted into"
+        msg = f"{stats['changed']} vertices {verb} {stats['name']} ({stats['dabs']} dabs)"
+        if stats["error"]:
+            self._say(f"{msg}; last dab refused: {stats['error']}", error=True)
+        else:
+            self._say(msg)
+        st = self._model.regions
+        if st is not None and stats["name"] in st.regions.names[st.level]:
+            self._select_index(st.regions.names[st.level].index(stats["name"]))
+        self._refresh_edit_markers()
+
+    def _on_brush_options(self, _change: Any = None) -> None:
+        self.brush_handler.radius = float(self.paint_radius.value)
+        self.brush_handler.erase = bool(self.paint_erase.value)
+        self._refresh_edit_markers()
+
+    def _edit_markers_for(self, mode: str) -> np.ndarray:
+        from scipy.spatial import cKDTree
+
+        sel = self._selected()
+        if sel is None:
+            return np.zeros(0, np.int64)
+        R, lv, r = sel
+        topo = self._topology()
+        core = np.flatnonzero((R.labels[lv] == r) & topo.skin)
+        if core.size == 0:
+            return np.zeros(0, np.int64)
+        V = topo.vertices
+        if mode == "split":
+            return spread_vertices(core, V, SPLIT_MARKERS)
+        # paint: the region and a band of three brush radii around it
+        skin = np.flatnonzero(topo.skin)
+        d, _ = cKDTree(V[core]).query(V[skin])
+        band = skin[d <= 3.0 * float(self.paint_radius.value)]
+        return spread_vertices(band, V, PAINT_MARKERS)
+
+    def _refresh_edit_markers(self) -> None:
+        mode = "split" if self.split_mode.value else "paint" if self.paint_mode.value else None
+        if mode is None or self.brush_handler.dragging:
+            return  # (markers never change under a stroke: the drag addresses them by index)
+        self._edit_markers = self._edit_markers_for(mode)
+        vp = self.viewport
+        if vp is not None and self._edit_handler_installed():
+            vp.handles = self._edit_markers
+        self._update_status()
+
+    def _edit_handler_installed(self) -> bool:
+        h = getattr(self.viewport, "drag_handler", None)
+        return h is not None and (h is self.seed_picker or h is self.brush_handler)
+
+    def _on_split_mode(self, change: Any) -> None:
+        if change["new"]:
+            self.drag_mode.value = False
+            self.paint_mode.value = False
+            self._split_seeds = []
+            sel = self._selected()
+            if sel is not None:
+                R, lv, r = sel
+                self._say(f"split {R.names[lv][r]}: click two markers on it")
+            if self._active:
+                self._enter_edit_mode()
+        else:
+            self._split_seeds = []
+            if not self.paint_mode.value:
+                self._leave_edit_mode()
+
+    def _on_paint_mode(self, change: Any) -> None:
+        if change["new"]:
+            self.drag_mode.value = False
+            self.split_mode.value = False
+            self._on_brush_options()
+            self._say("drag from a marker to paint the selected region (tick erase to remove)")
+            if self._active:
+                self._enter_edit_mode()
+        elif not self.split_mode.value:
+            self._leave_edit_mode()
+
+    def _enter_edit_mode(self) -> None:
+        handler = self.seed_picker if self.split_mode.value else self.brush_handler
+        self._refresh_edit_markers()
+        vp = self.viewport
+        if vp is None or not self._active:
+            return
+        if getattr(vp, "drag_handler", None) is handler:
+            return
+        if self._edit_handler_installed():
+            vp.drag_handler = handler  # split <-> paint: same markers mechanism
+            self._refresh_edit_markers()
+            return
+        self._flush()
+        if hasattr(vp, "end_drag"):
+            vp.end_drag()
+        vp.drag_handler = handler
+        self._saved_tool = vp.tool
+        vp.handles = self._edit_markers
+        vp.tool = "sculpt"
+        self._update_status()
+
+    def _leave_edit_mode(self) -> None:
+        self.brush_handler.end()
+        vp = self.viewport
+        if vp is None or not self._edit_handler_installed():
+            return
+        vp.drag_handler = None
+        vp._model_handles_sent = None
+        vp._sync_handles()
+        if self._saved_tool is not None and vp.tool == "sculpt":
+            vp.tool = self._saved_tool
+        self._saved_tool = None
+        self._update_status()
 
     # ------------------------------------------------------- model -> UI
     def _on_model_shapes(self) -> None:
@@ -767,12 +1433,19 @@ class RegionsPanel(W.VBox):
             self.reset_region_button,
             self.reset_all_button,
             self.drag_mode,
+            self.rename_text,
+            self.rename_button,
+            self.merge_with,
+            self.merge_button,
+            self.split_mode,
+            self.paint_mode,
         ):
             w.disabled = not has
         if not has:
             self._shown_regions = None
             self.region.options = []
             self._build_sliders()
+            self._refresh_edit_controls()
             self._update_overlay()
             self._update_status()
             return
@@ -786,6 +1459,7 @@ class RegionsPanel(W.VBox):
             finally:
                 self._syncing = False
             self._build_sliders()
+            self._refresh_edit_controls()
             self._update_overlay()
         else:
             self._refresh_slider_values()
@@ -888,8 +1562,45 @@ class RegionsPanel(W.VBox):
             return
         key = (id(st.regions), st.level)
         if key != self._overlay_key:
-            vp.vertex_colors = region_colors(st.regions, st.level)
+            slots = self.color_slots(st.regions, st.level)
+            vp.vertex_colors = region_colors(st.regions, st.level, slots=slots)
             self._overlay_key = key
+
+    def color_slots(self, regions: Any, level: int) -> np.ndarray:
+        """(R,) palette entry of each region: stable across region edits.
+
+        A fresh segmentation colours region ``r`` with palette entry ``r``. After
+        an edit (same segmentation: the edits keep its ``deformation`` array)
+        every region whose name survives keeps its colour, a renamed region keeps
+        its colour, and new regions (split halves) take the lowest free entries,
+        so an edit does not repaint the whole face.
+        """
+        names = regions.names[level]
+        prev = self._slot_memory
+        if prev is None or prev[0] is not regions.deformation:
+            prev = (regions.deformation, {})
+            self._slot_memory = prev
+        per_level: dict[int, tuple[Any, tuple[str, ...], dict[str, int]]] = prev[1]
+        old = per_level.get(level)
+        if old is None:
+            table = {nm: i for i, nm in enumerate(names)}
+        else:
+            # every name ever seen keeps its entry, so undoing an edit brings the colours back
+            old_labels, old_names, table = old[0], old[1], dict(old[2])
+            new = [nm for nm in names if nm not in table]
+            gone = [nm for nm in old_names if nm not in names]
+            if old_labels is regions.labels[level] and len(gone) == len(new) == 1:
+                table[new[0]] = table[gone[0]]  # a rename (same labels): same colour
+            used = set(table.values())
+            free = (i for i in range(len(used) + len(names) + 1) if i not in used)
+            for nm in names:
+                if nm not in table:
+                    table[nm] = next(free)
+        per_level[level] = (regions.labels[level], names, table)
+        slots = np.array([table[nm] for nm in names], np.int64)
+        if np.unique(slots).size != slots.size:  # (two names that once shared an entry)
+            slots = np.arange(len(names), dtype=np.int64)
+        return slots
 
     def _update_status(self) -> None:
         st = self._model.regions
@@ -910,6 +1621,9 @@ class RegionsPanel(W.VBox):
         vp = self.viewport
         if vp is not None and getattr(vp, "drag_handler", None) is self.drag_handler:
             parts.append(f"drag mode: {len(self._pin_vertices())} markers")
+        elif self._edit_handler_installed():
+            mode = "split" if self.split_mode.value else "paint"
+            parts.append(f"{mode} mode: {len(self._edit_markers)} markers")
         self.status.value = " · ".join(parts)
 
     # ------------------------------------------------------------ closing

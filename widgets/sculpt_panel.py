@@ -29,7 +29,7 @@ from typing import Any
 import ipywidgets as W
 import traitlets as t
 
-from widgets._threading import ErrorSink
+from widgets._threading import ErrorSink, close_interactions
 
 _HELP = (
     "<div style='line-height:1.35'>"
@@ -214,6 +214,7 @@ class SculptPanel(W.VBox):
 
     # ------------------------------------------------------- UI -> model
     def _flush(self) -> None:
+        close_interactions(self._model)
         for fn in self._before_edit:
             fn()
 

@@ -61,7 +61,7 @@ import math
 import threading
 import time
 from collections import deque
-from collections.abc import Sequence
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -70,7 +70,7 @@ import ipywidgets
 import numpy as np
 import traitlets as t
 
-from widgets._threading import ErrorSink
+from widgets._threading import ErrorSink, close_interactions
 from workbench.model import ModelError
 from workbench.tracks import HANDLES, HEAD_POSE, WEIGHTS_PREFIX, Timeline
 
@@ -91,6 +91,10 @@ FRAME_ACK_TIMEOUT_S = 0.5
 #: frames sent but not yet drawn by the browser: 2 lets the kernel prepare the next
 #: frame while the browser draws the current one, and still bounds the backlog
 FRAMES_IN_FLIGHT = 2
+
+#: front-end messages that do not touch the model (every other one first ends the
+#: interactions other widgets hold open, e.g. a slider drag waiting for its idle time)
+_NOT_EDITS = frozenset({"frame_ack", "pause", "scrub_end"})
 
 
 def load_timeline_bundle() -> str:
@@ -182,6 +186,11 @@ class TimelineWidget(anywidget.AnyWidget):
         expressions (``model.expressions``) then every blendshape.
     errors : ipywidgets.Output, optional
         Where callback tracebacks go (the status label shows a one-line summary).
+    before_edit : iterable of callables, optional
+        Called before each editing message (a key, a key move, a scrub, Play),
+        after :func:`widgets._threading.close_interactions` ended the
+        interactions other widgets hold open on the model: a Key pressed right
+        after a slider drag is an undo step of its own, not part of the drag's.
 
     Attributes
     ----------
@@ -227,10 +236,12 @@ class TimelineWidget(anywidget.AnyWidget):
         *,
         chips: Sequence[str] | None = None,
         errors: ipywidgets.Output | None = None,
+        before_edit: Iterable[Callable[[], Any]] = (),
         **kwargs: Any,
     ) -> None:
         super().__init__(_esm=load_timeline_bundle(), **kwargs)
         self._model = model
+        self._before_edit = list(before_edit)
         self.gallery = gallery
         self._chips = None if chips is None else list(chips)
         self.errors = ErrorSink(errors, on_error=self._show_error)
@@ -300,6 +311,8 @@ class TimelineWidget(anywidget.AnyWidget):
             self._fail(f"unknown timeline message {kind!r}")
             return
         try:
+            if kind not in _NOT_EDITS:
+                self._flush()
             handler(content)
         except Exception as exc:
             self.errors.report(f"timeline {kind}", exc)
@@ -312,8 +325,15 @@ class TimelineWidget(anywidget.AnyWidget):
         name = getattr(self.gallery, "selected", None)
         if not name:
             raise ValueError("no expression is selected in the gallery")
+        self._flush()
         self._model.key_expression(self._model.time, name)
         self.status = f"keyed {name} at {self._model.time:.2f} s"
+
+    def _flush(self) -> None:
+        """End open slider/handle interactions so the next edit is an undo step of its own."""
+        close_interactions(self._model)
+        for fn in self._before_edit:
+            fn()
 
     # ---------------------------------------------------------------- playback
     def play(self, loop: bool | None = None) -> Any:

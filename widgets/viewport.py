@@ -24,7 +24,13 @@ would turn every drag frame into a full buffer. The final event of the
 interaction sends the exact positions.
 
 Camera orbit/zoom/pan happen entirely in the browser (OrbitControls): they
-never send a kernel message.
+never send a kernel message. Each view frames the camera on the *neutral*
+mesh's bounds (``_neutral_bounds``, sent with every topology), not on the first
+positions it receives, and at the canvas's current size: on its first geometry
+and again whenever the canvas is resized, until the person orbits, zooms or
+pans (from then on the camera is theirs). So a fresh app, a recovered session
+and one opened on a posed face (jaw open, a sculpted handle) frame the face
+identically, whatever width the notebook gave the view when it first drew.
 
 Handle editing (``tool="sculpt"``, Bickel et al. 2008 §4): the front end picks
 handle markers and sends small JSON messages
@@ -77,6 +83,12 @@ F*2 vertex ids: :meth:`Viewport.set_feature_graph`) and ``_feature_strain``
 :class:`widgets.WrinklePanel` on every model change). The end points follow the
 drawn geometry in the browser, so a drag sends only the F strain values
 (~0.7 kB for ~175 edges). Hidden (``feature_graph = False``), no strain is sent.
+The lines are depth-tested against the face, so the head hides them seen from
+behind. An edge is a straight chord between two handles and dips under the
+curved skin (up to about half its length where it crosses under the lips or
+the side of the nose), so the front end moves its end points toward the
+camera along their view rays (the same pixels, a smaller depth) by
+``FEATURE_DEPTH_PULL`` (``viewport.js``) times the edge's length.
 
 Why hand-written rather than pythreejs / pyvista: see ``widgets/js/src/viewport.js``.
 """
@@ -95,7 +107,12 @@ import ipywidgets
 import numpy as np
 import traitlets as t
 
-from widgets._threading import ErrorSink
+from widgets._threading import (
+    ErrorSink,
+    close_interactions,
+    register_interaction_closer,
+    unregister_interaction_closer,
+)
 
 _STATIC = Path(__file__).resolve().parent / "static"
 BUNDLE = _STATIC / "viewport.js"
@@ -185,6 +202,22 @@ def face_height(model: Any) -> float:
     return h if h > 0 else float(np.linalg.norm(np.ptp(V, axis=0))) or 1.0
 
 
+def neutral_bounds(model: Any) -> dict[str, Any]:
+    """``{"min": [x, y, z], "max": [x, y, z], "radius": r}`` of the neutral mesh (``model.vertices``).
+
+    ``radius``: the largest distance of a vertex from the box centre (what
+    three.js's ``computeBoundingSphere`` gives). The front end frames the camera
+    on this box and sizes the handle markers by this radius, so neither depends
+    on the expression shown when the view opened.
+    """
+    V = np.asarray(model.vertices, dtype=np.float64).reshape(-1, 3)
+    if not V.size or not np.isfinite(V).all():
+        return {}
+    lo, hi = V.min(axis=0), V.max(axis=0)
+    r = float(np.sqrt(((V - (lo + hi) / 2) ** 2).sum(axis=1).max()))
+    return {"min": lo.tolist(), "max": hi.tolist(), "radius": r}
+
+
 def default_brush_radius(model: Any) -> float:
     """:data:`BRUSH_RADIUS_FRACTION` of the face height (about a third of the mouth width)."""
     return BRUSH_RADIUS_FRACTION * face_height(model)
@@ -246,7 +279,8 @@ class Viewport(anywidget.AnyWidget):
     add_on_click : bool
         In sculpt mode, a plain click (no modifier) on the surface adds a handle.
     selected_handle : int
-        Index of the last dragged handle (highlighted), or -1.
+        Index of the last dragged handle (highlighted), or -1. Cleared when the
+        tool changes and when the pointer leaves the view.
     paint_expression : str
         The expression the brush paints (a blendshape or saved expression name;
         "" = none: the left button then orbits in paint mode).
@@ -276,6 +310,7 @@ class Viewport(anywidget.AnyWidget):
     _topology = t.Int(0).tag(sync=True)
     _component_names = t.List(t.Unicode()).tag(sync=True)
     _up_axis = t.Unicode("+y").tag(sync=True)
+    _neutral_bounds = t.Dict().tag(sync=True)
     _vertex_colors = t.Bytes(None, allow_none=True).tag(sync=True)
     _handles = t.Bytes(b"").tag(sync=True)
     _probe_ids = t.Bytes(b"").tag(sync=True)
@@ -371,6 +406,9 @@ class Viewport(anywidget.AnyWidget):
         model.events.handles_changing.connect(self._on_handles)
         model.events.paint_layers.connect(self._on_paint)
         model.events.paint_layers_changing.connect(self._on_paint)
+        # other widgets' edits end an open drag or stroke first (one undo step each)
+        register_interaction_closer(model, self.end_drag)
+        register_interaction_closer(model, self.end_stroke)
         self._connected = True
         self._push_geometry(force_full=True)
         self._sync_handles()
@@ -440,6 +478,11 @@ class Viewport(anywidget.AnyWidget):
             raise t.TraitError(f"Viewport.tool must be one of {TOOLS}, got {value!r}")
         return value
 
+    @t.observe("tool")
+    def _on_tool_changed(self, _change: Any) -> None:
+        # the last dragged marker is no longer highlighted once another tool is picked
+        self.selected_handle = -1
+
     @t.validate("brush_falloff")
     def _valid_falloff(self, proposal: Any) -> str:
         value = str(proposal["value"])
@@ -505,6 +548,8 @@ class Viewport(anywidget.AnyWidget):
                 ev.handles_changing.disconnect(self._on_handles)
                 ev.paint_layers.disconnect(self._on_paint)
                 ev.paint_layers_changing.disconnect(self._on_paint)
+                unregister_interaction_closer(self._model, self.end_drag)
+                unregister_interaction_closer(self._model, self.end_stroke)
                 self._connected = False
         super().close()
 
@@ -512,13 +557,16 @@ class Viewport(anywidget.AnyWidget):
     def begin_stroke(self, expression: str | None = None) -> None:
         """Start a paint stroke (what the front end's "start" message does).
 
-        Enters ``model.interaction("Paint <expression>")``; an open drag or stroke
-        is ended first. ``expression`` defaults to :attr:`paint_expression`.
+        Enters ``model.interaction("Paint <expression>")``; an open drag or stroke,
+        and every interaction other widgets hold open (a slider drag waiting for
+        its idle timer), is ended first. ``expression`` defaults to
+        :attr:`paint_expression`.
         """
         from workbench.expressions import expression_names
 
         model = self._model
         expr = expression if expression is not None else self.paint_expression
+        close_interactions(model)
         with self._drag_lock:
             self.end_drag()
             self.end_stroke()
@@ -674,9 +722,12 @@ class Viewport(anywidget.AnyWidget):
     def begin_drag(self, index: int, vertex: int | None = None) -> None:
         """Start dragging handle ``index`` (what the front end's "start" message does).
 
-        Enters ``model.interaction("Drag handle <name>")``; an open drag is ended first.
+        Enters ``model.interaction("Drag handle <name>")``; an open drag or stroke,
+        and every interaction other widgets hold open (a slider drag waiting for
+        its idle timer), is ended first.
         """
         model = self._model
+        close_interactions(model)
         with self._drag_lock:
             self.end_drag()
             self.end_stroke()
@@ -819,7 +870,7 @@ class Viewport(anywidget.AnyWidget):
         from workbench.model import HandleSet
 
         model = self._model
-        self.end_drag()
+        close_interactions(model)
         with model.lock:
             h = model.handles
             v = int(vertex)
@@ -855,7 +906,7 @@ class Viewport(anywidget.AnyWidget):
         from workbench.model import HandleSet
 
         model = self._model
-        self.end_drag()
+        close_interactions(model)
         with model.lock:
             i = self._resolve_handle(index, vertex)
             if i is None:
@@ -924,6 +975,7 @@ class Viewport(anywidget.AnyWidget):
             try:
                 if phase == "start":
                     v = content.get("vertex")
+                    close_interactions(self._model)
                     handler.begin(int(content["index"]), None if v is None else int(v))
                 elif phase in ("move", "end") and content.get("position") is not None:
                     ms = float(handler.move(int(content["index"]), content["position"]) or 0.0)
@@ -1106,6 +1158,7 @@ class Viewport(anywidget.AnyWidget):
                 self._labels = labels.astype("<u2").tobytes()
                 self._component_names = list(model.component_names)
                 self._up_axis = str(getattr(model.metadata, "up_axis", "+y"))
+                self._neutral_bounds = neutral_bounds(model)
                 self._faces = _u32_bytes(faces.reshape(-1))
                 self._topology = self._topology + 1
             self._positions = _f32_bytes(pos)

@@ -44,7 +44,7 @@ import numpy as np
 import traitlets as t
 from numpy.typing import NDArray
 
-from widgets._threading import ErrorSink
+from widgets._threading import ErrorSink, close_interactions
 
 __all__ = [
     "WrinklePanel",
@@ -448,6 +448,7 @@ class WrinklePanel(W.VBox):
 
     # ------------------------------------------------------- actions (UI -> model)
     def _flush(self) -> None:
+        close_interactions(self._model)
         for fn in self._before_edit:
             fn()
 

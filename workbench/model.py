@@ -987,6 +987,89 @@ class FaceModel:
             raise ModelError(f"{what}: no regions yet; call model.segment_regions() first")
         return st
 
+    # ------------------------------------------- region edits (merge/split/rename/paint)
+    # Thin undoable wrappers of the pure edits in workbench.regions: each is one
+    # set_slot("regions", ...) step (undo restores the previous RegionState object,
+    # so the regions come back bit-exact). The per-region blend weights follow the
+    # edit's ``origins``: a merged region keeps the weights of the larger region,
+    # both halves of a split inherit the split region's, painting keeps everyone's.
+    def _apply_region_edit(self, edit: Any, label: str) -> RegionState:
+        st = self._require_regions(label)
+        if edit.regions is st.regions:
+            return st
+        rw = st.weights
+        if rw is not None:
+            rw = RegionWeights(
+                rw.level, rw.shape_names, edit.regions.names[rw.level], rw.values[edit.origins[rw.level]]
+            )
+        state = RegionState(edit.regions, st.level, rw)
+        self.set_slot("regions", state, label)
+        return state
+
+    def merge_regions(self, level: int, a: int | str, b: int | str, name: str | None = None) -> RegionState:
+        """Merge two touching regions of ``level`` (undoable); see :func:`workbench.regions.merge_regions`.
+
+        The merged region keeps the lower index and the name and blend weights of
+        the larger region (or ``name``); coarser levels merge too if needed to stay nested.
+        """
+        from workbench.regions import merge_regions, region_topology
+
+        with self._lock:
+            st = self._require_regions("merge_regions")
+            R = st.regions
+            edit = merge_regions(R, region_topology(self), level, a, b, name=name)
+            lv = R.check_level(level)
+            na, nb = R.names[lv][R.region_index(lv, a)], R.names[lv][R.region_index(lv, b)]
+            return self._apply_region_edit(edit, f"Merge regions {na} + {nb}")
+
+    def split_region(
+        self, level: int, region: int | str, seeds_a: ArrayLike, seeds_b: ArrayLike,
+        names: tuple[str, str] | None = None,
+    ) -> RegionState:
+        """Split a region around two clicked vertices (undoable); see :func:`workbench.regions.split_region`.
+
+        Geodesic Voronoi of the seeds on level 0; on coarser levels whole children
+        are grouped. Both halves inherit the region's blend weights.
+        """
+        from workbench.regions import region_topology, split_region
+
+        with self._lock:
+            st = self._require_regions("split_region")
+            R = st.regions
+            edit = split_region(R, region_topology(self), level, region, seeds_a, seeds_b, names=names)
+            lv = R.check_level(level)
+            return self._apply_region_edit(edit, f"Split region {R.names[lv][R.region_index(lv, region)]}")
+
+    def rename_region(self, level: int, region: int | str, name: str) -> RegionState:
+        """Rename a region of ``level`` (undoable; labels and weights unchanged)."""
+        from workbench.regions import rename_region
+
+        with self._lock:
+            st = self._require_regions("rename_region")
+            R = st.regions
+            lv = R.check_level(level)
+            old = R.names[lv][R.region_index(lv, region)]
+            if old == name:
+                return st
+            return self._apply_region_edit(rename_region(R, lv, region, name), f"Rename region {old} to {name}")
+
+    def paint_region(self, level: int, region: int | str, vertices: ArrayLike, add: bool = True) -> RegionState:
+        """Assign skin vertices to a region (``add``) or return them to the background (undoable).
+
+        See :func:`workbench.regions.paint_region`; a paint that changes nothing adds no undo step.
+        """
+        from workbench.regions import paint_region, region_topology
+
+        with self._lock:
+            st = self._require_regions("paint_region")
+            R = st.regions
+            edit = paint_region(R, region_topology(self), level, region, vertices, add=add)
+            lv = R.check_level(level)
+            verb = "Paint region" if add else "Erase from region"
+            return self._apply_region_edit(edit, f"{verb} {R.names[lv][R.region_index(lv, region)]}")
+
+    # ----------------------------------------- end of region edits (merge/split/rename/paint)
+
     # ----------------------------------------------------------------- timeline
     @property
     def time(self) -> float:
@@ -1074,9 +1157,9 @@ class FaceModel:
             tl = self.tracks.move_key(track, index, time, value)
             self.set_timeline(self._grow_range(tl, time), f"Move key of {track}")
 
-    def _apply_sample(self, time: float) -> None:
+    def _apply_sample(self, time: float, timeline: Timeline | None = None) -> None:
         """Write the timeline's values at ``time`` into the live state (no history, no events)."""
-        sample = self.tracks.evaluate(time)
+        sample = (self.tracks if timeline is None else timeline).evaluate(time)
         for n, v in sample.weights.items():
             if n in self._weights:
                 s = self._shapes[self._index[n]]
@@ -1108,21 +1191,68 @@ class FaceModel:
             self.events.handles.emit()
             self.events.deformed.emit(True)
 
-    def evaluate_at(self, time: float) -> NDArray[np.float32]:
-        """(n, 3) float32 mesh at ``time`` (head pose applied), without changing the model."""
+    def evaluate_at(self, time: float, timeline: Timeline | None = None) -> NDArray[np.float32]:
+        """(n, 3) float32 mesh at ``time`` (head pose applied), without changing the model.
+
+        ``timeline`` (default: :attr:`tracks`) animates the weights, handle
+        offsets and head pose; exporters pass the timeline they write.
+        """
         with self._lock:
             saved = (dict(self._weights), self._slots["handles"], self._evaluated, self._blended)
             try:
-                self._apply_sample(float(time))
+                self._apply_sample(float(time), timeline)
                 out = self.evaluate().copy()
             finally:
                 self._weights, self._slots["handles"], self._evaluated, self._blended = (
                     saved[0], saved[1], saved[2], saved[3],
                 )
-            pose = self.tracks.evaluate(float(time)).head_matrix()
+            pose = (self.tracks if timeline is None else timeline).evaluate(float(time)).head_matrix()
             if not np.allclose(pose, np.eye(4)):
                 out = (out @ pose[:3, :3].T.astype(np.float32)) + pose[:3, 3].astype(np.float32)
             return out
+
+    def layers_at(
+        self, time: float, names: Iterable[str], timeline: Timeline | None = None
+    ) -> dict[str, NDArray[np.float32] | None]:
+        """Displacements ``(n, 3)`` float32 (copies, or None) of the named layers at ``time``.
+
+        The model is put in the state of ``timeline`` (default :attr:`tracks`)
+        at ``time`` as in :meth:`evaluate_at`, each named provider is called,
+        and the state is restored. No head pose. Exporters use it to bake
+        layers that are not linear in the animated weights and offsets.
+        """
+        with self._lock:
+            wanted = list(names)
+            unknown = [n for n in wanted if n not in self._layer_providers]
+            if unknown:
+                raise KeyError(f"no layers named {unknown}; layers are {list(self._layer_providers)}")
+            saved = (dict(self._weights), self._slots["handles"], self._evaluated, self._blended)
+            try:
+                self._apply_sample(float(time), timeline)
+                out: dict[str, NDArray[np.float32] | None] = {}
+                for n in wanted:
+                    d = self._layer_providers[n](self)
+                    out[n] = None if d is None else np.array(d, dtype=np.float32)
+            finally:
+                self._weights, self._slots["handles"], self._evaluated, self._blended = (
+                    saved[0], saved[1], saved[2], saved[3],
+                )
+            return out
+
+    @property
+    def layer_providers(self) -> Mapping[str, Callable[[FaceModel], NDArray[np.float32] | None]]:
+        """The displacement layers of :meth:`evaluate` by name, in order (a read-only copy).
+
+        Built in: ``"regions"``, ``"handles"``, ``"paint"`` (see
+        :meth:`is_builtin_layer`); later tools add theirs with :meth:`register_layer`.
+        """
+        with self._lock:
+            return MappingProxyType(dict(self._layer_providers))
+
+    def is_builtin_layer(self, name: str) -> bool:
+        """True if layer ``name`` is still the model's own region, handle or paint layer."""
+        builtin = {"regions": region_layer, "handles": self._handle_layer, "paint": self._paint_layer}
+        return name in builtin and self._layer_providers.get(name) is builtin[name]
 
     def register_layer(
         self, name: str, provider: Callable[[FaceModel], NDArray[np.float32] | None]

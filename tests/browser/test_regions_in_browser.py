@@ -5,7 +5,8 @@ The test uses the mouse like a person: "Find regions", "Drag to sculpt", then
 drags the left mouth-corner marker up and out. Checked on both sides: in the
 kernel the region weights under the pin changed (one undo step) and no vertex
 outside those regions (``Regions.members``) moved; on screen the mouth pixels
-changed and the forehead's did not. Screenshots go to ``test-artifacts/<test>/``.
+changed and the forehead's did not. Then "Split…" and two clicks on its markers split
+the selected region (one undo step). Screenshots go to ``test-artifacts/<test>/``.
 """
 
 from __future__ import annotations
@@ -75,6 +76,21 @@ print(json.dumps({"undo": model.history.undo_labels, "interacting": model.intera
                   "pin_disp": (_X1[_v] - _X0[_v]).tolist(),
                   "errors": panel.errors.count + vp.errors.count,
                   "status": panel.status.value}))
+"""
+
+_FRONT_MARKERS = """
+import json, numpy as np
+_n = model.to_trimesh().vertex_normals[panel._edit_markers]
+print(json.dumps((_n[:, 2] > 0.6).tolist()))
+"""
+
+_SPLIT_STATE = """
+import json
+_st = model.regions
+print(json.dumps({"undo": model.history.undo_labels, "n_regions": _st.regions.n_regions(_st.level),
+                  "selected": panel.region.label, "split_mode": panel.split_mode.value,
+                  "tool": vp.tool, "errors": panel.errors.count + vp.errors.count,
+                  "edit": panel.edit_message}))
 """
 
 
@@ -164,5 +180,36 @@ def test_drag_mouth_corner_in_region_mode_moves_only_its_region(open_notebook):
     assert changed > 0.03, f"only {changed:.1%} of the mouth region changed"
     still = pixel_change(forehead0, forehead1)
     assert still < 0.01, f"{still:.1%} of the forehead changed"
+
+    # Split the selected region with two clicks on its split-mode markers
+    before = nb.kernel_eval(_SPLIT_STATE)
+    page.locator(".fwb-region-split").click()
+    page.wait_for_function(
+        "(n) => JSON.parse(document.querySelector('.fwb-viewport').getAttribute('data-handles')"
+        " || '[]').length === n",
+        arg=nb.kernel_eval("import json; print(json.dumps(len(panel._edit_markers)))"),
+    )
+    # (clicking the button may have scrolled the page: bring the face back into view)
+    page.locator(".fwb-viewport").evaluate("e => e.scrollIntoView({block: 'start'})")
+    page.mouse.move(5, 5)
+    page.wait_for_timeout(300)
+    pts = np.array(page.locator(".fwb-viewport").evaluate("e => e.fwbHandles()"), float)
+    pts = pts.reshape(-1, 3)
+    height = page.viewport_size["height"] if page.viewport_size else 10**6
+    # markers on skin facing the camera (+z): a lip region also has markers inside the mouth
+    front = np.array(nb.kernel_eval(_FRONT_MARKERS), bool)
+    vis = np.flatnonzero(front & (pts[:, 2] == 1) & (pts[:, 1] > 0) & (pts[:, 1] < height))
+    assert vis.size >= 2, "fewer than two split markers are visible"
+    d = np.linalg.norm(pts[vis, None, :2] - pts[None, vis, :2], axis=2)
+    i, j = np.unravel_index(np.argmax(d), d.shape)
+    for k in (vis[i], vis[j]):
+        page.mouse.click(pts[k, 0], pts[k, 1])
+        page.wait_for_timeout(300)
+    after = _wait(nb, _SPLIT_STATE, lambda s: s["undo"][-1].startswith("Split region"))
+    assert after["undo"][-1] == f"Split region {before['selected']}", after
+    assert after["n_regions"] == before["n_regions"] + 1, after
+    assert not after["split_mode"] and after["tool"] == "orbit", after  # viewport given back
+    assert after["errors"] == 0, after
+    nb.screenshot("page-split")
     console = "\n".join(nb.console)
     assert "pageerror" not in console, console

@@ -3,10 +3,11 @@
 The tests open ``notebooks/workbench.ipynb``, switch to the "Sculpt" tab, load
 the default handle set with the panel's button and then use the mouse like a
 person: drag the left mouth-corner marker, undo from the panel, drag with
-"Symmetric" on, Shift-click to add a handle and Alt-click to remove it. Each
-step is checked on both sides: the model in the kernel (offsets, undo labels)
-and the pixels (the mouth region changes, the forehead does not). Screenshots
-are kept in ``test-artifacts/<test>/``.
+"Symmetric" on, Shift-click to add a handle and Alt-click to remove it, and
+hover or drag a marker, then leave the view or change the tool (its highlight
+ends). Each step is checked on both sides: the model in the kernel (offsets,
+undo labels) and the pixels (the mouth region changes, the forehead does
+not). Screenshots are kept in ``test-artifacts/<test>/``.
 """
 
 from __future__ import annotations
@@ -263,3 +264,75 @@ print(json.dumps(int(_c[np.argmax(_gap)])))
     assert st["undo"][-1].startswith("Remove handle pair")
     console = "\n".join(nb.console)
     assert "pageerror" not in console, console
+
+
+# Marker colours (sRGB, widgets/js/src/viewport.js): idle, hovered, last dragged.
+_MARKER_COLOURS = {"idle": (255, 140, 26), "hover": (255, 225, 77), "selected": (46, 230, 255)}
+
+
+def _marker_colour(nb: NotebookPage, k: int) -> str:
+    """The colour name nearest to the pixels at the centre of marker ``k``."""
+    x, y, _ = _handles_on_screen(nb)[k]
+    img = nb.screenshot(f"marker-{k}", clip={"x": x - 1, "y": y - 1, "width": 3, "height": 3})
+    c = img.reshape(-1, 3).mean(axis=0)
+    return min(_MARKER_COLOURS, key=lambda n: float(np.abs(c - _MARKER_COLOURS[n]).sum()))
+
+
+def _wait_hover(nb: NotebookPage, k: int) -> None:
+    nb.page.wait_for_function(
+        "(k) => document.querySelector('.fwb-viewport').getAttribute('data-hover') === String(k)",
+        arg=k,
+        timeout=5000,
+    )
+    nb.page.wait_for_timeout(200)  # the render that shows it
+
+
+def _hover(nb: NotebookPage, k: int) -> None:
+    x, y, _ = _handles_on_screen(nb)[k]
+    nb.page.mouse.move(x + 25, y)
+    nb.page.mouse.move(x, y, steps=5)
+    _wait_hover(nb, k)
+
+
+def _selected(nb: NotebookPage) -> int:
+    return int(nb.kernel_eval("import json; print(json.dumps(wb.viewport.selected_handle))"))
+
+
+def test_marker_highlight_ends_when_the_pointer_leaves_or_the_tool_changes(open_notebook):
+    nb = open_notebook(WORKBENCH_NB)
+    info = _open_sculpt(nb)
+    k, page = info["index"], nb.page
+    assert _marker_colour(nb, k) == "idle"
+
+    # Hovered: yellow. Leaving the view in one move (no pointer move lands on it on
+    # the way out) ends the highlight.
+    _hover(nb, k)
+    assert _marker_colour(nb, k) == "hover"
+    page.mouse.move(5, 5)
+    _wait_hover(nb, -1)
+    assert _marker_colour(nb, k) == "idle"
+
+    # Dragged: cyan after the release (selected_handle) until the pointer leaves the view.
+    x, y, _ = _handles_on_screen(nb)[k]
+    _drag(nb, np.array([x, y]), (0.0, -15.0), steps=6)
+    _wait_drag_closed(nb)
+    assert _selected(nb) == k
+    page.wait_for_timeout(300)
+    assert _marker_colour(nb, k) == "selected"
+    page.mouse.move(5, 5)
+    deadline = time.monotonic() + 10
+    while _selected(nb) != -1:
+        assert time.monotonic() < deadline, "selected_handle was not cleared"
+        time.sleep(0.1)
+    page.wait_for_timeout(200)
+    assert _marker_colour(nb, k) == "idle"
+
+    # Hovered, then the tool changes under the resting pointer (here: from the kernel).
+    _hover(nb, k)
+    nb.kernel_eval('wb.viewport.tool = "orbit"')
+    page.wait_for_function(
+        "() => document.querySelector('.fwb-viewport').getAttribute('data-tool') === 'orbit'"
+    )
+    _wait_hover(nb, -1)
+    assert _marker_colour(nb, k) == "idle"
+    assert nb.kernel_eval("import json; print(json.dumps(wb.errors.outputs == ()))") is True

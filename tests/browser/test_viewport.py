@@ -269,3 +269,78 @@ def test_display_options_redraw_without_geometry_updates(open_notebook):
     h = shots["handles"].reshape(-1, 3).astype(int)
     orange = (h[:, 0] > 200) & (h[:, 1] > 90) & (h[:, 1] < 180) & (h[:, 2] < 90)
     assert orange.sum() > 50  # the orange handle markers
+
+
+_APP = (
+    "import workbench, widgets\n"
+    'model = workbench.load_sample("head")\n'
+    "{edit}"
+    "wb = widgets.Workbench(model)\n"
+    "wb"
+)
+
+# A face that is not neutral when the app opens, as a recovered session often is: the
+# jaw open, and the lips pulled forward by a sculpt edit (out of the neutral mesh's box).
+_POSE = """
+import numpy as np
+from workbench.handle_presets import default_face_handles
+model.set_weight("jawOpen", 1.0)
+model.set_handles(default_face_handles(model))
+_V = np.asarray(model.vertices)
+_front = _V[int(np.argmax(_V[:, 2]))]
+_k = int(np.argmin(np.linalg.norm(_V[model.handles.vertices] - _front, axis=1)))
+model.move_handle(_k, [0.0, 0.0, 0.6])
+"""
+
+
+def _unmoved_forehead() -> list[int]:
+    """Front-facing upper-face skin vertices that _POSE leaves where they are (< 0.01 mm)."""
+    import numpy as np
+
+    from workbench import load_sample
+
+    ns: dict = {"model": load_sample("head")}
+    exec(_POSE, ns)  # the same edit, in this process
+    model = ns["model"]
+    V = np.asarray(model.vertices)
+    d = np.linalg.norm(model.evaluate() - V, axis=1)
+    skin = model.component_labels == model.component_names.index("skin")
+    top = V[skin, 1].max() - 0.3 * np.ptp(V[skin, 1])  # the upper face
+    front = skin & (np.abs(V[:, 0]) < 0.5) & (V[:, 2] > V[skin, 2].max() - 0.5)
+    ids = np.flatnonzero(front & (d < 1e-4) & (V[:, 1] > top - 0.6) & (V[:, 1] < top))
+    assert ids.size > 10, ids.size
+    return [int(i) for i in ids[:: max(1, ids.size // 12)]]
+
+
+_TOP_BOTTOM = """
+import json, numpy as np
+_y = np.asarray(model.vertices)[:, 1]
+print(json.dumps([int(np.argmax(_y)), int(np.argmin(_y))]))
+"""
+
+
+def test_a_view_opened_on_a_posed_face_frames_it_like_a_fresh_one(open_notebook):
+    """The camera frames the neutral mesh at the canvas's laid-out size.
+
+    Not the first mesh the view receives (a posed face: jaw open, lips sculpted
+    forward), and not the 320 px minimum width the view has before the notebook
+    lays it out.
+    """
+    ids = _unmoved_forehead()
+    points, boxes = [], []
+    for name, edit in (("fresh", ""), ("posed", _POSE)):
+        nb = open_notebook([_APP.format(edit=edit)])
+        _prepare(nb)  # collapses the file browser: the view gets wider
+        _scroll_to_workbench(nb)
+        box = nb.canvas_box(0)
+        points.append(nb.project(ids)[:, :2] - [box["x"], box["y"]])  # canvas pixels
+        boxes.append((box["width"], box["height"]))
+        nb.canvas_shot(name)
+        if name == "fresh":
+            # fitted to the final size: the head (5.75 to 8.49 dm) fills most of the
+            # height (framed for 320 px, the width bound the distance: 64 %)
+            top, bottom = nb.project(nb.kernel_eval(_TOP_BOTTOM))
+            assert box["width"] > box["height"]  # the height bounds the distance
+            assert (bottom[1] - top[1]) / box["height"] > 0.75, (top, bottom, box)
+    assert boxes[0] == boxes[1]
+    np.testing.assert_allclose(points[0], points[1], atol=1.0)

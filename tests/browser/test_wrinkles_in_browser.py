@@ -17,6 +17,10 @@ with the mouse, and checks
 * dragging back down fades the detail to about zero, and Undo restores the
   rest pose exactly (no detail at all).
 
+A second, quicker test draws the default handles' feature graph on the base
+head (no fit) and orbits half a turn: seen from the front the edges are drawn,
+seen from behind the head hides them (the lines are depth-tested).
+
 Screenshots: ``test-artifacts/<test>/``; drag latencies (pointer event to the
 frame showing it) with wrinkles on and off go to ``latency.json`` there.
 """
@@ -199,7 +203,7 @@ def test_brow_drag_wrinkles_the_forehead_then_undo(open_notebook) -> None:
     # Zoom in on the face with the mouse wheel (camera only: no kernel message).
     box = nb.canvas_box(0)
     page.mouse.move(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
-    for _ in range(12):  # about 2x
+    for _ in range(4):  # about 1.2x (the face is framed to fill the height of the view)
         page.mouse.wheel(0, -120)
         page.wait_for_timeout(60)
     page.locator(".fwb-workbench").evaluate("e => e.scrollIntoView({block: 'start'})")
@@ -294,7 +298,7 @@ def test_brow_drag_wrinkles_the_forehead_then_undo(open_notebook) -> None:
     )
     assert page.locator(".fwb-strain-legend").is_visible()
     fh_graph = nb.screenshot("forehead-rest-graph-again", clip=forehead_clip)
-    assert pixel_change(fh_rest_graph, fh_graph) < 0.03  # (the last dragged marker stays selected)
+    assert pixel_change(fh_rest_graph, fh_graph) < 0.03
     assert pixel_change(fh_rest, fh_graph) > 0.002  # the edges are drawn
     graph = nb.viewport(0).evaluate("e => e.fwbFeatureGraph()")
     assert max(abs(s) for s in graph["strain"]) < 1e-3
@@ -320,3 +324,87 @@ def test_brow_drag_wrinkles_the_forehead_then_undo(open_notebook) -> None:
             indent=1,
         )
     )
+
+
+# The feature graph of the default handles (what a fit draws), no fit needed; the
+# model has no handles, so no marker covers the lines.
+_GRAPH_CELLS = [
+    """
+import numpy as np, widgets, workbench
+from workbench.handle_presets import default_face_handles
+from workbench.pose_space import FeatureGraph
+model = workbench.load_sample("head")
+_h = default_face_handles(model)
+graph = FeatureGraph.from_handles(np.asarray(model.vertices)[_h.vertices])
+PAIRS = np.asarray(_h.vertices)[graph.edges]
+vp = widgets.Viewport(model, height=480)
+vp.layout.width = "640px"
+vp.set_feature_graph(PAIRS)
+vp
+""",
+]
+
+
+def _line_samples(nb: NotebookPage, pairs: np.ndarray) -> np.ndarray:
+    """(k, 2) page points on the drawn edges (a quarter, half and three quarters along)."""
+    ends = nb.project(np.unique(pairs))
+    at = {int(v): ends[i, :2] for i, v in enumerate(np.unique(pairs))}
+    return np.array(
+        [at[a] + t * (at[b] - at[a]) for a, b in pairs.tolist() for t in (0.25, 0.5, 0.75)]
+    )
+
+
+def _drawn_fraction(nb: NotebookPage, name: str, pts: np.ndarray) -> float:
+    """Fraction of the points ``pts`` whose pixel the overlay changes (graph off, then on)."""
+    box = nb.canvas_box(0)
+    shots = {}
+    for shown in (False, True):  # (it is on: each assignment changes it and redraws)
+        renders = int(nb.viewport(0).get_attribute("data-render-count"))
+        nb.kernel_eval(f"vp.feature_graph = {shown}")
+        nb.page.wait_for_function(
+            "(r) => Number(document.querySelector('.fwb-viewport')"
+            ".getAttribute('data-render-count')) > r",
+            arg=renders,
+        )
+        nb.page.wait_for_timeout(200)
+        shots[shown] = nb.screenshot(f"{name}-{'on' if shown else 'off'}", clip=box)
+    diff = np.abs(shots[True].astype(int) - shots[False].astype(int)).max(axis=2)
+    xy = np.round(pts - [box["x"], box["y"]]).astype(int)
+    h, w = diff.shape
+    inside = (xy[:, 0] >= 0) & (xy[:, 0] < w) & (xy[:, 1] >= 0) & (xy[:, 1] < h)
+    xy = xy[inside]
+    return float((diff[xy[:, 1], xy[:, 0]] > 12).mean())
+
+
+def test_feature_graph_is_hidden_by_the_head_seen_from_behind(open_notebook) -> None:
+    nb = open_notebook(_GRAPH_CELLS)
+    nb.page.evaluate(
+        "() => { const s = window.jupyterapp.shell; if (!s.leftCollapsed) s.collapseLeft(); }"
+    )
+    nb.wait_viewports(1)
+    nb.viewport(0).evaluate("e => e.scrollIntoView({block: 'center'})")
+    nb.page.wait_for_timeout(300)
+    pairs = np.array(nb.kernel_eval("import json; print(json.dumps(PAIRS.tolist()))"))
+    assert nb.viewport(0).get_attribute("data-feature-edges") == str(len(pairs))
+
+    # From the front the edges lie on the face: (nearly) all of them are drawn ...
+    front = _drawn_fraction(nb, "front", _line_samples(nb, pairs))
+    assert front > 0.9, front
+    assert nb.page.locator(".fwb-strain-legend").is_visible()
+
+    # ... orbit half a turn (OrbitControls: 2 pi per canvas height dragged) ...
+    box = nb.canvas_box(0)
+    cx, cy = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
+    nb.page.mouse.move(cx - box["height"] / 4, cy)
+    nb.page.mouse.down()
+    nb.page.mouse.move(cx + box["height"] / 4, cy, steps=20)
+    nb.page.mouse.up()
+    nb.page.mouse.move(5, 5)
+    pts = _line_samples(nb, pairs)
+    assert pts[:, 0].min() > box["x"] and pts[:, 0].max() < box["x"] + box["width"]
+    # ... and the head hides them: none shows through the back of the head.
+    back = _drawn_fraction(nb, "back", pts)
+    assert back < 0.03, back
+    assert nb.page.locator(".fwb-strain-legend").is_visible()  # the legend stays
+    console = "\n".join(nb.console)
+    assert "pageerror" not in console, console

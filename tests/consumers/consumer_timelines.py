@@ -52,3 +52,23 @@ def with_handle_keys(tl: Timeline, interpolation: str = "bezier") -> Timeline:
 
 #: sample times: on keys, between keys, on frames and off frames (none inside step ramps)
 SAMPLE_TIMES = [0.0, 0.1, 0.25, 0.3, 0.5, 0.62, 0.75, 0.9, 0.99, 1.0, 1.1, 1.25, 1.4, 1.5, 1.77, 1.9, 2.0]
+
+
+def played_weights(model, tl: Timeline, times) -> np.ndarray:
+    """(F, k) weights the workbench plays (``FaceModel.set_time``): keyed values clamped to
+    each shape's slider range, unkeyed shapes at their current weight, muted shapes 0."""
+    out = np.zeros((len(times), len(model.shapes)))
+    for i, t in enumerate(times):
+        keyed = tl.evaluate(float(t)).weights
+        for k, s in enumerate(model.shapes):
+            w = min(max(keyed[s.name], s.slider_min), s.slider_max) if s.name in keyed else model.weights[s.name]
+            out[i, k] = 0.0 if s.mute else w
+    return out
+
+
+def expected_points(model, tl: Timeline, times, *, head_pose: bool = True) -> np.ndarray:
+    """(F, n, 3) metres: ``model.evaluate_at(t, tl)`` — what the workbench shows at each time."""
+    if not head_pose and HEAD_POSE in tl.tracks:
+        tl = tl.without_track(HEAD_POSE)
+    mpu = model.metadata.metres_per_unit
+    return np.stack([np.asarray(model.evaluate_at(float(t), tl), np.float64) * mpu for t in times])

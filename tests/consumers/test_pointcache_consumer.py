@@ -15,10 +15,9 @@ import struct
 
 import numpy as np
 import pytest
-from consumer_timelines import expression_timeline, with_head_pose
+from consumer_timelines import expected_points, expression_timeline, with_head_pose
 
 from workbench.export import export
-from workbench.tracks import MeshSampler
 
 
 def read_pc2(data: bytes):
@@ -41,8 +40,7 @@ def read_mdd(data: bytes):
 def short_anim(head):
     # 0.5 s at 30 fps keeps the struct parsers fast (16 frames x 5k vertices)
     tl = with_head_pose(expression_timeline("cubic")).replace(start=0.5, end=1.0)
-    mpu = head.metadata.metres_per_unit
-    return tl, MeshSampler(head, tl).points(tl.frame_times()) * mpu
+    return tl, expected_points(head, tl, tl.frame_times())
 
 
 def test_pc2_layout(head, short_anim, tmp_path):

@@ -4,10 +4,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from consumer_timelines import expression_timeline, with_handle_keys, with_head_pose
+from consumer_timelines import (
+    expected_points,
+    expression_timeline,
+    with_handle_keys,
+    with_head_pose,
+)
 
 from workbench.export import export
-from workbench.tracks import MeshSampler
 
 FRAMES = [0, 7, 15, 22, 30, 44, 60]
 
@@ -48,7 +52,7 @@ def test_usdskel_blend_shapes_give_our_points(usd, head, tmp_path, suffix):
     tl = expression_timeline("cubic")
     (p,) = export(head, tl, tmp_path / f"face{suffix}")
     stage, pts = usdskel_points(usd, p, FRAMES)
-    ours = MeshSampler(head, tl).local_points(np.array(FRAMES) / tl.fps) * head.metadata.metres_per_unit
+    ours = expected_points(head, tl, np.array(FRAMES) / tl.fps)
     np.testing.assert_allclose(pts, ours, atol=1e-5, rtol=0)
     assert np.abs(pts[2] - pts[0]).max() > 1e-3  # it really animates
     UsdGeom = usd.UsdGeom
@@ -66,16 +70,15 @@ def test_usdskel_with_handle_layer_and_head_pose(usd, head_with_handles, tmp_pat
     tl = with_head_pose(with_handle_keys(expression_timeline("linear"), "linear"))
     (p,) = export(m, tl, tmp_path / "face.usdc")
     stage, pts = usdskel_points(usd, p, FRAMES)
-    s = MeshSampler(m, tl)
-    mpu = m.metadata.metres_per_unit
     times = np.array(FRAMES) / tl.fps
-    np.testing.assert_allclose(pts, s.local_points(times) * mpu, atol=1e-5, rtol=0)
+    np.testing.assert_allclose(pts, expected_points(m, tl, times, head_pose=False), atol=1e-5, rtol=0)
+    world_expected = expected_points(m, tl, times)
     # the head pose is the SkelRoot transform
     Usd, UsdGeom = usd.Usd, usd.UsdGeom
-    for f, t in zip(FRAMES, times, strict=True):
+    for f in FRAMES:
         M = np.array(UsdGeom.Xformable(stage.GetPrimAtPath("/Face")).ComputeLocalToWorldTransform(Usd.TimeCode(f)))
         world = pts[FRAMES.index(f)] @ M[:3, :3] + M[3, :3]  # USD matrices are row-vector style
-        np.testing.assert_allclose(world, s.points([t])[0] * mpu, atol=1e-5)
+        np.testing.assert_allclose(world, world_expected[FRAMES.index(f)], atol=1e-5)
 
 
 def test_baked_usd_points(usd, head, tmp_path):
@@ -83,6 +86,6 @@ def test_baked_usd_points(usd, head, tmp_path):
     (p,) = export(head, tl, tmp_path / "baked.usda", bake=True)
     stage = usd.Usd.Stage.Open(str(p))
     attr = usd.UsdGeom.Mesh(stage.GetPrimAtPath("/Face/Mesh")).GetPointsAttr()
-    ours = MeshSampler(head, tl).local_points(np.array(FRAMES) / tl.fps) * head.metadata.metres_per_unit
+    ours = expected_points(head, tl, np.array(FRAMES) / tl.fps)
     for i, f in enumerate(FRAMES):
         np.testing.assert_allclose(np.array(attr.Get(usd.Usd.TimeCode(f))), ours[i], atol=1e-5)

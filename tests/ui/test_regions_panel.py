@@ -228,3 +228,148 @@ def test_leaving_drag_mode_gives_the_viewport_back(setup):
     panel.drag_mode.value = False
     assert vp.tool == "orbit" and vp.drag_handler is None
     np.testing.assert_array_equal(vp.handles, np.asarray(model.handles.vertices))
+
+
+# --------------------------------------------------------------- region edits
+def select(panel, name: str) -> int:
+    st = panel.model.regions
+    r = st.regions.names[st.level].index(name)
+    panel.region.value = r
+    return r
+
+
+def click_marker(vp, k: int, v: int, seq: int) -> None:
+    """A press and release on marker ``k`` (no motion), as the front end sends it."""
+    msg = {"type": "handle", "index": k, "vertex": v}
+    vp._on_frontend_msg(vp, {**msg, "phase": "start", "seq": seq}, [])
+    vp._on_frontend_msg(vp, {**msg, "phase": "end", "seq": seq + 1}, [])
+
+
+def test_rename_and_merge_controls_are_one_undo_step_each(setup):
+    model, vp, panel, _ = setup
+    panel.find_button.click()
+    r = select(panel, "mouth_L_2")
+    assert panel.rename_text.placeholder == "mouth_L_2"
+    n = len(model.history.undo_labels)
+    colors0 = np.array(vp.vertex_colors)
+    panel.rename_text.value = "lip_corner_L"
+    panel.rename_button.click()
+    R = model.regions.regions
+    assert R.names[0][r] == "lip_corner_L" and panel.region.label == "lip_corner_L"
+    np.testing.assert_array_equal(vp.vertex_colors, colors0)  # a rename keeps the colours
+    assert model.history.undo_labels[-1] == "Rename region mouth_L_2 to lip_corner_L"
+    # a taken name: the reason in the edit status, no undo step, no traceback
+    panel.rename_text.value = "mouth_L_1"
+    panel.rename_button.click()
+    assert "already used" in panel.edit_status.value and "b00020" in panel.edit_status.value
+    assert len(model.history.undo_labels) == n + 1 and panel.errors.count == 0
+    # merge: the dropdown lists the touching regions only
+    from workbench.regions import adjacent_regions, region_topology
+
+    nb = adjacent_regions(R, region_topology(model), 0, r)
+    assert [idx for _label, idx in panel.merge_with.options] == nb
+    b = nb[0]
+    panel.merge_with.value = b
+    n_regions = R.n_regions(0)
+    panel.merge_button.click()
+    R2 = model.regions.regions
+    assert R2.n_regions(0) == n_regions - 1 and int(panel.region.value) == min(r, b)
+    assert model.history.undo_labels[-1].startswith("Merge regions lip_corner_L + ")
+    assert "merged" in panel.edit_status.value
+    # the overlay: regions away from the merge keep their colours (no palette shift)
+    far = R.core(0, "brow_eye_R")
+    np.testing.assert_array_equal(np.asarray(vp.vertex_colors)[far], colors0[far])
+    panel.undo_button.click()
+    assert model.regions.regions is R
+    np.testing.assert_array_equal(vp.vertex_colors, colors0)
+    panel.undo_button.click()
+    assert model.regions.regions.names[0][r] == "mouth_L_2"
+
+
+def test_split_mode_splits_between_two_clicked_markers(setup):
+    model, vp, panel, sent = setup
+    panel.find_button.click()
+    r = select(panel, "cheek_mouth_L")
+    R = model.regions.regions
+    panel.drag_mode.value = True
+    panel.split_mode.value = True
+    assert not panel.drag_mode.value  # one pointer mode at a time
+    assert vp.tool == "sculpt" and vp.drag_handler is panel.seed_picker
+    markers = np.asarray(vp.handles)
+    assert markers.size >= 2 and (R.labels[0][markers] == r).all()
+    V = np.asarray(model.vertices)[markers]
+    ka, kb = int(np.argmin(V[:, 1])), int(np.argmax(V[:, 1]))
+    n = len(model.history.undo_labels)
+    click_marker(vp, ka, int(markers[ka]), 10)
+    assert "click a second marker" in panel.edit_status.value
+    assert len(model.history.undo_labels) == n
+    click_marker(vp, kb, int(markers[kb]), 12)
+    R2 = model.regions.regions
+    assert R2.names[0][r : r + 2] == ("cheek_mouth_L_a", "cheek_mouth_L_b")
+    assert R2.labels[0][markers[ka]] == r and R2.labels[0][markers[kb]] == r + 1
+    assert model.history.undo_labels[-1] == "Split region cheek_mouth_L"
+    assert len(model.history.undo_labels) == n + 1
+    assert not model.interacting and panel.errors.count + vp.errors.count == 0
+    # the split ends split mode and gives the viewport back
+    assert not panel.split_mode.value and vp.drag_handler is None and vp.tool == "orbit"
+    assert [c["seq"] for c in sent if c.get("type") == "handle_ack"] == [10, 11, 12, 13]
+    panel.undo_button.click()
+    assert model.regions.regions is R
+
+
+def test_paint_mode_brush_stroke_grows_the_region_in_one_undo_step(setup):
+    from workbench.regions import region_topology
+
+    model, vp, panel, _ = setup
+    panel.find_button.click()
+    r = select(panel, "mouth_L_2")
+    R = model.regions.regions
+    panel.paint_mode.value = True
+    assert vp.drag_handler is panel.brush_handler and vp.tool == "sculpt"
+    panel.paint_radius.value = panel.paint_radius.max / 2  # the markers follow the radius
+    markers = np.asarray(vp.handles)
+    topo = region_topology(model)
+    outside = [i for i, v in enumerate(markers) if R.labels[0][v] != r]
+    assert outside  # markers around the region too
+    # the outside marker nearest the region's core
+    core = R.core(0, r)
+    core = core[topo.skin[core]]
+    Vn = topo.vertices
+    k = min(outside, key=lambda i: np.linalg.norm(Vn[core] - Vn[markers[i]], axis=1).min())
+    v = int(markers[k])
+    X = np.asarray(model.evaluate(), dtype=np.float64)
+    toward = Vn[core][np.argmin(np.linalg.norm(Vn[core] - Vn[v], axis=1))]
+    path = [X[v] + f * (toward - Vn[v]) for f in (0.5, 1.0)]  # drag from the marker into the region
+    n = len(model.history.undo_labels)
+    drag(vp, k, v, path)
+    assert panel.brush_handler.last_stroke["error"] == "", panel.edit_status.value
+    assert not model.interacting and not panel.brush_handler.dragging
+    R2 = model.regions.regions
+    assert R2.labels[0][v] == r
+    grown = np.flatnonzero((R2.labels[0] == r) & ~(R.labels[0] == r) & topo.skin)
+    assert grown.size > 1
+    assert model.history.undo_labels[-1] == "Paint region mouth_L_2"
+    assert len(model.history.undo_labels) == n + 1
+    assert "painted into mouth_L_2" in panel.edit_status.value
+    from scipy.sparse.csgraph import connected_components
+
+    c2 = np.flatnonzero((R2.labels[0] == r) & topo.skin)
+    assert connected_components(topo.adjacency[c2][:, c2], directed=False)[0] == 1
+    # erase with a click-sized dab (paint_at), its own undo step
+    panel.paint_erase.value = True
+    panel.paint_radius.value = panel.paint_radius.min
+    assert panel.paint_at(v) > 0, panel.edit_status.value
+    assert model.regions.regions.labels[0][v] == -1
+    assert model.history.undo_labels[-1] == "Erase from region mouth_L_2"
+    panel.undo_button.click()
+    panel.undo_button.click()
+    assert model.regions.regions is R
+    # a dab far from the region is refused with the reason, no undo step
+    panel.paint_erase.value = False
+    far = int(R.core(0, "brow_eye_R")[0])
+    n = len(model.history.undo_labels)
+    assert panel.paint_at(far) == 0
+    assert "do not touch region 'mouth_L_2'" in panel.edit_status.value
+    assert len(model.history.undo_labels) == n
+    panel.paint_mode.value = False
+    assert vp.drag_handler is None and vp.tool == "orbit"

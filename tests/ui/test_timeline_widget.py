@@ -11,6 +11,7 @@ import asyncio
 import concurrent.futures
 import itertools
 
+import numpy as np
 import pytest
 
 pytest.importorskip("anywidget")
@@ -37,7 +38,6 @@ def keyed(tiny_model):
 def send(w, **content):
     w.handle_message(content)
     assert w._error == "", w._error
-
 
 
 def run_on_fresh_thread(fn, *args):
@@ -397,3 +397,39 @@ def test_export_panel_shows_errors(keyed, tmp_path):
     (tmp_path / "a_file_not_a_dir").write_text("")
     assert p.do_export() == []
     assert "Export failed" in p.result.value
+
+
+def test_panels_without_a_workbench_close_each_others_slider_steps(tiny_model):
+    """A timeline and two slider panels of one model, composed by hand (no Workbench)."""
+    from widgets.expression_panel import ExpressionPanel
+
+    m = tiny_model
+    a, b = ExpressionPanel(m, idle_s=30.0), ExpressionPanel(m, idle_s=30.0)
+    w = TimelineWidget(m)
+    a.sliders["up"].value = 0.5  # what a drag sends (the step stays open 30 s)
+    b.sliders["left"].value = 1.5  # another panel's slider: a step of its own
+    send(w, type="key", time=0.0)
+    assert not m.interacting
+    assert m.history.undo_labels == ["Drag up", "Drag left", "Key 2 weights at 0s"]
+    for p in (a, b):
+        p.close()
+    w.close()
+
+
+def test_export_panel_says_how_each_layer_was_written(keyed, tmp_path):
+    from widgets.export_panel import ExportPanel
+
+    def squared(m):  # not linear in the weights: the exporters must bake it
+        d = np.zeros((9, 3), np.float32)
+        d[4, 1] = m.weights["up"] ** 2
+        return d
+
+    keyed.register_layer("squared", squared)
+    p = ExportPanel(keyed, path=str(tmp_path / "anim.glb"))
+    assert p.do_export() == [tmp_path / "anim.glb"]
+    assert "fwb-export-layers" in p.result.value
+    assert "<b>squared</b>: baked frame by frame" in p.result.value
+    assert "handles" not in p.result.value  # inactive layers are not listed
+    p.format.value = "CSV weights (.csv)"
+    assert p.do_export()
+    assert "<b>squared</b>: not in this format" in p.result.value

@@ -209,3 +209,123 @@ def test_recovery_prompt_start_fresh(tmp_path, monkeypatch) -> None:
     prompt = recovery_prompt(lambda: "fresh")
     prompt.fresh_button.click()
     assert prompt.model == "fresh"
+
+
+# ------------------------------------------------- edits right after a slider drag
+def _drag_slider(slider, values) -> None:
+    """What the browser sends while a slider is dragged: comm "update" messages."""
+    for v in values:
+        slider._handle_msg(
+            {
+                "content": {
+                    "data": {"method": "update", "state": {"value": v}, "buffer_paths": []}
+                },
+                "buffers": [],
+            }
+        )
+
+
+def _errors(wb: Workbench) -> str:
+    return "".join(o.get("text", "") for o in wb.errors.outputs)
+
+
+def test_key_right_after_a_slider_drag_is_an_undo_step_of_its_own(wb: Workbench) -> None:
+    m = wb.model
+    _drag_slider(wb.panel.sliders["jawOpen"], (0.2, 0.5, 0.8))
+    assert m.interacting  # the drag's step waits for the slider to go quiet ...
+    wb.timeline.handle_message({"type": "key", "time": 0.0})  # ... but Key comes at once
+    assert wb.timeline._error == "" and not m.interacting
+    assert m.history.undo_labels == ["Drag jawOpen", "Key 1 weights at 0s"]
+    assert "weights/jawOpen" in m.tracks.tracks
+    m.undo()  # the key goes, the slider value stays
+    assert "weights/jawOpen" not in m.tracks.tracks
+    assert m.weights["jawOpen"] == pytest.approx(0.8)
+    m.undo()
+    assert m.weights["jawOpen"] == 0.0
+    assert _errors(wb) == ""
+
+
+def test_timeline_edits_and_scrub_right_after_a_slider_drag(wb: Workbench) -> None:
+    m = wb.model
+    m.set_weight("jawOpen", 0.5)
+    m.key_weights(1.0, ["jawOpen"])
+    _drag_slider(wb.panel.sliders["eyeBlinkLeft"], (0.3, 0.6))
+    wb.timeline.handle_message({"type": "add_key", "track": "weights/jawOpen", "time": 2.0})
+    assert m.history.undo_labels[-2:] == ["Drag eyeBlinkLeft", "Key 1 weights at 2s"]
+    _drag_slider(wb.panel.sliders["eyeBlinkLeft"], (0.1,))
+    wb.timeline.handle_message({"type": "scrub", "time": 0.5, "seq": 1})
+    assert wb.timeline._error == "" and m.time == 0.5  # set_time refuses inside a drag
+    assert m.history.undo_labels[-1] == "Drag eyeBlinkLeft"
+    assert _errors(wb) == ""
+
+
+def test_import_right_after_a_slider_drag_is_an_undo_step_of_its_own(
+    wb: Workbench, tmp_path: Path
+) -> None:
+    m = wb.model
+    csv = tmp_path / "anim.csv"
+    csv.write_text("time,jawOpen\n0,0\n1,0.5\n")
+    _drag_slider(wb.panel.sliders["mouthSmileLeft"], (0.4, 0.7))
+    wb.export.import_path.value = str(csv)
+    wb.export.import_button.click()
+    assert "Imported" in wb.export.import_result.value, wb.export.import_result.value
+    assert m.history.undo_labels == ["Drag mouthSmileLeft", "Import animation anim.csv"]
+    assert _errors(wb) == ""
+
+
+def test_handle_drag_right_after_a_slider_drag_is_an_undo_step_of_its_own(wb: Workbench) -> None:
+    from workbench.handle_presets import default_face_handles
+
+    m = wb.model
+    m.set_handles(default_face_handles(m), label="Default handles")
+    _drag_slider(wb.panel.sliders["jawOpen"], (0.3, 0.6))
+    vp = wb.viewport
+    vp.begin_drag(0)
+    p = m.evaluate()[int(m.handles.vertices[0])] + [0.0, 0.05, 0.0]
+    vp.drag_to(p)
+    vp.end_drag()
+    name = m.handles.names[0]
+    assert m.history.undo_labels == ["Default handles", "Drag jawOpen", f"Drag handle {name}"]
+    assert not m.interacting and _errors(wb) == ""
+
+
+# ------------------------------------------------------------------ viewport
+def test_viewport_frames_the_neutral_mesh_whatever_the_expression() -> None:
+    import numpy as np
+
+    from widgets import Viewport
+    from workbench.handle_presets import default_face_handles
+
+    fresh = load_sample("head")
+    posed = load_sample("head")  # opened mid-expression, as a recovered session may be:
+    posed.set_weight("jawOpen", 1.0)
+    posed.set_handles(default_face_handles(posed))
+    lips = int(np.argmax(np.asarray(posed.vertices)[posed.handles.vertices, 2]))
+    posed.move_handle(lips, [0.0, 0.0, 0.6])  # sculpted out of the neutral box
+    a, b = Viewport(fresh), Viewport(posed)
+    V = np.asarray(fresh.vertices)
+    lo, hi = V.min(axis=0), V.max(axis=0)
+    for vp in (a, b):
+        nb = vp._neutral_bounds
+        np.testing.assert_allclose(nb["min"], lo)
+        np.testing.assert_allclose(nb["max"], hi)
+        r = np.linalg.norm(V - (lo + hi) / 2, axis=1).max()  # three.js's bounding sphere
+        assert nb["radius"] == pytest.approx(r)
+    # what the posed view first receives has other bounds: framing on it would differ
+    P = posed.evaluate()
+    assert P[:, 2].max() > hi[2] + 0.1
+    a.close()
+    b.close()
+
+
+def test_changing_the_tool_clears_the_dragged_handle_highlight(wb: Workbench) -> None:
+    from workbench.handle_presets import default_face_handles
+
+    m = wb.model
+    m.set_handles(default_face_handles(m), label="Default handles")
+    _select(wb, "Sculpt")
+    wb.viewport.begin_drag(3)
+    wb.viewport.end_drag()
+    assert wb.viewport.selected_handle == 3
+    _select(wb, "Shapes")  # the viewport's tool goes back to orbit
+    assert wb.viewport.tool == "orbit" and wb.viewport.selected_handle == -1

@@ -14,9 +14,21 @@ obj       .obj             one OBJ per frame, ``<stem>_<frame>.obj`` (:mod:`.poi
 csv       .csv             per-frame weights, re-importable (:mod:`.csv`)
 ========  ===============  ==========================================================
 
+Every format reproduces :meth:`FaceModel.evaluate_at` — the blend *and every
+editing layer* (regions, handles, paint, and layers registered later such as
+wrinkles) — at every exported frame, within float32 round-off. Layers that are
+linear in the keyed weights and handle offsets are written exactly as a few
+morph targets / blend shapes; the others are baked per frame
+(:mod:`.encoding` has the decomposition, each writer's docstring its
+encoding). ``export`` returns an :class:`ExportResult`: the files written,
+with ``.layers`` saying how each layer was encoded (``"linear"``,
+``"baked"``, ``"inactive"`` or ``"omitted"``); baked and omitted layers are
+also logged as warnings on the ``workbench.export`` logger.
+
 Every file is written to a temporary name in the target folder and renamed
-into place (:func:`atomic_path`), so a crash never leaves a half-written file
-under the final name. Positions are written in metres (the model's units are
+into place (:func:`atomic_path`) with the permissions of a normal new file
+(``0o666 & ~umask``), so a crash never leaves a half-written file under the
+final name. Positions are written in metres (the model's units are
 scaled by ``model.metadata.metres_per_unit``), +y up, as glTF and USD expect.
 
 The registry is a dict rather than entry points: the formats are few and all
@@ -27,6 +39,7 @@ from __future__ import annotations
 
 import contextlib
 import importlib
+import logging
 import os
 import tempfile
 from collections.abc import Callable, Iterator
@@ -45,6 +58,8 @@ __all__ = [
     "FORMATS",
     "ExportError",
     "ExportFormat",
+    "ExportResult",
+    "LayerReport",
     "atomic_path",
     "atomic_write_bytes",
     "export",
@@ -53,8 +68,48 @@ __all__ = [
 ]
 
 
+logger = logging.getLogger("workbench.export")
+
+
 class ExportError(ValueError):
     """The model/timeline cannot be written in the requested format."""
+
+
+@dataclass(frozen=True)
+class LayerReport:
+    """How one editing layer of the model went into an export.
+
+    Attributes
+    ----------
+    name : str
+        The layer's name in :attr:`FaceModel.layer_providers` (``"regions"``,
+        ``"handles"``, ``"paint"``, ``"wrinkles"``, ...).
+    encoding : {"linear", "baked", "inactive", "omitted"}
+        ``linear``: written exactly as morph targets / blend shapes;
+        ``baked``: written per frame (exact at the frames);
+        ``inactive``: moves nothing; ``omitted``: the format cannot hold it (CSV).
+    detail : str
+        A sentence for people.
+    """
+
+    name: str
+    encoding: str
+    detail: str
+
+
+class ExportResult(list[Path]):
+    """The files an export wrote (a plain list of Path) plus :attr:`layers`.
+
+    ``layers`` is a tuple of :class:`LayerReport`, one per layer of the model.
+    """
+
+    def __init__(self, paths: list[Path] | tuple[Path, ...] = (), layers: tuple[LayerReport, ...] | list[LayerReport] = ()) -> None:
+        super().__init__(paths)
+        self.layers: tuple[LayerReport, ...] = tuple(layers)
+
+    def by_encoding(self, encoding: str) -> list[str]:
+        """Names of the layers with ``encoding`` (e.g. ``"baked"``)."""
+        return [r.name for r in self.layers if r.encoding == encoding]
 
 
 @dataclass(frozen=True)
@@ -135,8 +190,9 @@ def export(
 
     Returns
     -------
-    list of Path
-        The files written.
+    ExportResult
+        The files written (a list of Path); ``.layers`` reports how every
+        editing layer was encoded.
     """
     from workbench.tracks import TrackError
 
@@ -154,7 +210,15 @@ def export(
         raise ExportError(str(exc)) from None
     if fmt.name in ("pc2", "mdd", "obj"):
         options.setdefault("kind", fmt.name)
-    return fmt.writer()(model, tl, Path(path), bake=bake, **options)
+    written = fmt.writer()(model, tl, Path(path), bake=bake, **options)
+    result = written if isinstance(written, ExportResult) else ExportResult(written)
+    for r in result.layers:
+        # warn when a layer could not go into the file as it is, or only frame by frame
+        # although the format has morph targets / blend shapes
+        lossy = r.encoding == "omitted" or (r.encoding == "baked" and fmt.name in ("gltf", "usd") and not bake)
+        level = logging.WARNING if lossy else logging.INFO
+        logger.log(level, "%s: layer %r %s: %s", Path(path).name, r.name, r.encoding, r.detail)
+    return result
 
 
 def export_times(timeline: Timeline) -> NDArray[np.float64]:
@@ -167,15 +231,23 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     """Yield a temporary path next to ``path``; on success rename it onto ``path``.
 
     The temporary file is removed if the body raises, so ``path`` is either
-    the old file or the complete new one.
+    the old file or the complete new one. The file gets the mode of a normal
+    new file, ``0o666 & ~umask`` (mkstemp creates it 0600), as
+    :func:`workbench.fileformat.save_model` does; it is set again before the
+    rename because some writers (USD) replace the temporary file.
     """
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=f".tmp{p.suffix}", dir=p.parent)
     os.close(fd)
     tmp_p = Path(tmp)
+    umask = os.umask(0)
+    os.umask(umask)
+    mode = 0o666 & ~umask
     try:
+        os.chmod(tmp_p, mode)
         yield tmp_p
+        os.chmod(tmp_p, mode)
         os.replace(tmp_p, p)
     except BaseException:
         with contextlib.suppress(OSError):

@@ -10,9 +10,14 @@ Two layouts:
     ``HH:MM:SS:FF.fff`` timecodes at the timeline fps and ARKit shapes spelled
     as Live Link Face does (``EyeBlinkLeft``); non-ARKit shapes keep their name.
 
-Rows hold what the model plays at each frame (:meth:`MeshSampler.weights`):
-unkeyed shapes at their current weight, muted shapes 0. Written with the csv
-module into a temporary file, then renamed.
+Rows hold what the model plays at each frame
+(:meth:`workbench.export.encoding.MeshEncoding.weights`): unkeyed shapes at
+their current weight, keyed weights clamped to the slider range, muted shapes
+0. A CSV carries weights only: the editing layers (regions, handles, paint,
+wrinkles) cannot go into it; every active one is reported as ``"omitted"``
+in the returned :class:`~workbench.export.ExportResult` and logged as a
+warning — export a mesh format (glTF, USD, PC2/MDD) to keep them. Written
+with the csv module into a temporary file, then renamed.
 """
 
 from __future__ import annotations
@@ -23,8 +28,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from workbench.arkit import canonical_arkit_name
-from workbench.export import ExportError, atomic_path
-from workbench.tracks import MeshSampler, Timeline
+from workbench.export import ExportError, ExportResult, LayerReport, atomic_path
+from workbench.export.encoding import MeshEncoding
+from workbench.tracks import Timeline
 
 if TYPE_CHECKING:
     from workbench.model import FaceModel
@@ -48,13 +54,19 @@ def timecode(t: float, fps: float) -> str:
 
 def write(
     model: FaceModel, timeline: Timeline, path: Path, *, bake: bool = True, style: str = "plain"
-) -> list[Path]:
+) -> ExportResult:
     """Write the weights of every shape at every frame (see module docstring)."""
     if style not in ("plain", "livelink"):
         raise ExportError(f"CSV style must be 'plain' or 'livelink', got {style!r}")
-    sampler = MeshSampler(model, timeline)
+    enc = MeshEncoding(model, timeline)
     times = timeline.frame_times()
-    W = sampler.weights(times)
+    W = enc.weights(times)
+    # registered (non-built-in) layers are not evaluated here: reported as omitted
+    layers = [
+        LayerReport(r.name, "omitted", f"a CSV holds weights only; {r.detail}")
+        if r.encoding in ("linear", "baked") else r
+        for r in enc.layers
+    ]
     names = list(model.shape_names)
     with atomic_path(path) as tmp, open(tmp, "w", newline="", encoding="utf-8") as fh:
         w = csv.writer(fh)
@@ -70,4 +82,4 @@ def write(
             w.writerow(["Timecode", "BlendShapeCount", *cols])
             for t, row in zip(times, W, strict=True):
                 w.writerow([timecode(float(t), timeline.fps), len(names), *(f"{x:.9g}" for x in row)])
-    return [path]
+    return ExportResult([path], layers)

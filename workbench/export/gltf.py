@@ -2,20 +2,43 @@
 
 What is written
 ---------------
+The mesh of :class:`workbench.export.encoding.MeshEncoding` — every frame
+plays :meth:`FaceModel.evaluate_at` (blend + region, handle, paint and any
+registered layers) within float32 round-off:
+
 * One mesh, one primitive: ``POSITION`` (neutral, metres, with min/max) and
   ``indices`` (the original polygons fan-triangulated). No normals: viewers
   compute them, and morphing them correctly would need per-target normals.
-* One morph target per blendshape (its masked delta in metres; stored as a
-  sparse accessor when fewer than half the vertices move), names in
-  ``mesh.extras.targetNames`` (the convention Blender and three.js read).
-* **Handle layer** (when it moves the mesh): the shell displacement is linear
-  in the handle offsets, ``D(o) = Σ_j Σ_a o_ja B_ja`` (:mod:`workbench.shell`),
-  so it is written *exactly* as three extra morph targets per handle,
-  ``handle:<name>:x|y|z`` = ``B_ja`` (metres per model unit of offset), whose
-  weights are the animated offset components (model units). Any interpolation
-  of the offsets carries over unchanged. Caveat: Blender's glTF importer clamps
-  shape-key values to [0, 1], so there the handle layer is right only for
-  offsets in that range; export with ``bake=True`` to USD/PC2 for Blender.
+* One morph target per blendshape, named by the shape (names in
+  ``mesh.extras.targetNames``, the convention Blender and three.js read),
+  driven by the shape's weight. Its data is the masked delta times
+  ``1 − S_R − P`` (region coverage and painted weight, see
+  :mod:`.encoding`): exactly the delta where nothing is painted and no
+  region weights are set. Stored as a sparse accessor when fewer than half
+  the vertices move.
+* ``layer:static`` (weight 1, constant) when the layers add a constant: the
+  region constant ``C_R``, the painted expressions ``Σ_e W_e D_e``, and the
+  handle layer when its offsets are not keyed — one target instead of one per
+  handle and axis.
+* ``handle:basis<i>`` when the handle offsets are keyed: the shell
+  displacement is linear in the offsets, ``D(o) = B o``
+  (:mod:`workbench.shell`), and the keyed offsets live in the span of the
+  keys' values and tangents; one target per basis vector of that span
+  (usually one per distinct key pose, never more than ``3 × h``), weights
+  mapped onto ``[0, 1]`` over their exact range (so Blender, which clamps
+  shape-key values to ``[0, 1]``, plays them too). Any interpolation of the
+  offsets carries over unchanged.
+* ``layer:frame<NNNN>``, one per frame, only for layers that are not linear in
+  the keyed quantities (wrinkles, other registered layers): the baked sum of
+  those layers at that frame (sparse when it moves few vertices), driven by a
+  LINEAR "hat" weight that is 1 at its frame and 0 at the neighbouring frames
+  — exact at every frame, linearly interpolated in between. If they are the
+  same at every frame they go into ``layer:static`` instead. This is the one
+  encoding that grows with the length of the animation; USD (baked
+  ``points``) or PC2/MDD are the compact alternative for such layers.
+* Keyed weights outside a shape's slider range are clamped by the workbench
+  (``set_time``); glTF cannot clamp a curve, so when that happens at a frame
+  the weights are resampled per frame (LINEAR, clamped values) instead.
 * One animation: a ``weights`` channel on the mesh node (one sampler for all
   targets, as glTF requires) and, when the head pose is keyed, ``translation``
   and ``rotation`` channels on the same node (metres; quaternions slerped).
@@ -53,8 +76,9 @@ import numpy as np
 import pygltflib
 from numpy.typing import NDArray
 
-from workbench.export import ExportError, atomic_write_bytes
-from workbench.tracks import HEAD_POSE, MeshSampler, Timeline, Track
+from workbench.export import ExportError, ExportResult, LayerReport, atomic_write_bytes
+from workbench.export.encoding import MeshEncoding, crossing_times
+from workbench.tracks import HEAD_POSE, Key, Timeline, Track
 
 if TYPE_CHECKING:
     from workbench.model import FaceModel
@@ -66,17 +90,35 @@ _ELEMENT_ARRAY_BUFFER = 34963
 _STEP_EPS = 1e-4
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Curve:
-    """One scalar curve for a sampler: a component of a track, or a constant.
+    """One scalar curve for a sampler: a component (or a linear combination) of a track, or a constant.
 
-    ``value(t) = scale * track.sample(t)[:, component]`` (or ``scale * constant``).
+    ``value(t) = scale * track.sample(t)[:, component] + offset``, or with
+    ``coeffs`` ``scale * track.sample(t) @ coeffs + offset``; without a track
+    ``scale * constant``. ``clamp`` = ``(lo, hi)`` clips the written values
+    (used only where values are resampled at frames).
     """
 
     track: Track | None
     component: int = 0
     constant: float = 0.0
     scale: float = 1.0
+    coeffs: NDArray[np.float64] | None = None
+    offset: float = 0.0
+    clamp: tuple[float, float] | None = None
+
+    def _combine(self, arr: NDArray[np.float64]) -> NDArray[np.float64]:
+        col = arr @ self.coeffs if self.coeffs is not None else arr[:, self.component]
+        return self.scale * col
+
+    def sample(self, times: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Values at ``times`` (clamped if ``clamp``)."""
+        ts = np.asarray(times, np.float64).reshape(-1)
+        if self.track is None:
+            return np.full(ts.size, self.scale * self.constant)
+        v = self._combine(self.track.sample(ts)) + self.offset
+        return v if self.clamp is None else np.clip(v, *self.clamp)
 
 
 @dataclass(frozen=True)
@@ -151,6 +193,8 @@ def merge_curves(
         else:
             mode = "LINEAR"
         times = np.unique(np.concatenate([t.times for t in tracks.values()]))
+        if mode != "STEP":
+            times = _add_crossings(times, curves)
         if mode != "STEP" and "step" in orig:
             # hold-then-ramp knots just before the end of every step segment
             gaps = np.diff(times)
@@ -184,10 +228,55 @@ def merge_curves(
                 left = right = np.zeros_like(vals)
             cache[key] = (vals, left, right)
         vals, left, right = cache[key]
-        V[:, j] = c.scale * vals[:, c.component]
-        A[:, j] = c.scale * left[:, c.component]
-        B[:, j] = c.scale * right[:, c.component]
+        V[:, j] = c._combine(vals) + c.offset
+        A[:, j] = c._combine(left)
+        B[:, j] = c._combine(right)
+        if c.clamp is not None:
+            _clamp_column(V[:, j], A[:, j], B[:, j], *c.clamp)
     return SamplerData(times, mode, V, A, B)
+
+
+def _add_crossings(times: NDArray[np.float64], curves: list[Curve]) -> NDArray[np.float64]:
+    """``times`` plus the times where a clamped curve crosses its bounds.
+
+    With a knot at every crossing, each piece between knots is either inside
+    the range (the curve itself) or outside (the constant bound), so clamping
+    is exact in a LINEAR/CUBICSPLINE sampler. Crossings closer than float32
+    resolution to another knot are dropped (times are stored as float32).
+    """
+    extra: list[float] = []
+    for c in curves:
+        if c.clamp is not None and c.track is not None and c.coeffs is None and c.track.values.shape[1] == 1:
+            lo, hi = ((x - c.offset) / c.scale for x in c.clamp)
+            extra += crossing_times(c.track, (lo, hi))
+    if not extra:
+        return times
+    out = np.unique(np.concatenate([times, np.asarray(extra)]))
+    f32 = out.astype(np.float32)
+    orig = np.isin(out, times)
+    kept: list[int] = []
+    for i in range(out.size):
+        if kept and f32[i] <= f32[kept[-1]]:
+            if not orig[i]:
+                continue  # a crossing on top of the previous knot
+            if not orig[kept[-1]]:
+                kept.pop()  # the previous one was a crossing: the key wins
+        kept.append(i)
+    return out[kept]
+
+
+def _clamp_column(
+    v: NDArray[np.float64], a: NDArray[np.float64], b: NDArray[np.float64], lo: float, hi: float
+) -> None:
+    """Clamp one sampler column in place: values to ``[lo, hi]``, tangents 0 on the clamped side."""
+    tol = 1e-9 * max(1.0, abs(lo), abs(hi))
+    above, below = v > hi + tol, v < lo - tol
+    at_hi, at_lo = np.abs(v - hi) <= tol, np.abs(v - lo) <= tol
+    # at the upper bound the curve is inside on the left if it comes up (a >= 0),
+    # and on the right if it goes down (b <= 0); mirrored at the lower bound
+    a[:] = np.where(above | below, 0.0, np.where(at_hi, np.maximum(a, 0.0), np.where(at_lo, np.minimum(a, 0.0), a)))
+    b[:] = np.where(above | below, 0.0, np.where(at_hi, np.minimum(b, 0.0), np.where(at_lo, np.maximum(b, 0.0), b)))
+    v[:] = np.clip(v, lo, hi)
 
 
 def _step_ramps(
@@ -305,7 +394,26 @@ def build_gltf(
     blob : bytes
         Contents of buffer 0.
     """
-    sampler = MeshSampler(model, timeline)
+    gltf, data, _ = _build(model, timeline, bake=bake, sparse=sparse)
+    return gltf, data
+
+
+def _hat_track(times: NDArray[np.float64], f: int) -> Track:
+    """A LINEAR weight track that is 1 at frame ``f`` and 0 at its neighbours."""
+    keys = [Key(float(times[f]), 1.0, "linear")]
+    if f > 0:
+        keys.insert(0, Key(float(times[f - 1]), 0.0, "linear"))
+    if f + 1 < times.size:
+        keys.append(Key(float(times[f + 1]), 0.0, "linear"))
+    return Track(f"weights/layer:frame{f}", tuple(keys))
+
+
+def _build(
+    model: FaceModel, timeline: Timeline, *, bake: bool = False, sparse: bool = True
+) -> tuple[pygltflib.GLTF2, bytes, list[LayerReport]]:
+    enc = MeshEncoding(model, timeline)
+    frames = timeline.frame_times()
+    enc.fold_constant_baked(frames)
     mpu = model.metadata.metres_per_unit
     gltf = pygltflib.GLTF2(
         asset=pygltflib.Asset(version="2.0", generator="Facial Editing Workbench"),
@@ -324,40 +432,45 @@ def build_gltf(
     targets: list[dict[str, int]] = []
     curves: list[Curve] = []
     n = V.shape[0]
-    weight_tracks = timeline.weight_tracks
-    for k, s in enumerate(model.shapes):
-        d = (sampler.deltas[k].astype(np.float64) * mpu).astype(np.float32)
+
+    def add_target(delta: NDArray[Any], name: str, curve: Curve) -> None:
+        d = (np.asarray(delta, np.float64) * mpu).astype(np.float32)
         moving = int(np.count_nonzero(np.any(d != 0, axis=1)))
         if sparse and moving * 2 < n:
             acc = blob.sparse_vec3(d)
         else:
             acc = blob.accessor(d, pygltflib.VEC3, target=_ARRAY_BUFFER, minmax=True)
         targets.append({"POSITION": acc})
-        names.append(s.name)
-        if s.mute:
-            curves.append(Curve(None, constant=0.0))
-        elif s.name in weight_tracks:
-            curves.append(Curve(weight_tracks[s.name]))
-        else:
-            curves.append(Curve(None, constant=float(sampler.static_weights[k])))
+        names.append(name)
+        curves.append(curve)
 
-    if sampler.has_handle_layer:
-        basis = sampler.handle_basis()
-        h = model.handles
-        htrack = timeline.handles
-        for j in range(len(h)):
-            for a, axis in enumerate("xyz"):
-                d = (basis[j, a].astype(np.float64) * mpu).astype(np.float32)
-                acc = blob.accessor(d, pygltflib.VEC3, target=_ARRAY_BUFFER, minmax=True)
-                targets.append({"POSITION": acc})
-                names.append(f"handle:{h.names[j]}:{axis}")
-                if htrack is None:
-                    curves.append(Curve(None, constant=float(sampler.static_offsets[j, a])))
-                else:
-                    curves.append(Curve(htrack, component=3 * j + a))
+    weight_tracks = timeline.weight_tracks
+    for k, s in enumerate(model.shapes):
+        if s.mute:
+            curve = Curve(None, constant=0.0)
+        elif s.name in weight_tracks:
+            curve = Curve(weight_tracks[s.name], clamp=(s.slider_min, s.slider_max))
+        else:
+            curve = Curve(None, constant=float(enc.static_weights[k]))
+        add_target(enc.shape_targets[k], s.name, curve)
+
+    if enc.static is not None:
+        add_target(enc.static, "layer:static", Curve(None, constant=1.0))
+    for i in range(enc.handle_targets.shape[0]):
+        add_target(
+            enc.handle_targets[i],
+            f"handle:basis{i}",
+            Curve(enc.handle_track, coeffs=enc.handle_coeffs[:, i], offset=float(enc.handle_shift[i])),
+        )
+    for f, t in enumerate(frames):
+        b = enc.baked(float(t))
+        if b is not None:
+            frame_no = round(float(t) * timeline.fps)
+            add_target(b, f"layer:frame{frame_no:04d}", Curve(_hat_track(frames, f)))
+    enc.baked_report(frames, "per-frame morph targets layer:frame<N> with LINEAR hat weights")
 
     t0 = timeline.start
-    initial = [c.scale * (c.constant if c.track is None else float(c.track.sample([t0])[0, c.component])) for c in curves]
+    initial = [float(c.sample(np.array([t0]))[0]) for c in curves]
     mesh = pygltflib.Mesh(
         name=model.metadata.name or "face",
         primitives=[
@@ -376,7 +489,8 @@ def build_gltf(
     gltf.nodes.append(node)
     gltf.scenes.append(pygltflib.Scene(nodes=[0]))
 
-    bake_times = timeline.frame_times() if bake else None
+    bake_times = frames if bake else None
+    layers = list(enc.layers)
     anim = pygltflib.Animation(name="timeline", samplers=[], channels=[])
 
     def add_channel(data: SamplerData | None, path: str, type_: str, width: int) -> None:
@@ -417,7 +531,7 @@ def build_gltf(
         gltf.animations.append(anim)
     data = blob.data()
     gltf.buffers.append(pygltflib.Buffer(byteLength=len(data)))
-    return gltf, data
+    return gltf, data, layers
 
 
 def _glb_bytes(gltf: pygltflib.GLTF2, data: bytes) -> bytes:
@@ -437,7 +551,7 @@ def write(
     *,
     bake: bool = False,
     sparse: bool = True,
-) -> list[Path]:
+) -> ExportResult:
     """Write a .glb (one file) or .gltf (+ ``<stem>.bin``) atomically.
 
     Parameters
@@ -447,12 +561,12 @@ def write(
     sparse : bool
         Store blendshape targets that move few vertices as sparse accessors.
     """
-    gltf, data = build_gltf(model, timeline, bake=bake, sparse=sparse)
+    gltf, data, layers = _build(model, timeline, bake=bake, sparse=sparse)
     if path.suffix.lower() == ".gltf":
         bin_path = path.with_suffix(".bin")
         gltf.buffers[0].uri = bin_path.name
         atomic_write_bytes(bin_path, data)
         atomic_write_bytes(path, gltf.to_json(indent=1).encode("utf-8"))
-        return [path, bin_path]
+        return ExportResult([path, bin_path], layers)
     atomic_write_bytes(path, _glb_bytes(gltf, data))
-    return [path]
+    return ExportResult([path], layers)

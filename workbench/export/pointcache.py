@@ -1,8 +1,13 @@
 """Baked vertex animation: PC2 and MDD point caches and an OBJ-per-frame sequence.
 
-All three store the evaluated mesh (blendshapes + handle layer + head pose,
-:meth:`workbench.tracks.MeshSampler.points`) at every frame of the timeline
-range, in metres, in the model's axes (+y up). Vertex order is the model's.
+All three store the evaluated mesh — :meth:`FaceModel.evaluate_at` at every
+frame of the timeline range: blendshapes, every editing layer (regions,
+handles, paint, wrinkles and other registered layers) and the head pose,
+computed by :meth:`workbench.export.encoding.MeshEncoding.points` (the same
+decomposition the glTF/USD writers use; layers that are not linear in the
+keyed quantities are evaluated frame by frame) — in metres, in the model's
+axes (+y up). Vertex order is the model's. Every layer is therefore "baked"
+in the returned :class:`~workbench.export.ExportResult`.
 
 Byte layouts (written with numpy dtypes, so the byte order is explicit)
 ------------------------------------------------------------------------
@@ -45,8 +50,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
-from workbench.export import ExportError, atomic_path
-from workbench.tracks import MeshSampler, Timeline
+from workbench.export import ExportError, ExportResult, LayerReport, atomic_path
+from workbench.export.encoding import MeshEncoding
+from workbench.tracks import Timeline
 
 if TYPE_CHECKING:
     from workbench.model import FaceModel
@@ -69,25 +75,28 @@ _CHUNK = 16  # frames evaluated at once (bounds memory at 100k vertices)
 
 def _frames(
     model: FaceModel, timeline: Timeline
-) -> tuple[NDArray[np.float64], Iterator[NDArray[np.float32]]]:
-    """Frame times and an iterator of (chunk, n, 3) float32 positions in metres."""
-    sampler = MeshSampler(model, timeline)
+) -> tuple[NDArray[np.float64], Iterator[NDArray[np.float32]], list[LayerReport]]:
+    """Frame times, an iterator of (chunk, n, 3) float32 positions in metres, and the layer report."""
+    enc = MeshEncoding(model, timeline)
     times = timeline.frame_times()
     mpu = np.float32(model.metadata.metres_per_unit)
+    enc.fold_constant_baked(times)
+    enc.baked_report(times, "per-frame positions")
+    enc.all_baked_report("in the per-frame positions")
 
     def gen() -> Iterator[NDArray[np.float32]]:
         for a in range(0, times.size, _CHUNK):
-            P = sampler.points(times[a : a + _CHUNK])
+            P = enc.points(times[a : a + _CHUNK])
             if mpu != 1:
                 P *= mpu
             yield P
 
-    return times, gen()
+    return times, gen(), enc.layers
 
 
-def write_pc2(model: FaceModel, timeline: Timeline, path: Path) -> list[Path]:
+def write_pc2(model: FaceModel, timeline: Timeline, path: Path) -> ExportResult:
     """Write a PC2 point cache (layout in the module docstring)."""
-    times, chunks = _frames(model, timeline)
+    times, chunks, layers = _frames(model, timeline)
     header = np.zeros((), PC2_HEADER)
     header["signature"] = b"POINTCACHE2\0"
     header["version"] = 1
@@ -101,12 +110,12 @@ def write_pc2(model: FaceModel, timeline: Timeline, path: Path) -> list[Path]:
             fh.write(P.astype("<f4").tobytes())
         fh.flush()
         os.fsync(fh.fileno())
-    return [path]
+    return ExportResult([path], layers)
 
 
-def write_mdd(model: FaceModel, timeline: Timeline, path: Path) -> list[Path]:
+def write_mdd(model: FaceModel, timeline: Timeline, path: Path) -> ExportResult:
     """Write an MDD point cache (layout in the module docstring)."""
-    times, chunks = _frames(model, timeline)
+    times, chunks, layers = _frames(model, timeline)
     with atomic_path(path) as tmp, open(tmp, "wb") as fh:
         fh.write(np.array([times.size, model.n_vertices], ">i4").tobytes())
         fh.write(times.astype(">f4").tobytes())
@@ -114,7 +123,7 @@ def write_mdd(model: FaceModel, timeline: Timeline, path: Path) -> list[Path]:
             fh.write(P.astype(">f4").tobytes())
         fh.flush()
         os.fsync(fh.fileno())
-    return [path]
+    return ExportResult([path], layers)
 
 
 def _face_lines(model: FaceModel) -> str:
@@ -130,9 +139,9 @@ def _face_lines(model: FaceModel) -> str:
     )
 
 
-def write_obj_sequence(model: FaceModel, timeline: Timeline, path: Path) -> list[Path]:
+def write_obj_sequence(model: FaceModel, timeline: Timeline, path: Path) -> ExportResult:
     """Write ``<stem>_<frame:04d>.obj`` files (one per frame); returns their paths."""
-    times, chunks = _frames(model, timeline)
+    times, chunks, layers = _frames(model, timeline)
     faces = _face_lines(model)
     frames = np.rint(times * timeline.fps).astype(np.int64)
     if np.unique(frames).size != frames.size:
@@ -154,12 +163,12 @@ def write_obj_sequence(model: FaceModel, timeline: Timeline, path: Path) -> list
                 tmp.write_text(text, encoding="utf-8")
             out.append(p)
             f += 1
-    return out
+    return ExportResult(out, layers)
 
 
 def write(
     model: FaceModel, timeline: Timeline, path: Path, *, bake: bool = True, kind: str | None = None
-) -> list[Path]:
+) -> ExportResult:
     """Registry entry: ``kind`` (or the suffix) picks PC2, MDD or OBJ; ``bake`` is implied."""
     k = kind or path.suffix.lower().lstrip(".")
     if k == "pc2":

@@ -12,18 +12,32 @@ Layout (``metersPerUnit = 1``, ``upAxis = Y``, positions in metres,
                           skel:blendShapes, skel:blendShapeTargets
     /Face/Mesh/<shape>    BlendShape: offsets (metres) + pointIndices (moving vertices)
 
+Every frame evaluates to :meth:`FaceModel.evaluate_at` (all editing layers),
+through the decomposition of :class:`workbench.export.encoding.MeshEncoding`:
+
+* one blend shape per model shape (its masked delta scaled per vertex by
+  ``1 − S_R − P``, region coverage and painted weight; the plain delta where
+  nothing is painted), weight = the shape's weight (clamped to its slider
+  range, muted shapes 0);
+* ``layer_static`` (weight 1 at every frame) when the layers add a constant:
+  region constant, painted expressions, unkeyed handle offsets;
+* ``handle_basis<i>`` when the handle offsets are keyed: the shell
+  displacement of one basis vector of the keyed offsets' span, weight in
+  ``[0, 1]`` per frame;
+* layers that are not linear in the keyed quantities (wrinkles, anything
+  registered later) are baked: the Mesh ``points`` get one time sample per
+  frame, ``neutral + those layers``; UsdSkel adds the blend shapes on top.
+  Without such layers ``points`` is the neutral, unanimated.
+
 USD has no cubic interpolation for weights, so weights are written per frame
-(linear in between, as USD interpolates time samples). When the handle layer
-moves the mesh, the Mesh ``points`` get one time sample per frame
-(``neutral + handle displacement``); UsdSkel adds the blend shapes on top, so
-the evaluated mesh equals :class:`workbench.tracks.MeshSampler.local_points`.
+(linear in between, as USD interpolates time samples).
 
 ``bake=True`` writes no skeleton: ``/Face`` is an Xform and ``/Face/Mesh`` a
 Mesh with fully evaluated ``points`` per frame (for tools without UsdSkel).
 
-Muted shapes get weight 0. Blend-shape prim names are shape names made into
-valid identifiers (the original name is kept in customData
-``workbench:shapeName``).
+Blend-shape prim names are target names made into valid identifiers (the
+original name is kept in customData ``workbench:shapeName``, or
+``workbench:layerTarget`` for the layer targets).
 """
 
 from __future__ import annotations
@@ -33,8 +47,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from workbench.export import ExportError, atomic_path
-from workbench.tracks import MeshSampler, Timeline
+from workbench.export import ExportError, ExportResult, LayerReport, atomic_path
+from workbench.export.encoding import MeshEncoding
+from workbench.tracks import Timeline
 
 if TYPE_CHECKING:
     from workbench.model import FaceModel
@@ -72,15 +87,16 @@ def _prim_names(names: list[str], Tf: Any) -> list[str]:
 
 def write(
     model: FaceModel, timeline: Timeline, path: Path, *, bake: bool = False
-) -> list[Path]:
+) -> ExportResult:
     """Write ``.usd`` (crate), ``.usdc`` or ``.usda`` atomically (see module docstring)."""
     pxr = _pxr()
     Gf, Tf, Usd, UsdGeom, UsdSkel, Vt = pxr.Gf, pxr.Tf, pxr.Usd, pxr.UsdGeom, pxr.UsdSkel, pxr.Vt
-    sampler = MeshSampler(model, timeline)
+    enc = MeshEncoding(model, timeline)
     mpu = model.metadata.metres_per_unit
     times = timeline.frame_times()
     codes = times * timeline.fps
     fps = timeline.fps
+    enc.fold_constant_baked(times)
 
     stage = Usd.Stage.CreateInMemory()
     UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
@@ -115,9 +131,11 @@ def write(
 
     if bake:
         for c, t in zip(codes, times, strict=True):
-            pts = sampler.local_points([t])[0].astype(np.float64) * mpu
+            pts = enc.local_points([t])[0].astype(np.float64) * mpu
             points.Set(Vt.Vec3fArray.FromNumpy(pts.astype(np.float32)), Usd.TimeCode(float(c)))
-        return _save(stage, path)
+        enc.baked_report(times, "per-frame points")
+        enc.all_baked_report("bake=True: in the per-frame points")
+        return _save(stage, path, enc.layers)
 
     skel = UsdSkel.Skeleton.Define(stage, SKEL)
     skel.CreateJointsAttr(Vt.TokenArray([]))
@@ -125,39 +143,55 @@ def write(
     anim.CreateJointsAttr(Vt.TokenArray([]))
     UsdSkel.BindingAPI.Apply(skel.GetPrim()).CreateAnimationSourceRel().SetTargets([anim.GetPath()])
 
+    # targets: shapes, then the layer targets (static, handle basis)
     names = list(model.shape_names)
-    prim_names = _prim_names(names, Tf)
+    data = [enc.shape_targets[k] for k in range(len(names))]
+    extra: list[str] = []
+    if enc.static is not None:
+        extra.append("layer:static")
+        data.append(enc.static)
+    for i in range(enc.handle_targets.shape[0]):
+        extra.append(f"handle:basis{i}")
+        data.append(enc.handle_targets[i])
+    all_names = names + extra
+    prim_names = _prim_names(all_names, Tf)
     tokens = Vt.TokenArray(prim_names)
     anim.CreateBlendShapesAttr(tokens)
     binding = UsdSkel.BindingAPI.Apply(mesh.GetPrim())
     binding.CreateSkeletonRel().SetTargets([skel.GetPath()])
     binding.CreateBlendShapesAttr(tokens)
     targets = []
-    for k, (name, pname) in enumerate(zip(names, prim_names, strict=True)):
-        d = sampler.deltas[k]
+    for k, (name, pname) in enumerate(zip(all_names, prim_names, strict=True)):
+        d = data[k]
         idx = np.flatnonzero(np.any(d != 0, axis=1)).astype(np.int32)
         bs = UsdSkel.BlendShape.Define(stage, mesh.GetPath().AppendChild(pname))
         off = (d[idx].astype(np.float64) * mpu).astype(np.float32)
         bs.CreateOffsetsAttr(Vt.Vec3fArray.FromNumpy(off))
         bs.CreatePointIndicesAttr(Vt.IntArray.FromNumpy(idx))
-        bs.GetPrim().SetCustomDataByKey("workbench:shapeName", name)
+        key = "workbench:shapeName" if k < len(names) else "workbench:layerTarget"
+        bs.GetPrim().SetCustomDataByKey(key, name)
         targets.append(bs.GetPath())
     binding.CreateBlendShapeTargetsRel().SetTargets(targets)
 
-    W = sampler.weights(times).astype(np.float32)
+    cols = [enc.weights(times)]
+    if enc.static is not None:
+        cols.append(np.ones((times.size, 1)))
+    cols.append(enc.handle_weights(times))
+    W = np.concatenate(cols, axis=1).astype(np.float32)
     wattr = anim.CreateBlendShapeWeightsAttr()
     for c, w in zip(codes, W, strict=True):
         wattr.Set(Vt.FloatArray.FromNumpy(np.ascontiguousarray(w)), Usd.TimeCode(float(c)))
 
-    if sampler.has_handle_layer:
-        offsets = sampler.handle_offsets(times)
-        for c, o in zip(codes, offsets, strict=True):
-            pts = neutral + (sampler.handle_displacement(o).astype(np.float64) * mpu).astype(np.float32)
+    baked = [enc.baked(float(t)) for t in times]
+    if any(b is not None for b in baked):
+        for c, b in zip(codes, baked, strict=True):
+            pts = neutral if b is None else neutral + (b.astype(np.float64) * mpu).astype(np.float32)
             points.Set(Vt.Vec3fArray.FromNumpy(pts), Usd.TimeCode(float(c)))
-    return _save(stage, path)
+    enc.baked_report(times, "Mesh points time samples (neutral + baked layers), blend shapes on top")
+    return _save(stage, path, enc.layers)
 
 
-def _save(stage: Any, path: Path) -> list[Path]:
+def _save(stage: Any, path: Path, layers: list[LayerReport]) -> ExportResult:
     suffix = path.suffix.lower()
     if suffix not in (".usd", ".usda", ".usdc"):
         raise ExportError(f"{path.name}: USD files end in .usd, .usda or .usdc")
@@ -165,4 +199,4 @@ def _save(stage: Any, path: Path) -> list[Path]:
         # Export infers the file format from the temporary name's suffix
         if not stage.GetRootLayer().Export(str(tmp)):
             raise ExportError(f"{path.name}: USD could not write the layer")
-    return [path]
+    return ExportResult([path], layers)

@@ -14,6 +14,10 @@
 //               when fewer than ~1/3 of the vertices changed
 //   _handles        bytes, uint32 (h)   handle marker vertex ids (the model's handles)
 //   _handle_mirror  bytes, int32 (h)    mirror handle index or -1 (may be empty)
+//   _neutral_bounds {min, max, radius}  the NEUTRAL mesh's box: the camera is framed on it
+//                                       once (so the framing does not depend on the
+//                                       expression shown when the view opened), and
+//                                       the handle markers are sized by its radius
 //
 // Sculpt tool (tool == "sculpt", Bickel et al. 2008 §4 handle editing), front end -> Python:
 //   {type: "handle", phase: "start"|"move"|"end", index, vertex, position: [x,y,z], seq}
@@ -44,7 +48,9 @@
 //   _feature_strain  bytes, float32 (F): relative stretch of each edge
 //   feature_graph (bool, draw it), strain_range (|strain| drawn in full colour)
 //   Fat line segments over the surface, blue (compressed) - grey (rest) - red (stretched),
-//   end points following the drawn geometry; a colour-scale legend in the corner.
+//   end points following the drawn geometry; a colour-scale legend in the corner. The
+//   lines are depth-tested against the face (hidden behind the head seen from the back),
+//   pulled toward the camera along the view ray so chords lying on the skin stay visible.
 // All views of one widget model share one geometry store (state lives in the model,
 // not in the view), so a second display of the same widget shows the same frame.
 
@@ -388,7 +394,16 @@ class View {
 
     const controls = new OrbitControls(camera, renderer.domElement);
     controls.enableDamping = false; // render on demand only: no animation loop
-    controls.addEventListener("change", () => this.requestRender(false));
+    // userCamera: the person has orbited, zoomed or panned; from then on the camera is
+    // theirs (a resize no longer re-frames the face, see resize()).
+    this.userCamera = false;
+    this.controlsActive = false;
+    controls.addEventListener("start", () => { this.controlsActive = true; });
+    controls.addEventListener("end", () => { this.controlsActive = false; });
+    controls.addEventListener("change", () => {
+      if (this.controlsActive) this.userCamera = true;
+      this.requestRender(false);
+    });
     this.controls = controls;
 
     // Sculpt tool state. Listeners sit on the container in the CAPTURE phase so a press
@@ -422,10 +437,22 @@ class View {
       if (this.stroke && e.pointerId === this.stroke.pointerId) this.endStroke(null);
     };
     this.onLeave = () => {
+      this.pointerInside = false;
       if (!this.stroke && this.brushRing.visible) {
         this.brushRing.visible = false;
         this.brushMirrorRing.visible = false;
         this.requestRender();
+      }
+      if (!this.drag) {
+        // No marker stays lit once the pointer is elsewhere: neither the hovered one nor
+        // the last dragged one (selected_handle, cleared for every view).
+        this.clearHover();
+        if (this.model.get("selected_handle") >= 0) {
+          this.model.set("selected_handle", -1);
+          this.model.save_changes();
+          this.handlesDirty = true;
+          this.requestRender();
+        }
       }
     };
     renderer.domElement.addEventListener("pointerleave", this.onLeave);
@@ -613,10 +640,15 @@ class View {
   }
 
   markerRadius() {
-    if (!this.positionAttr) return 0.014; // no geometry yet: do not cache a guess
     if (!this.markerR) {
-      if (!this.geometry.boundingSphere) this.geometry.computeBoundingSphere();
-      const r = this.geometry.boundingSphere ? this.geometry.boundingSphere.radius : 1;
+      // The neutral mesh's radius: markers are the same size whatever the expression.
+      const nb = this.model.get("_neutral_bounds") || {};
+      let r = Number(nb.radius);
+      if (!(isFinite(r) && r > 0)) {
+        if (!this.positionAttr) return 0.014; // no geometry yet: do not cache a guess
+        if (!this.geometry.boundingSphere) this.geometry.computeBoundingSphere();
+        r = this.geometry.boundingSphere ? this.geometry.boundingSphere.radius : 1;
+      }
       this.markerR = (isFinite(r) && r > 0 ? r : 1) * 0.014;
     }
     return this.markerR;
@@ -632,12 +664,18 @@ class View {
     return P ? out.set(P[3 * i], P[3 * i + 1], P[3 * i + 2]) : out.set(0, 0, 0);
   }
 
+  // The last dragged marker, highlighted while the sculpt tool is on (-1: none).
+  selectedHandle() {
+    if (this.model.get("tool") !== "sculpt") return -1;
+    const sel = this.model.get("selected_handle");
+    return sel >= 0 && sel < this.handleIds.length ? sel : -1;
+  }
+
   // Which marker gets the highlight: the dragged one, else the hovered, else the selected.
   activeHandle() {
     if (this.drag) return this.drag.index;
     if (this.hover >= 0) return this.hover;
-    const sel = this.model.get("selected_handle");
-    return sel >= 0 && sel < this.handleIds.length ? sel : -1;
+    return this.selectedHandle();
   }
 
   updateHandles() {
@@ -664,7 +702,7 @@ class View {
     }
     const active = this.activeHandle();
     const dragged = this.drag ? this.drag.index : -1;
-    const selected = this.model.get("selected_handle");
+    const selected = this.selectedHandle();
     const mirror = this.handleMirror;
     const mirrorOf = this.model.get("symmetric") && mirror && active >= 0 ? mirror[active] : -1;
     const m = new THREE.Matrix4();
@@ -715,15 +753,25 @@ class View {
 
   // ---- sculpt tool: picking -----------------------------------------------------------
 
+  // Un-highlight the hovered marker (the pointer left the view, or the tool changed).
+  clearHover() {
+    if (this.hover < 0) return;
+    this.hover = -1;
+    this.el.setAttribute("data-hover", "-1");
+    if (this.renderer && !this.drag) {
+      this.renderer.domElement.style.cursor = this.model.get("tool") === "sculpt" ? "crosshair" : "";
+    }
+    this.handlesDirty = true;
+    this.requestRender();
+  }
+
   updateTool() {
     const tool = this.model.get("tool");
     const sculpt = tool === "sculpt";
     this.el.setAttribute("data-tool", tool === "sculpt" || tool === "paint" ? tool : "orbit");
-    if (!sculpt) {
-      if (this.drag) this.endDrag(null);
-      this.hover = -1;
-      this.click = null;
-    }
+    if (!sculpt && this.drag) this.endDrag(null);
+    this.click = null;
+    this.clearHover();
     if (tool !== "paint") {
       if (this.stroke) this.endStroke(null);
       if (this.brushRing) { this.brushRing.visible = false; this.brushMirrorRing.visible = false; }
@@ -889,11 +937,14 @@ class View {
     }
     if (this.model.get("tool") !== "sculpt" || e.buttons !== 0) return;
     this.hoverAt = [e.clientX, e.clientY];
+    this.pointerInside = true;
     if (this.hoverPending) return;
     this.hoverPending = true;
     requestAnimationFrame(() => {
       this.hoverPending = false;
-      if (!this.renderer || this.drag || this.model.get("tool") !== "sculpt") return;
+      // (a pick queued just before the pointer left must not light a marker again)
+      if (!this.renderer || this.drag || !this.pointerInside) return;
+      if (this.model.get("tool") !== "sculpt") return;
       const k = this.pickHandle(this.hoverAt[0], this.hoverAt[1], false);
       if (k !== this.hover) {
         this.hover = k;
@@ -1219,11 +1270,24 @@ class View {
     this.requestRender();
   }
 
-  frameCamera() {
+  // The box the camera frames: the neutral mesh's (Python's _neutral_bounds), so a view
+  // opened on a posed face (jaw open, a recovered session) frames it like a fresh one;
+  // the drawn geometry only when the bounds are missing.
+  frameBox() {
+    const nb = this.model.get("_neutral_bounds") || {};
+    const lo = nb.min, hi = nb.max;
+    if (Array.isArray(lo) && Array.isArray(hi) && lo.length === 3 && hi.length === 3 &&
+        lo.concat(hi).every((x) => isFinite(x)) && hi.some((x, i) => x > lo[i])) {
+      return new THREE.Box3(new THREE.Vector3(...lo), new THREE.Vector3(...hi));
+    }
     const sphere = this.geometry.boundingSphere;
-    if (!sphere || !isFinite(sphere.radius) || sphere.radius <= 0) return;
-    // Frame the bounding box of the skin only if it exists: eyes/teeth are inside anyway.
-    const box = new THREE.Box3().setFromBufferAttribute(this.geometry.getAttribute("position"));
+    if (!sphere || !isFinite(sphere.radius) || sphere.radius <= 0) return null;
+    return new THREE.Box3().setFromBufferAttribute(this.geometry.getAttribute("position"));
+  }
+
+  frameCamera() {
+    const box = this.frameBox();
+    if (!box) return;
     const center = box.getCenter(new THREE.Vector3());
     const size = box.getSize(new THREE.Vector3());
     const up = this.model.get("_up_axis") || "+y";
@@ -1261,6 +1325,11 @@ class View {
     this.renderer.setSize(w, h, true);
     this.camera.aspect = w / h;
     this.camera.updateProjectionMatrix();
+    // Until the person moves the camera the framing follows the canvas size: the first
+    // geometry usually arrives before the notebook has laid the view out at its width
+    // (it was framed for the 320 px minimum), and a fresh app and one opened later must
+    // look the same.
+    if (this.framed && !this.userCamera) this.frameCamera();
     this.requestRender(false);
   }
 
@@ -1394,6 +1463,17 @@ const STRAIN_REST = [0.72, 0.72, 0.72]; // sRGB grey: edge at its rest length
 const STRAIN_STRETCH = [0.93, 0.16, 0.12]; // red: longer than at rest
 const STRAIN_COMPRESS = [0.16, 0.42, 1.0]; // blue: shorter than at rest
 const FEATURE_LINE_PX = 3; // line width in CSS pixels
+// Depth bias of the lines. An edge is a straight chord between two handles on the
+// curved skin and dips under it: by a few % of its length over the cheeks, by up to
+// about half of it where it passes under the lips or the side of the nose (measured
+// on the sample head). Each end point is moved toward the camera ALONG ITS VIEW RAY
+// (it projects to the same pixel, only its depth changes) by FEATURE_DEPTH_PULL times
+// its edge's length (more than the dip: seen at an angle, the skin in front of a chord
+// is deeper than along the normal). The lines are then whole over the face seen from
+// the front, while from behind the head (about ten edge lengths deep) hides them. A
+// tighter, per-edge bias (the dip measured in Python) hid the edges under the lips
+// from the front, and a ray-cast depth was slow and no tighter (eyelashes, nose).
+const FEATURE_DEPTH_PULL = 1.5;
 
 // sRGB colour of a relative stretch s, full colour at |s| >= range.
 function strainColor(s, range) {
@@ -1409,6 +1489,7 @@ class FeatureGraphOverlay {
     this.model = model;
     this.edges = new Uint32Array(0);
     this.strain = new Float32Array(0);
+    this.ends = new Float32Array(0); // (F*6) edge end points on the drawn geometry
     this.edgesDirty = true;
     this.colorsDirty = true;
     this.seenPositions = -1;
@@ -1419,9 +1500,11 @@ class FeatureGraphOverlay {
       vertexColors: true,
       linewidth: FEATURE_LINE_PX,
       worldUnits: false,
-      // Drawn over the surface (straight chords between handles dip under the curved
-      // skin), before the handle markers (opaque, renderOrder 1), which stay on top.
-      depthTest: false,
+      // Depth-tested against the face (drawn after it, renderOrder 0.5), so the head
+      // hides the lines seen from behind; the end points are pulled toward the camera
+      // (FEATURE_DEPTH_PULL) because the chords between handles dip under the skin.
+      // Not written to the depth buffer: the handle markers (renderOrder 1) stay whole.
+      depthTest: true,
       depthWrite: false,
       transparent: false,
     });
@@ -1512,20 +1595,24 @@ class FeatureGraphOverlay {
     if (this.edgesDirty || this.seenPositions !== s.positionsVersion) {
       const P = s.positions;
       const n = P.length / 3;
-      const attr = this.geometry.getAttribute("instanceStart");
-      const reuse = !this.edgesDirty && attr && attr.data.array.length === F * 6;
-      const buf = reuse ? attr.data.array : new Float32Array(F * 6);
+      if (this.ends.length !== F * 6) this.ends = new Float32Array(F * 6);
+      const X = this.ends;
       const E = this.edges;
       for (let k = 0; k < E.length; k++) {
         const i = Math.min(E[k], n - 1);
-        buf[3 * k] = P[3 * i]; buf[3 * k + 1] = P[3 * i + 1]; buf[3 * k + 2] = P[3 * i + 2];
+        X[3 * k] = P[3 * i]; X[3 * k + 1] = P[3 * i + 1]; X[3 * k + 2] = P[3 * i + 2];
       }
-      if (reuse) attr.data.needsUpdate = true;
-      else this.geometry.setPositions(buf);
-      if (!reuse) this.colorsDirty = true; // new instance buffers need their colours
-      this.edgesDirty = false;
       this.seenPositions = s.positionsVersion;
     }
+    // Every render (the camera may have moved): the end points pulled toward the camera.
+    const attr = this.geometry.getAttribute("instanceStart");
+    const reuse = !this.edgesDirty && attr && attr.data.array.length === F * 6;
+    const buf = reuse ? attr.data.array : new Float32Array(F * 6);
+    this.pullTowardCamera(this.ends, buf);
+    if (reuse) attr.data.needsUpdate = true;
+    else this.geometry.setPositions(buf);
+    if (!reuse) this.colorsDirty = true; // new instance buffers need their colours
+    this.edgesDirty = false;
     if (this.colorsDirty) {
       const range = Number(this.model.get("strain_range")) || 0.2;
       const C = new Float32Array(F * 6);
@@ -1543,6 +1630,23 @@ class FeatureGraphOverlay {
     }
     const size = this.view.renderer.getSize(new THREE.Vector2());
     this.material.resolution.set(size.x, size.y);
+  }
+
+  // out = the end points X (F*6) moved toward the camera along their view rays by
+  // FEATURE_DEPTH_PULL x their edge's length (never past the near plane).
+  pullTowardCamera(X, out) {
+    const c = this.view.camera.position;
+    const near = this.view.camera.near;
+    for (let k = 0; k < X.length; k += 6) {
+      const len = Math.hypot(X[k + 3] - X[k], X[k + 4] - X[k + 1], X[k + 5] - X[k + 2]);
+      const pull = FEATURE_DEPTH_PULL * len;
+      for (let j = k; j < k + 6; j += 3) {
+        const dx = X[j] - c.x, dy = X[j + 1] - c.y, dz = X[j + 2] - c.z;
+        const dist = Math.hypot(dx, dy, dz);
+        const f = dist > 0 ? Math.max(dist - pull, Math.min(dist, 2 * near)) / dist : 1;
+        out[j] = c.x + f * dx; out[j + 1] = c.y + f * dy; out[j + 2] = c.z + f * dz;
+      }
+    }
   }
 
   describe() {

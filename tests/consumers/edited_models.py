@@ -1,0 +1,83 @@
+"""Sample heads edited the way users edit them, for the consumer tests (a plain module).
+
+Every builder returns a fresh base head (~5k vertices, decimetres) whose
+``model.tracks`` holds three keys, edited through the public model API only:
+
+* :func:`painted_head` — the default handles, six of them moved (not keyed),
+  a saved "smile" expression painted onto both mouth corners, ``jawOpen``
+  keyed three times;
+* :func:`regions_head` — the same plus blend regions with their own weights
+  and the handle offsets keyed three times (rest, brows up, half-way);
+* :func:`wrinkled_head` — the pose-space wrinkle layer fitted and attached
+  (a layer that is not linear in the weights: exports must bake it), with
+  ``jawOpen`` and ``browInnerUp`` keyed.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from workbench import Brush, FaceModel, load_sample
+from workbench.handle_presets import default_face_handles
+
+#: times inside and between the keys (0, 0.5, 1 s); 0.2 and 0.8 are frames at 30 fps, 0.37 is not
+SAMPLE_TIMES = [0.0, 0.2, 0.37, 0.8, 1.0]
+
+
+def _corners(m: FaceModel) -> tuple[int, int]:
+    """The vertices the smile shapes move most (the mouth corners)."""
+    left = int(np.argmax(np.linalg.norm(m.shape("mouthSmileLeft").delta, axis=1)))
+    right = int(np.argmax(np.linalg.norm(m.shape("mouthSmileRight").delta, axis=1)))
+    return left, right
+
+
+def _brow_handles(m: FaceModel) -> list[int]:
+    ids = [i for i, n in enumerate(m.handles.names) if n.startswith("brow")]
+    return ids[:6] if ids else list(range(6))
+
+
+def painted_head(interpolation: str = "bezier") -> FaceModel:
+    m = load_sample("head")
+    m.set_handles(default_face_handles(m), label="Default handles")
+    with m.interaction("Drag brows"):
+        for i in _brow_handles(m):
+            m.move_handle(i, [0.0, 0.06, 0.02])
+    m.set_weights({"mouthSmileLeft": 1.0, "mouthSmileRight": 1.0, "cheekSquintLeft": 0.4, "cheekSquintRight": 0.4})
+    m.save_expression("smile")
+    m.reset_weights()
+    left, right = _corners(m)
+    m.paint_stroke("smile", [left, right], Brush(radius=0.4, opacity=0.8))
+    for t, w in ((0.0, 0.0), (0.5, 0.8), (1.0, 0.3)):
+        m.set_weight("jawOpen", w)
+        m.key_weights(t, ["jawOpen"], interpolation=interpolation)  # type: ignore[arg-type]
+    return m
+
+
+def regions_head(interpolation: str = "bezier") -> FaceModel:
+    m = painted_head(interpolation)
+    st = m.segment_regions(0.25)
+    from workbench.region_blend import RegionWeights
+
+    rw = RegionWeights.from_global(m, st.regions, st.level)
+    m.set_region_weights(rw.with_region(0, {"mouthPucker": 0.7, "jawOpen": 0.3}))
+    rest = m.handles.offsets.copy()
+    m.key_handles(0.0, interpolation)  # type: ignore[arg-type]
+    up = rest.copy()
+    up[_brow_handles(m)] += [0.0, 0.05, 0.0]
+    m.set_handle_offsets(up)
+    m.key_handles(0.5, interpolation)  # type: ignore[arg-type]
+    m.set_handle_offsets(0.5 * up)
+    m.key_handles(1.0, interpolation)  # type: ignore[arg-type]
+    return m
+
+
+def wrinkled_head() -> FaceModel:
+    from workbench.wrinkle_layer import fit_sample_wrinkles
+
+    m = load_sample("head")
+    fit_sample_wrinkles(m)
+    for t, w in ((0.0, {"jawOpen": 0.0, "browInnerUp": 0.0}), (0.5, {"jawOpen": 0.8, "browInnerUp": 1.0}),
+                 (1.0, {"jawOpen": 0.1, "browInnerUp": 0.3})):
+        m.set_weights(w)
+        m.key_weights(t, list(w))
+    return m

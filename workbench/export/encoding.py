@@ -1,0 +1,472 @@
+"""What every exporter writes: ``model.evaluate_at(t)`` split into linear parts and baked layers.
+
+:meth:`FaceModel.evaluate` is the blend plus the editing layers (``regions``,
+``handles``, ``paint``, and any layer registered later, e.g. wrinkles).
+The three built-in layers are linear in the animated quantities — the
+weights ``g(t)`` and the handle offsets ``o(t)`` — so with
+
+* ``Δ_k`` the effective (masked) delta of shape ``k``, muted shapes at weight 0,
+  keyed weights clamped to the slider range (as :meth:`FaceModel.set_time` does);
+* **regions** (:func:`workbench.region_blend.region_layer`): with region
+  weights ``w_rk`` on the shown level and memberships ``W_r(v)``, the layer is
+  ``Σ_r W_r Σ_k (w_rk − g_k) Δ_k = C_R − S_R Σ_k g_k Δ_k`` with the constant
+  ``C_R = Σ_k (Σ_r W_r w_rk) Δ_k`` and the coverage ``S_R = Σ_r W_r``;
+* **handles** (:class:`workbench.handle_layer.HandleLayer`): ``D(o) = B o``,
+  linear in the offsets (:mod:`workbench.shell`);
+* **paint** (:class:`workbench.paint.PaintLayer`): with painted maps ``W_e``
+  and expression displacements ``D_e`` the layer is
+  ``Σ_e W_e (D_e − base)``, ``base = blended − neutral + D(o) = Σ_k g_k Δ_k + D(o)``
+  (the region correction is *not* part of the base), i.e.
+  ``C_P − P (Σ_k g_k Δ_k + D(o))`` with ``C_P = Σ_e W_e D_e``, ``P = Σ_e W_e``;
+
+the mesh at time ``t`` before the head pose is exactly::
+
+    x(t) = neutral + C + Σ_k g_k(t) (1 − S_R − P) Δ_k + (1 − P) D(o(t)) + N(t)
+
+with the constant ``C = C_R + C_P`` and ``N(t)`` the sum of every other
+layer. That is what :class:`MeshEncoding` holds:
+
+``shape_targets``
+    ``(1 − S_R − P) Δ_k``, one per shape, driven by the shape's own weight.
+``static``
+    ``C`` plus ``(1 − P) D(o)`` when the handles are not keyed: one target at
+    weight 1 (instead of one per handle and axis).
+``handle_targets``
+    When the handles are keyed: the key values and tangents of the handle
+    track span a subspace of the ``3h`` offsets; with an orthonormal basis
+    ``q_i`` of it (SVD; usually a few vectors, at most ``3 × keys``),
+    ``o(t) = Σ_i a_i(t) q_i`` and ``a_i(t) = q_i · o(t)`` is the same
+    piecewise cubic/linear/step curve as the keys (any interpolation carries
+    over exactly). Each ``a_i`` is mapped affinely onto ``[0, 1]`` over its
+    exact range (extremes of every Bézier segment included), the offset going
+    into ``static``, so consumers that clamp morph weights to ``[0, 1]``
+    (Blender) play it too. Target ``i`` is ``(hi_i − lo_i)(1 − P) D(q_i)``.
+``baked_layers``
+    Layers that are not the model's own region/handle/paint layer (wrinkles,
+    anything registered later, or a built-in replaced by another provider):
+    not linear in the keyed quantities, so each format bakes their sum
+    ``N(t)`` per frame (:meth:`baked`, through :meth:`FaceModel.layers_at`).
+    A baked sum that is the same at every frame is folded into ``static``.
+
+The head pose is applied after all layers (a rigid transform, as in
+:meth:`FaceModel.evaluate_at`); formats write it on the node / root prim.
+Units are model units here; writers scale by ``metadata.metres_per_unit``.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from workbench.export import LayerReport
+
+if TYPE_CHECKING:
+    from workbench.model import FaceModel
+    from workbench.tracks import Timeline, Track
+
+__all__ = ["MeshEncoding", "crossing_times", "curve_range", "segment_polynomials"]
+
+#: singular values below this fraction of the largest are dropped from the handle basis
+_RANK_TOL = 1e-9
+
+
+def segment_polynomials(
+    track: Track, coeffs: NDArray[np.float64]
+) -> list[tuple[float, float, str, NDArray[np.float64]]]:
+    """Every segment of ``a(t) = track(t) @ coeffs`` as a polynomial in ``u = (t - t0) / (t1 - t0)``.
+
+    Returns ``(t0, t1, interpolation, c)`` per segment with ``c`` (4, r): the
+    coefficients of ``1, u, u², u³`` (a step segment is its held value).
+    """
+    T = track.times
+    if T.size < 2:
+        return []
+    vals = track.values @ coeffs
+    right = track.derivatives(T, "right") @ coeffs
+    left = track.derivatives(T, "left") @ coeffs
+    out: list[tuple[float, float, str, NDArray[np.float64]]] = []
+    for i, key in enumerate(track.keys[:-1]):
+        dt = T[i + 1] - T[i]
+        v0, v1 = vals[i], vals[i + 1]
+        c = np.zeros((4, vals.shape[1]))
+        c[0] = v0
+        if key.interpolation == "linear":
+            c[1] = v1 - v0
+        elif key.interpolation == "bezier":
+            m0, m1 = right[i] * dt, left[i + 1] * dt
+            c[1] = m0
+            c[2] = -3 * v0 - 2 * m0 + 3 * v1 - m1
+            c[3] = 2 * v0 + m0 - 2 * v1 + m1
+        out.append((float(T[i]), float(T[i + 1]), key.interpolation, c))
+    return out
+
+
+def _roots_in_unit(c: NDArray[np.float64]) -> list[float]:
+    """Real roots in (0, 1) of ``c[0] + c[1] u + c[2] u² + c[3] u³``."""
+    poly = np.trim_zeros(c[::-1], "f")
+    if poly.size < 2:
+        return []
+    return [float(r.real) for r in np.roots(poly) if abs(r.imag) < 1e-12 and 0.0 < r.real < 1.0]
+
+
+def curve_range(track: Track, coeffs: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Exact ``(lo, hi)`` of ``a(t) = track(t) @ coeffs`` over all ``t`` (one per column).
+
+    Tracks hold their end values outside the keyed range, step and linear
+    segments reach their extremes at keys, and a Bézier segment is a cubic
+    whose interior extremes are the roots of its derivative.
+    """
+    vals = track.values @ coeffs
+    lo, hi = vals.min(axis=0).copy(), vals.max(axis=0).copy()
+    for _, _, interp, c in segment_polynomials(track, coeffs):
+        if interp != "bezier":
+            continue
+        for j in range(c.shape[1]):
+            for u in _roots_in_unit(np.array([c[1, j], 2 * c[2, j], 3 * c[3, j], 0.0])):
+                p = c[0, j] + c[1, j] * u + c[2, j] * u * u + c[3, j] * u**3
+                lo[j], hi[j] = min(lo[j], p), max(hi[j], p)
+    return lo, hi
+
+
+def crossing_times(track: Track, bounds: tuple[float, float]) -> list[float]:
+    """Times where the scalar ``track`` crosses ``bounds[0]`` or ``bounds[1]`` inside a segment."""
+    if track.values.shape[1] != 1:
+        raise ValueError(f"crossing_times needs a scalar track, {track.name!r} is not")
+    out = []
+    for t0, t1, interp, c in segment_polynomials(track, np.ones((1, 1))):
+        if interp == "step":
+            continue
+        for b in bounds:
+            cc = c[:, 0].copy()
+            cc[0] -= b
+            out += [t0 + u * (t1 - t0) for u in _roots_in_unit(cc)]
+    return out
+
+
+class MeshEncoding:
+    """The animated mesh of ``model`` under ``timeline`` as exportable parts (module docstring).
+
+    Parameters
+    ----------
+    model : FaceModel
+    timeline : Timeline
+        Checked against the model; the exported animation (it need not be
+        ``model.tracks``: :meth:`FaceModel.evaluate_at` takes it too).
+
+    Attributes
+    ----------
+    neutral : (n, 3) float32
+    shape_names : list of str
+    shape_targets : (k, n, 3) float32
+    static : (n, 3) float32 or None
+        The constant target (weight 1); None when it is zero.
+    handle_targets : (r, n, 3) float32
+    handle_coeffs : (3h, r) float64
+        Handle target weight ``i`` is ``o(t).ravel() @ handle_coeffs[:, i] + handle_shift[i]``.
+    handle_shift : (r,) float64
+    handle_track : Track or None
+    baked_layers : tuple of str
+        Layers baked per frame (see :meth:`baked`); empty when all are linear.
+    layers : list of LayerReport
+        One per registered layer: ``"linear"``, ``"baked"`` or ``"inactive"``.
+    """
+
+    def __init__(self, model: FaceModel, timeline: Timeline) -> None:
+        from workbench.expressions import expression_displacement
+        from workbench.region_blend import RegionState, region_layer
+
+        timeline.check_model(model)
+        self.model = model
+        self.timeline = timeline
+        with model.lock:
+            n = model.n_vertices
+            self.n_vertices = n
+            self.neutral = np.asarray(model.vertices, np.float64).astype(np.float32)
+            shapes = model.shapes
+            self.shape_names = [s.name for s in shapes]
+            self.muted = np.array([s.mute for s in shapes], bool)
+            self.slider_range = np.array([[s.slider_min, s.slider_max] for s in shapes]).reshape(-1, 2)
+            self.static_weights = np.array([model.weights[nm] for nm in self.shape_names], np.float64)
+            eff = (
+                np.stack([s.effective_delta() for s in shapes])
+                if shapes
+                else np.zeros((0, n, 3), np.float32)
+            )
+            providers = model.layer_providers
+            builtin = {name: model.is_builtin_layer(name) for name in providers}
+            handles_linear = builtin.get("handles", False)
+            paint_linear = builtin.get("paint", False) and handles_linear
+            reports: dict[str, LayerReport] = {}
+            const = np.zeros((n, 3), np.float64)
+            scale = np.ones(n, np.float64)  # per-vertex factor of the shape targets
+            has_const = False
+
+            # --- regions: C_R - S_R * sum_k g_k delta_k
+            if builtin.get("regions", False):
+                st = model.regions
+                if isinstance(st, RegionState) and st.weights is not None and region_layer(model) is not None:
+                    rw = st.weights.to_level(st.regions, st.level)
+                    W = st.regions.weight_matrix(st.level)
+                    cover = np.asarray(W.sum(axis=1), np.float64).reshape(-1)
+                    rows = np.flatnonzero(cover > 0)
+                    vals = rw.values.astype(np.float64) * (~self.muted)[None, :]
+                    coef = np.asarray(W[rows] @ vals, np.float64)  # (m, k)
+                    const[rows] += np.einsum("mk,kmc->mc", coef, eff[:, rows].astype(np.float64))
+                    scale -= cover
+                    has_const = has_const or rows.size > 0
+                    reports["regions"] = LayerReport(
+                        "regions", "linear" if rows.size else "inactive",
+                        f"level {st.level}, {rw.values.shape[0]} regions over {rows.size} vertices: "
+                        "constant target + shape targets scaled by (1 - coverage)",
+                    )
+                else:
+                    reports["regions"] = LayerReport("regions", "inactive", "no region weights")
+
+            # --- paint: C_P - P * (sum_k g_k delta_k + D(o))
+            paint = np.zeros(n, np.float64)
+            if paint_linear:
+                mix = model.paint_layers
+                if len(mix):
+                    for name, w in mix.items():
+                        w64 = np.asarray(w, np.float64)
+                        paint += w64
+                        const += w64[:, None] * expression_displacement(model, name).astype(np.float64)
+                    scale -= paint
+                    has_const = True
+                    reports["paint"] = LayerReport(
+                        "paint", "linear",
+                        f"{len(mix)} painted expressions on {int(np.count_nonzero(paint))} vertices: "
+                        "constant target + shape and handle targets scaled by (1 - painted weight)",
+                    )
+                else:
+                    reports["paint"] = LayerReport("paint", "inactive", "nothing painted")
+
+            # --- handles: (1 - P) D(o(t))
+            self.handle_track = timeline.handles
+            H = len(model.handles)
+            basis_rows = np.zeros((0, 3 * H))
+            self.handle_coeffs = np.zeros((3 * H, 0))
+            self.handle_shift = np.zeros(0)
+            targets: list[NDArray[np.float64]] = []
+            if handles_linear and H:
+                deformer = providers["handles"].deformer(model)  # type: ignore[attr-defined]
+                keep = (1.0 - paint)[:, None]
+
+                def disp(o: NDArray[np.float64]) -> NDArray[np.float64]:
+                    d = np.asarray(deformer.displacement(o.reshape(H, 3)), np.float64)
+                    return d * keep if paint_linear else d
+
+                tr = self.handle_track
+                if tr is None:
+                    o = np.asarray(model.handles.offsets, np.float64)
+                    if np.any(o):
+                        const += disp(o)
+                        has_const = True
+                        reports["handles"] = LayerReport(
+                            "handles", "linear", f"{H} handles, offsets not keyed: one constant target"
+                        )
+                    else:
+                        reports["handles"] = LayerReport("handles", "inactive", "all offsets are zero")
+                else:
+                    basis_rows = np.concatenate([tr.values, tr.derivatives(tr.times, "left"),
+                                                 tr.derivatives(tr.times, "right")])
+                    Q = _row_basis(basis_rows)
+                    if Q.shape[1]:
+                        lo, hi = curve_range(tr, Q)
+                        coeffs, shift = [], []
+                        for i in range(Q.shape[1]):
+                            d = disp(Q[:, i])
+                            span = hi[i] - lo[i]
+                            if lo[i] != 0.0:
+                                const += lo[i] * d
+                                has_const = True
+                            if span <= 1e-12 * max(1.0, abs(lo[i])):
+                                continue  # constant along q_i: folded into the static target
+                            targets.append(span * d)
+                            coeffs.append(Q[:, i] / span)
+                            shift.append(-lo[i] / span)
+                        if coeffs:
+                            self.handle_coeffs = np.stack(coeffs, axis=1)
+                            self.handle_shift = np.array(shift)
+                        reports["handles"] = LayerReport(
+                            "handles", "linear",
+                            f"{H} handles keyed ({len(tr)} keys): {len(targets)} basis targets "
+                            "(weights in [0, 1]) + constant target",
+                        )
+                    else:
+                        reports["handles"] = LayerReport("handles", "inactive", "keyed offsets are all zero")
+            elif H == 0 and "handles" in providers and handles_linear:
+                reports["handles"] = LayerReport("handles", "inactive", "no handles")
+
+            self.handle_targets = (
+                np.stack(targets).astype(np.float32) if targets else np.zeros((0, n, 3), np.float32)
+            )
+            self.shape_targets = eff if np.all(scale == 1.0) else (eff * scale[None, :, None].astype(np.float32))
+            self.baked_layers = tuple(
+                name for name in providers
+                if not (builtin[name] and (name != "paint" or paint_linear))
+            )
+            for name in self.baked_layers:
+                reports[name] = LayerReport(name, "baked", "not linear in the keyed weights/offsets")
+            self.layers = [reports[name] for name in providers if name in reports]
+        self._const = const
+        self._has_const = has_const
+        self.static: NDArray[np.float32] | None = const.astype(np.float32) if has_const else None
+        self._baked_cache: dict[float, NDArray[np.float32] | None] = {}
+        self._folded = False
+
+    # ------------------------------------------------------------------ weights
+    @property
+    def n_shapes(self) -> int:
+        return len(self.shape_names)
+
+    def raw_weights(self, times: ArrayLike) -> NDArray[np.float64]:
+        """(F, k) weights as the keys give them (unclamped), unkeyed shapes at their current value."""
+        ts = np.asarray(times, np.float64).reshape(-1)
+        W = np.repeat(self.static_weights[None, :], ts.size, axis=0)
+        index = {nm: i for i, nm in enumerate(self.shape_names)}
+        for s, tr in self.timeline.weight_tracks.items():
+            W[:, index[s]] = tr.sample(ts)[:, 0]
+        return W
+
+    def weights(self, times: ArrayLike) -> NDArray[np.float64]:
+        """(F, k) weights the model plays: clamped to each slider range, muted shapes 0."""
+        W = self.raw_weights(times)
+        if W.size:
+            W = np.clip(W, self.slider_range[:, 0], self.slider_range[:, 1])
+        W[:, self.muted] = 0.0
+        return W
+
+    def clamping_shapes(self, times: ArrayLike) -> list[str]:
+        """Unmuted keyed shapes whose keys leave the slider range at some of ``times``."""
+        W = self.raw_weights(times)
+        out = []
+        for k, nm in enumerate(self.shape_names):
+            if self.muted[k] or nm not in self.timeline.weight_tracks:
+                continue
+            lo, hi = self.slider_range[k]
+            if np.any(W[:, k] < lo) or np.any(W[:, k] > hi):
+                out.append(nm)
+        return out
+
+    def handle_weights(self, times: ArrayLike) -> NDArray[np.float64]:
+        """(F, r) weights of :attr:`handle_targets` (in [0, 1])."""
+        ts = np.asarray(times, np.float64).reshape(-1)
+        r = self.handle_targets.shape[0]
+        if r == 0 or self.handle_track is None:
+            return np.zeros((ts.size, r))
+        return self.handle_track.sample(ts) @ self.handle_coeffs + self.handle_shift[None, :]
+
+    # ------------------------------------------------------------------ baked layers
+    def baked(self, time: float) -> NDArray[np.float32] | None:
+        """(n, 3) float32 sum of :attr:`baked_layers` at ``time`` (None: zero)."""
+        if not self.baked_layers or self._folded:
+            return None
+        t = float(time)
+        if t not in self._baked_cache:
+            parts = self.model.layers_at(t, self.baked_layers, self.timeline)
+            arrs = [p for p in parts.values() if p is not None]
+            total: NDArray[np.float32] | None = None
+            if arrs:
+                total = np.sum(np.stack(arrs), axis=0, dtype=np.float32) if len(arrs) > 1 else arrs[0]
+                if not np.any(total):
+                    total = None
+            self._baked_cache[t] = total
+        return self._baked_cache[t]
+
+    def fold_constant_baked(self, times: ArrayLike) -> bool:
+        """If the baked layers give the same displacement at every time, move it into :attr:`static`.
+
+        Returns True when folded (then :meth:`baked` is None everywhere).
+        """
+        if not self.baked_layers:
+            return False
+        ts = np.asarray(times, np.float64).reshape(-1)
+        frames = [self.baked(float(t)) for t in ts]
+        first = frames[0]
+        for f in frames:
+            if (f is None) != (first is None):
+                return False
+            if f is not None and first is not None and not np.array_equal(f, first):
+                return False
+        if first is not None:
+            self._const = self._const + first.astype(np.float64)
+            self._has_const = True
+            self.static = self._const.astype(np.float32)
+        self._baked_cache = {float(t): None for t in ts}
+        self._folded = True
+        return True
+
+    def baked_report(self, times: ArrayLike, how: str) -> None:
+        """Fill in how the baked layers were written (after the writer baked them)."""
+        if not self.baked_layers:
+            return
+        ts = np.asarray(times, np.float64).reshape(-1)
+        moving = sum(self.baked(float(t)) is not None for t in ts)
+        folded = self._folded
+        for i, rep in enumerate(self.layers):
+            if rep.name not in self.baked_layers:
+                continue
+            if folded and self.static is not None and moving == 0:
+                detail = "the same at every frame: folded into the constant target"
+                enc = "linear"
+            elif moving == 0:
+                detail, enc = "zero at every exported frame", "inactive"
+            else:
+                detail, enc = f"{how} ({moving} of {ts.size} frames non-zero)", "baked"
+            self.layers[i] = LayerReport(rep.name, enc, f"not linear in the keyed weights/offsets; {detail}")
+
+    def all_baked_report(self, how: str) -> None:
+        """Every active layer went into per-frame positions (point caches, ``bake=True``)."""
+        for i, rep in enumerate(self.layers):
+            if rep.encoding in ("linear", "baked"):
+                self.layers[i] = LayerReport(rep.name, "baked", f"{how}; {rep.detail}")
+
+    # ------------------------------------------------------------------ positions
+    def local_points(self, times: ArrayLike) -> NDArray[np.float32]:
+        """(F, n, 3) float32 mesh without the head pose (model units); equals ``evaluate_at``."""
+        ts = np.asarray(times, np.float64).reshape(-1)
+        n, k = self.n_vertices, self.n_shapes
+        out = np.empty((ts.size, n, 3), np.float32)
+        flat = out.reshape(ts.size, -1)
+        flat[:] = self.neutral.reshape(-1)
+        if self.static is not None:
+            flat += self.static.reshape(-1)
+        if k:
+            flat += self.weights(ts).astype(np.float32) @ self.shape_targets.reshape(k, -1)
+        r = self.handle_targets.shape[0]
+        if r:
+            flat += self.handle_weights(ts).astype(np.float32) @ self.handle_targets.reshape(r, -1)
+        for f, t in enumerate(ts):
+            b = self.baked(float(t))
+            if b is not None:
+                out[f] += b
+        return out
+
+    def head_matrices(self, times: ArrayLike) -> NDArray[np.float64]:
+        """(F, 4, 4) head transforms (identity when the head pose is not keyed)."""
+        ts = np.asarray(times, np.float64).reshape(-1)
+        return np.stack([self.timeline.evaluate(float(t)).head_matrix() for t in ts]) if ts.size else np.zeros((0, 4, 4))
+
+    def points(self, times: ArrayLike) -> NDArray[np.float32]:
+        """(F, n, 3) float32 mesh with the head pose (model units): ``model.evaluate_at(t, timeline)``."""
+        ts = np.asarray(times, np.float64).reshape(-1)
+        P = self.local_points(ts)
+        if self.timeline.head_pose is not None:
+            M = self.head_matrices(ts).astype(np.float32)
+            P = np.einsum("fij,fnj->fni", M[:, :3, :3], P) + M[:, None, :3, 3]
+        return np.ascontiguousarray(P, np.float32)
+
+
+def _row_basis(rows: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(d, r) orthonormal basis of the span of ``rows`` (SVD, relative tolerance ``_RANK_TOL``)."""
+    if rows.size == 0 or not np.any(rows):
+        return np.zeros((rows.shape[1], 0))
+    _, s, vt = np.linalg.svd(rows, full_matrices=False)
+    r = int(np.count_nonzero(s > _RANK_TOL * s[0]))
+    Q = vt[:r].T
+    # a deterministic sign: the largest component of every basis vector is positive
+    sign = np.sign(Q[np.argmax(np.abs(Q), axis=0), np.arange(r)])
+    return Q * np.where(sign == 0, 1.0, sign)[None, :]
