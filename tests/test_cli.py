@@ -67,3 +67,25 @@ def test_cli_errors_name_the_file(tmp_path: Path, capsys: pytest.CaptureFixture[
     model.save(saved)
     assert main(["export", str(saved), str(tmp_path / "x.glb")]) == 2
     assert "no keys" in capsys.readouterr().err
+
+
+def test_app_command_binds_localhost_with_a_token(tmp_path):
+    from workbench.cli import app_command
+
+    cmd = app_command(9001)
+    assert cmd[1:3] == ["-m", "voila"] and cmd[3].endswith("notebooks/workbench.ipynb")
+    assert "--Voila.ip=127.0.0.1" in cmd and "--port=9001" in cmd and "--token" in cmd
+    assert "--token" not in app_command(9001, token=False)
+    with pytest.raises(ValueError, match=r"missing\.ipynb: no such notebook"):
+        app_command(9001, notebook=tmp_path / "missing.ipynb")
+
+
+def test_app_reports_a_missing_notebook(tmp_path, capsys):
+    import importlib.util
+
+    if importlib.util.find_spec("voila") is None:
+        assert main(["app", "--notebook", str(tmp_path / "x.ipynb")]) == 2
+        assert "Voila is not installed" in capsys.readouterr().err
+    else:
+        assert main(["app", "--notebook", str(tmp_path / "x.ipynb")]) == 2
+        assert "x.ipynb: no such notebook" in capsys.readouterr().err

@@ -1,15 +1,22 @@
-"""Command line: ``workbench info PATH``.
+"""Command line: ``workbench info PATH``, ``workbench export``, ``workbench app``.
 
 ``info`` prints what a new user wants to know before opening a face: vertex,
 triangle and polygon counts, the connected components (eyes, teeth...), the
-blendshapes with their ARKit-52 mapping, and units/axes.
+blendshapes with their ARKit-52 mapping, and units/axes. ``export`` writes the
+animation of a saved ``.fwb`` file. ``app`` serves the workbench notebook as an
+app without code cells (Voila, a separate process: the core never imports it),
+on 127.0.0.1 with a token in the printed URL.
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib.util
+import os
+import subprocess
 import sys
 from collections.abc import Sequence
+from pathlib import Path
 
 import numpy as np
 
@@ -65,7 +72,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     p_exp.add_argument("--fps", type=float, default=None, help="frame rate for baked/per-frame formats (default: the timeline's)")
     p_exp.add_argument("--bake", action="store_true", help="write per-frame points instead of blend shapes + weights")
     p_exp.add_argument("--format", default=None, help="override the format chosen from the suffix")
+    p_app = sub.add_parser("app", help="serve the workbench as an app without code cells (Voila, 127.0.0.1)")
+    p_app.add_argument("--port", type=int, default=8866, help="port on 127.0.0.1 (default 8866; the next free one is used)")
+    p_app.add_argument(
+        "--no-token", action="store_true", help="serve without the access token (only for a machine of your own)"
+    )
+    p_app.add_argument("--notebook", default=None, help="notebook to serve (default: notebooks/workbench.ipynb)")
     args = parser.parse_args(argv)
+    if args.command == "app":
+        return serve_app(args.port, token=not args.no_token, notebook=args.notebook)
     if args.command == "info":
         from workbench.io import load
 
@@ -94,6 +109,43 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(p)
         return 0
     return 1  # pragma: no cover - argparse rejects unknown commands
+
+
+def app_command(port: int, *, token: bool = True, notebook: str | Path | None = None) -> list[str]:
+    """The Voila command line that serves ``notebook`` on 127.0.0.1:``port`` (sources hidden).
+
+    Raises ValueError naming the notebook when it does not exist.
+    """
+    nb = Path(notebook) if notebook is not None else Path(__file__).resolve().parents[1] / "notebooks" / "workbench.ipynb"
+    if not nb.is_file():
+        raise ValueError(f"{nb}: no such notebook (expected the workbench notebook, notebooks/workbench.ipynb)")
+    cmd = [
+        sys.executable, "-m", "voila", str(nb),
+        "--Voila.ip=127.0.0.1", f"--port={int(port)}", "--no-browser",
+        "--strip_sources=True", "--show_tracebacks=True",
+    ]
+    if token:
+        cmd.append("--token")
+    return cmd
+
+
+def serve_app(port: int, *, token: bool = True, notebook: str | Path | None = None) -> int:
+    """Run Voila in the foreground (Ctrl-C stops it); 2 with a message when it cannot start."""
+    if importlib.util.find_spec("voila") is None:
+        print("workbench app: Voila is not installed; run `bash .ci/workbench run` once, "
+              "or pip install -e '.[ui]'", file=sys.stderr)
+        return 2
+    try:
+        cmd = app_command(port, token=token, notebook=notebook)
+    except ValueError as exc:
+        print(f"workbench app: {exc}", file=sys.stderr)
+        return 2
+    env = dict(os.environ)
+    env.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
+    try:
+        return subprocess.call(cmd, env=env)
+    except KeyboardInterrupt:
+        return 0
 
 
 if __name__ == "__main__":
