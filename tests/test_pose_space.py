@@ -20,6 +20,7 @@ from workbench.pose_space import (
     local_frames,
     tangent_neighbours,
     to_world,
+    vertex_normals,
 )
 from workbench.shell import ShellDeformer
 from workbench.wrinkle_examples import EXAMPLE_POSES, WrinkleSculptor, performance_weights
@@ -197,6 +198,56 @@ def test_numba_wpsd_matches_numpy_for_any_number_of_poses(head, poses) -> None:
         DetailEvaluator(ps, m.faces, nb, "numpy").apply(V, Ft[-1], add_base=False),
         atol=1e-6,
     )
+
+
+@pytest.mark.parametrize("n", [1, 1023, 1024, 2500])
+def test_numba_basis_product_matches_numpy(n) -> None:
+    # blocks of 1024 rows: sizes below, at and across a block boundary; zero handle rows skipped
+    pytest.importorskip("numba")
+    from workbench import _kernels
+
+    rng = np.random.default_rng(n)
+    B = np.asfortranarray(rng.normal(size=(n, 7)).astype(np.float32))
+    uH = rng.normal(size=(7, 3)).astype(np.float32)
+    uH[2] = 0.0
+    rest = rng.normal(size=(n, 3)).astype(np.float32)
+    out = np.full_like(rest, np.nan)
+    _kernels.bmul_add(B, uH, rest, out)
+    np.testing.assert_allclose(out, rest + B.astype(np.float64) @ uH, atol=1e-5)
+
+
+def test_numba_wpsd_skips_vertices_without_details(head) -> None:
+    # vertices whose examples have no detail get exactly X (or 0): the fast path
+    # only visits vertices with non-zero RBF weights, and must agree with numpy
+    pytest.importorskip("numba")
+    from workbench.pose_space import DetailEvaluator
+
+    m, h, _shell, _sculptor, _examples = head
+    V = np.asarray(m.vertices, np.float64)
+    g = FeatureGraph.from_handles(V[h])
+    rng = np.random.default_rng(5)
+    Ft = rng.normal(0.0, 0.05, (5, len(g)))
+    Ft[0] = 0.0
+    D = rng.normal(0.0, 1e-3, (5, len(V), 3)).astype(np.float32)
+    D[0] = 0.0
+    quiet = V[:, 1] < np.median(V[:, 1])  # the lower half has no details
+    D[:, quiet] = 0.0
+    ps = fit_pose_space(Ft, D, alpha=edge_weights(V, V[h], g), mode="interp")
+    nb = tangent_neighbours(m.faces, len(V))
+    fast = DetailEvaluator(ps, m.faces, nb, "numba")
+    assert fast.rows.size == np.count_nonzero(~quiet)
+    f = rng.normal(0.0, 0.05, len(g))
+    X = (V + rng.normal(0.0, 0.01, V.shape)).astype(np.float32)
+    ref = DetailEvaluator(ps, m.faces, nb, "numpy").apply(X, f, 0.7)
+    out = np.full_like(X, np.nan)
+    got = fast.apply(X, f, 0.7, out=out)
+    assert got is out
+    np.testing.assert_array_equal(got[quiet], X[quiet])
+    np.testing.assert_allclose(got, ref, atol=1e-6 + 1e-4 * np.abs(ref - X).max())
+    only = fast.apply(X, f, 0.7, add_base=False, out=np.full_like(X, np.nan))
+    np.testing.assert_array_equal(only[quiet], 0.0)
+    # the public normals() are still those of every vertex
+    np.testing.assert_allclose(fast.normals(X), vertex_normals(X, m.faces), atol=1e-5)
 
 
 def test_editing_one_example_propagates(head) -> None:

@@ -36,56 +36,62 @@ except ImportError:  # pragma: no cover - numba is optional
 
     prange = range  # type: ignore[misc]
 
-_BLOCK = 2048
+_BLOCK = 1024
 
 
 @njit(parallel=True, fastmath=True, cache=True)
 def bmul_add(B, uH, rest, out):
     """``out = rest + B @ uH``; B (n, H) float32 in Fortran order, uH (H, 3), rest/out (n, 3).
 
-    Blocks of rows, one contiguous accumulator per coordinate (vectorizes; the
-    columns of the Fortran-ordered basis are read contiguously, no copy of B).
+    Blocks of rows (their accumulators stay in L1), one pass over each column
+    of the Fortran-ordered basis per block. The column is taken as a 1-D
+    contiguous slice so the inner loop vectorizes (indexing ``B[i, j]``
+    directly did not: 1.5x slower at 80k).
     """
     n, H = B.shape
     nblocks = (n + _BLOCK - 1) // _BLOCK
     for bi in prange(nblocks):
         s = bi * _BLOCK
         e = min(n, s + _BLOCK)
-        a0 = np.empty(e - s, np.float32)
-        a1 = np.empty(e - s, np.float32)
-        a2 = np.empty(e - s, np.float32)
-        for i in range(s, e):
-            a0[i - s] = rest[i, 0]
-            a1[i - s] = rest[i, 1]
-            a2[i - s] = rest[i, 2]
+        m = e - s
+        acc = np.zeros((3, _BLOCK), np.float32)
+        a0 = acc[0]
+        a1 = acc[1]
+        a2 = acc[2]
         for j in range(H):
             u0, u1, u2 = uH[j, 0], uH[j, 1], uH[j, 2]
             if u0 == 0.0 and u1 == 0.0 and u2 == 0.0:
                 continue
-            for i in range(s, e):
-                b = B[i, j]
-                a0[i - s] += b * u0
-                a1[i - s] += b * u1
-                a2[i - s] += b * u2
-        for i in range(s, e):
-            out[i, 0] = a0[i - s]
-            out[i, 1] = a1[i - s]
-            out[i, 2] = a2[i - s]
+            col = B[s:e, j]
+            for i in range(m):
+                b = col[i]
+                a0[i] += b * u0
+                a1[i] += b * u1
+                a2[i] += b * u2
+        for i in range(m):
+            out[s + i, 0] = rest[s + i, 0] + a0[i]
+            out[s + i, 1] = rest[s + i, 1] + a1[i]
+            out[s + i, 2] = rest[s + i, 2] + a2[i]
 
 
 @njit(parallel=True, fastmath=True, cache=True)
-def vertex_normals(X, faces, vf_ptr, vf_idx, fbuf, out):
-    """Area-weighted unit vertex normals of X into ``out`` (n, 3); fbuf (m, 3) scratch."""
-    m = faces.shape[0]
-    for f in prange(m):
+def vertex_normals(X, faces, vf_ptr, vf_idx, face_rows, rows, fbuf, out):
+    """Area-weighted unit vertex normals of X for the vertices ``rows`` into ``out`` (n, 3).
+
+    ``face_rows``: the faces incident to ``rows`` (their cross products go to the
+    scratch ``fbuf`` (m, 3)); rows of ``out`` not in ``rows`` are left as they are.
+    Wrinkles need normals only where there are details, often half of the head.
+    """
+    for i in prange(face_rows.shape[0]):
+        f = face_rows[i]
         a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
         e1x, e1y, e1z = X[b, 0] - X[a, 0], X[b, 1] - X[a, 1], X[b, 2] - X[a, 2]
         e2x, e2y, e2z = X[c, 0] - X[a, 0], X[c, 1] - X[a, 1], X[c, 2] - X[a, 2]
         fbuf[f, 0] = e1y * e2z - e1z * e2y
         fbuf[f, 1] = e1z * e2x - e1x * e2z
         fbuf[f, 2] = e1x * e2y - e1y * e2x
-    n = X.shape[0]
-    for v in prange(n):
+    for i in prange(rows.shape[0]):
+        v = rows[i]
         sx = np.float32(0.0)
         sy = np.float32(0.0)
         sz = np.float32(0.0)
@@ -160,8 +166,11 @@ def pad_poses(W: np.ndarray) -> np.ndarray:
 
 
 @njit(parallel=True, fastmath=True, cache=True)
-def wpsd_apply(X, N, nb, a_idx, a_val, D, W, strength, add_base, out):
+def wpsd_apply(X, N, nb, rows, a_idx, a_val, D, W, strength, add_base, out):
     """WPSD (eq. 3, 5) + local frames: ``out = [X +] strength · R_v Σ_j W[v, j] ‖f − FS_j‖_v``.
+
+    Only the vertices ``rows`` (those with non-zero RBF weights) are written;
+    the caller fills the others (``X`` or zero: their detail is zero).
 
     X, N (n, 3) float32: large-scale positions and their unit normals; nb (n,)
     tangent neighbours; a_idx/a_val (n, K) edge weights (strongest first, zero
@@ -172,9 +181,10 @@ def wpsd_apply(X, N, nb, a_idx, a_val, D, W, strength, add_base, out):
     vertex's edges are then eight independent chains (twice as fast as one
     accumulator array per vertex, which serializes on store-to-load latency).
     """
-    n, K = a_idx.shape
+    K = a_idx.shape[1]
     P8 = D.shape[1]
-    for v in prange(n):
+    for row in prange(rows.shape[0]):
+        v = rows[row]
         d0 = np.float32(0.0)
         d1 = np.float32(0.0)
         d2 = np.float32(0.0)

@@ -13,7 +13,6 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import os
-import subprocess
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -130,7 +129,12 @@ def app_command(port: int, *, token: bool = True, notebook: str | Path | None = 
 
 
 def serve_app(port: int, *, token: bool = True, notebook: str | Path | None = None) -> int:
-    """Run Voila in the foreground (Ctrl-C stops it); 2 with a message when it cannot start."""
+    """Replace this process by Voila (Ctrl-C or SIGTERM stops it and its kernel).
+
+    ``exec`` rather than a child process: whoever stops ``workbench app`` by its
+    PID stops the server itself, never leaving an orphaned Voila behind.
+    Returns 2 with a message when it cannot start.
+    """
     if importlib.util.find_spec("voila") is None:
         print("workbench app: Voila is not installed; run `bash .ci/workbench run` once, "
               "or pip install -e '.[ui]'", file=sys.stderr)
@@ -142,10 +146,10 @@ def serve_app(port: int, *, token: bool = True, notebook: str | Path | None = No
         return 2
     env = dict(os.environ)
     env.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
-    try:
-        return subprocess.call(cmd, env=env)
-    except KeyboardInterrupt:
-        return 0
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os.execve(cmd[0], cmd, env)
+    return 0  # pragma: no cover - execve does not return
 
 
 if __name__ == "__main__":

@@ -749,11 +749,22 @@ class DetailEvaluator:
         self.FS = np.ascontiguousarray(pose_space.basis_features, np.float32)
         self.W = np.ascontiguousarray(pose_space.weights, np.float32)
         if pose_space.alpha is not None:
-            self.a_idx = np.ascontiguousarray(pose_space.alpha.index, np.int32)
+            # edge ids fit in int16 (F is a few hundred): less memory traffic per frame
+            idx_type = np.int16 if self.FS.shape[1] < np.iinfo(np.int16).max else np.int32
+            self.a_idx = np.ascontiguousarray(pose_space.alpha.index, idx_type)
             self.a_val = np.ascontiguousarray(pose_space.alpha.value, np.float32)
         self.vf_ptr, self.vf_idx = _kernels.vertex_face_csr(self.faces, n)
         self._fbuf = np.empty((self.faces.shape[0], 3), np.float32)
-        self._normals = np.empty((n, 3), np.float32)
+        self._normals = np.zeros((n, 3), np.float32)
+        self._all_rows = np.arange(n, dtype=np.int32)
+        self._all_faces = np.arange(self.faces.shape[0], dtype=np.int32)
+        # vertices with details (non-zero RBF weights; the rest of the head has none)
+        # and the faces around them: a frame only touches these
+        Wv = np.abs(self.W).max(axis=(1, 2)) if pose_space.alpha is not None else np.abs(self.W).max(axis=(0, 2))
+        self.rows = np.flatnonzero(Wv > 0).astype(np.int32)
+        touched = np.zeros(n, bool)
+        touched[self.rows] = True
+        self.face_rows = np.flatnonzero(touched[self.faces].any(axis=1)).astype(np.int32)
         if pose_space.alpha is not None:
             self._W8 = _kernels.pad_poses(self.W)  # WPSD weights in groups of 8 poses
             self._D = np.empty((self.FS.shape[1], self._W8.shape[1]), np.float32)
@@ -761,7 +772,9 @@ class DetailEvaluator:
     def normals(self, X: NDArray[np.float32]) -> NDArray[np.float32]:
         """Unit area-weighted normals of X (n, 3) float32 (an internal buffer; copy to keep)."""
         if self.backend == "numba":
-            _kernels.vertex_normals(X, self.faces, self.vf_ptr, self.vf_idx, self._fbuf, self._normals)
+            _kernels.vertex_normals(
+                X, self.faces, self.vf_ptr, self.vf_idx, self._all_faces, self._all_rows, self._fbuf, self._normals
+            )
         else:
             self._normals[:] = vertex_normals(X, self.faces)
         return self._normals
@@ -790,14 +803,24 @@ class DetailEvaluator:
             out = np.empty_like(X32)
         ps = self.pose_space
         if self.backend == "numba":
-            N = self.normals(X32)
             if ps.alpha is not None:
+                # normals and details only where there are details; elsewhere out = X (or 0)
+                N = self._normals
+                _kernels.vertex_normals(
+                    X32, self.faces, self.vf_ptr, self.vf_idx, self.face_rows, self.rows, self._fbuf, N
+                )
+                if out is not X32:
+                    if add_base:
+                        np.copyto(out, X32)
+                    else:
+                        out.fill(0.0)
                 D = _kernels.wpsd_pose_table(self.FS, f, self._D)
                 _kernels.wpsd_apply(
-                    X32, N, self.neighbours, self.a_idx, self.a_val, D, self._W8,
+                    X32, N, self.neighbours, self.rows, self.a_idx, self.a_val, D, self._W8,
                     np.float32(strength), add_base, out,
                 )
             else:
+                N = self.normals(X32)
                 phi = np.ascontiguousarray(ps.distances(f), np.float32)
                 _kernels.psd_apply(X32, N, self.neighbours, phi, self.W, np.float32(strength), add_base, out)
             return out

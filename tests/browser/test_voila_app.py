@@ -64,6 +64,14 @@ class VoilaApp:
             time.sleep(0.25)
         raise RuntimeError(f"workbench app printed no URL within {timeout} s:\n{self.log()}")
 
+    def children(self) -> list[int]:
+        """PIDs of the server's child processes (its kernels)."""
+        try:
+            text = Path(f"/proc/{self.proc.pid}/task/{self.proc.pid}/children").read_text()
+        except OSError:
+            return []
+        return [int(p) for p in text.split()]
+
     def stop(self) -> None:
         if self.proc.poll() is None:
             self.proc.terminate()
@@ -154,3 +162,19 @@ def test_app_serves_the_workbench_without_code(app: VoilaApp, browser) -> None:
         )
     finally:
         page.close()
+    # stopping `workbench app` by its PID stops the server and its kernel (no orphans)
+    kernels = app.children()
+    assert kernels, "the app's kernel is not a child of the process `workbench app` started"
+    app.stop()
+    deadline = time.monotonic() + 20
+    while time.monotonic() < deadline and any(Path(f"/proc/{k}").exists() for k in kernels):
+        time.sleep(0.2)
+    alive = [k for k in kernels if Path(f"/proc/{k}").exists() and "zombie" not in _state(k)]
+    assert not alive, f"kernels {alive} outlived `workbench app`"
+
+
+def _state(pid: int) -> str:
+    try:
+        return "zombie" if Path(f"/proc/{pid}/stat").read_text().split()[2] == "Z" else "running"
+    except OSError:
+        return "gone"
