@@ -19,6 +19,9 @@ the mouth and brows), ticks *Loop*, presses **Play** with the mouse, waits
   viewport's geometry push alone;
 * ``render ms``: the viewport's own JS time per render (``data-render-ms``:
   upload + normals + draw call), sampled every 0.2 s;
+* ``page rAF/s``: animation frames the page ran per second (a counter on
+  ``requestAnimationFrame``): near 60 means the page's main thread had time to
+  spare, near ``viewport fps`` means the page itself (JS or rasterising) is the limit;
 * ``draft``: whether the viewport drew at half resolution while playing (it does
   on software WebGL, see ``softwareWebGL()`` in ``widgets/js/src/viewport.js``).
 
@@ -67,8 +70,13 @@ print(json.dumps([_bench_n[0], time.perf_counter(), tl.frames_dropped]))
 
 _PAGE_COUNTERS = """() => {
   const e = document.querySelector('.fwb-viewport');
+  if (window.__fwbRaf === undefined) {
+    window.__fwbRaf = 0;
+    const tick = () => { window.__fwbRaf++; requestAnimationFrame(tick); };
+    requestAnimationFrame(tick);
+  }
   return [Number(e.getAttribute('data-frame')), Number(e.getAttribute('data-render-count')),
-          performance.now()];
+          performance.now(), window.__fwbRaf];
 }"""
 
 
@@ -93,13 +101,13 @@ def measure(nb: NotebookPage, fps: float, warmup: float, seconds: float) -> dict
     time.sleep(warmup)
     draft = nb.viewport(0).get_attribute("data-draft") == "1"
     n0, k0, d0 = nb.kernel_eval(_COUNTER)
-    f0, r0, p0 = page.evaluate(_PAGE_COUNTERS)
+    f0, r0, p0, a0 = page.evaluate(_PAGE_COUNTERS)
     render_ms = []
     t_end = time.monotonic() + seconds
     while time.monotonic() < t_end:
         time.sleep(0.2)
         render_ms.append(float(nb.viewport(0).get_attribute("data-render-ms") or "nan"))
-    f1, r1, p1 = page.evaluate(_PAGE_COUNTERS)
+    f1, r1, p1, a1 = page.evaluate(_PAGE_COUNTERS)
     n1, k1, d1 = nb.kernel_eval(_COUNTER)
     stats = nb.kernel_eval("import json; print(json.dumps(tl.playback_stats))")
     push = nb.kernel_eval("import json; print(json.dumps(list(vp.push_ms)))")
@@ -114,6 +122,7 @@ def measure(nb: NotebookPage, fps: float, warmup: float, seconds: float) -> dict
         "dropped": dropped / max(dropped + (n1 - n0), 1),
         "viewport_fps": (f1 - f0) / ((p1 - p0) / 1e3),
         "renders": (r1 - r0) / ((p1 - p0) / 1e3),
+        "raf": (a1 - a0) / ((p1 - p0) / 1e3),
         "set_time_ms": float(stats.get("set_time_ms", float("nan"))),
         "push_ms": _median(push),
         "render_ms": _median(render_ms),
@@ -148,11 +157,12 @@ def main() -> int:
     print("  kernel fps: set_time calls/s; viewport fps: geometry frames the viewport rendered/s")
     print(f"{'resolution':>10} {'vertices':>9} {'target':>7} {'kernel fps':>10} {'dropped':>8} "
           f"{'viewport fps':>12} {'renders/s':>9} {'set_time ms':>11} {'push ms':>8} "
-          f"{'render ms':>9} {'draft':>5}")  # fmt: skip
+          f"{'render ms':>9} {'page rAF/s':>10} {'draft':>5}")  # fmt: skip
     for res, n, fps, m in rows:
         print(f"{res:>10} {n:>9} {fps:7.0f} {m['kernel_fps']:10.1f} {m['dropped']:8.0%} "
               f"{m['viewport_fps']:12.1f} {m['renders']:9.1f} {m['set_time_ms']:11.2f} "
-              f"{m['push_ms']:8.2f} {m['render_ms']:9.1f} {'yes' if m['draft'] else 'no':>5}")  # fmt: skip
+              f"{m['push_ms']:8.2f} {m['render_ms']:9.1f} {m['raf']:10.1f} "
+              f"{'yes' if m['draft'] else 'no':>5}")  # fmt: skip
     return 0
 
 
