@@ -32,7 +32,11 @@ FORMATS = {
     "mdd": ("face.mdd", {}),
     "csv": ("face.csv", {}),
     "obj-seq": ("seq/face.obj", {}),
+    # through Blender (bpy in .venv/blender or $WORKBENCH_BPY_PYTHON); not in the default set
+    "fbx": ("face.fbx", {}),
+    "abc": ("face.abc", {}),
 }
+DEFAULT_FORMATS = [f for f in FORMATS if f not in ("fbx", "abc")]
 
 
 def keyed_timeline(shape_names: list[str], seconds: float = 10.0, fps: float = 30.0) -> Timeline:
@@ -48,7 +52,8 @@ def keyed_timeline(shape_names: list[str], seconds: float = 10.0, fps: float = 3
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--resolutions", nargs="+", default=["25k", "100k"])
-    ap.add_argument("--formats", nargs="+", default=list(FORMATS), choices=list(FORMATS))
+    ap.add_argument("--formats", nargs="+", default=DEFAULT_FORMATS, choices=list(FORMATS),
+                    help="fbx and abc need Blender as a Python module (see workbench/export/blender.py)")
     args = ap.parse_args()
     rows = []
     for res in args.resolutions:

@@ -89,3 +89,17 @@ def test_app_reports_a_missing_notebook(tmp_path, capsys):
     else:
         assert main(["app", "--notebook", str(tmp_path / "x.ipynb")]) == 2
         assert "x.ipynb: no such notebook" in capsys.readouterr().err
+
+
+def test_fbx_export_without_blender_says_what_is_missing(tmp_path, capsys, monkeypatch) -> None:
+    monkeypatch.setenv("WORKBENCH_BPY_PYTHON", str(tmp_path / "no-such-python"))
+    model = workbench.load_sample("head")
+    model.key_expression(0.0, "jawOpen")
+    saved = tmp_path / "anim.fwb"
+    model.save(saved)
+    for suffix in (".fbx", ".abc"):
+        out = tmp_path / f"anim{suffix}"
+        assert main(["export", str(saved), str(out)]) == 2
+        err = capsys.readouterr().err
+        assert f"anim{suffix}" in err and "no Python with bpy" in err and "WORKBENCH_BPY_PYTHON" in err
+        assert not out.exists() and list(tmp_path.glob(".anim*")) == []  # nothing half-written

@@ -38,6 +38,8 @@ FORMAT_CHOICES: dict[str, tuple[str, str]] = {
     "MDD point cache (.mdd)": ("mdd", ".mdd"),
     "OBJ sequence (one .obj per frame)": ("obj", ".obj"),
     "CSV weights (.csv)": ("csv", ".csv"),
+    "FBX, shape keys (.fbx, through Blender)": ("fbx", ".fbx"),
+    "Alembic point cache (.abc, through Blender)": ("abc", ".abc"),
 }
 _SUFFIXES = {suffix for _, suffix in FORMAT_CHOICES.values()} | {".gltf", ".usd"}
 _MAX_LISTED = 6

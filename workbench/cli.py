@@ -64,7 +64,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     p_info.add_argument("path")
     p_exp = sub.add_parser(
         "export",
-        help="export the animation of a saved workbench file (.glb/.gltf, .usd/.usda/.usdc, .pc2, .mdd, .obj sequence, .csv)",
+        help="export the animation of a saved workbench file (.glb/.gltf, .usd/.usda/.usdc, .pc2, .mdd, .obj sequence, .csv; .fbx/.abc through Blender)",
     )
     p_exp.add_argument("saved_file", help="a .fwb workbench file with keys on its timeline")
     p_exp.add_argument("out", help="output path; the suffix picks the format")

@@ -116,3 +116,58 @@ def test_blender_plays_the_edited_head(build, tmp_path):
     theirs = np.stack([P[..., 0], P[..., 2], -P[..., 1]], axis=-1)  # Blender z-up -> glTF y-up
     ours = expected_points(m, m.tracks, np.array(frames) / 24.0)
     np.testing.assert_allclose(theirs, ours, atol=1e-5, rtol=0)
+
+
+READ_BACK_SCRIPT = r"""
+import json, sys
+import bpy
+args = json.loads(sys.argv[-1])
+bpy.ops.wm.read_factory_settings(use_empty=True)
+scene = bpy.context.scene
+scene.render.fps = args["fps"]
+if args["path"].endswith(".fbx"):
+    bpy.ops.import_scene.fbx(filepath=args["path"], anim_offset=0.0)  # default 1: keys one frame late
+else:
+    bpy.ops.wm.alembic_import(filepath=args["path"])
+obj = next(o for o in scene.objects if o.type == "MESH")
+out = []
+for f in args["frames"]:
+    scene.frame_set(f)
+    dg = bpy.context.evaluated_depsgraph_get()
+    ev = obj.evaluated_get(dg)
+    me = ev.to_mesh()
+    out.append([list(ev.matrix_world @ v.co) for v in me.vertices])
+    ev.to_mesh_clear()
+keys = obj.data.shape_keys
+names = [kb.name for kb in keys.key_blocks][1:] if keys else []
+print("JSON" + json.dumps({"names": names, "points": out}))
+"""
+
+
+@pytest.mark.skipif(
+    _bpy_python() is None and os.environ.get("CI") != "true",
+    reason="no Python with bpy (set WORKBENCH_BPY_PYTHON)",
+)
+@pytest.mark.parametrize("suffix", [".fbx", ".abc"])
+def test_fbx_and_alembic_play_the_edited_head_in_blender(suffix, tmp_path):
+    # written through Blender, read back by Blender's own FBX / Alembic importer:
+    # every frame (Bezier keys in between included) equals model.evaluate_at
+    assert _bpy_python() is not None, "CI must provide Blender (bpy) via WORKBENCH_BPY_PYTHON"
+    m = painted_head("bezier")
+    (p,) = export(m, m.tracks, tmp_path / f"edited{suffix}")
+    fps = m.tracks.fps
+    frames = [0, 5, 12, 17, round(m.tracks.end * fps)]
+    script = tmp_path / "read_back.py"
+    script.write_text(READ_BACK_SCRIPT)
+    args = {"path": str(p), "fps": round(fps), "frames": frames}
+    proc = subprocess.run(
+        [str(_bpy_python()), str(script), json.dumps(args)], capture_output=True, text=True, timeout=600
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    out = json.loads(next(line[4:] for line in proc.stdout.splitlines() if line.startswith("JSON")))
+    if suffix == ".fbx":  # the blend shapes travel as shape keys, named as ours
+        assert out["names"][: len(m.shape_names)] == m.shape_names
+    P = np.array(out["points"])
+    theirs = np.stack([P[..., 0], P[..., 2], -P[..., 1]], axis=-1)  # Blender z-up -> y-up
+    ours = expected_points(m, m.tracks, np.array(frames) / fps)
+    np.testing.assert_allclose(theirs, ours, atol=2e-5, rtol=0)

@@ -433,3 +433,15 @@ def test_export_panel_says_how_each_layer_was_written(keyed, tmp_path):
     p.format.value = "CSV weights (.csv)"
     assert p.do_export()
     assert "<b>squared</b>: not in this format" in p.result.value
+
+
+def test_export_panel_fbx_without_blender_shows_the_reason(keyed, tmp_path, monkeypatch):
+    from widgets.export_panel import ExportPanel
+
+    monkeypatch.setenv("WORKBENCH_BPY_PYTHON", str(tmp_path / "missing-python"))
+    p = ExportPanel(keyed, path=str(tmp_path / "anim.glb"))
+    p.format.value = "FBX, shape keys (.fbx, through Blender)"
+    assert p.path.value == str(tmp_path / "anim.fbx")
+    assert p.do_export() == []
+    assert "Export failed" in p.result.value and "WORKBENCH_BPY_PYTHON" in p.result.value
+    assert not (tmp_path / "anim.fbx").exists()

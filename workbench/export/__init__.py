@@ -12,6 +12,8 @@ pc2       .pc2             baked point cache, little-endian (:mod:`.pointcache`)
 mdd       .mdd             baked point cache, big-endian (:mod:`.pointcache`)
 obj       .obj             one OBJ per frame, ``<stem>_<frame>.obj`` (:mod:`.pointcache`)
 csv       .csv             per-frame weights, re-importable (:mod:`.csv`)
+fbx       .fbx             animated shape keys, written by Blender (:mod:`.blender`)
+abc       .abc             Alembic point cache, written by Blender (:mod:`.blender`)
 ========  ===============  ==========================================================
 
 Every format reproduces :meth:`FaceModel.evaluate_at` — the blend *and every
@@ -140,6 +142,8 @@ FORMATS: dict[str, ExportFormat] = {
         ExportFormat("mdd", (".mdd",), "workbench.export.pointcache", "MDD point cache"),
         ExportFormat("obj", (".obj",), "workbench.export.pointcache", "OBJ sequence, one file per frame"),
         ExportFormat("csv", (".csv",), "workbench.export.csv", "CSV of per-frame weights"),
+        ExportFormat("fbx", (".fbx",), "workbench.export.blender", "FBX with animated shape keys (through Blender)"),
+        ExportFormat("abc", (".abc",), "workbench.export.blender", "Alembic point cache (through Blender)"),
     )
 }
 
@@ -208,7 +212,7 @@ def export(
         tl.check_model(model)
     except TrackError as exc:
         raise ExportError(str(exc)) from None
-    if fmt.name in ("pc2", "mdd", "obj"):
+    if fmt.name in ("pc2", "mdd", "obj", "fbx", "abc"):
         options.setdefault("kind", fmt.name)
     written = fmt.writer()(model, tl, Path(path), bake=bake, **options)
     result = written if isinstance(written, ExportResult) else ExportResult(written)
