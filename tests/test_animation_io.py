@@ -232,7 +232,7 @@ def test_export_rejects_unknown_shapes_and_suffix(arkit_model, tmp_path):
     with pytest.raises(ExportError, match="unknown shape names"):
         export(arkit_model, Timeline().add_key("weights/nope", 0.0, 1.0), tmp_path / "a.glb")
     with pytest.raises(ExportError, match="cannot tell the format"):
-        export(arkit_model, _keyed(), tmp_path / "a.fbx")
+        export(arkit_model, _keyed(), tmp_path / "a.xyz")
     with pytest.raises(ExportError, match=">= 0"):
         export(arkit_model, Timeline().add_key("weights/jawOpen", -1.0, 1.0).add_key("weights/jawOpen", 1.0, 0.0), tmp_path / "n.glb")
 
