@@ -8,8 +8,16 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 import trimesh
 
-from workbench.shell import ShellDeformer, shell_system_matrix
+from workbench.operators import cotangent_laplacian, mass_matrix
+from workbench.shell import (
+    DEFAULT_K_B,
+    DEFAULT_K_S,
+    REFERENCE_VERTEX_COUNT,
+    ShellDeformer,
+    shell_system_matrix,
+)
 from workbench.sparse_cholesky import SparseSPDSolver, cholmod_available
+from workbench.subdivision import loop_subdivision
 
 
 def _disk(n: int = 14) -> tuple[np.ndarray, np.ndarray]:
@@ -180,3 +188,87 @@ def test_nothing_free_to_solve() -> None:
     assert d.backend_ == "none"
     out = d.deform(V[[4]] + [0, 0, 1])
     assert out[4, 2] == 1.0 and np.abs(out[np.arange(9) != 4] - V[np.arange(9) != 4]).max() == 0
+
+
+# ------------------------------------------------- resolution and unit independence
+def _old_mean_mass_matrix(V: np.ndarray, F: np.ndarray, k_s: float, k_b: float) -> sp.csr_matrix:
+    """The former normalization ``M̃ = M / mean(diag M)`` (bending weight shrank like 1/n)."""
+    L = cotangent_laplacian(V, F)
+    m = mass_matrix(V, F).diagonal()
+    inv = 1.0 / (m / m[m > 0].mean())
+    return sp.csr_matrix(-k_s * L + k_b * (L.T @ sp.diags(inv) @ L))
+
+
+def _relative_error(A: sp.spmatrix, B: sp.spmatrix) -> float:
+    return float(abs(A - B).max() / abs(B).max())
+
+
+@pytest.fixture(scope="module")
+def skin_head() -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, int]]:
+    """Skin of the base sample head as its own mesh, with the default handles on it."""
+    import workbench
+    from workbench.handle_presets import default_face_handles
+
+    model = workbench.load_sample("head", resolution="base")
+    skin = np.flatnonzero(model.component_labels == model.component_names.index("skin"))
+    remap = np.full(model.n_vertices, -1)
+    remap[skin] = np.arange(skin.size)
+    F = remap[model.faces[np.isin(model.faces, skin).all(axis=1)]]
+    handles = default_face_handles(model)
+    H = remap[np.asarray(handles.vertices)]
+    assert (F >= 0).all() and (H >= 0).all()
+    return model.vertices[skin], F, H, {n: i for i, n in enumerate(handles.names)}
+
+
+def test_same_drag_gives_the_same_shape_at_base_and_subdivided_resolution(skin_head) -> None:
+    """One Loop level (~4x vertices, coarse vertices keep their ids): the displacement of a
+    brow raise and a mouth-corner pull agrees at the coarse vertices. The old normalization
+    (reproduced through the equivalent k_b) weakened bending 4x; its error is 2.5-4x larger."""
+    V, F, H, name = skin_head
+    n = len(V)
+    S, F1 = loop_subdivision(F, n, 1)
+    V1 = S @ V
+    n1 = len(V1)
+    assert n == REFERENCE_VERTEX_COUNT  # so the base head looks exactly as before:
+    A = shell_system_matrix(V, F)
+    assert _relative_error(A, _old_mean_mass_matrix(V, F, DEFAULT_K_S, DEFAULT_K_B)) < 1e-12
+    # ...and the old normalization on the fine mesh is the new one with k_b * N_REF / n1
+    k_b_old = DEFAULT_K_B * REFERENCE_VERTEX_COUNT / n1
+    A_old = _old_mean_mass_matrix(V1, F1, DEFAULT_K_S, DEFAULT_K_B)
+    assert _relative_error(shell_system_matrix(V1, F1, DEFAULT_K_S, k_b_old), A_old) < 1e-12
+
+    coarse = ShellDeformer(V, F, H)
+    fine = ShellDeformer(V1, F1, H)
+    fine_old = ShellDeformer(V1, F1, H, DEFAULT_K_S, k_b_old)
+    for handle, vec in (("brows_L_1", [0.0, 0.1, 0.0]), ("mouth_L_1", [0.1, 0.0, 0.0])):
+        uH = np.zeros((len(H), 3))
+        uH[name[handle]] = vec  # decimetres: a 1 cm drag
+        u0 = coarse.displacement(uH).astype(float)
+        new = np.linalg.norm(fine.displacement(uH)[:n] - u0) / np.linalg.norm(u0)
+        old = np.linalg.norm(fine_old.displacement(uH)[:n] - u0) / np.linalg.norm(u0)
+        # measured: brow 0.072 new vs 0.281 old; mouth corner 0.036 vs 0.090
+        assert new < 0.1, (handle, new, old)
+        assert old > 2.4 * new, (handle, new, old)
+
+
+def test_scaling_mesh_and_drag_scales_the_displacement() -> None:
+    """Units do not matter: the mesh in mm instead of cm and a drag in mm give u in mm."""
+    V, F = _disk()
+    H = _interior(V)
+    uH = np.random.default_rng(3).normal(scale=0.1, size=(len(H), 3))
+    for k_s, k_b in ((DEFAULT_K_S, DEFAULT_K_B), (1.0, 0.0), (0.0, 1.0), (0.3, 200.0)):
+        u1 = ShellDeformer(V, F, H, k_s, k_b).displacement(uH).astype(float)
+        u10 = ShellDeformer(10 * V, F, H, k_s, k_b).displacement(10 * uH).astype(float)
+        np.testing.assert_allclose(u10, 10 * u1, rtol=1e-6, atol=1e-6 * np.abs(u10).max())
+    # the matrix itself is scale-invariant (L is; M * N_REF / area is)
+    assert _relative_error(shell_system_matrix(10 * V, F), shell_system_matrix(V, F)) < 1e-12
+
+
+def test_bending_weight_is_area_over_reference_count() -> None:
+    V, F = _disk()
+    L = cotangent_laplacian(V, F)
+    M = mass_matrix(V, F)
+    area = M.diagonal().sum()
+    bending = L.T @ sp.diags(1 / M.diagonal()) @ L
+    expected = -2.0 * L + 3.0 * (area / REFERENCE_VERTEX_COUNT) * bending
+    assert _relative_error(shell_system_matrix(V, F, 2.0, 3.0), sp.csr_matrix(expected)) < 1e-12

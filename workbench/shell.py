@@ -9,11 +9,31 @@ under the displacements ``u_H`` prescribed at ``H`` handle vertices. With the
 cotangent Laplacian ``L`` (negative semi-definite, :mod:`workbench.operators`)
 and the Voronoi mass ``M`` this is ``A u = 0`` with
 
-    A = -k_s L + k_b L^T M̃^{-1} L,      M̃ = M / mean(diag M)
+    A = -k_s L + k_b L^T M̃^{-1} L,      M̃ = M · N_REF / area
 
-(``M̃`` is the mass normalized to mean 1 so ``k_s`` and ``k_b`` are
-dimensionless and the defaults behave the same at any mesh scale or
-resolution-independent units). Splitting the vertices into free ``f`` and
+where ``area = trace M`` is the total area of the triangles being solved and
+``N_REF`` (:data:`REFERENCE_VERTEX_COUNT`) is a fixed number. ``L`` and
+``M^{-1} L`` converge under refinement, so this discretizes the *continuum* energy
+
+    E(u) = k_s ∫ |∇u|² dA + k_b (area / N_REF) ∫ (Δu)² dA
+
+**Meaning of k_s and k_b.** Both are dimensionless, and only their ratio shapes
+the result (``u`` depends on ``A`` up to a factor). The bending weight is
+measured in units of ``area / N_REF``, so the length over which bending
+dominates stretching is ``ℓ = sqrt(k_b / k_s · area / N_REF)``: with the
+defaults (``k_b / k_s = 10``) ``ℓ ≈ 0.048 · sqrt(area)`` ≈ 2 cm on the sample
+head's skin. What is held fixed is ``ℓ`` relative to the size of the surface,
+so the same ``k_s``, ``k_b`` and drag give the same shape
+
+* at any resolution (refining the mesh changes neither ``area`` nor the
+  continuum energy; the handle displacement field converges), and
+* at any scale or in any units (scaling the mesh and the handle displacements
+  by ``s`` scales ``u`` by ``s``: ``L`` is scale-invariant and ``M̃`` is too).
+
+``N_REF = 4328`` is the skin vertex count of the base sample head, so there
+``M̃ = M / mean(diag M)`` (the normalization used before, which made the
+bending weight shrink like ``1 / n`` on finer meshes) and its look is
+unchanged. Splitting the vertices into free ``f`` and
 handle ``H`` ones, ``A_ff u_f = -A_fH u_H``. We factor ``A_ff`` once (CHOLMOD
 when installed, see :mod:`workbench.sparse_cholesky`), solve all ``H`` columns
 and keep the basis ``B = -A_ff^{-1} A_fH`` in float32, so a drag is
@@ -67,6 +87,10 @@ DEFAULT_COMPONENT_POLICY: dict[str, Policy] = {
 #: a little stretching so the influence of a handle decays within a few centimetres)
 DEFAULT_K_S = 1.0
 DEFAULT_K_B = 10.0
+#: ``N_REF``: the mass is scaled by ``N_REF / area`` (see the module docstring); the
+#: skin vertex count of the base sample head, so its results match the old
+#: ``M / mean(diag M)`` normalization
+REFERENCE_VERTEX_COUNT = 4328
 _RIGID_NEIGHBOURS = 16
 
 
@@ -83,19 +107,25 @@ def shell_system_matrix(
 ) -> sp.csr_matrix:
     """``A = -k_s L + k_b L^T M̃^{-1} L`` (symmetric positive semi-definite).
 
+    ``M̃ = M · N_REF / area`` with ``area`` the total area of ``F`` and ``N_REF =``
+    :data:`REFERENCE_VERTEX_COUNT`, so the energy ``u^T A u`` discretizes
+    ``k_s ∫|∇u|² + k_b (area / N_REF) ∫(Δu)²`` independently of resolution and units.
+
     Parameters
     ----------
     V : (n, 3) float
     F : (m, 3) int
     k_s, k_b : float
-        Stretching and bending stiffness (>= 0, not both 0).
+        Stretching and bending stiffness (>= 0, not both 0; dimensionless, see
+        the module docstring).
     """
     if k_s < 0 or k_b < 0 or (k_s == 0 and k_b == 0):
         raise ValueError(f"need k_s >= 0, k_b >= 0, not both zero; got k_s={k_s}, k_b={k_b}")
     L = cotangent_laplacian(V, F)
     M = mass_matrix(V, F)
-    m = M.diagonal()
-    scale = float(m[m > 0].mean()) if np.any(m > 0) else 1.0
+    area = float(M.diagonal().sum())
+    # M̃ = M / scale: scale = area / N_REF is the mean vertex area of an N_REF-vertex mesh
+    scale = area / REFERENCE_VERTEX_COUNT if area > 0 else 1.0
     A = sp.csr_matrix(L.shape)
     if k_s:
         A = A - k_s * L
