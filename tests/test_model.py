@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import gc
 import threading
+import types
+from typing import Any
 
 import numpy as np
 import pytest
 
-from workbench.model import BlendShape, FaceModel, HandleSet, ModelError
+from workbench.model import BlendShape, FaceModel, HandleSet, ModelError, ModelMetadata
 
 
 def test_triangulates_quads_and_keeps_polygons(tiny_model: FaceModel) -> None:
@@ -234,3 +237,139 @@ def test_history_group_is_one_step_and_rolls_back_on_error(tiny_model: FaceModel
         tiny_model.set_weight("missing", 1.0)
     assert tiny_model.weights["up"] == 0.0  # the partial edit was rolled back
     assert tiny_model.history.undo_labels == []
+
+
+def _array_bytes_held(root: Any, model: FaceModel) -> int:
+    """Bytes of the numpy buffers reachable from ``root`` without going through ``model``.
+
+    Views count as their whole base buffer (a view of one row of a (k, n, 3)
+    stack keeps the whole stack alive). Functions are followed through their
+    closures and defaults only (not their module globals), and classes and
+    modules are not entered, so only what the history itself keeps alive counts.
+    """
+    seen: set[int] = set()
+    buffers: dict[int, int] = {}
+    todo = [root]
+    while todo:
+        o = todo.pop()
+        if id(o) in seen or o is model or isinstance(o, type | types.ModuleType):
+            continue
+        seen.add(id(o))
+        if isinstance(o, np.ndarray):
+            base = o
+            while isinstance(base.base, np.ndarray):
+                base = base.base
+            buffers[id(base)] = base.nbytes
+        elif isinstance(o, types.FunctionType):
+            todo.extend(o.__closure__ or ())
+            todo.extend(o.__defaults__ or ())
+        else:
+            todo.extend(gc.get_referents(o))
+    return sum(buffers.values())
+
+
+def _big_model(n: int = 4000, k: int = 8) -> FaceModel:
+    rng = np.random.default_rng(1)
+    shapes = [BlendShape(f"s{i}", rng.normal(size=(n, 3))) for i in range(k)]
+    return FaceModel(rng.normal(size=(n, 3)), np.array([[0, 1, 2]]), shapes)
+
+
+def test_shape_property_edits_hold_no_delta_memory_in_the_history() -> None:
+    m = _big_model()
+    stack_bytes = m.deltas.nbytes  # 384 kB: 30 whole-stack references would be 11.5 MB
+    for i in range(10):
+        m.set_shape_mute("s1", i % 2 == 0)
+        m.rename_shape(f"s2{'' if i == 0 else f'_{i - 1}'}", f"s2_{i}")
+        m.set_shape_range("s3", -1.0 - i, 1.0 + i)
+    assert len(m.history.undo_labels) == 30
+    held = _array_bytes_held(m.history, m)
+    assert held < m.shape("s0").delta.nbytes  # not even one delta, let alone a stack
+    assert held <= m.history.nbytes  # the byte budget sees everything the steps hold
+    for _ in range(30):
+        m.undo()
+    assert m.shape_names == [f"s{i}" for i in range(8)]
+    assert not m.shape("s1").mute and m.shape("s3").slider_max == 1.0
+    assert _array_bytes_held(m.history, m) < stack_bytes
+
+
+def test_add_remove_and_mask_steps_hold_only_what_changed() -> None:
+    m = _big_model()
+    removed = m.shape("s5").delta.copy()
+    delta_bytes = removed.nbytes
+    mask = np.linspace(0.0, 1.0, m.n_vertices)
+    m.set_shape_mask("s0", mask)
+    m.add_shape("extra", np.ones((m.n_vertices, 3)))
+    m.remove_shape("s5")
+    held = _array_bytes_held(m.history, m)
+    # the added delta, the removed delta and the new mask, nothing else
+    assert held <= 2 * delta_bytes + 2 * mask.astype(np.float32).nbytes
+    assert held <= m.history.nbytes
+    m.undo()
+    np.testing.assert_array_equal(m.shape("s5").delta, removed)
+    assert m.shape_names.index("s5") == 5
+    m.undo()
+    m.undo()
+    assert m.shape("s0").vertex_mask is None and "extra" not in m.shape_names
+    m.redo()
+    np.testing.assert_allclose(m.shape("s0").vertex_mask, mask, atol=1e-7)
+
+
+def test_history_byte_budget_bounds_the_memory_really_held() -> None:
+    m = _big_model()
+    m.history.max_bytes = 200_000  # a delta is 48 kB
+    for i in range(20):
+        m.add_shape(f"extra{i}", np.full((m.n_vertices, 3), float(i)))
+        m.set_shape_mute(f"extra{i}", True)
+        m.set_shape_range(f"extra{i}", -1.0, 2.0)
+    held = _array_bytes_held(m.history, m)
+    assert held <= m.history.max_bytes + m.shape("s0").delta.nbytes
+
+
+def test_set_metadata_is_one_undoable_step_with_events(tiny_model: FaceModel) -> None:
+    seen: list[str] = []
+    tiny_model.events.metadata.connect(lambda: seen.append("metadata"))
+    old = tiny_model.metadata
+    new = ModelMetadata(name="grid", units="cm")
+    tiny_model.set_metadata(new)
+    assert tiny_model.metadata is new and tiny_model.history.undo_labels == ["Set metadata"]
+    assert tiny_model.undo() == "Set metadata"
+    assert tiny_model.metadata is old
+    tiny_model.redo()
+    assert tiny_model.metadata is new
+    assert seen == ["metadata"] * 3
+    with pytest.raises(ModelError, match="ModelMetadata"):
+        tiny_model.set_metadata({"name": "x"})  # type: ignore[arg-type]
+
+
+def test_set_shell_stiffness_is_one_undoable_step_with_events() -> None:
+    from conftest import grid_polygons
+
+    V, polys = grid_polygons(6, 6)  # the boundary is held, so inner vertices follow the shell
+    m = FaceModel(V, None, [], polygons=polys)
+    m.set_handles(HandleSet([24, 0], [[0.0, 0.0, 0.5], [0.0, 0.0, 0.0]], ("c", "corner"), [-1, -1]))
+    m.history.clear()
+    before = m.evaluate().copy()
+    old = m.shell_stiffness
+    seen: list[str] = []
+    m.events.shell_stiffness.connect(lambda: seen.append("stiffness"))
+    m.events.deformed.connect(lambda final: seen.append(f"deformed {final}"))
+    m.set_shell_stiffness(old[0] * 100.0, old[1] / 100.0)
+    after = m.evaluate().copy()
+    assert np.abs(after - before).max() > 1e-3  # the stiffness really changes the handle layer
+    assert m.history.undo_labels == ["Shell stiffness"]
+    m.undo()
+    assert m.shell_stiffness == old
+    np.testing.assert_allclose(m.evaluate(), before, atol=1e-6)
+    m.redo()
+    assert m.shell_stiffness == (old[0] * 100.0, old[1] / 100.0)
+    np.testing.assert_allclose(m.evaluate(), after, atol=1e-6)
+    assert seen == ["stiffness", "deformed True"] * 3
+    m.set_shell_stiffness(*m.shell_stiffness)  # no change: no step
+    assert m.history.undo_labels == ["Shell stiffness"]
+    with pytest.raises(ModelError, match="finite k_s >= 0"):
+        m.set_shell_stiffness(float("nan"), 1.0)
+
+
+def test_a_model_without_blendshapes_evaluates_to_its_neutral() -> None:
+    m = FaceModel(np.eye(3), np.array([[0, 1, 2]]))
+    np.testing.assert_array_equal(m.evaluate(), np.eye(3, dtype=np.float32))

@@ -10,6 +10,7 @@ from hypothesis import strategies as st
 import workbench
 from workbench.model import FaceModel, ModelError
 from workbench.paint import Brush, PaintMix, feathered_presets, regional_mix
+from workbench.tracks import evaluate_mesh
 
 
 @pytest.fixture(scope="module")
@@ -150,6 +151,40 @@ def test_saved_expressions_paint_and_bake(head: FaceModel) -> None:
     np.testing.assert_allclose(head.evaluate(), before, atol=1e-5)
     with pytest.raises(KeyError, match="no expression named 'nope'"):
         head.paint_dab("nope", 0)
+
+
+def test_a_painted_expression_keys_exactly_as_saved_and_undo_removes_all_keying_made(head: FaceModel) -> None:
+    # Pighin et al. 1998 sec. 4: paint a smile (itself a saved expression) over the
+    # mouth of the neutral face and a half blink on one lid; the painted blend is a
+    # new expression of the library, which the timeline then interpolates.
+    head.set_weights({"mouthSmileLeft": 1.0, "mouthSmileRight": 1.0})
+    head.save_expression("smile")
+    head.reset_weights()
+    head.paint_stroke("smile", [_mouth_corner(head)], Brush(radius=0.5, opacity=1.0, mirror=True))
+    lid = int(np.argmax(np.linalg.norm(head.shape("eyeBlinkLeft").delta, axis=1)))
+    head.paint_stroke("eyeBlinkLeft", [lid], Brush(radius=0.15, opacity=0.5))
+    saved = head.evaluate().copy()
+    assert not any(head.weights.values())  # the look is in the paint only
+    assert np.abs(saved - head.vertices).max() > 0.05
+    head.save_expression("debauched")
+    head.clear_paint()
+    shapes_before, labels_before = head.shape_names, head.history.undo_labels
+
+    head.key_expression(1.0, "debauched")
+    np.testing.assert_allclose(head.evaluate_at(1.0), saved, rtol=0, atol=1e-6)
+    # the exporters' sampler plays it too: the look is a blendshape keyed at 1
+    np.testing.assert_allclose(evaluate_mesh(head, head.tracks, 1.0), saved, rtol=0, atol=1e-6)
+    (baked,) = set(head.shape_names) - set(shapes_before)
+    assert "debauched" in baked
+    np.testing.assert_array_equal(head.shape(baked).delta, head.expressions["debauched"].displacement)
+    assert head.weights[baked] == 0.0  # keying leaves the live face alone
+    assert head.history.undo_labels == [*labels_before, "Key debauched at 1s"]
+
+    head.undo()
+    assert head.shape_names == shapes_before and not head.tracks.tracks
+    assert head.history.undo_labels == labels_before
+    head.redo()
+    np.testing.assert_allclose(head.evaluate_at(1.0), saved, rtol=0, atol=1e-6)
 
 
 def test_regional_presets_are_partitions_of_unity(head: FaceModel) -> None:

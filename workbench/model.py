@@ -15,6 +15,7 @@ something it depends on changes.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 import threading
 from collections.abc import Callable, Iterable, Iterator, Mapping
@@ -43,6 +44,21 @@ class ModelError(ValueError):
 def _readonly(a: NDArray[Any]) -> NDArray[Any]:
     a.setflags(write=False)
     return a
+
+
+def _owned(a: NDArray[Any]) -> NDArray[Any]:
+    """``a`` if it owns its memory, else a read-only copy.
+
+    What undo steps keep goes through this so that a view (one row of the
+    model's (k, n, 3) delta stack, a slice of a caller's array) does not keep
+    the whole buffer it was cut from alive.
+    """
+    return a if a.base is None else _readonly(a.copy())
+
+
+def _detached_value(value: Any) -> Any:
+    """A field value safe to keep in an undo step (arrays own their memory)."""
+    return _owned(value) if isinstance(value, np.ndarray) else value
 
 
 @dataclass(frozen=True, eq=False)
@@ -111,6 +127,12 @@ class BlendShape:
         return self.delta * self.vertex_mask[:, None]
 
 
+def _detached(shape: BlendShape) -> BlendShape:
+    """``shape`` with a delta (n, 3) and mask (n,) that own their memory (for undo steps)."""
+    mask = shape.vertex_mask
+    return shape.replace(delta=_owned(shape.delta), vertex_mask=None if mask is None else _owned(mask))
+
+
 @dataclass(frozen=True)
 class ModelMetadata:
     """Where the model came from and how to read its coordinates.
@@ -153,6 +175,10 @@ class ModelMetadata:
             "provenance": [dict(p) for p in self.provenance],
         }
 
+
+#: Tolerance, relative to (1 + the largest neutral coordinate), within which a
+#: saved expression's recipe counts as playing back its look (float32 round-off).
+_PLAYBACK_ATOL = 1e-6
 
 UNIT_TO_METRES = {"m": 1.0, "dm": 0.1, "cm": 0.01, "mm": 0.001}
 AXES = ("+x", "-x", "+y", "-y", "+z", "-z")
@@ -217,6 +243,7 @@ class FaceModelEvents(SignalGroup):
     tracks = Signal()
     time = Signal(float)
     metadata = Signal()
+    shell_stiffness = Signal()
     deformed = Signal(bool)
     history = Signal()
 
@@ -462,48 +489,75 @@ class FaceModel:
         # Shapes share the stacked memory so the model holds each delta once.
         self._shapes = tuple(s.replace(delta=stack[i]) for i, s in enumerate(shapes))
         self._stack = stack
-        if any(s.vertex_mask is not None for s in shapes):
-            eff = stack.copy()
-            for i, s in enumerate(shapes):
-                if s.vertex_mask is not None:
-                    eff[i] *= s.vertex_mask[:, None]
-            self._effective = _readonly(eff)
-        else:
-            self._effective = stack
+        self._rebuild_effective()
         self._index = {nm: i for i, nm in enumerate(names)}
         self._weights = {nm: float(weights.get(nm, 0.0)) for nm in names}
         self._evaluated = None
         self._blended = None
 
+    def _rebuild_effective(self) -> None:
+        """Recompute the (k, n, 3) masked deltas from the stack and the shapes' masks."""
+        if any(s.vertex_mask is not None for s in self._shapes):
+            eff = self._stack.copy()
+            for i, s in enumerate(self._shapes):
+                if s.vertex_mask is not None:
+                    eff[i] *= s.vertex_mask[:, None]
+            self._effective = _readonly(eff)
+        else:
+            self._effective = self._stack
+
+    def _emit_shapes(self) -> None:
+        self.events.shapes.emit()
+        self.events.weights.emit(dict(self._weights))
+        self.events.deformed.emit(True)
+
     def _apply_shapes(self, shapes: tuple[BlendShape, ...], weights: Mapping[str, float]) -> None:
         with self._lock:
             self._install_shapes(shapes, weights)
-            self.events.shapes.emit()
-            self.events.weights.emit(dict(self._weights))
-            self.events.deformed.emit(True)
+            self._emit_shapes()
 
-    def _edit_shapes(
-        self, label: str, shapes: tuple[BlendShape, ...], weights: Mapping[str, float]
-    ) -> None:
+    # Undo steps of shape edits keep only what the edit changed: the one added or
+    # removed shape (with a delta that owns its memory) or the changed fields.
+    # Never a shape of the live model: its delta is a view into the whole
+    # (k, n, 3) stack and would keep that stack alive (1.2 MB per shape at 100k
+    # vertices) while the step books a few bytes, defeating History.max_bytes.
+    def _insert_shape(self, index: int, shape: BlendShape, weight: float) -> None:
+        """Insert ``shape`` at position ``index`` with ``weight``; events, no history."""
         with self._lock:
-            if self._interaction is not None:
-                raise ModelError(f"{label}: shape list edits are not allowed inside an interaction")
-            old_shapes, old_weights = self._shapes, dict(self._weights)
-            new_weights = dict(weights)
-            self._apply_shapes(shapes, new_weights)
-            new_shapes = self._shapes
-            old_names = {o.name for o in old_shapes}
-            # added deltas are new memory; the rest is shared with the live model
-            added = [s.delta for s in new_shapes if s.name not in old_names]
-            nbytes = payload_nbytes(added) + 64 * len(new_shapes)
-            self._push(
-                Command(
-                    label,
-                    lambda: self._apply_shapes(old_shapes, old_weights),
-                    lambda: self._apply_shapes(new_shapes, new_weights),
-                    nbytes,
-                )
-            )
+            weights = dict(self._weights)
+            weights[shape.name] = weight
+            self._apply_shapes((*self._shapes[:index], shape, *self._shapes[index:]), weights)
+
+    def _delete_shape(self, name: str) -> None:
+        """Remove shape ``name`` and its weight; events, no history."""
+        with self._lock:
+            i = self._shape_index(name)
+            weights = {k: v for k, v in self._weights.items() if k != name}
+            self._apply_shapes(self._shapes[:i] + self._shapes[i + 1 :], weights)
+
+    def _set_shape_props(self, name: str, props: Mapping[str, Any], weight: float) -> None:
+        """Change fields of shape ``name`` other than its delta, and its weight; events, no history.
+
+        The delta stays the same view of the current stack: nothing (k, n, 3) is copied.
+        """
+        with self._lock:
+            i = self._shape_index(name)
+            new = self._shapes[i].replace(**props)
+            self._shapes = (*self._shapes[:i], new, *self._shapes[i + 1 :])
+            if new.name != name:
+                self._index = {s.name: j for j, s in enumerate(self._shapes)}
+                # rebuilt in shape order so weights keep following the shape list
+                self._weights = {(new.name if k == name else k): v for k, v in self._weights.items()}
+            self._weights[new.name] = weight
+            if "vertex_mask" in props:
+                self._rebuild_effective()
+            self._evaluated = None
+            self._blended = None
+            self._emit_shapes()
+
+    def _refuse_in_interaction(self, label: str) -> None:
+        if self._interaction is not None:
+            raise ModelError(f"{label}: shape list edits are not allowed inside an interaction")
 
     def add_shape(
         self,
@@ -525,35 +579,64 @@ class FaceModel:
             mute,
             None if vertex_mask is None else np.asarray(vertex_mask),
         )
+        label = f"Add shape {name}"
         with self._lock:
+            self._refuse_in_interaction(label)
             if name in self._index:
                 raise ModelError(f"a blendshape named {name!r} already exists")
-            weights = dict(self._weights)
-            weights[name] = min(max(float(weight), shape.slider_min), shape.slider_max)
-            self._edit_shapes(f"Add shape {name}", (*self._shapes, shape), weights)
+            w = min(max(float(weight), shape.slider_min), shape.slider_max)
+            index = len(self._shapes)
+            kept = _detached(shape)  # the redo copy: the added delta is the step's new memory
+            self._insert_shape(index, kept, w)
+            self._push(
+                Command(
+                    label,
+                    lambda: self._delete_shape(name),
+                    lambda: self._insert_shape(index, kept, w),
+                    payload_nbytes(kept),
+                )
+            )
             return self.shape(name)
 
     def remove_shape(self, name: str) -> None:
         """Remove a blendshape (undoable)."""
+        label = f"Remove shape {name}"
         with self._lock:
+            self._refuse_in_interaction(label)
             i = self._shape_index(name)
-            shapes = self._shapes[:i] + self._shapes[i + 1 :]
-            weights = {k: v for k, v in self._weights.items() if k != name}
-            self._edit_shapes(f"Remove shape {name}", shapes, weights)
+            kept = _detached(self._shapes[i])  # the one removed delta, copied out of the stack
+            w = self._weights[name]
+            self._delete_shape(name)
+            self._push(
+                Command(
+                    label,
+                    lambda: self._insert_shape(i, kept, w),
+                    lambda: self._delete_shape(name),
+                    payload_nbytes(kept),
+                )
+            )
 
     def _edit_shape_props(self, name: str, label: str, /, **changes: Any) -> None:
         with self._lock:
-            i = self._shape_index(name)
-            new = self._shapes[i].replace(**changes)
-            shapes = (*self._shapes[:i], new, *self._shapes[i + 1 :])
-            weights = dict(self._weights)
-            if "name" in changes:
-                if changes["name"] in self._index and changes["name"] != name:
-                    raise ModelError(f"a blendshape named {changes['name']!r} already exists")
-                weights = {(changes["name"] if k == name else k): v for k, v in weights.items()}
-            nm = new.name
-            weights[nm] = min(max(weights[nm], new.slider_min), new.slider_max)
-            self._edit_shapes(label, shapes, weights)
+            self._refuse_in_interaction(label)
+            old = self._shapes[self._shape_index(name)]
+            new = old.replace(**changes)  # validates before anything changes
+            new_name = new.name
+            if new_name != name and new_name in self._index:
+                raise ModelError(f"a blendshape named {new_name!r} already exists")
+            before = {f: _detached_value(getattr(old, f)) for f in changes}
+            after = {f: _detached_value(getattr(new, f)) for f in changes}
+            w_before = self._weights[name]
+            w_after = min(max(w_before, new.slider_min), new.slider_max)
+            self._set_shape_props(name, after, w_after)
+            self._push(
+                Command(
+                    label,
+                    lambda: self._set_shape_props(new_name, before, w_before),
+                    lambda: self._set_shape_props(name, after, w_after),
+                    payload_nbytes([before, after]) + 64,
+                )
+            )
 
     def rename_shape(self, name: str, new_name: str) -> None:
         self._edit_shape_props(name, f"Rename {name} to {new_name}", name=new_name)
@@ -814,12 +897,33 @@ class FaceModel:
         return self._handle_layer.k_s, self._handle_layer.k_b
 
     def set_shell_stiffness(self, k_s: float, k_b: float) -> None:
-        """Change the stiffness of the handle layer (rebuilds its basis on next evaluation)."""
-        if k_s < 0 or k_b < 0 or (k_s == 0 and k_b == 0):
-            raise ModelError(f"need k_s >= 0, k_b >= 0, not both zero; got {k_s}, {k_b}")
+        """Change the stiffness of the handle layer as one undoable step.
+
+        The shell basis is rebuilt on the next evaluation. Emits
+        ``shell_stiffness`` and ``deformed``; setting the current values records nothing.
+        """
+        ks, kb = float(k_s), float(k_b)
+        if not (math.isfinite(ks) and math.isfinite(kb)) or ks < 0 or kb < 0 or (ks == 0 and kb == 0):
+            raise ModelError(f"need finite k_s >= 0, k_b >= 0, not both zero; got {k_s}, {k_b}")
         with self._lock:
-            self._handle_layer.k_s, self._handle_layer.k_b = float(k_s), float(k_b)
+            old, new = self.shell_stiffness, (ks, kb)
+            if new == old:
+                return
+            self._apply_shell_stiffness(new)
+            self._push(
+                Command(
+                    "Shell stiffness",
+                    lambda: self._apply_shell_stiffness(old),
+                    lambda: self._apply_shell_stiffness(new),
+                    payload_nbytes([old, new]),
+                )
+            )
+
+    def _apply_shell_stiffness(self, stiffness: tuple[float, float]) -> None:
+        with self._lock:
+            self._handle_layer.k_s, self._handle_layer.k_b = stiffness
             self._evaluated = None
+            self.events.shell_stiffness.emit()
             self.events.deformed.emit(True)
 
     def set_handle_progress(self, progress: Callable[[float, str], None] | None) -> None:
@@ -1108,36 +1212,119 @@ class FaceModel:
             self.set_timeline(self._grow_range(tl, time), f"Key {len(names)} weights at {time:g}s")
 
     def key_expression(self, time: float, expression: str, interpolation: Interpolation = "bezier") -> None:
-        """Key an expression at ``time`` (drop from the gallery onto the timeline).
+        """Key an expression at ``time`` (drop from the gallery onto the timeline); one undo step.
 
-        A saved expression keys its recipe weights and, when the handle set
-        matches, its handle offsets; a blendshape keys itself at 1. Every other
-        already-keyed shape is keyed at 0, and a shape keyed for the first time
-        gets 0-keys at the earlier key times, so every keyed expression shows
-        exactly as saved at its time.
+        A blendshape keys itself at 1. A saved expression whose recipe plays
+        back its look keys its recipe weights and, when the handle set matches,
+        its handle offsets. Any other saved expression (its look comes from
+        painting, region weights, handles of another handle set, or shapes
+        since removed or edited) is, as in Pighin et al. 1998 §4, a new
+        expression of its own: its displacement becomes the blendshape
+        ``<expression>_baked`` (added once in the same undo step, reused when
+        it already holds exactly that displacement) keyed at 1; keyed handles
+        are keyed at rest there, since the bake already holds their effect.
+
+        Every other already-keyed shape is keyed at 0, and a shape keyed for
+        the first time gets 0-keys at the earlier key times, so at its time a
+        keyed expression plays back exactly as saved, in :meth:`evaluate_at`
+        and in every export, as long as the unkeyed state (shapes never keyed,
+        live paint and region weights, which the timeline does not animate)
+        is at rest.
         """
         with self._lock:
-            if expression in self.expressions:
-                expr = self.expressions[expression]
-                values = dict(expr.weights)
-                offsets = expr.handle_offsets
-                same_handles = np.array_equal(expr.handle_vertices, self.handles.vertices)
-            elif expression in self._index:
-                values, offsets, same_handles = {expression: 1.0}, None, False
-            else:
-                raise KeyError(f"no expression named {expression!r}")
-            tl = self.tracks
-            keyed = set(tl.weight_tracks)
-            earlier = sorted({float(t) for tr in tl.weight_tracks.values() for t in tr.times})
-            for n in keyed | {k for k, v in values.items() if v != 0.0}:
-                if n not in keyed:
-                    # a newly keyed shape was 0 in the expressions keyed before
-                    for t in earlier:
-                        tl = tl.add_key(weight_track_name(n), t, 0.0, interpolation=interpolation)
-                tl = tl.add_key(weight_track_name(n), time, values.get(n, 0.0), interpolation=interpolation)
-            if same_handles and offsets is not None and len(self.handles) and np.any(offsets):
-                tl = tl.add_key("handles", time, offsets, interpolation=interpolation)
-            self.set_timeline(self._grow_range(tl, time), f"Key {expression} at {time:g}s")
+            label = f"Key {expression} at {time:g}s"
+            with self.history.group(label):
+                handle_key: NDArray[np.float32] | None = None
+                if expression in self.expressions:
+                    expr = self.expressions[expression]
+                    if self._recipe_plays_back(expr):
+                        values = dict(expr.weights)
+                        same_handles = np.array_equal(expr.handle_vertices, self.handles.vertices)
+                        if same_handles and len(self.handles) and np.any(expr.handle_offsets):
+                            handle_key = expr.handle_offsets
+                    else:
+                        values = {self._baked_expression_shape(expr): 1.0}
+                        if len(self.handles) and self.tracks.handles is not None:
+                            handle_key = np.zeros_like(self.handles.offsets)
+                elif expression in self._index:
+                    values = {expression: 1.0}
+                else:
+                    raise KeyError(f"no expression named {expression!r}")
+                tl = self.tracks
+                keyed = set(tl.weight_tracks)
+                earlier = sorted({float(t) for tr in tl.weight_tracks.values() for t in tr.times})
+                for n in keyed | {k for k, v in values.items() if v != 0.0}:
+                    if n not in keyed:
+                        # a newly keyed shape was 0 in the expressions keyed before
+                        for t in earlier:
+                            tl = tl.add_key(weight_track_name(n), t, 0.0, interpolation=interpolation)
+                    tl = tl.add_key(
+                        weight_track_name(n), time, values.get(n, 0.0), interpolation=interpolation
+                    )
+                if handle_key is not None:
+                    tl = tl.add_key("handles", time, handle_key, interpolation=interpolation)
+                self.set_timeline(self._grow_range(tl, time), label)
+            self.events.history.emit()
+
+    def _recipe_plays_back(self, expr: Expression) -> bool:
+        """True if keying ``expr``'s weights and handle offsets reproduces its displacement.
+
+        The recipe is evaluated as the timeline plays it: its weights (0 for
+        shapes it does not name), its handle offsets when the handle set is
+        the one it was saved with (else none), no paint and no region weights
+        (the timeline animates neither), and every other layer as it is. The
+        model is restored afterwards; no events.
+        """
+        if any(v != 0.0 and k not in self._index for k, v in expr.weights.items()):
+            return False  # a shape of the recipe is gone
+        h = self.handles
+        same_handles = np.array_equal(expr.handle_vertices, h.vertices)
+        if not same_handles and np.any(expr.handle_offsets):
+            return False  # its handle deformation cannot be keyed on this handle set
+        regions = self._slots["regions"]
+        saved = (dict(self._weights), h, regions, self._slots["paint_layers"], self._evaluated, self._blended)
+        try:
+            self._weights = {
+                s.name: self._clamp(s.name, expr.weights.get(s.name, 0.0)) for s in self._shapes
+            }
+            offsets = expr.handle_offsets if same_handles else np.zeros_like(h.offsets)
+            self._slots["handles"] = dataclasses.replace(h, offsets=offsets)
+            if isinstance(regions, RegionState) and regions.weights is not None:
+                self._slots["regions"] = RegionState(regions.regions, regions.level, None)
+            self._slots["paint_layers"] = PaintMix()
+            self._evaluated = None
+            self._blended = None
+            played = self.evaluate() - self._vertices32
+        finally:
+            self._weights, self._slots["handles"], self._slots["regions"] = saved[0], saved[1], saved[2]
+            self._slots["paint_layers"], self._evaluated, self._blended = saved[3], saved[4], saved[5]
+        # float32 round-off of the same sums in another order, relative to the mesh size
+        atol = _PLAYBACK_ATOL * (1.0 + float(np.abs(self._vertices32).max()))
+        return bool(np.allclose(played, expr.displacement, rtol=0.0, atol=atol))
+
+    def _baked_expression_shape(self, expr: Expression) -> str:
+        """Name of a blendshape whose delta is ``expr.displacement``, added if none is (undoable).
+
+        Tries ``<name>_baked``, ``<name>_baked_2``, ... and reuses the first that
+        holds exactly this displacement unmasked, unmuted and with 1 in its
+        slider range; otherwise adds the first free name at weight 0 (the live
+        face does not change).
+        """
+        stem = f"{expr.name}_baked"
+        for i in itertools.count(1):
+            name = stem if i == 1 else f"{stem}_{i}"
+            if name not in self._index:
+                self.add_shape(name, expr.displacement)
+                return name
+            s = self._shapes[self._index[name]]
+            if (
+                s.vertex_mask is None
+                and not s.mute
+                and s.slider_min <= 1.0 <= s.slider_max
+                and np.array_equal(s.delta, expr.displacement)
+            ):
+                return name
+        raise AssertionError("unreachable")  # itertools.count never ends
 
     def key_handles(self, time: float, interpolation: Interpolation = "bezier") -> None:
         """Key the handle offsets at ``time`` (undoable)."""
@@ -1299,7 +1486,9 @@ class FaceModel:
 
     def _blend(self) -> NDArray[np.float32]:
         k = len(self._shapes)
-        w = self.weight_vector() if k else np.zeros(0, np.float32)
+        if k == 0:  # a (0, 3n) reshape cannot infer its -1 axis: nothing to add anyway
+            return self._vertices32.copy()
+        w = self.weight_vector()
         nz = np.flatnonzero(w)
         if nz.size * 4 > k:
             # many active shapes: one BLAS gemv straight into the output buffer
@@ -1429,8 +1618,30 @@ class FaceModel:
         pts = self.evaluate() if evaluated else self._vertices
         return trimesh.Trimesh(np.asarray(pts, np.float64), self._faces, process=False)
 
-    def set_metadata(self, metadata: ModelMetadata) -> None:
-        """Replace the metadata (not undoable: it describes the data, it does not edit it)."""
+    def set_metadata(self, metadata: ModelMetadata, label: str = "Set metadata") -> None:
+        """Replace the metadata as one undoable step (emits ``metadata``).
+
+        Units and axes change how every exporter reads the coordinates, so a
+        wrong choice must be as easy to take back as any edit. Setting equal
+        metadata records nothing.
+        """
+        if not isinstance(metadata, ModelMetadata):
+            raise ModelError(f"set_metadata expects a ModelMetadata, got {type(metadata).__name__}")
+        with self._lock:
+            old = self._metadata
+            if metadata == old:
+                return
+            self._apply_metadata(metadata)
+            self._push(
+                Command(
+                    label,
+                    lambda: self._apply_metadata(old),
+                    lambda: self._apply_metadata(metadata),
+                    payload_nbytes([old, metadata]),
+                )
+            )
+
+    def _apply_metadata(self, metadata: ModelMetadata) -> None:
         with self._lock:
             self._metadata = metadata
             self.events.metadata.emit()
