@@ -20,8 +20,8 @@ this package.
 - :class:`ExpressionGallery`: the thumbnail grid (also the paint palette).
 - :class:`Workbench` / :func:`show_workbench`: the composed app: one viewport
   beside a tab of the panels ("Shapes", "Sculpt", "Regions", "Paint",
-  "Export"), the timeline under it, undo/redo and a status line on top, and a
-  shared Output that callback errors go to.
+  "Export"), the timeline under it, undo/redo, a wireframe toggle and a status
+  line on top, and a shared Output that callback errors go to.
 - :func:`recovery_prompt`: offer to recover an autosaved session after a
   kernel crash or restart.
 """
@@ -34,6 +34,7 @@ from collections.abc import Callable
 from typing import Any
 
 import ipywidgets as W
+import traitlets
 
 from widgets._threading import ErrorSink, close_interactions
 from widgets.export_panel import ExportPanel
@@ -72,7 +73,8 @@ _SHAPES, _SCULPT, _REGIONS, _PAINT, _EXPORT = range(5)
 class Workbench(W.VBox):
     """The composed app: one viewport over one model, tabs of tools, timeline, status line.
 
-    Layout: a top bar (Undo / Redo and the status line), then the viewport
+    Layout: a top bar (Undo / Redo, a *Wireframe* checkbox — view state linked
+    to ``viewport.wireframe``, not an undoable edit — and the status line), then the viewport
     beside a tab of panels ("Shapes", "Sculpt", "Regions", "Paint", "Export"),
     the :class:`TimelineWidget` under the viewport, and the shared error
     Output at the bottom (every panel reports callback errors there).
@@ -80,7 +82,8 @@ class Workbench(W.VBox):
     Selecting "Sculpt" switches the viewport to its sculpt tool (drag handle
     markers), "Paint" to its paint tool (brush strokes); the other tabs orbit.
     The Sculpt tab holds the :class:`SculptPanel` and, under it, the
-    :class:`WrinklePanel` (pose-space wrinkles while dragging).
+    :class:`WrinklePanel` (pose-space wrinkles while dragging; its *Erase
+    wrinkles* toggle brushes with the paint tool without leaving the tab).
     "Regions" activates its panel (colour overlay, and the pin drag mode, which
     itself switches the viewport to the sculpt tool without leaving the tab)
     and deactivates it when another tab is selected. The Regions and Paint
@@ -107,6 +110,8 @@ class Workbench(W.VBox):
     Attributes
     ----------
     wrinkles : WrinklePanel
+    wireframe : ipywidgets.Checkbox
+        Top-bar toggle of the viewport's triangle-edge overlay (``viewport.wireframe``).
     status : ipywidgets.HTML
         "N vertices · last drag X ms (Y updates/s) · undo depth D · saved 12:03:04".
     autosaver : workbench.autosave.Autosaver or None
@@ -172,10 +177,22 @@ class Workbench(W.VBox):
         self.redo_button.add_class("fwb-wb-redo")
         self.undo_button.on_click(g("undo")(self._on_undo))
         self.redo_button.on_click(g("redo")(self._on_redo))
+        # View state, not a model edit (no undo step): linked to the viewport's trait.
+        self.wireframe = W.Checkbox(
+            value=bool(self.viewport.wireframe),
+            description="Wireframe",
+            indent=False,
+            tooltip="Draw the triangle edges over the shaded surface",
+            layout=W.Layout(width="auto"),
+        )
+        self.wireframe.add_class("fwb-wb-wireframe")
+        self._wireframe_link = traitlets.link(
+            (self.wireframe, "value"), (self.viewport, "wireframe")
+        )
         self.status = W.HTML()
         self.status.add_class("fwb-wb-status")
         top = W.HBox(
-            [self.undo_button, self.redo_button, self.status],
+            [self.undo_button, self.redo_button, self.wireframe, self.status],
             layout=W.Layout(width="100%", align_items="center", grid_gap="6px"),
         )
         top.add_class("fwb-topbar")
@@ -244,6 +261,9 @@ class Workbench(W.VBox):
         if old == _REGIONS and self._regions is not None:
             # First: leaving drag mode gives the viewport its previous tool back.
             self._regions.deactivate()
+        if old == _SCULPT:
+            # The wrinkle eraser's strokes belong to the Sculpt tab (the Paint tab paints).
+            self.wrinkles.stop_erasing()
         if new is None or not 0 <= new < len(_TAB_TOOLS):
             return
         self.viewport.tool = _TAB_TOOLS[new]
@@ -264,6 +284,8 @@ class Workbench(W.VBox):
         i = self.tabs.selected_index
         if self._switching or i == _REGIONS or (i is not None and _TAB_TOOLS[i] == change["new"]):
             return
+        if i == _SCULPT and change["new"] == "paint" and self.wrinkles.erasing:
+            return  # the wrinkle eraser brushes with the paint tool in the Sculpt tab
         if change["new"] in _TAB_TOOLS:
             self.tabs.selected_index = _TAB_TOOLS.index(change["new"])
 
@@ -349,6 +371,7 @@ class Workbench(W.VBox):
                 a.save_now()
             a.close(discard=discard_autosave)
         self.model.events.history.disconnect(self._cb_history)
+        self._wireframe_link.unlink()
         if self._cb_drag in self.viewport.drag_listeners:
             self.viewport.drag_listeners.remove(self._cb_drag)
         if self._regions is not None:

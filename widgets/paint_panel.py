@@ -76,6 +76,22 @@ def _next_free(name: str, taken: Iterable[str]) -> str:
     return cand
 
 
+def _auto_regions(model: Any) -> tuple[list[str], np.ndarray]:
+    """(names, (r, n) memberships) of the model's automatic regions on the level shown.
+
+    ``model.regions`` is a :class:`workbench.region_blend.RegionState` (the
+    segmentation, the level the Regions tab shows and edits, and its weights);
+    the memberships are the soft per-vertex region weights of that level (they
+    sum to ``1 - background`` per vertex, so <= 1 as :func:`regional_mix` needs).
+    """
+    state = getattr(model, "regions", None)
+    if state is None:
+        raise ValueError("automatic regions: segment the model first (model.segment_regions())")
+    regions, level = state.regions, int(state.level)
+    R = np.asarray(regions.weight_matrix(level).toarray(), dtype=np.float64).T
+    return list(regions.names[level]), R
+
+
 class PaintPanel(W.VBox):
     """Palette, brush, blend tools and save/bake for painterly blending.
 
@@ -381,12 +397,7 @@ class PaintPanel(W.VBox):
             if preset == "global":
                 out = (["all"], np.ones((1, m.n_vertices)))
             elif preset == "auto":
-                regions = m.regions
-                if regions is None:
-                    raise ValueError("automatic regions: segment the model first (model.regions)")
-                level = int(getattr(regions, "n_levels", len(regions.labels))) - 1
-                R = np.asarray(regions.weight_matrix(level).toarray(), dtype=np.float64).T
-                out = (list(regions.names[level]), R)
+                out = _auto_regions(m)
             else:
                 names, R = feathered_presets(np.asarray(m.vertices), preset, feather)
                 out = (list(names), np.asarray(R))
@@ -585,7 +596,14 @@ class PaintPanel(W.VBox):
     def _on_model_regions(self) -> None:
         value = self.preset.value
         opts = self._preset_options()
+        old = [v[0] for k, v in self._region_cache.items() if k[0] == "auto"]
         self._region_cache = {k: v for k, v in self._region_cache.items() if k[0] != "auto"}
+        if "auto" in self._mixes:
+            # each region keeps its mix only while the regions are the same ones
+            # (another level, a merge, split or re-segmentation starts afresh)
+            new = _auto_regions(self._model)[0] if self._model.regions is not None else None
+            if not old or new != old[0]:
+                self._mixes.pop("auto", None)
         self.preset.options = opts
         self.preset.value = value if value in [k for _, k in opts] else "global"
         self._build_region_sliders()

@@ -60,6 +60,14 @@ nearest corner becomes a brush dab; release ends the stroke. Messages:
   fast stroke has no gaps and a slow kernel still gets one message at a time).
   Every message is answered with ``{"type": "paint_ack", "seq", "version",
   "kernel_ms"}`` and its geometry patch carries the same ``seq``.
+* Stroke hook: while an object is set with :meth:`Viewport.set_stroke_handler`
+  (the Sculpt tab's wrinkle eraser, :class:`widgets.wrinkle_panel.WrinkleEraser`),
+  the same strokes go to it instead of the model's paint layers:
+  ``handler.begin()`` at "start", ``handler.dab(vertices)`` for the dabs of every
+  message, ``handler.end()`` at "end" (``handler.cancel()`` after an error); the
+  acks are the same. The front end lets a press paint when ``stroke_target`` (a
+  description of what the stroke does) is set, even with no ``paint_expression``;
+  the overlay then shows ``handler.overlay()`` (the stroke's mask so far).
 * The weight-map overlay (the selected expression's painted weights, tinted
   magenta over the skin) is the binary trait ``_paint_weights`` (float32 n, or
   empty = nothing painted / overlay off) plus ``{"type": "paint_patch",
@@ -290,6 +298,9 @@ class Viewport(anywidget.AnyWidget):
     paint_overlay : bool
         Tint the surface by the painted weight of :attr:`paint_expression`
         (white skin -> magenta at weight 1).
+    stroke_target : str
+        Set by :meth:`set_stroke_handler`: what paint strokes do while a stroke
+        handler receives them ("" = the model's paint layers).
     feature_graph : bool
         Draw the feature-graph edges given to :meth:`set_feature_graph`, coloured
         by the strain given to :meth:`set_feature_strain` (blue compressed, grey
@@ -330,6 +341,7 @@ class Viewport(anywidget.AnyWidget):
     brush_mode = t.Unicode("add").tag(sync=True)
     brush_mirror = t.Bool(False).tag(sync=True)
     paint_overlay = t.Bool(True).tag(sync=True)
+    stroke_target = t.Unicode("").tag(sync=True)
     wireframe = t.Bool(False).tag(sync=True)
     component_visible = t.Dict(value_trait=t.Bool()).tag(sync=True)
     height = t.Int(480).tag(sync=True)
@@ -386,6 +398,9 @@ class Viewport(anywidget.AnyWidget):
         #: called after each stroke ends with a dict of stats (PaintPanel status line)
         self.stroke_listeners: list[Any] = []
         self.last_stroke: dict[str, Any] = {}
+        #: receives paint strokes instead of the model's paint layers (set_stroke_handler)
+        self.stroke_handler: Any = None
+        self._hook_stroke = False  # a hooked stroke is open
         # While a message's dabs run, model events only mark the view stale; one
         # overlay + geometry update is sent after the last dab of the message.
         self._hold_pushes = 0
@@ -540,6 +555,7 @@ class Viewport(anywidget.AnyWidget):
             try:
                 self.end_drag()
                 self.end_stroke()
+                self.set_stroke_handler(None)
             finally:
                 ev = self._model.events
                 ev.deformed.disconnect(self._on_deformed)
@@ -554,6 +570,76 @@ class Viewport(anywidget.AnyWidget):
         super().close()
 
     # ------------------------------------------------------------ paint strokes
+    def set_stroke_handler(self, handler: Any, target: str = "") -> None:
+        """Send paint strokes to ``handler`` instead of the model's paint layers (None: back).
+
+        ``handler`` has ``begin()``, ``dab(vertices)``, ``end()``, ``cancel()``
+        and optionally ``overlay() -> (n,) float or None`` (drawn as the paint
+        overlay while it is set). ``target`` describes what a stroke does (the
+        front end paints on a press only when it, or :attr:`paint_expression`,
+        is set). An open stroke of the previous handler is cancelled.
+        """
+        if handler is not None and not str(target):
+            raise ValueError("Viewport.set_stroke_handler: describe the stroke's target")
+        with self._drag_lock:
+            old = self.stroke_handler
+            if old is not None and old is not handler and self._hook_stroke:
+                self._hook_stroke = False
+                old.cancel()
+            if handler is not None:
+                self.end_stroke()
+            self.stroke_handler = handler
+            self._hook_stroke = self._hook_stroke and handler is old
+            self.stroke_target = str(target) if handler is not None else ""
+        # the overlay's source changed: send the difference to what the front end has
+        if getattr(self, "_connected", False):
+            self.errors.guard("Viewport paint overlay")(self._sync_paint)()
+
+    def _on_hooked_paint_msg(self, content: dict[str, Any]) -> None:
+        """A paint message while a stroke handler is set (see :meth:`set_stroke_handler`)."""
+        handler, phase, ms = self.stroke_handler, content.get("phase"), 0.0
+        verts = content.get("vertices") or []
+        try:
+            with self._drag_lock:
+                if phase == "start":
+                    close_interactions(self._model)
+                    self.end_drag()
+                    self.end_stroke()
+                    handler.begin()
+                    self._hook_stroke = True
+                if verts and self._hook_stroke:
+                    ids = np.asarray([int(v) for v in verts], np.int64)[-MAX_DABS_PER_MESSAGE:]
+                    if ids.min() < 0 or ids.max() >= self._model.n_vertices:
+                        raise ValueError(f"paint stroke: vertex ids out of range: {ids}")
+                    t0 = time.perf_counter()
+                    handler.dab(ids)
+                    self._sync_paint()
+                    ms = (time.perf_counter() - t0) * 1e3
+                if phase == "end" and self._hook_stroke:
+                    self._hook_stroke = False
+                    handler.end()
+                    self._sync_paint()
+        except Exception as exc:
+            try:
+                if self._hook_stroke:
+                    self._hook_stroke = False
+                    handler.cancel()
+                    self._sync_paint()
+            finally:
+                self.errors.report(f"paint stroke ({phase})", exc)
+                self.send({"type": "paint_cancel"})
+        finally:
+            self.send(
+                {
+                    "type": "paint_ack",
+                    "seq": content.get("seq"),
+                    "phase": phase,
+                    "version": self._version,
+                    "paint_version": self._paint_version,
+                    "kernel_ms": round(ms, 3),
+                }
+            )
+
     def begin_stroke(self, expression: str | None = None) -> None:
         """Start a paint stroke (what the front end's "start" message does).
 
@@ -675,8 +761,14 @@ class Viewport(anywidget.AnyWidget):
         with model.lock, self._send_lock:
             if not getattr(self, "_connected", False):
                 return
-            expr = self.paint_expression if self.paint_overlay else ""
-            w = model.paint_layers.get(expr) if expr else None
+            handler = self.stroke_handler
+            if handler is not None:
+                overlay = getattr(handler, "overlay", None)
+                w = overlay() if overlay is not None else None
+                w = None if w is None else np.asarray(w, dtype=np.float32)
+            else:
+                expr = self.paint_expression if self.paint_overlay else ""
+                w = model.paint_layers.get(expr) if expr else None
             last = self._paint_last
             if w is None:
                 if last is not None:
@@ -993,6 +1085,8 @@ class Viewport(anywidget.AnyWidget):
         # --- end drag_handler hook ---
         elif kind == "handle":
             self._on_handle_msg(content)
+        elif kind == "paint" and self.stroke_handler is not None:
+            self._on_hooked_paint_msg(content)
         elif kind == "paint":
             self._on_paint_msg(content)
         elif kind == "request_paint":

@@ -20,14 +20,22 @@ the Sculpt tab under the handle controls:
   *views* the example (sets its weights on the model, one undo step). **Scale
   wrinkles** multiplies the chosen example's details
   (:meth:`~workbench.wrinkle_layer.WrinkleLayer.edit_example`; the change
-  propagates to every pose near it). **Add current pose** adds the current
-  blend weights as a new example (the procedural sculptor's detailed mesh for
-  those weights) and refits, keeping earlier scale edits.
+  propagates to every pose near it). **Erase wrinkles** (a toggle on each
+  card) paints the example's wrinkles out with the brush: while it is on, the
+  viewport's paint tool sends its strokes to a :class:`WrinkleEraser` (the
+  viewport's stroke hook, :meth:`widgets.Viewport.set_stroke_handler`) instead
+  of the paint layers; the stroke's mask is tinted magenta while painting and
+  on release becomes ``edit_example(example, mask=...)``: one undo step per
+  stroke. **Add current pose** adds the current blend weights as a new example
+  (the procedural sculptor's detailed mesh for those weights) and refits,
+  keeping earlier scale and erase edits.
 
 Like the other panels it keeps no model state of its own: it changes the
 model and the layer only through their methods and follows
-``model.events``. Example edits and fits are not undoable: the layer has no
-API to restore an earlier fit (its strength and on/off are).
+``model.events``. Scale and erase edits are undoable (:func:`edit_wrinkle_example`;
+undo puts the layer's previous pose space back); fits are not (a refit makes
+earlier example edits' undo steps no-ops). Edits made by calling
+``layer.edit_example`` directly are not recorded.
 """
 
 from __future__ import annotations
@@ -47,7 +55,9 @@ from numpy.typing import NDArray
 from widgets._threading import ErrorSink, close_interactions
 
 __all__ = [
+    "WrinkleEraser",
     "WrinklePanel",
+    "edit_wrinkle_example",
     "example_detailed",
     "example_thumbnail",
     "set_wrinkle_strength",
@@ -78,11 +88,17 @@ _HELP = (
 # --------------------------------------------------------------------------- undoable edits
 
 
-def _record(model: Any, label: str, undo: Callable[[], None], redo: Callable[[], None]) -> None:
+def _record(
+    model: Any,
+    label: str,
+    undo: Callable[[], None],
+    redo: Callable[[], None],
+    nbytes: int = 64,
+) -> None:
     """Push an already-applied edit onto the model's undo history (one step)."""
     from workbench.history import Command
 
-    model.history.push(Command(label, undo, redo, 64))
+    model.history.push(Command(label, undo, redo, nbytes))
     model.events.history.emit()
 
 
@@ -137,6 +153,54 @@ def set_wrinkles_enabled(model: Any, layer: Any, enabled: bool) -> bool:
             lambda: layer.set_enabled(new),
         )
         return True
+
+
+def _fit_key(layer: Any) -> tuple[Any, list[str]]:
+    """What identifies one fit of the layer (a refit makes a new feature graph or examples)."""
+    return layer.graph, list(layer.example_names)
+
+
+def _restore_pose_space(model: Any, layer: Any, ps: Any, fit_key: tuple[Any, list[str]]) -> None:
+    """Undo / redo of an example edit: put the pose space ``ps`` of the same fit back."""
+    if layer.graph is not fit_key[0] or list(layer.example_names) != fit_key[1]:
+        return  # refitted since: the edits of the earlier fit no longer apply
+    if layer.pose_space is ps:
+        return
+    # WrinkleLayer has no public setter for its pose space (core: a `set_pose_space`
+    # would do); _set_pose_space rebuilds the detail evaluator for it.
+    layer._set_pose_space(ps, model)
+    layer.set_enabled(layer.enabled)  # public: drops the cached evaluate, tells the views
+
+
+def _nbytes(ps: Any) -> int:
+    return int(sum(getattr(getattr(ps, k, None), "nbytes", 0) for k in ("weights", "train_values")))
+
+
+def edit_wrinkle_example(
+    model: Any,
+    layer: Any,
+    example: str,
+    *,
+    scale: float | NDArray[np.float64] = 1.0,
+    mask: NDArray[np.float64] | None = None,
+    label: str | None = None,
+) -> None:
+    """:meth:`WrinkleLayer.edit_example` as one undoable step of ``model``.
+
+    Undo puts the layer's previous pose space back (bit-exact, no refit); undo
+    and redo do nothing once the layer was refitted.
+    """
+    with model.lock:
+        key, old = _fit_key(layer), layer.pose_space
+        layer.edit_example(example, scale=scale, mask=mask)
+        new = layer.pose_space
+        _record(
+            model,
+            label or f"Edit wrinkles {example}",
+            lambda: _restore_pose_space(model, layer, old, key),
+            lambda: _restore_pose_space(model, layer, new, key),
+            _nbytes(new),  # the pose space this step adds (the old one is the step before's)
+        )
 
 
 # --------------------------------------------------------------------------- examples
@@ -230,6 +294,95 @@ def _warm_up(model: Any, layer: Any) -> None:
     layer.details(model)  # the real state again (its strain is what the views show)
 
 
+# --------------------------------------------------------------------------- eraser
+
+
+class WrinkleEraser:
+    """Stroke handler that paints one example's wrinkles out (the viewport's stroke hook).
+
+    :class:`WrinklePanel` installs it with :meth:`widgets.Viewport.set_stroke_handler`
+    while an example's *Erase wrinkles* toggle is on: the viewport's paint tool
+    (raycast, brush cursor, dab spacing) then sends its strokes here. Each dab
+    adds the brush footprint (surface distance on the rest mesh, the brush's
+    falloff, x-mirror) to the stroke's mask, keeping the largest strength any
+    dab gave a vertex (as a paint stroke caps at its opacity); release applies
+    the mask with :meth:`WrinklePanel.erase_wrinkles`: one undo step per
+    stroke. Usable without a viewport (tests call :meth:`begin` / :meth:`dab` /
+    :meth:`end`).
+
+    Parameters
+    ----------
+    panel : WrinklePanel
+    example : str
+        The example whose wrinkles the strokes erase.
+
+    Attributes
+    ----------
+    last_mask : (n,) float32 or None
+        The mask of the last applied stroke.
+    """
+
+    def __init__(self, panel: WrinklePanel, example: str) -> None:
+        self.panel = panel
+        self.example = example
+        self.last_mask: NDArray[np.float32] | None = None
+        self._mask: NDArray[np.float32] | None = None
+        self._overlay: NDArray[np.float32] | None = None
+        self._brush: Any = None
+
+    @property
+    def stroking(self) -> bool:
+        """True between :meth:`begin` and :meth:`end` / :meth:`cancel`."""
+        return self._mask is not None
+
+    def begin(self) -> None:
+        """Start a stroke with the panel's eraser brush."""
+        self._brush = self.panel.eraser_brush()
+        self._mask = np.zeros(self.panel.model.n_vertices, np.float32)
+        self._overlay = None
+
+    def dab(self, vertices: Any) -> None:
+        """Brush dabs centred at vertex ids ``vertices`` (int or sequence)."""
+        from workbench.paint import falloff_curve
+
+        mask, brush = self._mask, self._brush
+        if mask is None:
+            raise RuntimeError("WrinkleEraser.dab: no stroke open (begin first)")
+        ids = np.asarray(vertices, np.int64).reshape(-1)
+        if ids.size and (ids.min() < 0 or ids.max() >= mask.shape[0]):
+            raise ValueError(f"WrinkleEraser.dab: vertex ids must be in 0..{mask.shape[0] - 1}")
+        surface = self.panel.model.paint_surface
+        for c in ids:
+            centres = [int(c)]
+            if brush.mirror and surface.mirror[c] != c:
+                centres.append(int(surface.mirror[c]))
+            for cc in centres:
+                near, dist = surface.within(cc, brush.radius)
+                st = (brush.opacity * falloff_curve(dist / brush.radius, brush.falloff)).astype(
+                    np.float32
+                )
+                mask[near] = np.maximum(mask[near], st)
+        if ids.size:
+            self._overlay = mask.copy()  # a new array: the viewport sends what changed
+
+    def overlay(self) -> NDArray[np.float32] | None:
+        """The open stroke's mask so far (the viewport tints it), or None."""
+        return self._overlay
+
+    def end(self) -> bool:
+        """Apply the stroke's mask (one undo step); False when it erased nothing."""
+        mask = self._mask
+        self._mask, self._overlay = None, None
+        if mask is None or not np.any(mask > 0):
+            return False
+        self.last_mask = mask
+        return self.panel.erase_wrinkles(self.example, mask)
+
+    def cancel(self) -> None:
+        """Drop the open stroke without changing anything."""
+        self._mask, self._overlay = None, None
+
+
 # --------------------------------------------------------------------------- the panel
 
 
@@ -274,6 +427,10 @@ class WrinklePanel(W.VBox):
     layer : WrinkleLayer or None
     last_fit_s : float
         Seconds the last fit took (thumbnails excluded).
+    eraser : WrinkleEraser or None
+        The stroke handler while an example's *Erase wrinkles* toggle is on.
+    erase_toggles : dict of str -> ipywidgets.ToggleButton
+        The *Erase wrinkles* toggle of each example card.
     """
 
     def __init__(
@@ -305,6 +462,9 @@ class WrinklePanel(W.VBox):
         self._last_status_t = 0.0
         self.last_fit_s = math.nan
         self._links: list[Any] = []
+        self.eraser: WrinkleEraser | None = None
+        self.erase_toggles: dict[str, W.ToggleButton] = {}
+        self._tool_before_erase: str | None = None
 
         def button(desc: str, cls: str, tip: str, icon: str = "", width: str = "auto") -> W.Button:
             b = W.Button(description=desc, tooltip=tip, icon=icon, layout=W.Layout(width=width))
@@ -374,6 +534,46 @@ class WrinklePanel(W.VBox):
         self.rest_button = button(
             "Rest pose", "fwb-wrinkle-rest", "Set every weight to 0 (undoable)"
         )
+        # ---- eraser brush (shown while an example's "Erase wrinkles" toggle is on)
+        from widgets.viewport import default_brush_radius, face_height
+
+        H = face_height(model)
+        r0 = float(getattr(viewport, "brush_radius", 0.0) or default_brush_radius(model))
+        self.erase_radius = W.FloatSlider(
+            value=r0,
+            min=0.005 * H,
+            max=0.3 * H,
+            step=0.001 * H,
+            readout_format=".3f",
+            description="radius",
+            style={"description_width": "60px"},
+            layout=W.Layout(width="260px"),
+        )
+        self.erase_radius.add_class("fwb-wrinkle-erase-radius")
+        self.erase_strength = W.FloatSlider(
+            value=1.0,
+            min=0.0,
+            max=1.0,
+            step=0.05,
+            description="strength",
+            readout_format=".2f",
+            style={"description_width": "60px"},
+            layout=W.Layout(width="220px"),
+        )
+        self.erase_strength.add_class("fwb-wrinkle-erase-strength")
+        self.erase_note = W.HTML("")
+        self.erase_note.add_class("fwb-wrinkle-erase-note")
+        self.erase_box = W.VBox(
+            [
+                self.erase_note,
+                W.HBox(
+                    [self.erase_radius, self.erase_strength],
+                    layout=W.Layout(flex_flow="row wrap"),
+                ),
+            ],
+            layout=W.Layout(display="none", border="1px solid #c6c", padding="2px"),
+        )
+        self.erase_box.add_class("fwb-wrinkle-erase-box")
         self.new_name = W.Text(
             value="pose_1", placeholder="example name", layout=W.Layout(width="140px")
         )
@@ -392,8 +592,12 @@ class WrinklePanel(W.VBox):
             [
                 W.HBox([self.enabled, self.strength], layout=W.Layout(align_items="center")),
                 self.show_graph,
-                W.HTML("<b>Example poses</b> (click a name to view it)"),
+                W.HTML(
+                    "<b>Example poses</b> (click a name to view it; <i>Erase wrinkles</i> "
+                    "paints that example's wrinkles out with the brush)"
+                ),
                 self.cards,
+                self.erase_box,
                 W.HBox(
                     [self.example, self.scale, self.scale_button],
                     layout=W.Layout(flex_flow="row wrap"),
@@ -428,7 +632,12 @@ class WrinklePanel(W.VBox):
         self.enabled.observe(g("wrinkles on/off")(self._on_enabled), "value")
         self.strength.observe(g("wrinkle strength")(self._on_strength), "value")
         if viewport is not None:
-            self._links = [t.link((self.show_graph, "value"), (viewport, "feature_graph"))]
+            self._links = [
+                t.link((self.show_graph, "value"), (viewport, "feature_graph")),
+                t.link((self.erase_radius, "value"), (viewport, "brush_radius")),
+            ]
+            self._cb_tool = g("WrinklePanel tool")(self._on_tool)
+            viewport.observe(self._cb_tool, "tool")
         self._cb_deformed = g("WrinklePanel update")(self._on_deformed)
         self._cb_handles = g("WrinklePanel handles")(self._on_handles)
         self._cb_drag = g("WrinklePanel drag stats")(self._on_drag_end)
@@ -548,9 +757,127 @@ class WrinklePanel(W.VBox):
                 f"scale wrinkles: the factor must be a finite number >= 0, got {scale!r}"
             )
         self._flush()
-        layer.edit_example(name, scale=s)
+        edit_wrinkle_example(
+            self._model, layer, name, scale=s, label=f"Scale wrinkles {name} ×{s:g}"
+        )
         self._refresh()
         self._update_status(f"<b>{name}</b> wrinkles ×{s:g}")
+
+    # ---- erasing wrinkles with the brush
+    @property
+    def erasing(self) -> str | None:
+        """The example whose wrinkles brush strokes erase, or None."""
+        return None if self.eraser is None else self.eraser.example
+
+    def eraser_brush(self) -> Any:
+        """The eraser's :class:`workbench.paint.Brush`: the panel's radius and strength,
+        the viewport's falloff and x-mirror."""
+        from workbench.paint import Brush
+
+        vp = self.viewport
+        return Brush(
+            radius=float(self.erase_radius.value),
+            opacity=float(self.erase_strength.value),
+            falloff=getattr(vp, "brush_falloff", "smooth"),
+            mirror=bool(getattr(vp, "brush_mirror", False)),
+        )
+
+    def start_erasing(self, name: str) -> WrinkleEraser:
+        """Make brush strokes in the viewport erase example ``name``'s wrinkles.
+
+        Switches the viewport to its paint tool with a :class:`WrinkleEraser` as
+        stroke handler (the previous tool comes back with :meth:`stop_erasing`).
+        Each stroke is one undo step. The face keeps its pose: view the example
+        (click its name) to see the wrinkles you erase.
+        """
+        layer = self._require_layer("erase wrinkles")
+        if name not in layer.example_names:
+            raise KeyError(f"erase wrinkles: no example {name!r}; have {layer.example_names}")
+        if self.eraser is not None:
+            if self.eraser.example == name:
+                return self.eraser
+            self.stop_erasing()
+        self._flush()
+        eraser = WrinkleEraser(self, name)
+        self.eraser = eraser  # first: the Workbench keeps the Sculpt tab for this tool change
+        vp = self.viewport
+        if vp is not None:
+            vp.set_stroke_handler(eraser, f"erase {name} wrinkles")
+            if vp.tool != "paint":
+                self._tool_before_erase = vp.tool
+                vp.tool = "paint"
+        self._sync_erase_controls()
+        return eraser
+
+    def stop_erasing(self) -> None:
+        """Back to the previous viewport tool; brush strokes paint expressions again."""
+        eraser = self.eraser
+        if eraser is None:
+            return
+        self.eraser = None
+        eraser.cancel()
+        vp = self.viewport
+        if vp is not None:
+            if vp.stroke_handler is eraser:
+                vp.set_stroke_handler(None)
+            before, self._tool_before_erase = self._tool_before_erase, None
+            if before is not None and vp.tool == "paint":
+                vp.tool = before
+        self._sync_erase_controls()
+
+    def erase_wrinkles(self, name: str, mask: Any) -> bool:
+        """Paint example ``name``'s wrinkles out where ``mask`` (n,) is 1 (0 keeps them).
+
+        One undo step (what an eraser stroke does on release); the change
+        propagates to every pose near the example. False when ``mask`` is all 0.
+        """
+        layer = self._require_layer("erase wrinkles")
+        if name not in layer.example_names:
+            raise KeyError(f"erase wrinkles: no example {name!r}; have {layer.example_names}")
+        n = self._model.n_vertices
+        m = np.clip(np.asarray(mask, np.float64).reshape(n), 0.0, 1.0)
+        if not np.any(m > 0):
+            return False
+        self._flush()
+        edit_wrinkle_example(self._model, layer, name, mask=m, label=f"Erase wrinkles {name}")
+        self._refresh()
+        self._update_status(
+            f"erased <b>{name}</b> wrinkles on {np.count_nonzero(m) / n:.1%} of the vertices"
+        )
+        return True
+
+    def _on_erase_toggle(self, name: str, change: dict) -> None:
+        if self._syncing_toggles:
+            return
+        if change["new"]:
+            self.start_erasing(name)
+        elif self.erasing == name:
+            self.stop_erasing()
+
+    def _on_tool(self, change: dict) -> None:
+        # another tool picked (a tab, a cell): the eraser no longer gets strokes
+        if self.eraser is not None and change["new"] != "paint":
+            self._tool_before_erase = None
+            self.stop_erasing()
+
+    _syncing_toggles = False
+
+    def _sync_erase_controls(self) -> None:
+        name = self.erasing
+        self._syncing_toggles = True
+        try:
+            for n, tb in self.erase_toggles.items():
+                if tb.value != (n == name):
+                    tb.value = n == name
+        finally:
+            self._syncing_toggles = False
+        self.erase_box.layout.display = "" if name else "none"
+        self.erase_note.value = (
+            f"<b>Erasing {name}</b>'s wrinkles: paint on the face (one undo step per stroke). "
+            f"Click <i>{name}</i> to view its pose; untoggle to stop."
+            if name
+            else ""
+        )
 
     def add_current_pose(self, name: str) -> None:
         """Add the current blend weights as example ``name`` and refit.
@@ -745,8 +1072,13 @@ class WrinklePanel(W.VBox):
         """Rebuild the example list (names, thumbnails, dropdown) from the layer."""
         layer = self.layer
         self._sync_controls()
+        if self.eraser is not None and (
+            layer is None or not layer.fitted or self.eraser.example not in layer.example_names
+        ):
+            self.stop_erasing()
         if layer is None or not layer.fitted:
             self.cards.children = []
+            self.erase_toggles = {}
             self.example.options = []
             self._sync_graph()
             self._update_status(detail=False)
@@ -763,6 +1095,7 @@ class WrinklePanel(W.VBox):
                 self._fitted_norms.setdefault(n, v)
             pngs = self._thumbnails(names) if self.thumbnails else {}
         cards = []
+        toggles: dict[str, W.ToggleButton] = {}
         for n in names:
             ref = self._fitted_norms.get(n, 0.0)
             factor = norms[n] / ref if ref > 0 else 1.0
@@ -777,7 +1110,23 @@ class WrinklePanel(W.VBox):
                 f"<div style='font-size:11px;text-align:center;color:#555'>detail ×{factor:.2f}</div>",
                 layout=W.Layout(width=f"{THUMB_SIZE[0] + 8}px"),
             )
-            parts: list[W.Widget] = [b, label]
+            erase = W.ToggleButton(
+                value=self.erasing == n,
+                description="Erase",
+                icon="eraser",
+                tooltip=f"Erase wrinkles with the brush: strokes on the face paint {n}'s "
+                "wrinkles out (one undo step per stroke)",
+                layout=W.Layout(width=f"{THUMB_SIZE[0] + 8}px"),
+            )
+            erase.add_class("fwb-wrinkle-erase")
+            erase.observe(
+                self.errors.guard(f"erase wrinkles {n}")(
+                    lambda change, n=n: self._on_erase_toggle(n, change)
+                ),
+                "value",
+            )
+            toggles[n] = erase
+            parts: list[W.Widget] = [b, erase, label]
             if n in pngs:
                 parts.insert(
                     0,
@@ -789,6 +1138,8 @@ class WrinklePanel(W.VBox):
             card.add_class("fwb-wrinkle-card")
             cards.append(card)
         self.cards.children = cards
+        self.erase_toggles = toggles
+        self._sync_erase_controls()
         current = self.example.value
         self.example.options = names
         self.example.value = current if current in names else names[0] if names else None
@@ -885,6 +1236,9 @@ class WrinklePanel(W.VBox):
     def close(self) -> None:
         """Disconnect from the model and the viewport, then close the child widgets."""
         if getattr(self, "_connected", False):
+            self.stop_erasing()
+            if self.viewport is not None:
+                self.viewport.unobserve(self._cb_tool, "tool")
             ev = self._model.events
             ev.deformed.disconnect(self._cb_deformed)
             ev.handles.disconnect(self._cb_handles)

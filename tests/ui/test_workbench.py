@@ -112,6 +112,18 @@ def test_status_line_and_undo_redo_buttons_follow_edits(wb: Workbench) -> None:
     assert wb.model.weights["jawOpen"] == pytest.approx(0.3)
 
 
+def test_wireframe_checkbox_in_the_top_bar_is_view_state(wb: Workbench) -> None:
+    top = wb.children[0]
+    assert wb.wireframe in top.children and wb.wireframe.description == "Wireframe"
+    assert wb.wireframe.value is False and wb.viewport.wireframe is False
+    wb.wireframe.value = True
+    assert wb.viewport.wireframe is True
+    assert wb.model.history.undo_labels == [] and wb.undo_button.disabled  # not an edit
+    wb.viewport.wireframe = False  # set from code (the notebook): the checkbox follows
+    assert wb.wireframe.value is False
+    assert wb.errors.outputs == ()
+
+
 def test_last_drag_stats_are_shown(wb: Workbench) -> None:
     wb.viewport.last_drag = {
         "name": "h",

@@ -299,3 +299,147 @@ def test_workbench_shows_the_wrinkle_panel_in_the_sculpt_tab() -> None:
         assert wb.wrinkles.layer.enabled is True and wb.wrinkles.enabled.value is True
     finally:
         wb.close()
+
+
+# ---------------------------------------------------------------- erasing wrinkles with the brush
+
+
+def _strongest_detail_vertex(model, panel) -> int:
+    return int(np.argmax(np.linalg.norm(_detail(model, panel), axis=1)))
+
+
+def test_erase_toggle_turns_brush_strokes_into_a_paint_out_mask(fitted) -> None:
+    model, vp, panel, errors = fitted
+    panel.view_example("brow_raise")
+    d0 = _detail(model, panel)
+    v = _strongest_detail_vertex(model, panel)  # on the forehead furrows
+    tool = vp.tool
+    # the card's toggle: the viewport's paint tool now sends its strokes to the eraser
+    card = panel.cards.children[0]
+    toggle = panel.erase_toggles["brow_raise"]
+    assert toggle in card.children and toggle.description == "Erase"
+    assert "Erase wrinkles with the brush" in toggle.tooltip
+    toggle.value = True
+    assert panel.erasing == "brow_raise" and panel.eraser is not None
+    assert vp.tool == "paint" and vp.stroke_handler is panel.eraser
+    assert "brow_raise" in vp.stroke_target and panel.erase_box.layout.display == ""
+    depth = len(model.history.undo_labels)
+
+    # one stroke (press, two moves, release) driven on the handler directly
+    panel.erase_radius.value = 0.3
+    assert vp.brush_radius == 0.3  # the eraser's radius is the viewport's brush (cursor ring)
+    eraser = panel.eraser
+    eraser.begin()
+    eraser.dab([v])
+    eraser.dab([v, int(model.paint_surface.mirror[v])])
+    assert eraser.stroking and len(model.history.undo_labels) == depth  # nothing yet
+    ov = eraser.overlay()
+    assert ov is not None and ov[v] == pytest.approx(1.0) and 0 < np.count_nonzero(ov) < 2000
+    assert eraser.end() is True
+    assert _errors(errors) == "" and panel.error_line.value == ""
+    assert model.history.undo_labels[-1] == "Erase wrinkles brow_raise"
+    assert len(model.history.undo_labels) == depth + 1  # one undo step per stroke
+    mask = eraser.last_mask
+    d1 = _detail(model, panel)
+    # erased under the brush (at the example pose its details are reproduced), kept elsewhere
+    inside, outside = mask >= 0.999, mask == 0
+    assert (
+        np.linalg.norm(d1[inside], axis=1).max() < 0.05 * np.linalg.norm(d0[inside], axis=1).max()
+    )
+    assert np.allclose(d1[outside], d0[outside], atol=0.05 * np.abs(d0).max())
+    assert np.linalg.norm(d1[outside]) > 0.5 * np.linalg.norm(d0[outside])
+    assert "erased <b>brow_raise</b>" in panel.status.value
+    assert panel.erasing == "brow_raise" and panel.erase_toggles["brow_raise"].value
+
+    # undo puts the earlier details back exactly, redo erases again
+    model.undo()
+    np.testing.assert_array_equal(_detail(model, panel), d0)
+    model.redo()
+    np.testing.assert_array_equal(_detail(model, panel), d1)
+
+    # an empty stroke (cancelled, or nothing under the brush) is no undo step
+    eraser.begin()
+    eraser.cancel()
+    assert eraser.end() is False and len(model.history.undo_labels) == depth + 1
+
+    # untoggling gives the previous tool back; strokes paint expressions again
+    panel.erase_toggles["brow_raise"].value = False
+    assert panel.eraser is None and vp.stroke_handler is None and vp.stroke_target == ""
+    assert vp.tool == tool and panel.erase_box.layout.display == "none"
+
+
+def test_eraser_strokes_from_the_viewport_messages(fitted) -> None:
+    model, vp, panel, errors = fitted
+    panel.view_example("brow_raise")
+    v = _strongest_detail_vertex(model, panel)
+    panel.start_erasing("brow_raise")
+    panel.erase_toggles["smile"].value = True  # one example at a time
+    assert panel.erasing == "smile" and not panel.erase_toggles["brow_raise"].value
+    panel.start_erasing("brow_raise")
+    depth = len(model.history.undo_labels)
+    sent = dict(vp.paint_updates_sent)
+    msg = {"type": "paint"}
+    vp._on_frontend_msg(vp, {**msg, "phase": "start", "vertices": [v], "seq": 1}, [])
+    # the stroke's mask is the viewport's paint overlay while painting; no paint layer
+    w = np.frombuffer(vp._paint_weights, np.float32)
+    assert w.size == model.n_vertices and w[v] == pytest.approx(1.0)
+    vp._on_frontend_msg(vp, {**msg, "phase": "move", "vertices": [v + 1], "seq": 2}, [])
+    vp._on_frontend_msg(vp, {**msg, "phase": "end", "vertices": [], "seq": 3}, [])
+    assert _errors(errors) == ""
+    assert vp.paint_updates_sent != sent
+    assert len(model.paint_layers) == 0 and not model.interacting
+    assert model.history.undo_labels[-1] == "Erase wrinkles brow_raise"
+    assert len(model.history.undo_labels) == depth + 1
+    assert vp._paint_weights == b""  # the overlay goes with the stroke
+    assert np.linalg.norm(_detail(model, panel)[v]) < 1e-4
+    # a bad message cancels the stroke and reports; no half edit
+    vp._on_frontend_msg(vp, {**msg, "phase": "start", "vertices": [model.n_vertices], "seq": 4}, [])
+    assert "out of range" in _errors(errors) and len(model.history.undo_labels) == depth + 1
+    panel.stop_erasing()
+    assert vp.stroke_handler is None
+
+
+def test_erase_from_code_and_scale_are_undoable_and_a_refit_ends_erasing(fitted) -> None:
+    model, vp, panel, _ = fitted
+    panel.view_example("brow_raise")
+    d0 = _detail(model, panel)
+    right = (np.asarray(model.vertices)[:, 0] < 0).astype(float)
+    assert panel.erase_wrinkles("brow_raise", right)
+    assert not panel.erase_wrinkles("brow_raise", np.zeros(model.n_vertices))  # no step
+    panel.scale_example("brow_raise", 2.0)
+    assert model.history.undo_labels[-2:] == [
+        "Erase wrinkles brow_raise",
+        "Scale wrinkles brow_raise ×2",
+    ]
+    model.undo()
+    model.undo()
+    np.testing.assert_array_equal(_detail(model, panel), d0)
+    with pytest.raises(KeyError, match="no example"):
+        panel.start_erasing("nope")
+    panel.start_erasing("brow_raise")
+    assert vp.tool == "paint"
+    panel.fit()  # a refit: the old fit's edits' undo steps no longer apply
+    assert panel.erasing == "brow_raise"  # same examples: still erasing
+    model.redo()  # the erase of the previous fit: nothing happens
+    np.testing.assert_allclose(_detail(model, panel), d0, atol=1e-6)
+    vp.tool = "orbit"  # another tool (a cell, another tab) ends erasing
+    assert panel.eraser is None and vp.stroke_handler is None
+
+
+def test_workbench_keeps_the_sculpt_tab_while_erasing() -> None:
+    wb = Workbench(load_sample("head"))
+    try:
+        wb.tabs.selected_index = 1  # Sculpt
+        wb.wrinkles.fit()
+        wb.wrinkles.erase_toggles["brow_raise"].value = True
+        assert wb.viewport.tool == "paint" and wb.tabs.selected_index == 1
+        assert wb._paint is None  # the Paint tab was not opened
+        wb.wrinkles.erase_toggles["brow_raise"].value = False
+        assert wb.viewport.tool == "sculpt" and wb.tabs.selected_index == 1
+        wb.wrinkles.start_erasing("smile")
+        wb.tabs.selected_index = 3  # Paint: its strokes paint expressions, not wrinkles
+        assert wb.wrinkles.eraser is None and wb.viewport.stroke_handler is None
+        assert wb.viewport.tool == "paint"
+        assert wb.errors.outputs == ()
+    finally:
+        wb.close()

@@ -38,6 +38,9 @@
 //       point. Like handle moves, at most ONE message is in flight: the queue (at most
 //       the 8 newest vertices) goes out when Python's {type: "paint_ack", seq} - or the
 //       geometry patch carrying that seq - arrives. Release sends "end" (one undo step).
+//   stroke_target   non-empty while Python sends strokes to a stroke handler instead of
+//       the paint layers (e.g. the wrinkle eraser): a press paints even with no
+//       paint_expression, and _paint_weights is the handler's overlay (its mask).
 //   _paint_weights  bytes, float32 (n) or empty: the selected expression's weights,
 //   msg:custom      {type: "paint_patch", version}, buffers [ids uint32, weights float32]
 //       drawn as a magenta tint over the component colours (weight-map overlay).
@@ -1169,7 +1172,8 @@ class View {
 
   onPaintDown(e) {
     if (this.stroke || e.button !== 0 || e.altKey || e.ctrlKey || e.metaKey) return;
-    if (!this.model.get("paint_expression")) return; // nothing picked: the press orbits
+    // Nothing to paint (no expression picked, no stroke handler in Python): the press orbits.
+    if (!this.model.get("paint_expression") && !this.model.get("stroke_target")) return;
     const hit = this.paintHit(e.clientX, e.clientY);
     if (!hit) return; // off the face: OrbitControls gets it
     e.stopPropagation(); e.preventDefault();
