@@ -27,7 +27,7 @@ from workbench.model import BlendShape, FaceModel, ModelMetadata
 from workbench.paint import Brush
 from workbench.polygons import Polygons
 from workbench.region_blend import RegionWeights
-from workbench.tracks import HANDLES, Key, Timeline, Track
+from workbench.tracks import HANDLES, Key, Timeline, Track, region_track_name
 
 TIMES = np.linspace(-0.2, 2.2, 49)  # before, inside and after the keys, on and off frames
 
@@ -192,6 +192,34 @@ def test_baked_layer_is_reported_and_logged(tmp_path, caplog):
     assert names[3:] == [f"layer:frame{f:04d}" for f in range(1, 9)]
     res = export(m, m.tracks, tmp_path / "f.csv")
     assert res.by_encoding("omitted") == ["wobble"]
+
+
+def test_keyed_region_weights_are_baked_per_frame_and_reported(tmp_path):
+    from pygltflib import GLTF2
+
+    m = make_model()
+    add_layers(m, keyed_handles=True)
+    keyed(m)
+    r0 = m.regions.regions.names[0][0]
+    tl = m.tracks.add_key(region_track_name(0, r0), 0.0, [0.0, 0.5, 1.0], interpolation="linear")
+    m.set_timeline(tl.add_key(region_track_name(0, r0), 2.0, [1.0, -0.5, 0.0], interpolation="linear"))
+    enc = MeshEncoding(m, m.tracks)
+    kinds = {r.name: r.encoding for r in enc.layers}
+    assert kinds == {"regions": "baked", "handles": "linear", "paint": "linear"}
+    assert enc.baked_layers == ("regions",)
+    # the keyed region weights replace the static ones and vary over time
+    d0, d2 = (m.layers_at(t, ["regions"])["regions"] for t in (0.0, 2.0))
+    assert d0 is not None and d2 is not None and np.abs(d2 - d0).max() > 1e-2
+    # baked through layers_at: exact at any time, not only at frames
+    np.testing.assert_allclose(enc.points(TIMES), _evaluate_at(m, TIMES), atol=2e-6, rtol=0)
+    tl = m.tracks.replace(fps=4.0)
+    res = export(m, tl, tmp_path / "r.glb")
+    (rep,) = [r for r in res.layers if r.name == "regions"]
+    assert rep.encoding == "baked" and rep.detail.startswith("region weights keyed on level 0 (1 region tracks)")
+    names = GLTF2.load(str(res[0])).meshes[0].extras["targetNames"]
+    assert [n for n in names if n.startswith("layer:frame")] == [f"layer:frame{f:04d}" for f in range(9)]
+    want = np.stack([m.evaluate_at(t, tl) for t in tl.frame_times()]) * m.metadata.metres_per_unit
+    np.testing.assert_allclose(_read_pc2(export(m, tl, tmp_path / "r.pc2")[0]), want, atol=1e-7)
 
 
 def test_constant_extra_layer_is_folded_into_the_static_target(tmp_path):

@@ -130,3 +130,79 @@ def test_bad_time_and_timeline(tiny_model: FaceModel) -> None:
         tiny_model.set_timeline({"x": 1})  # type: ignore[arg-type]
     with pytest.raises(ModelError, match="no handles"):
         tiny_model.key_handles(0.0)
+
+
+# ------------------------------------------------------------------ head pose
+HALF = float(np.sqrt(0.5))
+QZ90 = [0.0, 0.0, HALF, HALF]  # 90 degrees about +z: (x, y, z) -> (-y, x, z)
+
+
+def test_head_pose_keys_move_the_shown_face_like_evaluate_at(tiny_model: FaceModel) -> None:
+    m = tiny_model
+    m.set_weight("up", 1.0)
+    m.key_head_pose(0.0, [0, 0, 0, 1], [0, 0, 0], interpolation="linear")
+    m.key_head_pose(2.0, QZ90, [1.0, 2.0, 3.0], interpolation="linear")
+    assert m.history.undo_labels[-1] == "Key head pose at 2s"
+    local = m.evaluate(posed=False).copy()
+    # at a key, by hand: vertex 1 = (1, 0, 0) -> R(1, 0, 0) + t = (0, 1, 0) + (1, 2, 3);
+    # vertex 4 = (1, 1, 0) lifted by 'up' to (1, 1, 1) -> (-1, 1, 1) + (1, 2, 3)
+    at2 = m.evaluate_at(2.0)
+    np.testing.assert_allclose(at2[1], [1.0, 3.0, 3.0], atol=1e-6)
+    np.testing.assert_allclose(at2[4], [0.0, 3.0, 4.0], atol=1e-6)
+    for t in (2.0, 0.7, 1.0):
+        m.set_time(t)
+        np.testing.assert_array_equal(m.evaluate(), m.evaluate_at(t))
+        np.testing.assert_array_equal(m.evaluate(posed=False), local)  # the pose is not a layer
+    # half-way: slerp to 45 degrees, translation half-way
+    p = m.head_pose
+    assert p is not None
+    np.testing.assert_allclose(p, [0.5, 1.0, 1.5, 0, 0, np.sin(np.pi / 8), np.cos(np.pi / 8)], atol=1e-12)
+    np.testing.assert_allclose(m.head_matrix()[:3, 3], [0.5, 1.0, 1.5])
+
+
+def test_undoing_a_head_pose_key_moves_the_face_back_at_once(tiny_model: FaceModel) -> None:
+    m = tiny_model
+    m.set_time(1.0)
+    rest = m.evaluate().copy()
+    shown: list[bool] = []
+    m.events.deformed.connect(shown.append)
+    m.key_head_pose(1.0, QZ90)  # at the playhead: the face turns without set_time
+    assert shown == [True] and m.head_pose is not None
+    np.testing.assert_allclose(m.evaluate()[1], [0.0, 1.0, 0.0], atol=1e-6)
+    np.testing.assert_array_equal(m.evaluate(), m.evaluate_at(1.0))
+    m.undo()
+    assert not m.tracks.tracks and m.head_pose is None and shown == [True, True]
+    np.testing.assert_array_equal(m.evaluate(), rest)
+    m.redo()
+    np.testing.assert_array_equal(m.evaluate(), m.evaluate_at(1.0))
+
+
+def test_key_head_pose_defaults_matrices_and_errors(tiny_model: FaceModel) -> None:
+    m = tiny_model
+    R = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # the same 90 degrees about z
+    m.key_head_pose(0.0, R, [0.0, 0.0, 1.0])
+    np.testing.assert_allclose(m.tracks.head_pose.keys[0].value, [0, 0, 1, *QZ90], atol=1e-12)
+    m.key_head_pose(1.0, translation=[2.0, 0.0, 0.0])  # rotation defaults to the one at t=1
+    np.testing.assert_allclose(m.tracks.head_pose.keys[1].value, [2, 0, 0, *QZ90], atol=1e-12)
+    m.key_head_pose(1.0, [0, 0, 0, 2])  # translation defaults to the one at t=1; normalised
+    np.testing.assert_allclose(m.tracks.head_pose.keys[1].value, [2, 0, 0, 0, 0, 0, 1])
+    with pytest.raises(ModelError, match="rotation must be a non-zero finite"):
+        m.key_head_pose(0.0, [0, 0, 0, 0])
+    with pytest.raises(ModelError, match="orthonormal"):
+        m.key_head_pose(0.0, 2 * np.eye(3))
+    with pytest.raises(ModelError, match="translation must be 3 finite numbers"):
+        m.key_head_pose(0.0, translation=[1.0, 2.0])
+    with pytest.raises(ModelError, match="time must be finite"):
+        m.key_head_pose(float("inf"))
+
+
+def test_expressions_are_saved_without_the_head_pose(tiny_model: FaceModel) -> None:
+    m = tiny_model
+    m.key_head_pose(0.0, QZ90, [5.0, 0.0, 0.0])
+    m.set_weight("up", 1.0)
+    m.save_expression("lifted")
+    expect = np.zeros((9, 3), np.float32)
+    expect[4, 2] = 1.0
+    np.testing.assert_array_equal(m.expressions["lifted"].displacement, expect)
+    m.key_expression(1.0, "lifted")  # its recipe plays back: no baked shape
+    assert m.shape_names == ["up", "left"]

@@ -16,11 +16,17 @@ from workbench.tracks import (
     Track,
     TrackError,
     add_key,
+    add_keys,
     auto_clamped_slopes,
     delete_key,
     evaluate_mesh,
+    head_euler_from_rotation,
+    head_rotation_from_euler,
     move_key,
+    parse_region_track,
     quat_slerp,
+    quaternion_to_matrix,
+    region_track_name,
     set_interpolation,
     set_tangents,
 )
@@ -317,3 +323,79 @@ def test_json_round_trip_is_exact():
         assert [k.tangent_mode for k in back.tracks[name].keys] == [k.tangent_mode for k in tr.keys]
     with pytest.raises(TrackError, match="malformed"):
         Timeline.from_json({"tracks": {W: [{"value": 1.0}]}})
+
+
+# ------------------------------------------------------------------ region tracks
+def test_region_track_names_round_trip_and_are_validated():
+    assert region_track_name(1, "mouth/L") == "regions/1/mouth/L"
+    assert parse_region_track("regions/1/mouth/L") == (1, "mouth/L")
+    for bad in ("regions/x/a", "regions/1/", "regions/-1/a", "regions/1", "weights/a"):
+        assert parse_region_track(bad) is None
+    with pytest.raises(TrackError, match="level must be an int >= 0"):
+        region_track_name(-1, "a")
+    with pytest.raises(TrackError, match="track name must be"):
+        Track("regions/one/a", (Key(0.0, [1.0, 2.0]),))
+    with pytest.raises(TrackError, match=r"values must be \(k,\) shape weights"):
+        Track("regions/0/a", (Key(0.0, 1.0),))
+
+
+def test_region_tracks_interpolate_per_shape_and_stay_on_one_level():
+    tl = Timeline().add_key("regions/0/a", 0.0, [0.0, 1.0], interpolation="linear")
+    tl = tl.add_key("regions/0/a", 2.0, [1.0, 0.0], interpolation="linear")
+    tl = tl.add_key("regions/0/b", 0.0, [0.5, 0.5])
+    s = tl.evaluate(0.5)
+    assert s.region_level == 0 and sorted(s.region_weights) == ["a", "b"]
+    np.testing.assert_allclose(s.region_weights["a"], [0.25, 0.75])
+    np.testing.assert_allclose(s.region_weights["b"], [0.5, 0.5])
+    assert tl.tracks["regions/0/a"].kind == "region" and tl.tracks["regions/0/a"].region == (0, "a")
+    with pytest.raises(TrackError, match=r"one region level, got levels \[0, 1\]"):
+        tl.add_key("regions/1/a", 0.0, [0.0, 0.0])
+    with pytest.raises(TrackError, match=r"one weight per model shape, got lengths \[2, 3\]"):
+        tl.add_key("regions/0/c", 0.0, [0.0, 0.0, 0.0])
+    assert Timeline().evaluate(0.0).region_level is None
+    back = Timeline.from_json(tl.to_json())
+    np.testing.assert_array_equal(back.tracks["regions/0/a"].values, tl.tracks["regions/0/a"].values)
+
+
+def test_add_keys_equals_add_key_one_by_one():
+    tl = Timeline().add_key(W, 0.5, 0.3).add_key(W, 3.0, 0.9)
+    times, values = [2.0, 0.5 + 1e-12, 1.0], [0.1, 0.7, 0.4]  # 0.5 is replaced (within tol)
+    one = tl
+    for t, v in zip(times, values, strict=True):
+        one = one.add_key(W, t, v, interpolation="linear")
+    many = add_keys(tl, W, times, values, interpolation="linear")
+    assert many.tracks[W].times.tolist() == one.tracks[W].times.tolist() == pytest.approx([0.5, 1.0, 2.0, 3.0])
+    np.testing.assert_array_equal(many.tracks[W].values, one.tracks[W].values)
+    np.testing.assert_array_equal(many.tracks[W]._out, one.tracks[W]._out)
+    with pytest.raises(TrackError, match="one row per time"):
+        add_keys(tl, W, [0.0, 1.0], [0.0])
+    with pytest.raises(TrackError, match="distinct"):
+        add_keys(tl, W, [1.0, 1.0], [0.0, 1.0])
+
+
+# ------------------------------------------------------------------ head pose angles
+def test_yaw_pitch_roll_turn_the_model_axes_by_hand():
+    front, up = np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0])
+    R = quaternion_to_matrix(head_rotation_from_euler(90, 0, 0))
+    np.testing.assert_allclose(R @ front, [1, 0, 0], atol=1e-12)  # toward the subject's left (+x)
+    R = quaternion_to_matrix(head_rotation_from_euler(0, 30, 0))
+    np.testing.assert_allclose(R @ front, [0, -0.5, math.sqrt(0.75)], atol=1e-12)  # nods down
+    R = quaternion_to_matrix(head_rotation_from_euler(0, 0, 90))
+    np.testing.assert_allclose(R @ up, [-1, 0, 0], atol=1e-12)  # top of the head to the subject's right
+    # a z-up model facing -y: yaw is about +z
+    R = quaternion_to_matrix(head_rotation_from_euler(90, 0, 0, up_axis="+z", front_axis="-y"))
+    np.testing.assert_allclose(R @ [0, -1, 0], [1, 0, 0], atol=1e-12)
+    np.testing.assert_allclose(R @ [0, 0, 1], [0, 0, 1], atol=1e-12)
+
+
+@pytest.mark.parametrize("axes", [("+y", "+z"), ("+z", "-y"), ("-x", "+y")])
+def test_euler_angles_round_trip(axes):
+    up, front = axes
+    for ypr in ((25.0, -10.0, 5.0), (-170.0, 80.0, 120.0), (0.0, 0.0, 0.0)):
+        q = head_rotation_from_euler(*ypr, up_axis=up, front_axis=front)
+        assert q[3] >= 0 and np.linalg.norm(q) == pytest.approx(1.0)
+        assert head_euler_from_rotation(q, up_axis=up, front_axis=front) == pytest.approx(ypr, abs=1e-9)
+    with pytest.raises(TrackError, match="perpendicular"):
+        head_rotation_from_euler(0, 0, 0, up_axis="+y", front_axis="-y")
+    with pytest.raises(TrackError, match="signed axis name"):
+        head_rotation_from_euler(0, 0, 0, up_axis="y")

@@ -88,6 +88,7 @@ class SculptPanel(W.VBox):
         if viewport is not None:
             self._before_edit.append(viewport.end_drag)
         self._links: list[Any] = []
+        self._syncing = False  # True while model -> UI updates set the stiffness sliders
         self._status_lock = threading.Lock()
         self._last_status_t = 0.0
 
@@ -199,7 +200,9 @@ class SculptPanel(W.VBox):
         self._cb_handles_changing = g("SculptPanel handles")(self._on_handles_changing)
         self._cb_history = g("SculptPanel history")(self._on_model_history)
         self._cb_shapes = g("SculptPanel shapes")(self._on_model_shapes)
+        self._cb_stiffness = g("SculptPanel stiffness")(self._on_model_stiffness)
         model.events.handles.connect(self._cb_handles)
+        model.events.shell_stiffness.connect(self._cb_stiffness)
         model.events.handles_changing.connect(self._cb_handles_changing)
         model.events.history.connect(self._cb_history)
         model.events.shapes.connect(self._cb_shapes)
@@ -255,6 +258,8 @@ class SculptPanel(W.VBox):
         self._update_status(f"baked <b>{name}</b>")
 
     def _on_stiffness(self, _change: Any = None) -> None:
+        if self._syncing:
+            return  # the sliders follow the model (undo/redo): not an edit
         k_s, k_b = float(self.k_s.value), float(self.k_b.value)
         if (k_s, k_b) == tuple(self._model.shell_stiffness):
             return
@@ -270,6 +275,18 @@ class SculptPanel(W.VBox):
 
     def _on_model_handles(self) -> None:
         self._update_status()
+
+    def _on_model_stiffness(self) -> None:
+        """Show the model's ``(k_s, k_b)`` (after an undo/redo or an edit from code)."""
+        k_s, k_b = self._model.shell_stiffness
+        lo = 10 ** _LOG_RANGE[0]
+        self._syncing = True
+        try:
+            with self.k_s.hold_sync(), self.k_b.hold_sync():
+                self.k_s.value = max(k_s, lo)
+                self.k_b.value = max(k_b, lo)
+        finally:
+            self._syncing = False
 
     def _on_handles_changing(self) -> None:
         # During a drag: at most 4 status updates a second (each one is a comm message).
@@ -320,6 +337,7 @@ class SculptPanel(W.VBox):
         if getattr(self, "_connected", False):
             ev = self._model.events
             ev.handles.disconnect(self._cb_handles)
+            ev.shell_stiffness.disconnect(self._cb_stiffness)
             ev.handles_changing.disconnect(self._cb_handles_changing)
             ev.history.disconnect(self._cb_history)
             ev.shapes.disconnect(self._cb_shapes)

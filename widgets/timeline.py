@@ -3,7 +3,12 @@
 The widget draws ``model.tracks`` (a :class:`workbench.tracks.Timeline`): a time
 ruler with frame ticks at the timeline's fps, a playhead, one row per track with
 its keys as diamonds (squares for step keys), and a curve view of the selected
-weight track with the Bézier tangent handles of its keys. It only *observes*
+weight track with the Bézier tangent handles of its keys. Region-weight tracks
+(a keyed marker fit) and the head pose are vector tracks: rows without a
+curve view. Three sliders give the head's yaw, pitch and roll (degrees about
+the model's up, side and front axes, :func:`workbench.tracks.head_rotation_from_euler`);
+they show the pose keyed at the playhead and "Key head pose" keys what they
+say there (the face turns at once: the model shows the keyed head pose). It only *observes*
 the model (``events.tracks``, ``events.time``, ``events.expressions``,
 ``events.shapes``) and edits it only through model methods, so undo, other
 views and Python cells stay in agreement:
@@ -16,6 +21,7 @@ drag a key diamond, release    ``move_key(track, i, t)`` — one undo step per d
 Delete / Backspace / button    ``delete_key`` (several keys: one ``set_timeline``)
 double-click a row             ``key_weights(t, [shape])`` / ``key_handles(t)``
 "Key" / "Key handles"          ``key_weights(time)`` / ``key_handles(time)``
+yaw/pitch/roll, "Key head pose" ``key_head_pose(time, rotation)`` (translation kept)
 interpolation selector         ``set_timeline(tl.set_interpolation(...))``
 drag a tangent handle          ``set_timeline(tl.set_tangents(...))`` (user tangents)
 drop an expression chip        ``key_expression(t, name)`` (HTML5 drag and drop)
@@ -72,7 +78,16 @@ import traitlets as t
 
 from widgets._threading import ErrorSink, close_interactions
 from workbench.model import ModelError
-from workbench.tracks import HANDLES, HEAD_POSE, WEIGHTS_PREFIX, Timeline
+from workbench.tracks import (
+    HANDLES,
+    HEAD_POSE,
+    IDENTITY_POSE,
+    WEIGHTS_PREFIX,
+    Timeline,
+    head_euler_from_rotation,
+    head_rotation_from_euler,
+    parse_region_track,
+)
 
 __all__ = ["TimelineWidget", "load_timeline_bundle"]
 
@@ -111,6 +126,9 @@ def load_timeline_bundle() -> str:
 def _track_label(name: str) -> str:
     if name.startswith(WEIGHTS_PREFIX):
         return name[len(WEIGHTS_PREFIX) :]
+    region = parse_region_track(name)
+    if region is not None:
+        return f"region {region[1]} (L{region[0]})"
     return {HANDLES: "handles (pose)", HEAD_POSE: "head pose"}.get(name, name)
 
 
@@ -125,7 +143,8 @@ def timeline_state(tl: Timeline) -> dict[str, Any]:
     """JSON the front end draws: fps, range, visible range and every track's keys.
 
     Scalar (weight) tracks carry values and tangent slopes; vector tracks
-    (handles, head pose) only times and interpolations (no curve view).
+    (handles, head pose, region weights) only times and interpolations (no
+    curve view).
     """
     tracks = []
     for name, tr in tl.tracks.items():
@@ -208,6 +227,8 @@ class TimelineWidget(anywidget.AnyWidget):
         The status label (achieved playback fps, last action).
     frames_shown, frames_dropped : int
         Live counters of the current (or last) playback.
+    head_pose_angles : tuple of float
+        (yaw, pitch, roll) in degrees of the head pose keyed at the playhead.
     playback_stats : dict
         After/while playing: ``frames``, ``dropped``, ``fps`` (achieved),
         ``target_fps``, ``set_time_ms`` (median), ``seconds``.
@@ -220,6 +241,8 @@ class TimelineWidget(anywidget.AnyWidget):
     _saved_expressions = t.List(t.Unicode()).tag(sync=True)
     _gallery_selected = t.Unicode("").tag(sync=True)
     _has_handles = t.Bool(False).tag(sync=True)
+    #: [yaw, pitch, roll] in degrees of the head pose keyed at the playhead
+    _head_pose = t.List(t.Float(), default_value=[0.0, 0.0, 0.0]).tag(sync=True)
 
     time = t.Float(0.0).tag(sync=True)
     playing = t.Bool(False).tag(sync=True)
@@ -266,6 +289,7 @@ class TimelineWidget(anywidget.AnyWidget):
         g = self.errors.guard
         self._on_tracks = g("Timeline update")(self._refresh_tracks)
         self._on_time = g("Timeline time")(self._refresh_time)
+        self._on_metadata = g("Timeline head pose")(self._refresh_head_pose)
         self._on_expr = g("Timeline expressions")(self._refresh_chips)
         self._on_handles = g("Timeline handles")(self._refresh_handles)
         model.events.tracks.connect(self._on_tracks)
@@ -273,6 +297,7 @@ class TimelineWidget(anywidget.AnyWidget):
         model.events.expressions.connect(self._on_expr)
         model.events.shapes.connect(self._on_expr)
         model.events.handles.connect(self._on_handles)
+        model.events.metadata.connect(self._on_metadata)
         if gallery is not None:
             gallery.observe(self._on_gallery, "selected")
             self._gallery_selected = gallery.selected or ""
@@ -297,6 +322,7 @@ class TimelineWidget(anywidget.AnyWidget):
             (m.events.expressions, self._on_expr),
             (m.events.shapes, self._on_expr),
             (m.events.handles, self._on_handles),
+            (m.events.metadata, self._on_metadata),
         ):
             sig.disconnect(cb)
         if self.gallery is not None:
@@ -328,6 +354,28 @@ class TimelineWidget(anywidget.AnyWidget):
         self._flush()
         self._model.key_expression(self._model.time, name)
         self.status = f"keyed {name} at {self._model.time:.2f} s"
+
+    @property
+    def head_pose_angles(self) -> tuple[float, float, float]:
+        return (float(self._head_pose[0]), float(self._head_pose[1]), float(self._head_pose[2]))
+
+    def key_head_pose(self, yaw: float, pitch: float, roll: float, time: float | None = None) -> None:
+        """Key the head turned by ``yaw``, ``pitch``, ``roll`` degrees at ``time`` (default: playhead).
+
+        The rotation is about the model's axes (``metadata.up_axis`` /
+        ``front_axis``, see :func:`workbench.tracks.head_rotation_from_euler`);
+        the translation keeps the one keyed at ``time`` (0 when the head pose
+        is not keyed). One undo step (``model.key_head_pose``).
+        """
+        m = self._model
+        meta = m.metadata
+        q = head_rotation_from_euler(
+            float(yaw), float(pitch), float(roll), up_axis=meta.up_axis, front_axis=meta.front_axis
+        )
+        when = float(m.time if time is None else time)
+        self._flush()
+        m.key_head_pose(when, rotation=q)
+        self.status = f"keyed head pose (yaw {yaw:.0f}°, pitch {pitch:.0f}°, roll {roll:.0f}°) at {when:.2f} s"
 
     def _flush(self) -> None:
         """End open slider/handle interactions so the next edit is an undo step of its own."""
@@ -532,12 +580,25 @@ class TimelineWidget(anywidget.AnyWidget):
                 weights = [n for n in names if n.startswith(WEIGHTS_PREFIX)]
                 self.selected_track = weights[0] if weights else (names[0] if names else "")
             self._curve = curve_samples(tl, self.selected_track)
+            self._refresh_head_pose()
 
     def _on_selected_track(self, _change: Any) -> None:
         self._curve = curve_samples(self._model.tracks, self.selected_track)
 
     def _refresh_time(self, t_: float, *_args: Any) -> None:
-        self.time = float(t_)
+        with self.hold_sync():
+            self.time = float(t_)
+            self._refresh_head_pose()
+
+    def _refresh_head_pose(self, *_args: Any) -> None:
+        m = self._model
+        pose = m.head_pose
+        q = IDENTITY_POSE[3:] if pose is None else pose[3:]
+        meta = m.metadata
+        angles = head_euler_from_rotation(q, up_axis=meta.up_axis, front_axis=meta.front_axis)
+        rounded = [round(a, 6) + 0.0 for a in angles]  # + 0.0: no "-0" in the sliders
+        if rounded != list(self._head_pose):
+            self._head_pose = rounded
 
     def _refresh_chips(self, *_args: Any) -> None:
         m = self._model
@@ -653,6 +714,13 @@ class TimelineWidget(anywidget.AnyWidget):
         when = float(c.get("time", m.time))
         m.key_handles(when)
         self.status = f"keyed handles at {when:.2f} s"
+
+    def _msg_key_head_pose(self, c: dict[str, Any]) -> None:
+        angles = [float(c[k]) for k in ("yaw", "pitch", "roll")]
+        if not all(math.isfinite(a) for a in angles):
+            raise ValueError(f"yaw, pitch and roll must be finite degrees, got {angles}")
+        when = float(c.get("time", self._model.time))
+        self.key_head_pose(*angles, time=when)
 
     def _msg_key_expression(self, c: dict[str, Any]) -> None:
         name, when = str(c["name"]), float(c["time"])

@@ -340,7 +340,13 @@ class MarkerFit:
         return RegionWeights(self.level, self.shape_names, self.region_names, self.region_weights[frame])
 
     def tracks(self) -> dict[str, NDArray[np.float32]]:
-        """Keyframable weight tracks: ``{region name: (T, k)}`` plus ``"background"`` (global)."""
+        """Per-frame weight curves: ``{region name: (T, k)}`` plus ``"background"`` (global).
+
+        Plain arrays; :meth:`FaceModel.key_marker_fit` puts them on the model's
+        timeline (weight keys for the global weights, ``"regions/<level>/<region>"``
+        keys for the regions), where playback, the file and the exports use them.
+        The RBF residual is not keyable (see there).
+        """
         out = {nm: self.region_weights[:, r] for r, nm in enumerate(self.region_names)}
         out["background"] = self.global_weights
         return out

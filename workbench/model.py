@@ -9,7 +9,9 @@ events while it lasts and one undo step plus one ``changed`` event on release.
 Evaluation (:meth:`FaceModel.evaluate`) is ``neutral + sum_k w_k * delta_k``
 plus the editing layers later tools add, computed in float32 with one BLAS
 call (or per-shape axpy when few weights are non-zero) and cached until
-something it depends on changes.
+something it depends on changes; then the head pose keyed on the timeline at
+the current time (:attr:`FaceModel.head_pose`) moves it rigidly, so the
+viewport shows what :meth:`FaceModel.evaluate_at` and the exports give.
 """
 
 from __future__ import annotations
@@ -28,13 +30,23 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from psygnal import Signal, SignalGroup
 
-from workbench.expressions import Expression, expression_from_state
+from workbench.expressions import Expression
 from workbench.handle_layer import HandleLayer
 from workbench.history import Command, History, payload_nbytes
 from workbench.paint import Brush, PaintLayer, PaintMix, Stroke, apply_dab, flood, normalize
 from workbench.polygons import Polygons
 from workbench.region_blend import RegionState, RegionWeights, region_layer
-from workbench.tracks import Interpolation, Timeline, weight_track_name
+from workbench.tracks import (
+    HEAD_POSE,
+    IDENTITY_POSE,
+    Interpolation,
+    Timeline,
+    TimelineSample,
+    add_keys,
+    quaternion_to_matrix,
+    region_track_name,
+    weight_track_name,
+)
 
 
 class ModelError(ValueError):
@@ -59,6 +71,44 @@ def _owned(a: NDArray[Any]) -> NDArray[Any]:
 def _detached_value(value: Any) -> Any:
     """A field value safe to keep in an undo step (arrays own their memory)."""
     return _owned(value) if isinstance(value, np.ndarray) else value
+
+
+def _head_matrix_at(timeline: Timeline, time: float) -> NDArray[np.float64] | None:
+    """(4, 4) head transform of ``timeline`` at ``time``, None when the head pose is not keyed."""
+    hp = timeline.head_pose
+    if hp is None:
+        return None
+    p = hp.sample([time])[0]
+    M = np.eye(4)
+    M[:3, :3] = quaternion_to_matrix(p[3:])
+    M[:3, 3] = p[:3]
+    return M
+
+
+def _as_quaternion(rotation: ArrayLike, what: str) -> NDArray[np.float64]:
+    """(4,) unit quaternion (x, y, z, w) from a quaternion or a (3, 3) rotation matrix."""
+    r = np.asarray(rotation, np.float64)
+    if r.shape == (4,) and np.isfinite(r).all() and np.linalg.norm(r) > 1e-12:
+        return np.asarray(r / np.linalg.norm(r), np.float64)
+    if r.shape == (3, 3) and np.isfinite(r).all():
+        if np.allclose(r.T @ r, np.eye(3), atol=1e-6) and np.linalg.det(r) > 0:
+            from scipy.spatial.transform import Rotation
+
+            return np.asarray(Rotation.from_matrix(r).as_quat(), np.float64)
+        raise ModelError(f"{what}: rotation matrix must be orthonormal with determinant +1")
+    raise ModelError(
+        f"{what}: rotation must be a non-zero finite (4,) quaternion (x, y, z, w) or a (3, 3) "
+        f"rotation matrix, got shape {r.shape}"
+    )
+
+
+def _posed_points(points: NDArray[np.float32], matrix: NDArray[np.float64]) -> NDArray[np.float32]:
+    """(n, 3) float32 ``R p + t`` for a (4, 4) rigid ``matrix`` (the one rounding rule for both
+    :meth:`FaceModel.evaluate` and :meth:`FaceModel.evaluate_at`)."""
+    out: NDArray[np.float32] = (points @ matrix[:3, :3].T.astype(np.float32)) + matrix[:3, 3].astype(
+        np.float32
+    )
+    return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -352,6 +402,10 @@ class FaceModel:
         self._interaction: _Interaction | None = None
         self._evaluated: NDArray[np.float32] | None = None
         self._blended: NDArray[np.float32] | None = None
+        # (local mesh it was made from, head matrix, posed mesh): evaluate()'s posed cache
+        self._posed: tuple[NDArray[np.float32], NDArray[np.float64], NDArray[np.float32]] | None = None
+        # (timeline, time, head matrix or None): the live head pose
+        self._pose_cache: tuple[Timeline, float, NDArray[np.float64] | None] | None = None
         self._layer_providers: dict[str, Callable[[FaceModel], NDArray[np.float32] | None]] = {}
         # layer order: region blend (a correction of the blend), handles, paint
         self._layer_providers["regions"] = region_layer
@@ -747,6 +801,7 @@ class FaceModel:
 
     def _apply_slot(self, name: str, value: Any, final: bool) -> None:
         with self._lock:
+            pose_before = self._live_head_matrix() if name == "tracks" else None
             self._slots[name] = value
             changing = getattr(self.events, f"{name}_changing", None)
             if final or changing is None:
@@ -756,6 +811,15 @@ class FaceModel:
             if _SLOTS[name]:
                 self._evaluated = None
                 self.events.deformed.emit(final)
+            elif name == "tracks":
+                # the live head pose follows the timeline: a key edit (or its undo)
+                # at the current time moves the shown head
+                after = self._live_head_matrix()
+                if (pose_before is None) != (after is None) or (
+                    pose_before is not None and after is not None
+                    and not np.array_equal(pose_before, after)
+                ):
+                    self.events.deformed.emit(final)
 
     def set_slot(self, name: str, value: Any, label: str) -> None:
         """Replace a layer slot (handles, regions, paint_layers, tracks) as one undoable edit.
@@ -948,9 +1012,20 @@ class FaceModel:
 
     # --------------------------------------------------- expressions, painting
     def save_expression(self, name: str) -> Expression:
-        """Save the current evaluated state as expression ``name`` (undoable); replaces a same-named one."""
+        """Save the current evaluated state as expression ``name`` (undoable); replaces a same-named one.
+
+        The displacement is ``evaluate(posed=False) - neutral``: the head pose is
+        a rigid motion of the whole head, not part of an expression.
+        """
         with self._lock:
-            expr = expression_from_state(self, name)
+            # the expression is a deformation of the face: without the head pose
+            expr = Expression(
+                name,
+                self.evaluate(posed=False) - self._vertices32,
+                dict(self._weights),
+                self.handles.vertices,
+                self.handles.offsets,
+            )
             lib = dict(self.expressions)
             lib[name] = expr
             self.set_slot("expressions", lib, f"Save expression {name}")
@@ -1181,11 +1256,27 @@ class FaceModel:
         return self._time
 
     def set_timeline(self, timeline: Timeline, label: str = "Edit keys") -> None:
-        """Replace the timeline (undoable); it is checked against the model's shapes/handles."""
+        """Replace the timeline (undoable); it is checked against the model's shapes/handles/regions.
+
+        Raises
+        ------
+        ModelError
+            ``timeline`` is not a Timeline, or it has region tracks and the model
+            has no regions.
+        TrackError
+            The tracks do not fit the model (:meth:`Timeline.check_model`).
+        """
         if not isinstance(timeline, Timeline):
             raise ModelError(f"set_timeline expects a Timeline, got {type(timeline).__name__}")
-        timeline.check_model(self)
-        self.set_slot("tracks", timeline, label)
+        with self._lock:
+            if timeline.region_tracks and not isinstance(self.regions, RegionState):
+                raise ModelError(
+                    "set_timeline: the timeline keys region weights "
+                    f"({len(timeline.region_tracks)} region tracks) but the model has no regions; "
+                    "call segment_regions() first"
+                )
+            timeline.check_model(self)
+            self.set_slot("tracks", timeline, label)
 
     def _grow_range(self, tl: Timeline, time: float) -> Timeline:
         return tl.replace(start=min(tl.start, time), end=max(tl.end, time))
@@ -1294,7 +1385,7 @@ class FaceModel:
             self._slots["paint_layers"] = PaintMix()
             self._evaluated = None
             self._blended = None
-            played = self.evaluate() - self._vertices32
+            played = self.evaluate(posed=False) - self._vertices32
         finally:
             self._weights, self._slots["handles"], self._slots["regions"] = saved[0], saved[1], saved[2]
             self._slots["paint_layers"], self._evaluated, self._blended = saved[3], saved[4], saved[5]
@@ -1334,6 +1425,201 @@ class FaceModel:
             tl = self.tracks.add_key("handles", time, self.handles.offsets, interpolation=interpolation)
             self.set_timeline(self._grow_range(tl, time), f"Key handles at {time:g}s")
 
+    def key_head_pose(
+        self,
+        time: float,
+        rotation: ArrayLike | None = None,
+        translation: ArrayLike | None = None,
+        interpolation: Interpolation = "bezier",
+    ) -> None:
+        """Key the rigid head transform at ``time`` (one undo step).
+
+        The head pose maps a point ``p`` of the deformed face to ``R p + t``
+        (track ``"head_pose"``, see :mod:`workbench.tracks`). It is applied by
+        :meth:`evaluate` at the current :attr:`time`, by :meth:`evaluate_at`
+        and by every export; the rotation is always slerped between keys,
+        ``interpolation`` shapes the translation.
+
+        Parameters
+        ----------
+        time : float
+            Seconds.
+        rotation : (4,) or (3, 3) float, optional
+            Unit quaternion ``(x, y, z, w)`` (glTF order; normalised here) or a
+            rotation matrix. Default: the rotation the timeline has at ``time``
+            (identity when the head pose is not keyed).
+            :func:`workbench.tracks.head_rotation_from_euler` makes one from
+            yaw/pitch/roll about the model's axes.
+        translation : (3,) float, optional
+            Model units. Default: the translation at ``time`` (0 when not keyed).
+        interpolation : {"step", "linear", "bezier"}
+
+        Raises
+        ------
+        ModelError
+            A non-finite time, a rotation that is not a non-zero quaternion or
+            a proper rotation matrix, a translation that is not 3 finite numbers.
+        """
+        t = float(time)
+        if not math.isfinite(t):
+            raise ModelError(f"key_head_pose: time must be finite, got {time!r}")
+        with self._lock:
+            tl = self.tracks
+            hp = tl.head_pose
+            current = IDENTITY_POSE if hp is None else hp.evaluate(t)
+            q = current[3:] if rotation is None else _as_quaternion(rotation, "key_head_pose")
+            if translation is None:
+                tr = current[:3]
+            else:
+                tr = np.asarray(translation, np.float64).reshape(-1)
+                if tr.shape != (3,) or not np.isfinite(tr).all():
+                    raise ModelError(
+                        "key_head_pose: translation must be 3 finite numbers (model units), "
+                        f"got {np.asarray(translation).tolist()!r}"
+                    )
+            tl = tl.add_key(HEAD_POSE, t, np.concatenate([tr, q]), interpolation=interpolation)
+            self.set_timeline(self._grow_range(tl, t), f"Key head pose at {t:g}s")
+
+    @property
+    def head_pose(self) -> NDArray[np.float64] | None:
+        """(7,) float: the head pose keyed at :attr:`time` (translation + quaternion), or None.
+
+        It is a function of the timeline and the current time only (set by
+        :meth:`set_time`, and following key edits and their undo at once): the
+        head pose is not keyed while a track holds no ``"head_pose"`` keys, and
+        the face is then not moved.
+        """
+        with self._lock:
+            hp = self.tracks.head_pose
+            return None if hp is None else hp.sample([self._time])[0]
+
+    def head_matrix(self) -> NDArray[np.float64]:
+        """(4, 4) float: the rigid transform :meth:`evaluate` applies now (identity if none).
+
+        Tools that pick points on the shown mesh and edit in model space map
+        the picks back with its inverse.
+        """
+        with self._lock:
+            M = self._live_head_matrix()
+            return np.eye(4) if M is None else M.copy()
+
+    def _live_head_matrix(self) -> NDArray[np.float64] | None:
+        tl, t = self._slots["tracks"], self._time
+        c = self._pose_cache
+        if c is None or c[0] is not tl or c[1] != t:
+            c = (tl, t, _head_matrix_at(tl, t))
+            self._pose_cache = c
+        return c[2]
+
+    def key_marker_fit(
+        self,
+        fit: Any,
+        start: float = 0.0,
+        every: int = 1,
+        *,
+        interpolation: Interpolation = "linear",
+    ) -> NDArray[np.float64]:
+        """Key a marker fit (Joshi et al. 2003 §3) on the timeline, frame by frame; one undo step.
+
+        Frame ``f`` of the fit is keyed at ``start + f / fps`` (``fps`` of
+        :attr:`tracks`): the fitted global weights of every shape as weight
+        keys (the regions' background and the global sliders) and the fitted
+        weights of every region of ``fit.level`` as region keys
+        (``"regions/<level>/<region>"``, see :mod:`workbench.tracks`). If the
+        model's region level is not ``fit.level`` it is set to it in the same
+        undo step. At a keyed frame, :meth:`evaluate_at` (and :meth:`set_time`
+        then :meth:`evaluate`) gives ``fit.positions(model, regions, f,
+        residual=False)`` plus whatever other layers the model has (handles,
+        paint...), within float32 round-off; exports bake the region weights
+        per frame (their layer report says so).
+
+        The RBF residual is not keyed: it is a per-frame displacement field, not
+        a weight, and the timeline has no track for one. It is available per
+        frame as ``fit.residual_displacement(model, f)`` or in
+        ``fit.positions(model, regions, f)`` (residual included). Exports do
+        not bake it: a registered layer cannot see which time is being
+        exported (:meth:`layers_at` does not set :attr:`time`), so there is no
+        clean path; write ``fit.positions`` per frame yourself (e.g. into a
+        point cache) when the residual is needed.
+
+        Parameters
+        ----------
+        fit : workbench.marker_fit.MarkerFit
+            Made for this model's shapes (same names, same order) and regions
+            (the names of ``fit.level`` must be the current ones).
+        start : float
+            Seconds of frame 0.
+        every : int
+            >= 1: key every ``every``-th frame (the last frame is always keyed;
+            the frames in between are interpolated).
+        interpolation : {"step", "linear", "bezier"}
+            Of the new keys. "linear" (default) joins the fitted frames by
+            straight lines; exact at the keyed frames whatever the choice.
+
+        Returns
+        -------
+        (F,) float
+            The key times.
+
+        Raises
+        ------
+        ModelError
+            ``fit`` is not a MarkerFit or was made for other shapes or regions,
+            the model has no regions, ``every``/``start`` are invalid, or the
+            timeline already has region keys on another level.
+        """
+        from workbench.marker_fit import MarkerFit
+
+        if not isinstance(fit, MarkerFit):
+            raise ModelError(f"key_marker_fit: fit must be a MarkerFit, got {type(fit).__name__}")
+        if isinstance(every, bool) or not isinstance(every, int | np.integer) or every < 1:
+            raise ModelError(f"key_marker_fit: every must be an int >= 1, got {every!r}")
+        t0 = float(start)
+        if not math.isfinite(t0):
+            raise ModelError(f"key_marker_fit: start must be finite seconds, got {start!r}")
+        with self._lock:
+            st = self._require_regions("key_marker_fit")
+            if tuple(fit.shape_names) != tuple(self.shape_names):
+                raise ModelError(
+                    f"key_marker_fit: fit was made for {len(fit.shape_names)} shapes "
+                    f"{list(fit.shape_names[:4])}..., the model has {len(self._shapes)} "
+                    f"{self.shape_names[:4]}... (shape list edited since fitting: fit again)"
+                )
+            L = int(fit.level)
+            R = st.regions
+            if L >= R.n_levels or tuple(R.names[L]) != tuple(fit.region_names):
+                raise ModelError(
+                    f"key_marker_fit: fit was made for other regions on level {L} "
+                    "(the regions were edited or re-segmented since fitting: fit again)"
+                )
+            tl = self.tracks
+            if tl.region_level is not None and tl.region_level != L:
+                raise ModelError(
+                    f"key_marker_fit: the timeline has region keys on level {tl.region_level}, "
+                    f"the fit is on level {L}; delete those keys or fit on level {tl.region_level}"
+                )
+            T = fit.n_frames
+            frames = np.arange(0, T, int(every))
+            if frames[-1] != T - 1:
+                frames = np.append(frames, T - 1)
+            times = t0 + frames / tl.fps
+            G = np.asarray(fit.global_weights, np.float64)[frames]  # (F, k)
+            RW = np.asarray(fit.region_weights, np.float64)[frames]  # (F, R, k)
+            for k, name in enumerate(self.shape_names):
+                tl = add_keys(tl, weight_track_name(name), times, G[:, k], interpolation=interpolation)
+            for r, region in enumerate(fit.region_names):
+                tl = add_keys(
+                    tl, region_track_name(L, region), times, RW[:, r, :], interpolation=interpolation
+                )
+            tl = tl.replace(start=min(tl.start, float(times[0])), end=max(tl.end, float(times[-1])))
+            label = f"Key marker fit ({frames.size} frames from {t0:g}s)"
+            with self.history.group(label):
+                if st.level != L:
+                    self.set_region_level(L)
+                self.set_timeline(tl, label)
+            self.events.history.emit()
+            return times
+
     def delete_key(self, track: str, index: int) -> None:
         """Delete key ``index`` of ``track`` (undoable)."""
         self.set_timeline(self.tracks.delete_key(track, index), f"Delete key {index} of {track}")
@@ -1344,8 +1630,11 @@ class FaceModel:
             tl = self.tracks.move_key(track, index, time, value)
             self.set_timeline(self._grow_range(tl, time), f"Move key of {track}")
 
-    def _apply_sample(self, time: float, timeline: Timeline | None = None) -> None:
-        """Write the timeline's values at ``time`` into the live state (no history, no events)."""
+    def _apply_sample(self, time: float, timeline: Timeline | None = None) -> bool:
+        """Write the timeline's values at ``time`` into the live state (no history, no events).
+
+        Returns True when region weights were written (the timeline has region tracks).
+        """
         sample = (self.tracks if timeline is None else timeline).evaluate(time)
         for n, v in sample.weights.items():
             if n in self._weights:
@@ -1355,15 +1644,45 @@ class FaceModel:
             self._slots["handles"] = dataclasses.replace(
                 self.handles, offsets=np.asarray(sample.handle_offsets, np.float32)
             )
+        regions = self._sampled_regions(sample)
+        if regions is not None:
+            self._slots["regions"] = regions
         self._evaluated = None
         self._blended = None
+        return regions is not None
+
+    def _sampled_regions(self, sample: TimelineSample) -> RegionState | None:
+        """The regions slot with the region weights of ``sample`` (None: no region tracks apply).
+
+        Keyed regions take their keyed weights; every other region of the keyed
+        level follows the (already sampled) global weights, so it adds no
+        correction. Tracks naming regions or levels the model no longer has, or
+        holding a stale number of shapes, are skipped (``check_model`` reports them).
+        """
+        st = self._slots["regions"]
+        L = sample.region_level
+        if L is None or not isinstance(st, RegionState) or L >= st.regions.n_levels:
+            return None
+        names = st.regions.names[L]
+        k = len(self._shapes)
+        g = np.array([self._weights[s.name] for s in self._shapes], np.float32)
+        values = np.tile(g, (len(names), 1))
+        index = {nm: i for i, nm in enumerate(names)}
+        for region, v in sample.region_weights.items():
+            if region in index and v.shape == (k,):
+                values[index[region]] = v
+        rw = RegionWeights(L, tuple(self.shape_names), names, values)
+        return RegionState(st.regions, st.level, rw)
 
     def set_time(self, time: float) -> None:
-        """Go to ``time``: keyed weights and handle offsets take their animated values.
+        """Go to ``time``: keyed weights, handle offsets, region weights and head pose animate.
 
         Like changing the frame in Blender this is not an undo step; unkeyed
-        shapes keep their values. Emits ``time``, ``weights``, ``handles`` and
-        ``deformed`` (final) events.
+        shapes keep their values. With region tracks the regions slot gets the
+        keyed region weights (see :mod:`workbench.tracks`); the head pose is the
+        one keyed at ``time`` (:attr:`head_pose`). Afterwards :meth:`evaluate`
+        equals ``evaluate_at(time)``. Emits ``time``, ``weights``, ``handles``,
+        ``regions`` (with region tracks) and ``deformed`` (final) events.
         """
         t = float(time)
         if not math.isfinite(t):
@@ -1372,31 +1691,42 @@ class FaceModel:
             if self._interaction is not None:
                 raise ModelError("set_time: finish the drag first")
             self._time = t
-            self._apply_sample(t)
+            regions = self._apply_sample(t)
             self.events.time.emit(t)
             self.events.weights.emit(dict(self._weights))
             self.events.handles.emit()
+            if regions:
+                self.events.regions.emit()
             self.events.deformed.emit(True)
 
     def evaluate_at(self, time: float, timeline: Timeline | None = None) -> NDArray[np.float32]:
         """(n, 3) float32 mesh at ``time`` (head pose applied), without changing the model.
 
         ``timeline`` (default: :attr:`tracks`) animates the weights, handle
-        offsets and head pose; exporters pass the timeline they write.
+        offsets, region weights and head pose; exporters pass the timeline they
+        write. ``set_time(time)`` then :meth:`evaluate` gives the same array.
         """
+        tl = self.tracks if timeline is None else timeline
         with self._lock:
-            saved = (dict(self._weights), self._slots["handles"], self._evaluated, self._blended)
+            saved = self._save_live()
             try:
-                self._apply_sample(float(time), timeline)
-                out = self.evaluate().copy()
+                self._apply_sample(float(time), tl)
+                out = self.evaluate(posed=False).copy()
             finally:
-                self._weights, self._slots["handles"], self._evaluated, self._blended = (
-                    saved[0], saved[1], saved[2], saved[3],
-                )
-            pose = (self.tracks if timeline is None else timeline).evaluate(float(time)).head_matrix()
-            if not np.allclose(pose, np.eye(4)):
-                out = (out @ pose[:3, :3].T.astype(np.float32)) + pose[:3, 3].astype(np.float32)
-            return out
+                self._restore_live(saved)
+            pose = _head_matrix_at(tl, float(time))
+            return out if pose is None else _posed_points(out, pose)
+
+    def _save_live(self) -> tuple[Any, ...]:
+        """What :meth:`_apply_sample` changes, to put back after a temporary evaluation."""
+        return (
+            dict(self._weights), self._slots["handles"], self._slots["regions"],
+            self._evaluated, self._blended,
+        )
+
+    def _restore_live(self, saved: tuple[Any, ...]) -> None:
+        self._weights, self._slots["handles"], self._slots["regions"] = saved[0], saved[1], saved[2]
+        self._evaluated, self._blended = saved[3], saved[4]
 
     def layers_at(
         self, time: float, names: Iterable[str], timeline: Timeline | None = None
@@ -1413,7 +1743,7 @@ class FaceModel:
             unknown = [n for n in wanted if n not in self._layer_providers]
             if unknown:
                 raise KeyError(f"no layers named {unknown}; layers are {list(self._layer_providers)}")
-            saved = (dict(self._weights), self._slots["handles"], self._evaluated, self._blended)
+            saved = self._save_live()
             try:
                 self._apply_sample(float(time), timeline)
                 out: dict[str, NDArray[np.float32] | None] = {}
@@ -1421,9 +1751,7 @@ class FaceModel:
                     d = self._layer_providers[n](self)
                     out[n] = None if d is None else np.array(d, dtype=np.float32)
             finally:
-                self._weights, self._slots["handles"], self._evaluated, self._blended = (
-                    saved[0], saved[1], saved[2], saved[3],
-                )
+                self._restore_live(saved)
             return out
 
     @property
@@ -1453,13 +1781,35 @@ class FaceModel:
             self._evaluated = None
 
     # ---------------------------------------------------------------- evaluate
-    def evaluate(self) -> NDArray[np.float32]:
+    def evaluate(self, posed: bool = True) -> NDArray[np.float32]:
         """(n, 3) float32, read-only: the current deformed mesh.
 
         :meth:`blended` (``neutral + sum_k w_k * delta_k``) plus every editing
-        layer (the handle layer, and layers later tools register). Cached until a
-        weight, shape or layer changes; a handle drag reuses the cached blend.
+        layer (the handle layer, and layers later tools register), then moved
+        by the head pose keyed at the current time (:attr:`head_pose`, as in
+        :meth:`evaluate_at`). Cached until a weight, shape or layer changes; a
+        handle drag reuses the cached blend.
+
+        Parameters
+        ----------
+        posed : bool
+            False: without the head pose (model space, where the editing
+            layers, expressions and handle offsets live).
         """
+        with self._lock:
+            local = self._evaluate_local()
+            if not posed:
+                return local
+            M = self._live_head_matrix()
+            if M is None:
+                return local
+            c = self._posed
+            if c is None or c[0] is not local or not np.array_equal(c[1], M):
+                c = (local, M, _readonly(_posed_points(local, M)))
+                self._posed = c
+            return c[2]
+
+    def _evaluate_local(self) -> NDArray[np.float32]:
         with self._lock:
             if self._evaluated is None:
                 out = self.blended()

@@ -7,7 +7,19 @@ A :class:`Timeline` holds named :class:`Track` objects:
   ``(h, 3)`` in model units (the "pose keys" of the handle layer);
 * ``"head_pose"`` — a rigid head transform, value ``(7,)`` =
   translation ``(tx, ty, tz)`` in model units + unit quaternion ``(qx, qy, qz, qw)``
-  (glTF order). The transform maps a model point ``p`` to ``R(q) p + t``.
+  (glTF order). The transform maps a model point ``p`` to ``R(q) p + t``;
+  :func:`head_rotation_from_euler` / :func:`head_euler_from_rotation` convert
+  yaw/pitch/roll about the model's axes;
+* ``"regions/<level>/<region>"`` — per-region blend weights (Joshi et al. 2003
+  §3/§4), a vector track whose value is ``(k,)``: the weight of every model
+  shape (in the model's shape order, as a row of
+  :class:`workbench.region_blend.RegionWeights`) inside region ``<region>`` of
+  hierarchy level ``<level>``. All region tracks of a timeline are on one
+  level and have the same ``k``. While a timeline has region tracks, they
+  define the region weights of that level: keyed regions take their keyed
+  values and every other region of the level follows the global weights
+  (no correction there), whatever static region weights the model holds.
+  ``FaceModel.key_marker_fit`` writes them from a marker fit.
 
 Everything is immutable: the edit functions (:func:`add_key`, :func:`delete_key`,
 :func:`move_key`, :func:`set_interpolation`, :func:`set_tangents`) return *new*
@@ -88,6 +100,7 @@ __all__ = [
     "HANDLES",
     "HEAD_POSE",
     "INTERPOLATIONS",
+    "REGIONS_PREFIX",
     "TANGENT_MODES",
     "WEIGHTS_PREFIX",
     "Key",
@@ -97,12 +110,17 @@ __all__ = [
     "Track",
     "TrackError",
     "add_key",
+    "add_keys",
     "auto_clamped_slopes",
     "delete_key",
     "evaluate_mesh",
+    "head_euler_from_rotation",
+    "head_rotation_from_euler",
     "move_key",
+    "parse_region_track",
     "quat_slerp",
     "quaternion_to_matrix",
+    "region_track_name",
     "set_interpolation",
     "set_tangents",
     "weight_track_name",
@@ -117,6 +135,7 @@ _CODE = {"step": 0, "linear": 1, "bezier": 2}
 WEIGHTS_PREFIX = "weights/"
 HANDLES = "handles"
 HEAD_POSE = "head_pose"
+REGIONS_PREFIX = "regions/"
 
 #: identity head pose: no translation, quaternion (0, 0, 0, 1)
 IDENTITY_POSE = np.array([0, 0, 0, 0, 0, 0, 1], np.float64)
@@ -129,6 +148,25 @@ class TrackError(ValueError):
 def weight_track_name(shape: str) -> str:
     """``"weights/<shape>"``: the track name of a blendshape weight."""
     return WEIGHTS_PREFIX + shape
+
+
+def region_track_name(level: int, region: str) -> str:
+    """``"regions/<level>/<region>"``: the track name of one region's blend weights."""
+    if isinstance(level, bool) or not isinstance(level, int | np.integer) or level < 0:
+        raise TrackError(f"region track level must be an int >= 0, got {level!r}")
+    if not isinstance(region, str) or not region:
+        raise TrackError(f"region track region must be a non-empty name, got {region!r}")
+    return f"{REGIONS_PREFIX}{int(level)}/{region}"
+
+
+def parse_region_track(name: str) -> tuple[int, str] | None:
+    """``(level, region)`` of a ``"regions/<level>/<region>"`` name, else None."""
+    if not isinstance(name, str) or not name.startswith(REGIONS_PREFIX):
+        return None
+    level, sep, region = name[len(REGIONS_PREFIX) :].partition("/")
+    if not sep or not region or not level.isdigit() or not level.isascii():
+        return None
+    return int(level), region
 
 
 def _readonly(a: NDArray[Any]) -> NDArray[Any]:
@@ -152,9 +190,10 @@ class Key:
     ----------
     time : float
         Seconds.
-    value : float or (h, 3) or (7,) array
+    value : float or (h, 3) or (7,) or (k,) array
         Scalar for weight tracks, ``(h, 3)`` offsets for the handle track,
-        ``(7,)`` translation + quaternion (x, y, z, w) for the head pose.
+        ``(7,)`` translation + quaternion (x, y, z, w) for the head pose,
+        ``(k,)`` shape weights for a region track.
         Stored as a read-only float64 array (0-d for scalars).
     interpolation : {"step", "linear", "bezier"}
         How the segment starting at this key is interpolated.
@@ -296,6 +335,90 @@ def quaternion_to_matrix(q: ArrayLike) -> NDArray[np.float64]:
     )
 
 
+def _axis_vector(axis: str, what: str) -> NDArray[np.float64]:
+    names = {"x": 0, "y": 1, "z": 2}
+    if not isinstance(axis, str) or len(axis) != 2 or axis[0] not in "+-" or axis[1] not in names:
+        raise TrackError(f"{what} must be a signed axis name like '+y', got {axis!r}")
+    v = np.zeros(3)
+    v[names[axis[1]]] = 1.0 if axis[0] == "+" else -1.0
+    return v
+
+
+def _head_basis(up_axis: str, front_axis: str) -> NDArray[np.float64]:
+    """(3, 3) rotation whose columns are the model's side, up and front axes."""
+    up = _axis_vector(up_axis, "up_axis")
+    front = _axis_vector(front_axis, "front_axis")
+    if abs(float(up @ front)) > 0:
+        raise TrackError(f"up_axis {up_axis!r} and front_axis {front_axis!r} must be perpendicular")
+    return np.stack([np.cross(up, front), up, front], axis=1)
+
+
+def head_rotation_from_euler(
+    yaw: float, pitch: float, roll: float, *, up_axis: str = "+y", front_axis: str = "+z"
+) -> NDArray[np.float64]:
+    """Unit quaternion ``(x, y, z, w)`` of a head turned by yaw, pitch and roll (degrees).
+
+    Intrinsic yaw-pitch-roll about the model's own axes (right-hand rule):
+    ``R = R_up(yaw) R_side(pitch) R_front(roll)`` with ``side = up × front``.
+    For the usual ``up = +y``, ``front = +z`` (``side = +x``, the subject's
+    left): positive yaw turns the face toward the subject's left, positive
+    pitch nods it down, positive roll tilts the top of the head toward the
+    subject's right. Uses :class:`scipy.spatial.transform.Rotation`.
+
+    Parameters
+    ----------
+    yaw, pitch, roll : float
+        Degrees.
+    up_axis, front_axis : str
+        Signed axis names (``model.metadata.up_axis`` / ``front_axis``).
+
+    Returns
+    -------
+    (4,) float
+        Unit quaternion with ``w >= 0``.
+    """
+    from scipy.spatial.transform import Rotation
+
+    angles = np.array([yaw, pitch, roll], np.float64)
+    if not np.isfinite(angles).all():
+        raise TrackError(f"yaw, pitch and roll must be finite degrees, got {angles.tolist()}")
+    B = _head_basis(up_axis, front_axis)
+    local = Rotation.from_euler("YXZ", angles, degrees=True).as_matrix()
+    q = np.asarray(Rotation.from_matrix(B @ local @ B.T).as_quat(), np.float64)
+    return q if q[3] >= 0 else -q
+
+
+def head_euler_from_rotation(
+    rotation: ArrayLike, *, up_axis: str = "+y", front_axis: str = "+z"
+) -> tuple[float, float, float]:
+    """Inverse of :func:`head_rotation_from_euler`: ``(yaw, pitch, roll)`` in degrees.
+
+    Parameters
+    ----------
+    rotation : (4,) float
+        Quaternion ``(x, y, z, w)`` (normalised here).
+
+    Returns
+    -------
+    tuple of float
+        Yaw and roll in (-180, 180], pitch in [-90, 90] (at pitch ±90 yaw and
+        roll are not unique; scipy picks roll = 0).
+    """
+    import warnings
+
+    from scipy.spatial.transform import Rotation
+
+    q = np.asarray(rotation, np.float64).reshape(-1)
+    if q.shape != (4,) or not np.isfinite(q).all() or not np.linalg.norm(q) > 0:
+        raise TrackError(f"rotation must be a finite non-zero (4,) quaternion, got {q.tolist()}")
+    B = _head_basis(up_axis, front_axis)
+    local = B.T @ quaternion_to_matrix(q) @ B
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)  # gimbal lock at pitch = ±90
+        yaw, pitch, roll = Rotation.from_matrix(local).as_euler("YXZ", degrees=True)
+    return float(yaw), float(pitch), float(roll)
+
+
 # -------------------------------------------------------------------------- tracks
 @dataclass(frozen=True, eq=False)
 class Track:
@@ -304,10 +427,12 @@ class Track:
     Parameters
     ----------
     name : str
-        ``"weights/<shape>"``, ``"handles"`` or ``"head_pose"``.
+        ``"weights/<shape>"``, ``"handles"``, ``"head_pose"`` or
+        ``"regions/<level>/<region>"``.
     keys : sequence of Key
         At least one key; times strictly increasing; all values the same shape
-        (scalar for weights, ``(h, 3)`` for handles, ``(7,)`` for the head pose).
+        (scalar for weights, ``(h, 3)`` for handles, ``(7,)`` for the head pose,
+        ``(k,)`` with ``k >= 1`` for a region).
 
     Raises
     ------
@@ -328,9 +453,11 @@ class Track:
         if not isinstance(name, str) or not (
             name in (HANDLES, HEAD_POSE)
             or (name.startswith(WEIGHTS_PREFIX) and len(name) > len(WEIGHTS_PREFIX))
+            or parse_region_track(name) is not None
         ):
             raise TrackError(
-                f"track name must be 'weights/<shape>', 'handles' or 'head_pose', got {name!r}"
+                "track name must be 'weights/<shape>', 'handles', 'head_pose' or "
+                f"'regions/<level>/<region>', got {name!r}"
             )
         keys = tuple(self.keys)
         if not keys:
@@ -354,6 +481,11 @@ class Track:
             raise TrackError(f"track {name!r}: values must have shape {expect}, got {shape}")
         if name == HANDLES and (len(shape) != 2 or shape[1] != 3):
             raise TrackError(f"track 'handles': values must be (h, 3) offsets, got shape {shape}")
+        if name.startswith(REGIONS_PREFIX) and (len(shape) != 1 or shape[0] < 1):
+            raise TrackError(
+                f"track {name!r}: values must be (k,) shape weights, one per model shape, "
+                f"got shape {shape}"
+            )
         for i, k in enumerate(keys):
             if k.value.shape != shape:
                 raise TrackError(
@@ -404,8 +536,15 @@ class Track:
 
     @property
     def kind(self) -> str:
-        """"weight", "handles" or "head_pose"."""
-        return "weight" if self.name.startswith(WEIGHTS_PREFIX) else self.name
+        """"weight", "handles", "head_pose" or "region"."""
+        if self.name.startswith(WEIGHTS_PREFIX):
+            return "weight"
+        return "region" if self.name.startswith(REGIONS_PREFIX) else self.name
+
+    @property
+    def region(self) -> tuple[int, str] | None:
+        """``(level, region name)`` of a region track, else None."""
+        return parse_region_track(self.name)
 
     @property
     def shape_name(self) -> str | None:
@@ -434,7 +573,7 @@ class Track:
         -------
         (F, d) float
             Flattened values (``d = 1`` for weights, ``3h`` for handles, 7 for the
-            head pose with unit quaternions).
+            head pose with unit quaternions, ``k`` for a region).
         """
         ts = np.asarray(times, np.float64).reshape(-1)
         out, _ = self._eval(ts, derivative=False)
@@ -541,12 +680,18 @@ class TimelineSample:
         Model units.
     head_rotation : (4,) float or None
         Unit quaternion (x, y, z, w).
+    region_level : int or None
+        Level of the region tracks, None without region tracks.
+    region_weights : dict of str to (k,) float
+        Shape weights of every keyed region (empty without region tracks).
     """
 
     weights: dict[str, float]
     handle_offsets: NDArray[np.float64] | None
     head_translation: NDArray[np.float64] | None
     head_rotation: NDArray[np.float64] | None
+    region_level: int | None = None
+    region_weights: dict[str, NDArray[np.float64]] = field(default_factory=dict)
 
     def head_matrix(self) -> NDArray[np.float64]:
         """(4, 4) homogeneous head transform (identity when the head is not keyed)."""
@@ -570,7 +715,9 @@ class Timeline:
         Playback/export range in seconds, ``start <= end``. :meth:`fit_range`
         sets it to the keyed range.
     tracks : mapping of str to Track
-        By track name (``"weights/<shape>"``, ``"handles"``, ``"head_pose"``).
+        By track name (``"weights/<shape>"``, ``"handles"``, ``"head_pose"``,
+        ``"regions/<level>/<region>"``). Region tracks must all be on one
+        level and hold the same number of shape weights.
     """
 
     fps: float = 30.0
@@ -590,6 +737,17 @@ class Timeline:
                 raise TrackError(f"tracks[{name!r}] must be a Track, got {type(tr).__name__}")
             if tr.name != name:
                 raise TrackError(f"tracks[{name!r}] holds a track named {tr.name!r}")
+        regions = [tr for tr in tracks.values() if tr.kind == "region"]
+        levels = sorted({tr.region[0] for tr in regions if tr.region is not None})
+        if len(levels) > 1:
+            raise TrackError(
+                f"region tracks must all be on one region level, got levels {levels}"
+            )
+        lengths = sorted({tr.value_shape[0] for tr in regions})
+        if len(lengths) > 1:
+            raise TrackError(
+                f"region tracks must all hold one weight per model shape, got lengths {lengths}"
+            )
         object.__setattr__(self, "fps", fps)
         object.__setattr__(self, "start", start)
         object.__setattr__(self, "end", end)
@@ -614,6 +772,25 @@ class Timeline:
     @property
     def head_pose(self) -> Track | None:
         return self.tracks.get(HEAD_POSE)
+
+    @property
+    def region_tracks(self) -> dict[str, Track]:
+        """Region tracks by *region* name (all on :attr:`region_level`)."""
+        out = {}
+        for tr in self.tracks.values():
+            r = tr.region
+            if r is not None:
+                out[r[1]] = tr
+        return out
+
+    @property
+    def region_level(self) -> int | None:
+        """The hierarchy level the region tracks key, None without region tracks."""
+        for tr in self.tracks.values():
+            r = tr.region
+            if r is not None:
+                return r[0]
+        return None
 
     @property
     def key_range(self) -> tuple[float, float] | None:
@@ -651,8 +828,14 @@ class Timeline:
     def check_model(self, model: FaceModel) -> None:
         """Raise :class:`TrackError` if the tracks do not fit ``model``.
 
-        Checks that every weight track names a shape of the model and that the
-        handle track has one offset per model handle.
+        Checks that every weight track names a shape of the model, that the
+        handle track has one offset per model handle and that region tracks
+        hold one weight per model shape. When the model has regions, region
+        tracks must name a level and regions of them; a model without regions
+        (yet) is not checked for that, because
+        :func:`workbench.fileformat.load_model` checks the timeline before it
+        installs the regions (``FaceModel.set_timeline`` and ``export`` require
+        the regions).
         """
         names = set(model.shape_names)
         unknown = sorted(s for s in self.weight_tracks if s not in names)
@@ -667,10 +850,38 @@ class Timeline:
                 f"the 'handles' track keys {h.value_shape[0]} handles but the model has "
                 f"{len(model.handles)}"
             )
+        rt = self.region_tracks
+        if not rt:
+            return
+        k = len(model.shape_names)
+        bad_k = sorted(n for n, tr in rt.items() if tr.value_shape != (k,))
+        if bad_k:
+            raise TrackError(
+                f"region tracks {bad_k[:4]} hold {rt[bad_k[0]].value_shape[0]} shape weights "
+                f"but the model has {k} shapes (shapes were added or removed after keying)"
+            )
+        state = getattr(model, "regions", None)
+        regions = getattr(state, "regions", None)
+        if regions is None:
+            return
+        level = self.region_level
+        assert level is not None
+        if level >= regions.n_levels:
+            raise TrackError(
+                f"region tracks key level {level} but the model's regions have "
+                f"{regions.n_levels} levels"
+            )
+        names = set(regions.names[level])
+        unknown = sorted(n for n in rt if n not in names)
+        if unknown:
+            raise TrackError(
+                f"region tracks key regions {unknown[:4]} that level {level} does not have; "
+                f"its regions are {sorted(names)[:8]}{'...' if len(names) > 8 else ''}"
+            )
 
     # ------------------------------------------------------------ evaluation
     def evaluate(self, time: float) -> TimelineSample:
-        """Weights, handle offsets and head transform at ``time`` (seconds)."""
+        """Weights, handle offsets, head transform and region weights at ``time`` (seconds)."""
         weights = {s: float(tr.sample([time])[0, 0]) for s, tr in self.weight_tracks.items()}
         h = self.handles
         offsets = None if h is None else h.evaluate(time)
@@ -679,7 +890,8 @@ class Timeline:
         if hp is not None:
             p = hp.sample([time])[0]
             tr_, rot = p[:3].copy(), p[3:].copy()
-        return TimelineSample(weights, offsets, tr_, rot)
+        regions = {r: tr.sample([time])[0] for r, tr in self.region_tracks.items()}
+        return TimelineSample(weights, offsets, tr_, rot, self.region_level, regions)
 
     def weight_matrix(self, shape_names: Iterable[str], times: ArrayLike) -> NDArray[np.float64]:
         """(F, k) weights of ``shape_names`` (in that order) at ``times``; unkeyed shapes 0.
@@ -836,6 +1048,56 @@ def add_key(
     return timeline.with_track(Track(track, tuple(keys)))
 
 
+def add_keys(
+    timeline: Timeline,
+    track: str,
+    times: ArrayLike,
+    values: ArrayLike,
+    *,
+    interpolation: Interpolation = "bezier",
+    tol: float = 1e-9,
+) -> Timeline:
+    """A new timeline with many auto-clamped keys added to one track at once.
+
+    The same as calling :func:`add_key` for every ``(time, value)`` pair, but
+    the track is built once (``add_key`` in a loop rebuilds it per key, which
+    is quadratic in the number of keys).
+
+    Parameters
+    ----------
+    timeline : Timeline
+    track : str
+        Track name; created if missing.
+    times : (K,) float
+        Seconds, distinct (more than ``tol`` apart).
+    values : (K, ...) float
+        One key value per time (``(K,)`` for a weight track, ``(K, k)`` for a
+        region track, ...).
+    interpolation : {"step", "linear", "bezier"}
+    tol : float
+        Existing keys within ``tol`` seconds of a new time are replaced.
+    """
+    ts = np.asarray(times, np.float64).reshape(-1)
+    vs = np.asarray(values, np.float64)
+    if vs.shape[:1] != ts.shape:
+        raise TrackError(
+            f"add_keys {track!r}: values must have one row per time ({ts.size}), got shape {vs.shape}"
+        )
+    order = np.argsort(ts, kind="stable")
+    ts, vs = ts[order], vs[order]
+    if ts.size > 1 and np.any(np.diff(ts) <= tol):
+        i = int(np.flatnonzero(np.diff(ts) <= tol)[0])
+        raise TrackError(f"add_keys {track!r}: times must be distinct, {ts[i]:g} is given twice")
+    new = [Key(t, v, interpolation) for t, v in zip(ts.tolist(), vs, strict=True)]
+    old = timeline.tracks.get(track)
+    kept = []
+    if old is not None:
+        near = np.abs(old.times[:, None] - ts[None, :]).min(axis=1) <= tol if ts.size else None
+        kept = [k for i, k in enumerate(old.keys) if near is None or not near[i]]
+    keys = sorted([*kept, *new], key=lambda k: k.time)
+    return timeline.with_track(Track(track, tuple(keys)))
+
+
 def delete_key(timeline: Timeline, track: str, index: int) -> Timeline:
     """A new timeline without key ``index`` of ``track`` (the track goes when empty)."""
     tr = _track(timeline, track)
@@ -929,7 +1191,9 @@ class MeshSampler:
 
     The shell displacement is linear in the offsets, ``D(o) = B o`` (see
     :mod:`workbench.shell`); :meth:`handle_basis` exposes it per handle
-    component for exports.
+    component for exports. The region, paint and registered layers (and so
+    region tracks) are not evaluated here: :meth:`FaceModel.evaluate_at` and
+    :class:`workbench.export.encoding.MeshEncoding` are the full evaluation.
 
     Parameters
     ----------

@@ -81,3 +81,22 @@ def wrinkled_head() -> FaceModel:
         m.set_weights(w)
         m.key_weights(t, list(w))
     return m
+
+
+def fitted_head(n_frames: int = 10) -> FaceModel:
+    """A synthetic marker performance fitted on region level 1 and keyed frame by frame
+    (``key_marker_fit``: global weights + one region-weight track per region), with the
+    head turning (head-pose keys) over the same frames."""
+    from workbench.marker_fit import fit_markers, generate_synthetic_marker_performance
+    from workbench.tracks import head_rotation_from_euler
+
+    m = load_sample("head")
+    st = m.segment_regions(0.25)
+    markers = np.asarray(default_face_handles(m).vertices)
+    perf = generate_synthetic_marker_performance(m, markers, n_frames=n_frames, seed=5, noise=0.001)
+    fit = fit_markers(m, st.regions, perf.markers, perf.marker_positions, 1)
+    times = m.key_marker_fit(fit)
+    m.key_head_pose(float(times[0]), head_rotation_from_euler(0, 0, 0), [0, 0, 0], interpolation="linear")
+    m.key_head_pose(float(times[-1]), head_rotation_from_euler(15, -5, 3), [0.05, 0.0, 0.02],
+                    interpolation="linear")
+    return m

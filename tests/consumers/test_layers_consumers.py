@@ -14,7 +14,7 @@ import struct
 import numpy as np
 import pytest
 from consumer_timelines import expected_points
-from edited_models import SAMPLE_TIMES, painted_head, regions_head, wrinkled_head
+from edited_models import SAMPLE_TIMES, fitted_head, painted_head, regions_head, wrinkled_head
 from test_usd_consumer import usdskel_points
 
 from workbench.export import export
@@ -118,3 +118,41 @@ def test_point_caches_equal_evaluate_at(models, files, name):
     frames, points = struct.unpack_from(">ii", data, 0)
     mdd = np.array(struct.unpack_from(f">{frames * points * 3}f", data, 8 + 4 * frames)).reshape(frames, points, 3)
     np.testing.assert_allclose(mdd, ours, atol=1e-5, rtol=0)
+
+
+# ------------------------------------------------------------------ a keyed marker fit
+@pytest.fixture(scope="module")
+def fitted(tmp_path_factory):
+    m = fitted_head()
+    d = tmp_path_factory.mktemp("fit")
+    return m, {suffix: export(m, m.tracks, d / f"fit{suffix}") for suffix in (".glb", ".usda")}
+
+
+def test_keyed_marker_fit_glb_validates_and_reports_baked_regions(node_tools, fitted):
+    _, files = fitted
+    assert {r.name: r.encoding for r in files[".glb"].layers}["regions"] == "baked"
+    path = str(files[".glb"][0])
+    report = node_tools("validate.mjs", path)
+    assert (report[path]["numErrors"], report[path]["numWarnings"]) == (0, 0), report[path]["messages"]
+
+
+def test_three_js_plays_the_keyed_marker_fit(node_tools, fitted):
+    m, files = fitted
+    fps = m.tracks.fps
+    frames = [0, 3, 4, 9]  # the region layer is baked per frame: exact at frames
+    times = [f / fps for f in frames]
+    got = node_tools("three_sample.mjs", str(files[".glb"][0]), json.dumps(times), "positions")
+    theirs = np.array(got["points"]).reshape(len(times), -1, 3)
+    ours = expected_points(m, m.tracks, times)
+    np.testing.assert_allclose(theirs, ours, atol=1e-5, rtol=0)
+    # the fitted regions and the head turn really move the face between these frames
+    assert np.abs(ours[3] - ours[0]).max() > 1e-3
+
+
+def test_usdskel_plays_the_keyed_marker_fit(usd, fitted):
+    m, files = fitted
+    frames = [0, 4, 9]
+    _, pts = usdskel_points(usd, files[".usda"][0], frames)
+    # UsdSkel evaluates the mesh; the head pose is on the root prim's xform
+    ours = expected_points(m, m.tracks, np.array(frames) / m.tracks.fps, head_pose=False)
+    np.testing.assert_allclose(pts, ours, atol=1e-5, rtol=0)

@@ -345,6 +345,49 @@ def test_timeline_state_orders_weight_tracks_before_others(keyed):
     assert st["tracks"][1]["values"] is None and st["tracks"][1]["label"] == "head pose"
 
 
+def test_region_tracks_are_vector_rows_with_a_readable_label(keyed):
+    tl = keyed.tracks.add_key("regions/1/mouth_L", 0.0, [0.5, 0.0])
+    st = timeline_state(tl)
+    assert [d["name"] for d in st["tracks"]] == [UP, "regions/1/mouth_L"]
+    row = st["tracks"][1]
+    assert row["kind"] == "region" and row["label"] == "region mouth_L (L1)" and row["values"] is None
+    assert curve_samples(tl, "regions/1/mouth_L") == {"track": "regions/1/mouth_L", "times": [], "values": []}
+
+
+# ------------------------------------------------------------------ head pose
+def test_key_head_pose_message_turns_the_head_in_one_undo_step(keyed):
+    m = keyed
+    w = TimelineWidget(m)
+    assert w.head_pose_angles == (0.0, 0.0, 0.0)
+    m.set_time(1.0)
+    send(w, type="key_head_pose", yaw=90.0, pitch=0.0, roll=0.0)
+    assert m.history.undo_labels[-1] == "Key head pose at 1s"
+    assert list(m.tracks.head_pose.times) == [1.0]
+    # tiny model: y up, z front; yaw 90 turns +z (front) to +x and +x to -z
+    np.testing.assert_allclose(m.evaluate()[1], [0.0, 0.0, -1.0], atol=1e-6)
+    np.testing.assert_array_equal(m.evaluate(), m.evaluate_at(1.0))
+    assert w.head_pose_angles == pytest.approx((90.0, 0.0, 0.0))
+    assert "keyed head pose (yaw 90°" in w.status
+    assert "head_pose" in [d["name"] for d in w._tracks["tracks"]]
+    m.undo()
+    assert m.tracks.head_pose is None and w.head_pose_angles == (0.0, 0.0, 0.0)
+    np.testing.assert_array_equal(m.evaluate(), m.evaluate(posed=False))
+
+
+def test_head_pose_sliders_follow_the_playhead(keyed):
+    m = keyed
+    w = TimelineWidget(m)
+    send(w, type="key_head_pose", yaw=0.0, pitch=0.0, roll=0.0, time=0.0)
+    send(w, type="key_head_pose", yaw=0.0, pitch=40.0, roll=0.0, time=2.0)
+    send(w, type="scrub", time=1.0, seq=1)
+    assert w.head_pose_angles == pytest.approx((0.0, 20.0, 0.0))  # slerp half-way about one axis
+    send(w, type="scrub", time=2.0, seq=2)
+    assert w.head_pose_angles == pytest.approx((0.0, 40.0, 0.0))
+    w.handle_message({"type": "key_head_pose", "yaw": float("nan"), "pitch": 0.0, "roll": 0.0})
+    assert "finite degrees" in w._error
+    w.close()
+
+
 # ------------------------------------------------------------------ export panel
 def test_export_panel_writes_files_and_imports_csv_back(keyed, tmp_path):
     from widgets.export_panel import ExportPanel

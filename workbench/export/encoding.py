@@ -47,6 +47,11 @@ layer. That is what :class:`MeshEncoding` holds:
     not linear in the keyed quantities, so each format bakes their sum
     ``N(t)`` per frame (:meth:`baked`, through :meth:`FaceModel.layers_at`).
     A baked sum that is the same at every frame is folded into ``static``.
+    The region layer joins them when the timeline keys region weights
+    (``"regions/<level>/<region>"`` tracks, e.g. a keyed marker fit): then
+    ``w_rk(t)`` varies, ``C_R`` is no constant target, and the layer
+    ``Σ_r W_r Σ_k (w_rk(t) − g_k(t)) Δ_k`` is baked per frame (the shape
+    targets are then not scaled by ``1 − S_R``). Its report says so.
 
 The head pose is applied after all layers (a rigid transform, as in
 :meth:`FaceModel.evaluate_at`); formats write it on the node / root prim.
@@ -60,7 +65,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from workbench.export import LayerReport
+from workbench.export import ExportError, LayerReport
 
 if TYPE_CHECKING:
     from workbench.model import FaceModel
@@ -203,8 +208,23 @@ class MeshEncoding:
             scale = np.ones(n, np.float64)  # per-vertex factor of the shape targets
             has_const = False
 
-            # --- regions: C_R - S_R * sum_k g_k delta_k
-            if builtin.get("regions", False):
+            # --- regions: C_R - S_R * sum_k g_k delta_k (or baked when the region weights are keyed)
+            regions_keyed = False
+            reasons: dict[str, str] = {}
+            if builtin.get("regions", False) and timeline.region_tracks:
+                st = model.regions
+                if not isinstance(st, RegionState):
+                    raise ExportError(
+                        "the timeline keys region weights "
+                        f"({len(timeline.region_tracks)} region tracks) but the model has no regions"
+                    )
+                regions_keyed = True
+                reasons["regions"] = (
+                    f"region weights keyed on level {timeline.region_level} "
+                    f"({len(timeline.region_tracks)} region tracks) vary over time"
+                )
+                reports["regions"] = LayerReport("regions", "baked", reasons["regions"])
+            elif builtin.get("regions", False):
                 st = model.regions
                 if isinstance(st, RegionState) and st.weights is not None and region_layer(model) is not None:
                     rw = st.weights.to_level(st.regions, st.level)
@@ -307,9 +327,12 @@ class MeshEncoding:
             self.baked_layers = tuple(
                 name for name in providers
                 if not (builtin[name] and (name != "paint" or paint_linear))
+                or (name == "regions" and regions_keyed)
             )
             for name in self.baked_layers:
-                reports[name] = LayerReport(name, "baked", "not linear in the keyed weights/offsets")
+                reasons.setdefault(name, "not linear in the keyed weights/offsets")
+                reports[name] = LayerReport(name, "baked", reasons[name])
+            self._baked_reasons = reasons
             self.layers = [reports[name] for name in providers if name in reports]
         self._const = const
         self._has_const = has_const
@@ -416,7 +439,7 @@ class MeshEncoding:
                 detail, enc = "zero at every exported frame", "inactive"
             else:
                 detail, enc = f"{how} ({moving} of {ts.size} frames non-zero)", "baked"
-            self.layers[i] = LayerReport(rep.name, enc, f"not linear in the keyed weights/offsets; {detail}")
+            self.layers[i] = LayerReport(rep.name, enc, f"{self._baked_reasons[rep.name]}; {detail}")
 
     def all_baked_report(self, how: str) -> None:
         """Every active layer went into per-frame positions (point caches, ``bake=True``)."""

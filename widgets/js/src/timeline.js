@@ -12,7 +12,8 @@
 //   data-time, data-playhead-x, data-ruler-y, data-axis = {x0, x1, t0, t1},
 //   data-keys = [[track, index, time, x, y], ...], data-tangents =
 //   [[track, index, side, x, y], ...] (curve view), data-playing, data-selected,
-//   data-draws, data-scrub-sent, data-error.
+//   data-draws, data-scrub-sent, data-error, data-head-pose = [yaw, pitch, roll]
+//   as the sliders show them.
 
 const GUTTER = 150; // px: track labels
 const RULER = 30; // px: time ruler height
@@ -70,7 +71,22 @@ const CSS = `
 .fwb-tl-chips-label { color: ${COLORS.textDim}; font-size: 11px; padding: 1px 2px; }
 .fwb-tl-canvas, .fwb-tl-curve-canvas { display: block; width: 100%; touch-action: none; }
 .fwb-tl-curve-box { border-top: 1px solid #e2e5ea; }
+.fwb-tl-head { display: flex; flex-wrap: wrap; align-items: center; gap: 8px; }
+.fwb-tl-head label { display: inline-flex; align-items: center; gap: 3px; }
+.fwb-tl-head input[type=range] { width: 96px; }
+.fwb-tl-head button { font: inherit; padding: 2px 8px; border: 1px solid #c3c8d0; border-radius: 3px;
+  background: #f6f7f9; cursor: pointer; }
+.fwb-tl-head button:hover { background: #eceff3; }
+.fwb-tl-deg { min-width: 36px; text-align: right; color: ${COLORS.textDim}; font-variant-numeric: tabular-nums; }
+.fwb-tl-head-label { color: ${COLORS.textDim}; }
 `;
+
+// head pose sliders: [trait index, name, min, max, tooltip]; degrees about the model's axes
+const HEAD_ANGLES = [
+  [0, "yaw", -180, 180, "Yaw: turn about the model's up axis (+: toward the subject's left)"],
+  [1, "pitch", -90, 90, "Pitch: nod about the side axis (+: down)"],
+  [2, "roll", -180, 180, "Roll: tilt about the front axis (+: top of the head to the subject's right)"],
+];
 
 function el(tag, attrs = {}, children = []) {
   const e = document.createElement(tag);
@@ -150,11 +166,23 @@ class TimelineView {
       el("span", { class: "fwb-tl-sep" }),
       this.btnGallery, this.status,
     ]); // prettier-ignore
+    // head pose: yaw/pitch/roll sliders + key button (their own row)
+    this.headInputs = [];
+    const headParts = [el("span", { class: "fwb-tl-head-label", text: "Head pose" })];
+    for (const [, name, lo, hi, title] of HEAD_ANGLES) {
+      const inp = el("input", { type: "range", class: `fwb-tl-${name}`, min: String(lo), max: String(hi), step: "1" });
+      const out = el("span", { class: "fwb-tl-deg", text: "0°" });
+      this.headInputs.push({ inp, out });
+      headParts.push(el("label", { title }, [el("span", { text: name }), inp, out]));
+    }
+    this.btnKeyHead = b("fwb-tl-key-head", "◆ Key head pose", "Key the head's yaw/pitch/roll at the playhead");
+    this.poseDirty = false; // the sliders hold an edit not keyed yet
+    this.headBox = el("div", { class: "fwb-tl-head" }, [...headParts, this.btnKeyHead]);
     this.chips = el("div", { class: "fwb-tl-chips" });
     this.canvas = el("canvas", { class: "fwb-tl-canvas" });
     this.curveCanvas = el("canvas", { class: "fwb-tl-curve-canvas" });
     this.curveBox = el("div", { class: "fwb-tl-curve-box" }, [this.curveCanvas]);
-    r.append(this.toolbar, this.chips, this.canvas, this.curveBox);
+    r.append(this.toolbar, this.headBox, this.chips, this.canvas, this.curveBox);
   }
 
   on(target, type, fn, opts) {
@@ -170,7 +198,8 @@ class TimelineView {
     m.on("change:time", onTime);
     this.disposers.push(() => m.off("change:time", onTime));
     for (const name of ["_tracks", "_curve", "playing", "loop", "status", "_error", "expressions",
-      "_saved_expressions", "_gallery_selected", "selected_keys", "selected_track", "_has_handles"]) {
+      "_saved_expressions", "_gallery_selected", "selected_keys", "selected_track", "_has_handles",
+      "_head_pose"]) {
       m.on(`change:${name}`, redraw);
       this.disposers.push(() => m.off(`change:${name}`, redraw));
     }
@@ -191,6 +220,18 @@ class TimelineView {
     });
     this.on(this.btnKey, "click", () => this.send({ type: "key" }));
     this.on(this.btnKeyHandles, "click", () => this.send({ type: "key_handles" }));
+    for (const { inp, out } of this.headInputs) {
+      this.on(inp, "input", () => {
+        out.textContent = `${Number(inp.value).toFixed(0)}°`;
+        this.poseDirty = true;
+        this.root.setAttribute("data-head-pose", JSON.stringify(this.headAngles()));
+      });
+    }
+    this.on(this.btnKeyHead, "click", () => {
+      const [yaw, pitch, roll] = this.headAngles();
+      this.poseDirty = false;
+      this.send({ type: "key_head_pose", yaw, pitch, roll });
+    });
     this.on(this.btnDelete, "click", () => this.deleteSelected());
     this.on(this.selInterp, "change", () => {
       const v = this.selInterp.value;
@@ -252,6 +293,23 @@ class TimelineView {
     this.model.send(content);
   }
 
+  headAngles() {
+    return this.headInputs.map(({ inp }) => Number(inp.value));
+  }
+
+  // the sliders follow the pose keyed at the playhead, unless they hold an unkeyed edit
+  syncHeadPose() {
+    const pose = this.model.get("_head_pose") || [0, 0, 0];
+    if (!this.poseDirty) {
+      this.headInputs.forEach(({ inp, out }, i) => {
+        const v = Number(pose[i] || 0);
+        if (Number(inp.value) !== v) inp.value = String(v);
+        out.textContent = `${v.toFixed(0)}°`;
+      });
+    }
+    this.root.setAttribute("data-head-pose", JSON.stringify(this.headAngles()));
+  }
+
   // --------------------------------------------------------------- state
   state() {
     return this.model.get("_tracks") || { fps: 30, start: 0, end: 0, view: [0, 2], tracks: [] };
@@ -292,6 +350,7 @@ class TimelineView {
     const kinds = new Set(this.selected.map(([tn, i]) => this.track(tn).interp[i]));
     this.selInterp.value = kinds.size === 1 ? [...kinds][0] : "";
     this.selInterp.disabled = this.selected.length === 0;
+    this.syncHeadPose();
     this.syncChips();
     this.requestDraw();
   }
