@@ -22,6 +22,11 @@ from typing import Any
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[2]
+# tests/ holds ci_env.py; benchmarks import this module with only tests/browser on the path
+sys.path.insert(0, str(REPO / "tests"))
+from ci_env import in_ci  # noqa: E402
+
+__all__ = ["in_ci"]  # re-exported: the browser tests import it from here
 CHROMIUM = Path("/usr/bin/chromium")
 ARTIFACTS = REPO / "test-artifacts"
 OVERRIDES = REPO / "widgets" / "jupyter_settings" / "overrides.json"
@@ -43,9 +48,6 @@ TEST_SETTINGS = {
 }
 
 
-def in_ci() -> bool:
-    """True when the CI environment variable is set (CI=true on this project's CI)."""
-    return os.environ.get("CI", "").lower() not in ("", "0", "false", "no")
 
 
 def _free_port() -> int:
@@ -244,7 +246,11 @@ class NotebookPage:
 
     def run_all(self, timeout: float = 180.0) -> dict[str, Any]:
         """Run every cell; wait until all ran and the kernel is idle; fail on errors."""
-        self.page.evaluate("() => window.jupyterapp.commands.execute('notebook:run-all-cells')")
+        # Fire and poll: the command's promise settles only when every cell has run, and a
+        # page.evaluate awaiting it has no timeout (a lost reply hung a CI run for 40 min).
+        self.page.evaluate(
+            "() => { window.jupyterapp.commands.execute('notebook:run-all-cells'); }"
+        )
         deadline = time.monotonic() + timeout
         st: dict[str, Any] | None = None
         while time.monotonic() < deadline:

@@ -9,13 +9,12 @@ mouse like a user:
 2. **Paint**: pick ``mouthSmileLeft`` in the palette and paint the left mouth
    corner, pick ``mouthSmileRight`` and paint the right one: a smile. The
    overlay is switched off and the paint is baked into a new shape
-   ("Bake to new shape"): the glTF exporter writes blendshapes and the handle
-   layer (see ``workbench/export/gltf.py``), not paint layers, so baking is how
-   painted edits reach a .glb.
+   ("Bake to new shape"), as an animator keeps a painted look to animate it
+   (the exporter would also write unbaked paint, as one constant target).
 3. **Timeline**: three times, click the ruler at a time (0, 0.5, 1 s), drag the
    ``jawOpen`` slider and press "◆ Key".
 4. **Export**: in the Export tab type a path and press "Export" (glTF binary).
-5. **Consumers**: the Khronos glTF-Validator reports 0 errors; three.js
+5. **Consumers**: the Khronos glTF-Validator reports 0 errors and 0 warnings; three.js
    (GLTFLoader + AnimationMixer in Node) plays the file: the morph weights vary
    over time as keyed, the handle targets carry the brow offsets, and the
    CPU-morphed vertex positions equal the model's own ``evaluate()`` at each
@@ -355,6 +354,7 @@ def test_sculpt_paint_key_export_then_validator_and_three_js(open_notebook) -> N
     report = run("validate.mjs", str(glb))[str(glb)]
     (nb.artifacts / "5-validator.json").write_text(json.dumps(report, indent=1))
     assert report["numErrors"] == 0, report["messages"]
+    assert report["numWarnings"] == 0, report["messages"]
     got = run("three_sample.mjs", str(glb), json.dumps(sample_t), "positions")
     names_3 = got["targetNames"]
     W = np.array(got["weights"])

@@ -19,8 +19,9 @@ import urllib.request
 from collections.abc import Iterator
 from pathlib import Path
 
+import numpy as np
 import pytest
-from harness import ARTIFACTS, _free_port
+from harness import ARTIFACTS, NotebookPage, _free_port
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -91,7 +92,18 @@ def _outside_address() -> str | None:
     return None if addr.startswith("127.") else addr
 
 
-def test_run_command_opens_the_workbench_notebook(run_command, browser) -> None:
+@pytest.fixture
+def keep_notebook() -> Iterator[None]:
+    """The server's root is the checkout: put back the notebook JupyterLab saves after running."""
+    nb = REPO / "notebooks" / "workbench.ipynb"
+    original = nb.read_bytes()
+    try:
+        yield
+    finally:
+        nb.write_bytes(original)
+
+
+def test_run_command_opens_the_workbench_notebook(keep_notebook, run_command, browser) -> None:
     proc, url, log = run_command
     port = int(url.split(":")[2].split("/")[0])
     # the token is required ...
@@ -121,6 +133,18 @@ def test_run_command_opens_the_workbench_notebook(run_command, browser) -> None:
             timeout=60_000,
         )
         page.screenshot(path=str(out / "opened.png"))
+        # Run > Run All Cells from the menu bar, as the README says: the head is drawn
+        page.locator(".lm-MenuBar-itemLabel", has_text="Run").first.click()
+        page.locator(".lm-Menu-itemLabel", has_text="Run All Cells").first.click()
+        nb = NotebookPage(page, None, out, "run_command")  # type: ignore[arg-type]
+        nb.wait_viewports(1, timeout=300)
+        assert nb.viewport().get_attribute("data-vertex-count") == "5084"
+        assert nb.viewport().get_attribute("data-error") in (None, "")
+        page.locator(".fwb-workbench").evaluate("e => e.scrollIntoView({block: 'start'})")
+        page.wait_for_timeout(300)
+        head = nb.canvas_shot("workbench_drawn")
+        # a drawn, shaded head, not an empty canvas: many distinct grey levels
+        assert len(np.unique(head[..., :3].reshape(-1, 3) // 8, axis=0)) > 50
     finally:
         page.close()
     # stopping the process the command started stops JupyterLab (it execs the server)

@@ -145,6 +145,42 @@ def test_drag_jaw_slider_changes_weight_and_mouth_pixels(open_notebook):
     assert pixel_change(before, undone) < 0.01
 
 
+def test_drag_smile_left_slider_moves_only_the_left_mouth_corner(open_notebook):
+    """The issue's first look: after jawOpen, mouthSmileLeft pulls the subject's left corner."""
+    nb = open_notebook(WORKBENCH_NB)
+    _prepare(nb)
+    probe = """
+import json, numpy as np
+_d = np.linalg.norm(model.shape("mouthSmileLeft").delta, axis=1)
+_skin = model.component_labels == model.component_names.index("skin")
+_left = np.argsort(-(_d * _skin))[:40]
+_right = np.argsort(-(np.linalg.norm(model.shape("mouthSmileRight").delta, axis=1) * _skin))[:40]
+print(json.dumps([[int(i) for i in _left], [int(i) for i in _right]]))
+"""
+    left_ids, right_ids = nb.kernel_eval(probe)
+    _scroll_to_workbench(nb, slider="mouthSmileLeft")
+    left_clip = clip_around(nb.project(left_ids), pad=25)
+    right_clip = clip_around(nb.project(right_ids), pad=25)
+    left0 = nb.screenshot("left-corner-before", clip=left_clip)
+    right0 = nb.screenshot("right-corner-before", clip=right_clip)
+    frame0 = nb.frame(0)
+
+    _drag_slider(nb, "mouthSmileLeft", 0.9)
+    nb.wait_frame_after(0, frame0)
+    _wait_settled(nb)
+    nb.page.wait_for_timeout(200)
+
+    w = _weights(nb)
+    assert w["mouthSmileLeft"] > 0.5, w["mouthSmileLeft"]
+    assert w["mouthSmileRight"] == 0.0
+    left1 = nb.screenshot("left-corner-after", clip=left_clip)
+    right1 = nb.screenshot("right-corner-after", clip=right_clip)
+    nb.screenshot("page-after")
+    assert pixel_change(left0, left1) > 0.03, "the left mouth corner did not change on screen"
+    # the clips may overlap at the lip middle; the far corner changes much less
+    assert pixel_change(right0, right1) < 0.5 * pixel_change(left0, left1)
+
+
 def test_orbit_changes_pixels_without_kernel_messages(open_notebook):
     nb = open_notebook(WORKBENCH_NB)
     _prepare(nb)

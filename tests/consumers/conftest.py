@@ -10,7 +10,6 @@ missing. Without node/npm the tests are skipped locally but FAIL under
 from __future__ import annotations
 
 import json
-import os
 import shutil
 import subprocess
 from collections.abc import Callable
@@ -19,6 +18,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from ci_env import in_ci
 
 from workbench import FaceModel, load_sample
 
@@ -27,7 +27,7 @@ HERE = Path(__file__).resolve().parent
 
 def _missing(what: str) -> None:
     msg = f"{what} (needed by the consumer tests in tests/consumers)"
-    if os.environ.get("CI", "").lower() in ("1", "true", "yes"):
+    if in_ci():
         pytest.fail(msg + " is missing under CI=true", pytrace=False)
     pytest.skip(msg + " is not available")
 

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from ci_env import in_ci
 from consumer_timelines import expected_points, expression_timeline
 from edited_models import painted_head, regions_head
 
@@ -69,7 +70,7 @@ def _bpy_python() -> Path | None:
 
 
 @pytest.mark.skipif(
-    _bpy_python() is None and os.environ.get("CI") != "true",
+    _bpy_python() is None and not in_ci(),
     reason="no Python with bpy (set WORKBENCH_BPY_PYTHON)",
 )
 def test_blender_reads_names_and_linear_keys(head, tmp_path):
@@ -93,7 +94,7 @@ def test_blender_reads_names_and_linear_keys(head, tmp_path):
 
 
 @pytest.mark.skipif(
-    _bpy_python() is None and os.environ.get("CI") != "true",
+    _bpy_python() is None and not in_ci(),
     reason="no Python with bpy (set WORKBENCH_BPY_PYTHON)",
 )
 @pytest.mark.parametrize("build", [painted_head, regions_head], ids=["painted", "regions"])
@@ -145,7 +146,7 @@ print("JSON" + json.dumps({"names": names, "points": out}))
 
 
 @pytest.mark.skipif(
-    _bpy_python() is None and os.environ.get("CI") != "true",
+    _bpy_python() is None and not in_ci(),
     reason="no Python with bpy (set WORKBENCH_BPY_PYTHON)",
 )
 @pytest.mark.parametrize("suffix", [".fbx", ".abc"])

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from ci_env import in_ci
 
 pv = pytest.importorskip("pyvista")
 PIL_Image = pytest.importorskip("PIL.Image")
@@ -83,7 +84,7 @@ def check_baseline(name: str, png: bytes) -> None:
         path.write_bytes(png)
         return
     if not path.exists():
-        if os.environ.get("CI", "").lower() == "true":
+        if in_ci():
             pytest.fail(f"baseline {path} is missing; create it with FW_UPDATE_BASELINES=1")
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_bytes(png)
