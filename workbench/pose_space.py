@@ -22,8 +22,15 @@ bulges — is learned from a few detailed example poses as a function of skin
 
 Documented choices (each pinned by ``tests/test_pose_space.py``):
 
-* The rest pose is always basis pose 0 with zero features and zero detail, so
-  zero strain gives exactly zero detail in interpolation mode.
+* The rest pose is always basis pose 0 with zero features and zero detail,
+  and zero strain gives exactly zero detail (up to float32 rounding) in both
+  fit modes: ``Σ_j w_j φ(‖f_j‖) = 0`` is a linear constraint on the weights.
+  ``lsq`` solves the equality-constrained least-squares problem (null-space
+  projection, :func:`_rest_constrained_lstsq`), not a fit followed by a
+  projection, so a larger basis never fits the training poses worse and the
+  greedy error never rises. A consequence of ``φ(r) = r``: with one pose
+  besides the rest pose the constraint forces that pose's weight to 0, so the
+  two-pose ``lsq`` fit equals the rest-only one.
 * The 0.025 cut-off is applied to ``ᾱ`` *relative to the vertex's largest*
   ``ᾱ`` (identical to the paper for vertices near an edge, where the largest
   ``ᾱ`` is ≈ 1; vertices far from every edge — the neck, the scalp — keep
@@ -32,15 +39,24 @@ Documented choices (each pinned by ``tests/test_pose_space.py``):
   graph, of the gap between their nearest and 17th-nearest edge excess
   ``L_{v,i} − l_i``: ≥ 90 % of those vertices see ≤ 16 edges naturally, the
   rest are truncated to their 16 strongest edges (then renormalized).
-* Per-vertex systems are solved by a symmetric eigendecomposition with a
-  relative cut-off (``rcond = 1e-6``): where two basis poses coincide in a
-  vertex's metric (its nearby edges do not tell them apart) the vertex gets the
-  minimum-norm weights instead of a singular or wildly cancelling solve; the
-  weights are then projected so that the rest pose maps to exactly zero detail
-  (:attr:`PoseSpace.singular` marks those vertices).
+* Basis poses are tested in order, per vertex (one shared test for PSD): a
+  distance column whose part orthogonal to the columns kept before it is at
+  most ``rcond = 1e-3`` of its norm is dropped (weight 0) — the vertex's metric
+  cannot tell that basis pose from earlier ones. The test only looks at
+  earlier columns, so growing the basis never drops a column kept before.
+  Why ``1e-3``: weights are stored and evaluated in float32 (the kernels too),
+  which costs about ``eps32 / rcond ≈ 6e-5`` of a vertex's detail through the
+  cancelling weights of nearly coincident poses (``1e-4`` allowed 6e-4 on the
+  sample head's examples); and poses closer than ``1e-3`` of a vertex's
+  pose-space extent (median 0.18 on the sample head) differ by RMS strains of
+  ~2e-4 — a 0.02 % stretch, within two orders of magnitude of the few-1e-6
+  noise of strain measured from float32 positions. :attr:`PoseSpace.singular` marks
+  the vertices where a dropped pose makes the fit miss a basis pose's values
+  by more than ``1e-4`` of that pose's largest value (in ``interp`` mode: the
+  vertices not reproduced exactly); elsewhere dropping loses nothing.
 
 Hand-written because no library offers strain pose spaces; the linear algebra
-is numpy's batched ``solve`` and scipy's sparse products. Per-frame kernels for
+is numpy's batched ``eigh`` and scipy's sparse products. Per-frame kernels for
 large meshes are in :mod:`workbench._kernels` (numba, optional).
 """
 
@@ -64,7 +80,8 @@ FitMode = Literal["interp", "lsq"]
 #: paper values (§5.3)
 DEFAULT_WEIGHT_THRESHOLD = 0.025
 DEFAULT_MAX_EDGES = 16
-_RCOND = 1e-4
+_RCOND = 1e-3
+_MISS = 1e-4
 
 
 def _positions(x: ArrayLike, what: str) -> FloatArray:
@@ -382,6 +399,14 @@ class PoseSpace:
     train_features : (T, F) float64
     train_values : (T, n, 3) float32
         Kept so examples can be edited and refitted.
+    rcond : float
+        Column cut-off of the fit (module docstring).
+    errors : tuple of float
+        RMS training errors per basis size (greedy fits).
+    singular : (n,) bool or None
+        Vertices whose metric cannot tell a basis pose from an earlier one
+        where that costs more than ``1e-4`` of a basis pose's largest value;
+        in ``interp`` mode exactly the vertices not reproduced.
     """
 
     basis_features: FloatArray
@@ -476,34 +501,104 @@ class PoseSpace:
         )
 
 
-def _pinv_sym(A: FloatArray, b: FloatArray, rcond: float) -> tuple[FloatArray, NDArray[np.bool_]]:
-    """Batched ``A⁺ b`` for symmetric A (n, P, P), b (n, P, 3) by eigendecomposition.
+def _nested_columns(A: FloatArray, rcond: float) -> NDArray[np.bool_]:
+    """(n, P) bool: the columns of A (n, R, P) that ordered Gram–Schmidt keeps.
 
-    Eigenvalues below ``rcond · max|λ|`` are dropped (returned mask marks those
-    vertices): a vertex whose metric cannot tell two basis poses apart gets the
-    minimum-norm solution instead of huge, cancelling weights that float32
-    storage would ruin.
+    Column ``j`` is kept when its component orthogonal to the kept columns
+    before it is more than ``rcond`` times its norm; otherwise (a basis pose the
+    vertex's metric cannot tell from earlier ones, or an all-zero column) its
+    weight is 0. The decision for column ``j`` depends on columns ``0..j`` only,
+    so adding basis poses never drops a column kept before: fit spaces are
+    nested and a least-squares error cannot rise as the basis grows.
     """
-    lam, Q = np.linalg.eigh(A)
-    top = np.abs(lam).max(axis=1, keepdims=True)
-    keep = np.abs(lam) > rcond * np.maximum(top, 1e-300)
-    inv = np.where(keep, 1.0 / np.where(keep, lam, 1.0), 0.0)
-    w = np.einsum("npk,nk,nqk,nqc->npc", Q, inv, Q, b, optimize=True)
-    return w, ~keep.all(axis=1)
+    n, R, P = A.shape
+    Q = np.zeros((n, R, P))
+    keep = np.zeros((n, P), bool)
+    for j in range(P):
+        c = A[:, :, j]
+        r = c.copy()
+        if j:
+            Qj = Q[:, :, :j]
+            for _ in range(2):  # twice is enough (Kahan, Parlett)
+                r -= np.einsum("nrk,nk->nr", Qj, np.einsum("nrk,nr->nk", Qj, r))
+        nr = np.linalg.norm(r, axis=1)
+        k = nr > rcond * np.linalg.norm(c, axis=1)
+        keep[:, j] = k
+        Q[k, :, j] = r[k] / nr[k, None]
+    return keep
 
 
-def _rest_exact(w: FloatArray, a: FloatArray) -> FloatArray:
-    """Project per-vertex weights (n, P, 3) so the rest pose (distances a (n, P)) maps to exactly 0."""
-    aa = np.einsum("np,np->n", a, a)
-    coef = np.einsum("np,npc->nc", a, w) / np.maximum(aa, 1e-300)[:, None]
-    return w - a[:, :, None] * coef[:, None, :]
+def _rest_constrained_lstsq(A: FloatArray, b: FloatArray, rcond: float) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """Batched ``min ‖A w − b‖`` subject to ``A[:, 0, :] · w = 0`` (row 0 is the rest pose).
+
+    A (n, R, P) distance columns, b (n, R, m) values -> w (n, P, m) and the
+    (n, P) mask of kept columns. Columns are selected by
+    :func:`_nested_columns` (dropped ones get weight 0). The rest-pose
+    constraint ``aᵀ w = 0`` (``a`` = row 0 restricted to the kept columns) is
+    eliminated with the projector ``Π = I − â âᵀ``: ``w = (A Π)⁺ b`` is the
+    constrained least-squares solution (its range lies in ``â⊥``). It is
+    computed from the eigendecomposition of ``Π AᵀA Π``, whose null space is
+    known exactly — ``â`` and the dropped coordinates — so exactly that many
+    smallest eigenvalues are discarded and every other one is inverted (the
+    kept columns are independent by construction). With ``R = P`` and nothing
+    dropped this is exact interpolation, which reproduces row 0 anyway.
+    """
+    P = A.shape[2]
+    keep = _nested_columns(A, rcond)
+    AK = A * keep[:, None, :]
+    a = AK[:, 0, :]
+    na = np.linalg.norm(a, axis=1)
+    ah = np.divide(a, na[:, None], out=np.zeros_like(a), where=na[:, None] > 0)
+    M = AK - np.einsum("nr,np->nrp", np.einsum("nrp,np->nr", AK, ah), ah)  # A Π
+    lam, V = np.linalg.eigh(np.einsum("nrp,nrq->npq", M, M))
+    null = (~keep).sum(axis=1) + (na > 0)  # dimension of the known null space
+    use = (np.arange(P)[None, :] >= null[:, None]) & (lam > 0)
+    inv = np.where(use, 1.0 / np.where(use, lam, 1.0), 0.0)
+    rhs = np.einsum("nrp,nrm->npm", M, b, optimize=True)
+    w = np.einsum("npk,nk,nqk,nqm->npm", V, inv, V, rhs, optimize=True)
+    w -= ah[:, :, None] * np.einsum("np,npm->nm", ah, w)[:, None, :]  # exactly in â⊥ (up to rounding)
+    w *= keep[:, :, None]
+    return w, keep
 
 
-def _solve_square(A: FloatArray, b: FloatArray) -> FloatArray:
-    """Global interpolation system; the 1 x 1 rest-only system (φ(0) = 0) gives w = 0."""
-    if A.shape[0] == 1 or not np.any(A):
-        return np.zeros((A.shape[1], b.shape[1]))
-    return np.asarray(np.linalg.solve(A, b), np.float64)
+def _miss_thresholds(values: NDArray) -> FloatArray:
+    """(P,) per basis pose: ``_MISS`` times its largest value norm over all vertices (values (P, n, 3)).
+
+    The rest pose (row 0) is exact by construction and is not checked.
+    """
+    scale = np.linalg.norm(np.asarray(values, np.float64), axis=2).max(axis=1)
+    thr = _MISS * np.maximum(scale, 1e-9 * max(float(scale.max(initial=0.0)), 1e-300))
+    thr[0] = np.inf
+    return thr
+
+
+def _missed(pred: NDArray[np.floating], target: NDArray[np.floating], thr: FloatArray) -> NDArray[np.bool_]:
+    """(n,) vertices whose pred and target (n, P, 3) differ by more than ``thr[p]`` at some basis pose p."""
+    return np.any(np.linalg.norm(pred - target, axis=2) > thr[None, :], axis=1)
+
+
+def _fit_global(
+    rows_F: FloatArray, rows_D: NDArray[np.float32], basis_rows: Sequence[int], mode: FitMode, rcond: float
+) -> tuple[NDArray[np.float32], NDArray[np.bool_]]:
+    """Global PSD weights (P, n, 3): one system shared by every vertex (rows_F[0] is the rest pose).
+
+    Also returns the (n,) :attr:`PoseSpace.singular` mask (all False unless a
+    basis pose duplicates an earlier one).
+    """
+    n = rows_D.shape[1]
+    FS = rows_F[basis_rows]
+    P = len(FS)
+    rows = list(basis_rows) if mode == "interp" else list(range(rows_F.shape[0]))
+    A = _distances_global(rows_F[rows], FS)
+    b = rows_D[rows].reshape(len(rows), -1).astype(np.float64)
+    w, keep = _rest_constrained_lstsq(A[None], b[None], rcond)
+    W = w[0]
+    singular = np.zeros(n, bool)
+    if P > 1 and not keep.all():
+        target = rows_D[basis_rows]
+        pred = (_distances_global(FS, FS) @ W).reshape(P, n, 3)
+        singular = _missed(pred.transpose(1, 0, 2), target.transpose(1, 0, 2), _miss_thresholds(target))
+    return W.reshape(P, n, 3).astype(np.float32), singular
 
 
 def _weighted_columns(alpha: sp.csr_matrix, rows_F: FloatArray, FS: FloatArray) -> FloatArray:
@@ -521,26 +616,28 @@ def _solve_weighted(
 ) -> tuple[NDArray[np.float32], NDArray[np.bool_]]:
     """Per-vertex RBF weights (n, P, 3) from distance columns C (n, R, P) and values (R, n, 3).
 
-    Row 0 of C must be the rest pose. Also returns the (n,) mask of vertices
-    whose system was (numerically) singular — two basis poses coincide in the
-    vertex's metric — and got the minimum-norm solution.
+    Row 0 of C must be the rest pose. ``interp`` uses the rows ``basis_rows``
+    (a ``P × P`` system per vertex), ``lsq`` every row; both are solved by
+    :func:`_rest_constrained_lstsq`. Also returns :attr:`PoseSpace.singular`:
+    vertices that dropped a basis pose their metric cannot tell from an
+    earlier one *and* miss a basis pose's values by more than ``_MISS``.
     """
     n, _, P = C.shape
     W = np.empty((n, P, 3), np.float32)
     singular = np.zeros(n, bool)
     br = np.asarray(basis_rows, dtype=np.int64)
+    rows = br if mode == "interp" else np.arange(C.shape[1])
+    thr = _miss_thresholds(rows_D[br])
     for s in range(0, n, chunk):
         e = min(n, s + chunk)
-        if mode == "interp":
-            A = np.asarray(C[s:e][:, br, :], np.float64)
-            b = np.asarray(rows_D[br, s:e], np.float64).transpose(1, 0, 2)
-            w, singular[s:e] = _pinv_sym(A, b, rcond)
-        else:
-            A = np.asarray(C[s:e], np.float64)
-            b = np.asarray(rows_D[:, s:e], np.float64).transpose(1, 0, 2)
-            G = np.einsum("ntp,ntq->npq", A, A)
-            w, singular[s:e] = _pinv_sym(G, np.einsum("ntp,ntc->npc", A, b), rcond * rcond)
-        W[s:e] = _rest_exact(w, np.asarray(C[s:e, 0, :], np.float64))
+        A = np.asarray(C[s:e][:, rows, :], np.float64)
+        b = np.asarray(rows_D[rows, s:e], np.float64).transpose(1, 0, 2)
+        w, keep = _rest_constrained_lstsq(A, b, rcond)
+        W[s:e] = w
+        if P > 1:
+            Cb = np.asarray(C[s:e][:, br, :], np.float64)
+            target = np.asarray(rows_D[br, s:e], np.float64).transpose(1, 0, 2)
+            singular[s:e] = ~keep.all(axis=1) & _missed(np.einsum("nrp,npc->nrc", Cb, w), target, thr)
     return W, singular
 
 
@@ -588,7 +685,11 @@ def fit_pose_space(
         ``interp``: reproduce the basis poses exactly (``P × P`` systems).
         ``lsq``: least squares over all ``T`` poses (``T × P`` systems).
     rcond : float
-        Relative eigenvalue cut-off of the per-vertex systems (WPSD).
+        Relative cut-off of the ordered column test (module docstring): a basis
+        pose closer than this to the earlier ones in a vertex's metric gets weight 0.
+
+    Both modes keep the rest pose exact: ``Σ_j w_j φ(‖f_j‖) = 0`` is imposed as
+    a constraint (``interp`` reproduces it anyway), see :func:`_rest_constrained_lstsq`.
     """
     Ft, D = _check_training(features, values)
     if mode not in ("interp", "lsq"):
@@ -602,14 +703,8 @@ def fit_pose_space(
     basis_rows = [0] + [b + 1 for b in sel]
     FS = rows_F[basis_rows]
     P = len(basis_rows)
-    singular = None
     if alpha is None:
-        if mode == "interp":
-            W = _solve_square(_distances_global(FS, FS), rows_D[basis_rows].reshape(P, -1).astype(np.float64))
-        else:
-            A = _distances_global(rows_F, FS)
-            W = np.asarray(np.linalg.lstsq(A, rows_D.reshape(T + 1, -1).astype(np.float64), rcond=None)[0], np.float64)
-        weights = W.reshape(P, n, 3).astype(np.float32)
+        weights, singular = _fit_global(rows_F, rows_D, basis_rows, mode, rcond)
     else:
         if alpha.matrix.shape != (n, Ft.shape[1]):
             raise ValueError(
@@ -650,6 +745,13 @@ def greedy_fit(
     error and refit, until the RMS error over all poses and vertices is at most
     ``tolerance`` or the basis has ``max_basis`` poses (rest pose included).
 
+    In ``lsq`` mode the errors never rise (up to float32 rounding of the
+    weights): each fit is the rest-constrained least-squares optimum over a
+    basis that contains the previous one, with the same columns kept
+    (:func:`_nested_columns`). They can stay flat: a second pose alone gets
+    weight 0 (module docstring), and the next pose picked is then the
+    second-largest error of the rest-only fit.
+
     Parameters
     ----------
     features : (T, F), values : (T, n, 3)
@@ -685,15 +787,8 @@ def greedy_fit(
         FS = rows_F[basis_rows]
         P = len(basis_rows)
         if alpha is None:
-            if mode == "interp":
-                W = _solve_square(_distances_global(FS, FS), rows_D[basis_rows].reshape(P, -1).astype(np.float64))
-            else:
-                W = np.asarray(
-                    np.linalg.lstsq(_distances_global(rows_F, FS), rows_D.reshape(T + 1, -1).astype(np.float64), rcond=None)[0],
-                    np.float64,
-                )
-            weights = W.reshape(P, n, 3).astype(np.float32)
-            pred = (_distances_global(rows_F, FS) @ W).reshape(T + 1, n, 3)[:, mask]
+            weights, singular = _fit_global(rows_F, rows_D, basis_rows, mode, rcond)
+            pred = (_distances_global(rows_F, FS) @ weights.reshape(P, -1)).reshape(T + 1, n, 3)[:, mask]
         else:
             cols.append(_distances_weighted(alpha.matrix, rows_F, rows_F[basis_rows[-1]]))
             C = np.stack(cols, 2)  # (n, R, P)

@@ -159,17 +159,25 @@ def test_view_and_scale_an_example_propagates(fitted) -> None:
     X, D = example_detailed(model, panel.layer, "brow_raise")
     assert _near(model.evaluate(), D, D - X)
     assert np.abs(d0).max() > 0.002
-    # a pose near it: surprise shares the brow raise
+    # another example is interpolated exactly: the edit must not leak into it ...
     panel.view_example("surprise")
     s0 = _detail(model, panel)
+    # ... while a pose near brow_raise that is not an example follows the edit
+    near = dict.fromkeys(model.shape_names, 0.0)
+    near.update({k: 0.9 * v for k, v in EXAMPLE_POSES["brow_raise"].items()})
+    model.set_weights(near)
+    n0 = _detail(model, panel)
 
     panel.example.value = "brow_raise"
     panel.scale.value = 0.5
     panel.scale_button.click()
     assert panel.error_line.value == ""
     assert "×0.50" in panel.cards.children[0].children[-1].value
-    s1 = _detail(model, panel)
-    assert not np.allclose(s1, s0, atol=1e-5)  # the edit reached a neighbouring pose
+    model.set_weights(near)
+    n1 = _detail(model, panel)
+    assert np.linalg.norm(n1) < 0.8 * np.linalg.norm(n0)  # the edit reached a neighbouring pose
+    panel.view_example("surprise")
+    np.testing.assert_allclose(_detail(model, panel), s0, atol=2e-4 * np.abs(s0).max())
     panel.view_example("brow_raise")
     ratio = np.linalg.norm(_detail(model, panel)) / np.linalg.norm(d0)
     assert abs(ratio - 0.5) < 0.1, ratio
