@@ -373,3 +373,14 @@ def test_set_shell_stiffness_is_one_undoable_step_with_events() -> None:
 def test_a_model_without_blendshapes_evaluates_to_its_neutral() -> None:
     m = FaceModel(np.eye(3), np.array([[0, 1, 2]]))
     np.testing.assert_array_equal(m.evaluate(), np.eye(3, dtype=np.float32))
+
+
+def test_to_pyvista_without_the_ui_module_names_what_to_import(tiny_model, monkeypatch):
+    """The core never imports pyvista: without widgets.render registered, a clear error."""
+    from workbench import converters
+
+    monkeypatch.setattr(converters, "_CONVERTERS", {})
+    with pytest.raises(ImportError, match=r"import widgets\.render"):
+        tiny_model.to_pyvista()
+    with pytest.raises(ImportError, match=r"import widgets\.render"):
+        FaceModel.from_pyvista(object())

@@ -50,6 +50,7 @@ from numpy.typing import ArrayLike, NDArray
 from PIL import Image
 
 from workbench import FaceModel, ModelMetadata
+from workbench.converters import register_mesh_converter
 from workbench.polygons import Polygons
 
 __all__ = [
@@ -706,3 +707,7 @@ def png_to_array(png: bytes) -> NDArray[np.uint8]:
     """Decode PNG bytes to an (h, w, 3) uint8 array (for tests and contact sheets)."""
     with Image.open(io.BytesIO(png)) as im:
         return np.asarray(im.convert("RGB"))
+
+
+# FaceModel.to_pyvista() / FaceModel.from_pyvista() find these (workbench.converters)
+register_mesh_converter("pyvista", to_pyvista, from_pyvista, provider=__name__)

@@ -30,6 +30,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from psygnal import Signal, SignalGroup
 
+from workbench.converters import mesh_converter
 from workbench.expressions import Expression
 from workbench.handle_layer import HandleLayer
 from workbench.history import Command, History, payload_nbytes
@@ -1781,6 +1782,32 @@ class FaceModel:
             self._evaluated = None
 
     # ---------------------------------------------------------------- evaluate
+    def to_pyvista(self, points: ArrayLike | None = None, **kwargs: Any) -> Any:
+        """This model as a ``pyvista.PolyData`` (``widgets.render.to_pyvista``).
+
+        Parameters
+        ----------
+        points : (n, 3) float, optional
+            Positions to use instead of the neutral (e.g. ``self.evaluate()``).
+        **kwargs
+            ``polygons``, ``scalars``, ``scalars_name`` (see ``widgets.render.to_pyvista``).
+
+        Raises
+        ------
+        ImportError
+            If ``widgets.render`` (UI extra) was not imported: the core never imports
+            pyvista itself (:mod:`workbench.converters`).
+        """
+        return mesh_converter("pyvista").to(self, points, **kwargs)
+
+    @classmethod
+    def from_pyvista(cls, mesh: Any, **kwargs: Any) -> FaceModel:
+        """A model (no blendshapes) from a pyvista mesh (``widgets.render.from_pyvista``)."""
+        model = mesh_converter("pyvista").from_(mesh, **kwargs)
+        if not isinstance(model, cls):
+            raise TypeError(f"from_pyvista: the converter returned {type(model).__name__}")
+        return model
+
     def evaluate(self, posed: bool = True) -> NDArray[np.float32]:
         """(n, 3) float32, read-only: the current deformed mesh.
 

@@ -269,3 +269,15 @@ def test_head_jaw_open_changes_mouth_pixels_not_forehead(head):
     patch_n, patch_j = neutral[r - 4 : r + 5, c - 4 : c + 5], jaw[r - 4 : r + 5, c - 4 : c + 5]
     assert not np.all(patch_n == 255), "forehead probe landed on the background"
     assert mean_abs_diff(patch_n, patch_j) < 1.0
+
+
+def test_model_methods_convert_through_pyvista(head):
+    """``FaceModel.to_pyvista`` / ``from_pyvista`` are the widgets.render converters."""
+    X = head.evaluate()
+    mesh = head.to_pyvista(X, polygons=True)
+    np.testing.assert_array_equal(np.asarray(mesh.points), np.asarray(X, np.float64))
+    np.testing.assert_array_equal(np.asarray(mesh.point_data["component"]), head.component_labels)
+    back = FaceModel.from_pyvista(mesh, name="rt")
+    assert isinstance(back, FaceModel)
+    assert back.polygons.equals(head.polygons)
+    np.testing.assert_array_equal(back.vertices, np.asarray(X, np.float32))
