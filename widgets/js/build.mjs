@@ -12,7 +12,8 @@ const options = {
   format: "esm",
   minify: true,
   target: ["es2020"],
-  legalComments: "none",
+  // keep three.js's MIT notice (and any other licence comment) at the end of the bundle
+  legalComments: "eof",
   logLevel: "info",
 };
 // Second entry point: the keyframe timeline (plain DOM + canvas, no three.js).

@@ -37,8 +37,10 @@ registered layers) within float32 round-off:
   encoding that grows with the length of the animation; USD (baked
   ``points``) or PC2/MDD are the compact alternative for such layers.
 * Keyed weights outside a shape's slider range are clamped by the workbench
-  (``set_time``); glTF cannot clamp a curve, so when that happens at a frame
-  the weights are resampled per frame (LINEAR, clamped values) instead.
+  (``set_time``); glTF cannot clamp a curve, so a knot is inserted wherever a
+  curve crosses a bound (:func:`_add_crossings`) and the pieces outside are
+  written as the constant bound: the sampler keeps its interpolation (LINEAR
+  or CUBICSPLINE) and stays exact, with no per-frame resampling.
 * One animation: a ``weights`` channel on the mesh node (one sampler for all
   targets, as glTF requires) and, when the head pose is keyed, ``translation``
   and ``rotation`` channels on the same node (metres; quaternions slerped).
