@@ -28,6 +28,7 @@ this package.
 
 from __future__ import annotations
 
+import asyncio
 import math
 import time
 from collections.abc import Callable
@@ -68,6 +69,9 @@ __all__ = [
 TAB_TITLES = ("Shapes", "Sculpt", "Regions", "Paint", "Export")
 _TAB_TOOLS = ("orbit", "sculpt", "orbit", "paint", "orbit")
 _SHAPES, _SCULPT, _REGIONS, _PAINT, _EXPORT = range(5)
+#: thumbnail size and columns of the expression palette (Paint tab, timeline chips)
+PALETTE_THUMB_SIZE = (72, 72)
+PALETTE_COLUMNS = 7
 
 
 class Workbench(W.VBox):
@@ -91,6 +95,16 @@ class Workbench(W.VBox):
     palette thumbnails take seconds), or when :attr:`regions` / :attr:`paint`
     is read.
 
+    The expression palette (:attr:`gallery`, thumbnails of the saved
+    expressions and blendshapes) is rendered once and shared: the Paint tab
+    shows it and the timeline's expression chips show its pictures (drag one
+    onto the timeline to key it; the timeline's "Key selected expression"
+    button keys the palette's pick). In a kernel it is built right after the
+    cell that made the workbench (on the kernel's event loop, so the app shows
+    at once and the chips get their pictures a moment later); without a
+    running event loop it is built when :attr:`gallery` or :attr:`paint` is
+    first read, and until then the chips are text.
+
     Parameters
     ----------
     model : workbench.FaceModel
@@ -110,6 +124,8 @@ class Workbench(W.VBox):
     Attributes
     ----------
     wrinkles : WrinklePanel
+    gallery : ExpressionGallery
+        The expression palette (built on first use, see above).
     wireframe : ipywidgets.Checkbox
         Top-bar toggle of the viewport's triangle-edge overlay (``viewport.wireframe``).
     status : ipywidgets.HTML
@@ -153,6 +169,7 @@ class Workbench(W.VBox):
         self._regions: RegionsPanel | None = None
         self._switching = False
         self._paint: PaintPanel | None = None
+        self._gallery: ExpressionGallery | None = None
         self._regions_slot = W.VBox([W.HTML("<i>finding the blend regions ...</i>")])
         self._paint_slot = W.VBox([W.HTML("<i>building the expression palette ...</i>")])
         self.tabs = W.Tab(
@@ -221,6 +238,7 @@ class Workbench(W.VBox):
         super().__init__([top, row, self.errors], layout=W.Layout(width="100%"))
         self.add_class("fwb-workbench")
         self._on_history()
+        self._schedule_gallery()
 
     # ------------------------------------------------------------ lazy panels
     @property
@@ -237,11 +255,41 @@ class Workbench(W.VBox):
         return self._regions
 
     @property
+    def gallery(self) -> ExpressionGallery:
+        """The expression palette shared by the Paint tab and the timeline's chips (built once)."""
+        if self._gallery is None:
+            self._gallery = ExpressionGallery(
+                self.model,
+                size=PALETTE_THUMB_SIZE,
+                columns=PALETTE_COLUMNS,
+                expressions=True,
+                label_size="10px",
+            )
+            self.timeline.set_gallery(self._gallery)
+        return self._gallery
+
+    def _schedule_gallery(self) -> None:
+        # In a kernel: render the palette once the current cell is done (the app is
+        # already on screen), so the timeline chips get their pictures without the
+        # Paint tab being opened and without delaying the workbench itself.
+        try:
+            loop = asyncio.get_running_loop()
+        except RuntimeError:
+            return  # no event loop (a script, a test): built on first use
+
+        def build() -> None:
+            if not getattr(self, "_closed", False):
+                self.gallery  # noqa: B018 - builds the palette
+
+        loop.call_soon(self.sink.guard("rendering the expression thumbnails")(build))
+
+    @property
     def paint(self) -> PaintPanel:
         """The Paint tab's :class:`PaintPanel` (built on first use)."""
         if self._paint is None:
             self._paint = PaintPanel(
                 self.model,
+                self.gallery,
                 viewport=self.viewport,
                 errors=self.errors,
                 before_edit=[self.panel.grouper.flush],
@@ -383,6 +431,8 @@ class Workbench(W.VBox):
         self.sculpt.close()
         self.export.close()
         self.timeline.close()
+        if self._gallery is not None:
+            self._gallery.close()
         self.viewport.close()
         self.panel.close()
         self.errors.close()

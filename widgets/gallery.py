@@ -156,10 +156,12 @@ class ExpressionGallery(ipw.VBox):
     selected : str or None
         Name of the selected shape (a traitlet: ``observe``/``link`` it).
     thumbnails : dict[str, bytes]
-        The PNG bytes currently shown.
+        The PNG bytes currently shown (a traitlet, not synced: ``observe`` it to
+        follow new pictures, as the timeline's expression chips do).
     """
 
     selected = traitlets.Unicode(None, allow_none=True)
+    thumbnails = traitlets.Dict(value_trait=traitlets.Bytes())
 
     def __init__(
         self,
@@ -182,7 +184,6 @@ class ExpressionGallery(ipw.VBox):
         self.expressions = bool(expressions)
         self.label_size = label_size
         self._names_fixed = list(names) if names is not None else None
-        self.thumbnails: dict[str, bytes] = {}
         self._cells: dict[str, tuple[ipw.Image, ipw.Button]] = {}
         self._tiles: dict[str, ipw.VBox] = {}
         self._handlers: dict[Callable, Callable] = {}

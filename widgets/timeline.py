@@ -50,6 +50,15 @@ all (nothing displayed, a headless run), playback stops waiting after the
 first timeout. The achieved rate is shown in the status label and kept in
 :attr:`playback_stats`.
 
+The expression chips (one per saved expression and blendshape) are a small
+gallery: with a ``gallery`` (:class:`widgets.gallery.ExpressionGallery`) each
+chip shows that gallery's PNG thumbnail of the expression (nothing is rendered
+twice: the timeline observes ``gallery.thumbnails`` and follows it, e.g. when an
+expression is saved). The PNGs travel as binary message buffers (the
+``_thumbnails`` dict of bytes), never as JSON. Without thumbnails the chips
+are text. Dragging a chip onto the tracks or the ruler keys that expression at
+the drop time.
+
 Why hand-written: ipywidgets has no timeline/dope-sheet widget, and the
 available anywidget/ipywidget timeline components (e.g. vis-timeline wrappers)
 edit their own event lists rather than calling a model, have no Bézier
@@ -121,6 +130,10 @@ def load_timeline_bundle() -> str:
         )
     newest = max(candidates, key=lambda p: p.stat().st_mtime_ns)
     return newest.read_text(encoding="utf-8")
+
+
+def _has_trait(obj: Any, name: str) -> bool:
+    return isinstance(obj, t.HasTraits) and obj.has_trait(name)
 
 
 def _track_label(name: str) -> str:
@@ -199,7 +212,9 @@ class TimelineWidget(anywidget.AnyWidget):
     model : workbench.FaceModel
     gallery : widgets.gallery.ExpressionGallery, optional
         Its ``selected`` shape is keyed at the playhead by the "Key selected
-        expression at playhead" button (:meth:`key_selected_expression`).
+        expression at playhead" button (:meth:`key_selected_expression`), and
+        its ``thumbnails`` (name -> PNG bytes, followed as they change) are
+        the pictures of the chips. See :meth:`set_gallery`.
     chips : sequence of str, optional
         Expression names shown as draggable chips. Default: the saved
         expressions (``model.expressions``) then every blendshape.
@@ -240,6 +255,8 @@ class TimelineWidget(anywidget.AnyWidget):
     _error = t.Unicode("").tag(sync=True)
     _saved_expressions = t.List(t.Unicode()).tag(sync=True)
     _gallery_selected = t.Unicode("").tag(sync=True)
+    #: chip name -> PNG bytes (from the gallery; sent as binary buffers, not JSON)
+    _thumbnails = t.Dict(value_trait=t.Bytes()).tag(sync=True)
     _has_handles = t.Bool(False).tag(sync=True)
     #: [yaw, pitch, roll] in degrees of the head pose keyed at the playhead
     _head_pose = t.List(t.Float(), default_value=[0.0, 0.0, 0.0]).tag(sync=True)
@@ -265,7 +282,7 @@ class TimelineWidget(anywidget.AnyWidget):
         super().__init__(_esm=load_timeline_bundle(), **kwargs)
         self._model = model
         self._before_edit = list(before_edit)
-        self.gallery = gallery
+        self.gallery: Any = None
         self._chips = None if chips is None else list(chips)
         self.errors = ErrorSink(errors, on_error=self._show_error)
         self.frontend_msg_count = 0
@@ -298,9 +315,8 @@ class TimelineWidget(anywidget.AnyWidget):
         model.events.shapes.connect(self._on_expr)
         model.events.handles.connect(self._on_handles)
         model.events.metadata.connect(self._on_metadata)
-        if gallery is not None:
-            gallery.observe(self._on_gallery, "selected")
-            self._gallery_selected = gallery.selected or ""
+        self._on_thumbs = g("Timeline thumbnails")(self._refresh_thumbnails)
+        self.set_gallery(gallery)
         self.on_msg(self._on_frontend_msg)
         self.observe(self._on_selected_track, "selected_track")
         self._refresh_tracks()
@@ -325,9 +341,31 @@ class TimelineWidget(anywidget.AnyWidget):
             (m.events.metadata, self._on_metadata),
         ):
             sig.disconnect(cb)
-        if self.gallery is not None:
-            self.gallery.unobserve(self._on_gallery, "selected")
+        self.set_gallery(None)
         super().close()
+
+    def set_gallery(self, gallery: Any) -> None:
+        """Use ``gallery`` (or ``None``) for the "Key selected" button and the chip pictures.
+
+        The chips show ``gallery.thumbnails[name]`` where it has one (followed
+        when the gallery's ``thumbnails`` trait changes); chips without a
+        picture, or all of them without a gallery, are text.
+        """
+        old = self.gallery
+        if old is gallery:
+            return
+        if old is not None:
+            old.unobserve(self._on_gallery, "selected")
+            if _has_trait(old, "thumbnails"):
+                old.unobserve(self._on_thumbs, "thumbnails")
+        self.gallery = gallery
+        if gallery is not None:
+            gallery.observe(self._on_gallery, "selected")
+            if _has_trait(gallery, "thumbnails"):
+                gallery.observe(self._on_thumbs, "thumbnails")
+        with self.hold_sync():
+            self._gallery_selected = getattr(gallery, "selected", None) or ""
+            self._refresh_thumbnails()
 
     def handle_message(self, content: dict[str, Any]) -> None:
         """Apply one front-end message (what a click or drag sends); errors go to the status."""
@@ -609,6 +647,13 @@ class TimelineWidget(anywidget.AnyWidget):
                 self.expressions = list(self._chips)
             else:
                 self.expressions = saved + [n for n in m.shape_names if n not in saved]
+            self._refresh_thumbnails()
+
+    def _refresh_thumbnails(self, *_args: Any) -> None:
+        # only the chips' pictures, as bytes (ipywidgets sends them as binary buffers);
+        # an unchanged dict is not sent again (traitlets compares old and new)
+        thumbs = getattr(self.gallery, "thumbnails", None) or {}
+        self._thumbnails = {n: bytes(thumbs[n]) for n in self.expressions if n in thumbs}
 
     def _refresh_handles(self, *_args: Any) -> None:
         self._has_handles = len(self._model.handles) > 0

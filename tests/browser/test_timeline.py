@@ -3,9 +3,10 @@
 A small notebook shows ``widgets.Viewport`` above ``TimelineWidget`` on the
 sample head with three keyed expressions (jawOpen at 0 s, a saved "smile" at
 1 s, browInnerUp at 2 s). The tests scrub the playhead, drag a key diamond,
-play/pause, drop an expression chip (HTML5 drag and drop), drag a Bézier
-tangent handle and delete a key with the keyboard, checking the Python model
-(read back from the kernel) and the viewport's pixels. The timeline's test
+play/pause, drag an expression's thumbnail from the timeline's chip gallery
+onto the ruler (HTML5 drag and drop; the pictures are an ``ExpressionGallery``'s
+PNGs), drag a Bézier tangent handle and delete a key with the keyboard,
+checking the Python model (read back from the kernel) and the pixels. The timeline's test
 hooks (``data-playhead-x``, ``data-keys``, ``data-axis``, ``data-tangents``)
 give the screen positions to aim at. Screenshots: ``test-artifacts/<test>/``.
 """
@@ -16,6 +17,7 @@ import json
 import time
 from typing import Any
 
+import numpy as np
 from harness import NotebookPage, clip_around, pixel_change
 
 CELLS = [
@@ -34,7 +36,8 @@ model.key_expression(1.0, "smile")
 model.key_expression(2.0, "browInnerUp")
 model.set_time(0.0)
 vp = widgets.Viewport(model, height=330)
-tl = TimelineWidget(model)
+gal = widgets.ExpressionGallery(model, size=(64, 64), expressions=True)  # not shown: the chips use it
+tl = TimelineWidget(model, gallery=gal)
 W.VBox([vp, tl])
 """,
 ]
@@ -192,22 +195,64 @@ def test_scrub_drag_key_and_play(open_notebook):
     nb.screenshot("paused")
 
 
+def _box_pixels(nb: NotebookPage, name: str, box: dict[str, float]) -> np.ndarray:
+    return nb.screenshot(name, clip={k: box[k] for k in ("x", "y", "width", "height")})
+
+
 def test_drop_chip_tangent_and_delete(open_notebook):
     nb, root, _ids = _open(open_notebook)
-    h = _hooks(root)
 
-    # --- HTML5 drag of the "smile" chip onto the tracks at 0.5 s keys it there
+    # --- the chips are a gallery: one thumbnail (the gallery's PNG) per expression
+    n_chips = _py(nb, "len(tl.expressions)")
+    assert n_chips == 53  # "smile" + 52 blendshapes
+    strip = root.locator(".fwb-tl-chips")
+    nb.page.wait_for_function(
+        "n => document.querySelector('.fwb-tl-chips').getAttribute('data-thumbs') === String(n)",
+        arg=n_chips,
+    )
+    assert root.locator(".fwb-tl-chip img").count() == n_chips
+    img = root.locator('.fwb-tl-chip[data-name="smile"] img')
+    nb.page.wait_for_function("e => e.complete && e.naturalWidth === 64", arg=img.element_handle())
+    assert img.get_attribute("src").startswith("blob:")  # binary PNG, no data: URL
+    sbox = strip.bounding_box()
+    assert sbox["height"] < 100  # one compact row ...
+    assert strip.evaluate("e => e.scrollWidth > e.clientWidth")  # ... that scrolls sideways
+    ibox = img.bounding_box()
+    assert 40 <= ibox["width"] <= 64 and 40 <= ibox["height"] <= 64
+    pic = _box_pixels(nb, "smile-thumbnail", ibox).astype(float)
+    assert pic.std() > 20, "the smile thumbnail is blank"
+    assert len(np.unique(pic.reshape(-1, 3) // 16, axis=0)) > 20
+    nb.screenshot("chip-gallery")
+
+    # --- the mouse drags the smile thumbnail onto the ruler at 0.5 s: keyed there
     undo0 = _py(nb, "model.history.undo_labels")
-    canvas = root.locator(".fwb-tl-canvas")
-    box = canvas.bounding_box()
-    _x, y = _key(h, "weights/jawOpen", 0)
-    chip = root.locator('.fwb-tl-chip[data-name="smile"]')
-    chip.drag_to(canvas, target_position={"x": _x_of(h, 0.5) - box["x"], "y": y - box["y"]})
+    h = _hooks(root)
+    _drag(
+        nb,
+        ibox["x"] + ibox["width"] / 2,
+        ibox["y"] + ibox["height"] / 2,
+        _x_of(h, 0.5),
+        h["ruler_y"],
+        steps=15,
+    )
     _wait_py(nb, "len(model.history.undo_labels)", lambda n: n == len(undo0) + 1)
     assert _py(nb, "model.history.undo_labels")[-1] == "Key smile at 0.5s"
     w = _py(nb, "model.tracks.evaluate(0.5).weights")
     assert w == {"browInnerUp": 0.0, "jawOpen": 0.0, "mouthSmileLeft": 1.0, "mouthSmileRight": 1.0}
+    assert _py(nb, "model.time") == 0.0  # the drop keyed; it did not scrub
+    # ... and on screen: a key diamond at 0.5 s on every track
+    nb.page.wait_for_function(
+        "() => JSON.parse(document.querySelector('.fwb-timeline').getAttribute('data-keys'))"
+        ".length >= 16"
+    )
     nb.page.wait_for_timeout(300)
+    h = _hooks(root)
+    x, y = _key(h, "weights/mouthSmileLeft", 1)
+    assert abs(x - _x_of(h, 0.5)) < 1.0
+    diamond = _box_pixels(nb, "dropped-key", {"x": x - 7, "y": y - 7, "width": 14, "height": 14})
+    r, g, b = (diamond[..., i].astype(int) for i in range(3))
+    key_orange = (r > 190) & (g > 130) & (g < 190) & (b < 90)  # COLORS.key #e0a526
+    assert key_orange.sum() >= 10, "no key diamond drawn at 0.5 s"
     nb.screenshot("chip-dropped")
 
     # --- click a key: it is selected and its track shown in the curve view

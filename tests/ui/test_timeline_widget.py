@@ -488,3 +488,117 @@ def test_export_panel_fbx_without_blender_shows_the_reason(keyed, tmp_path, monk
     assert p.do_export() == []
     assert "Export failed" in p.result.value and "WORKBENCH_BPY_PYTHON" in p.result.value
     assert not (tmp_path / "anim.fbx").exists()
+
+
+# ------------------------------------------------------------ thumbnail chips
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.fixture
+def renders(monkeypatch):
+    """Names the gallery renders (blendshapes and saved expressions), from an empty cache."""
+    pytest.importorskip("pyvista")
+    import widgets.gallery as gallery_mod
+
+    gallery_mod.clear_thumbnail_cache()
+    done: list[str] = []
+    real_shapes, real_png = gallery_mod.expression_thumbnails, gallery_mod.render_png
+
+    def shapes(model, names, **kw):
+        done.extend(names)
+        return real_shapes(model, names, **kw)
+
+    def png(model, **kw):
+        done.append("<expression>")
+        return real_png(model, **kw)
+
+    monkeypatch.setattr(gallery_mod, "expression_thumbnails", shapes)
+    monkeypatch.setattr(gallery_mod, "render_png", png)
+    yield done
+    gallery_mod.clear_thumbnail_cache()
+
+
+def test_chips_show_the_gallery_thumbnails_as_binary_and_follow_new_expressions(
+    tiny_model, renders
+):
+    from ipywidgets.widgets.widget import _remove_buffers
+
+    from widgets.gallery import ExpressionGallery
+
+    gal = ExpressionGallery(tiny_model, size=(32, 32), expressions=True)
+    assert sorted(renders) == ["left", "up"]
+    w = TimelineWidget(tiny_model, gallery=gal)
+    assert sorted(renders) == ["left", "up"]  # nothing rendered twice: the gallery's PNGs
+    assert w.expressions == ["up", "left"]
+    assert set(w._thumbnails) == set(w.expressions)
+    for name in w.expressions:
+        png = w._thumbnails[name]
+        assert isinstance(png, bytes) and png.startswith(PNG_MAGIC)
+        assert png == gal.thumbnails[name]
+    # on the wire the pictures are binary buffers, one per chip, not JSON numbers
+    state, paths, buffers = _remove_buffers(w.get_state())
+    assert state["_thumbnails"] == {}
+    assert sorted(paths) == [["_thumbnails", "left"], ["_thumbnails", "up"]]
+    assert all(isinstance(b, bytes) and b.startswith(PNG_MAGIC) for b in buffers)
+
+    # a newly saved expression gets a chip (first) with the gallery's picture of it
+    tiny_model.set_weights({"up": 0.5, "left": 0.5})
+    tiny_model.save_expression("half")
+    assert w.expressions == ["half", "up", "left"] and w._saved_expressions == ["half"]
+    assert renders.count("<expression>") == 1  # rendered once, by the gallery
+    assert w._thumbnails["half"] == gal.thumbnails["half"]
+    assert w._thumbnails["half"].startswith(PNG_MAGIC)
+    assert w._thumbnails["half"] not in (w._thumbnails["up"], w._thumbnails["left"])
+    state, paths, _ = _remove_buffers(w.get_state())
+    assert sorted(p[1] for p in paths) == ["half", "left", "up"]
+
+    # dropping a picture chip sends the same message as a text chip: one undo step
+    n_undo = len(tiny_model.history.undo_labels)
+    send(w, type="key_expression", name="half", time=0.5)
+    assert tiny_model.history.undo_labels[n_undo:] == ["Key half at 0.5s"]
+    assert tiny_model.tracks.evaluate(0.5).weights == {"up": 0.5, "left": 0.5}
+
+    # without the gallery the chips are text again; a closed timeline stops following
+    w.set_gallery(None)
+    assert w._thumbnails == {} and w.expressions == ["half", "up", "left"]
+    w.set_gallery(gal)
+    assert set(w._thumbnails) == {"half", "up", "left"}
+    w.close()
+    assert not any(o for o in gal._trait_notifiers.get("thumbnails", {}).values())
+
+
+def test_standalone_timeline_has_text_chips(tiny_model):
+    w = TimelineWidget(tiny_model)
+    assert w.expressions == ["up", "left"] and w._thumbnails == {}
+    tiny_model.save_expression("same")
+    assert w.expressions == ["same", "up", "left"] and w._thumbnails == {}
+
+
+def test_workbench_shares_its_palette_with_the_timeline_chips(renders):
+    from widgets import Workbench
+    from workbench import load_sample
+
+    model = load_sample("head")
+
+    async def build_in_a_kernel_like_loop():
+        wb = Workbench(model)
+        assert wb._gallery is None and wb.timeline._thumbnails == {}  # text chips at first
+        await asyncio.sleep(0)  # the app is shown; then the loop renders the palette
+        return wb
+
+    wb = run_on_fresh_thread(asyncio.run, build_in_a_kernel_like_loop())
+    try:
+        assert wb._gallery is not None and wb.timeline.gallery is wb.gallery
+        n = len(renders)
+        assert n == len(model.shape_names)
+        assert wb.paint.gallery is wb.gallery and len(renders) == n  # the Paint tab's palette
+        tl = wb.timeline
+        assert set(tl._thumbnails) == set(tl.expressions) == set(model.shape_names)
+        assert all(tl._thumbnails[k] is wb.gallery.thumbnails[k] for k in tl.expressions)
+        model.set_weights({"jawOpen": 1.0})
+        model.save_expression("open")
+        assert tl.expressions[0] == "open" and tl._thumbnails["open"].startswith(PNG_MAGIC)
+        assert renders.count("<expression>") == 1
+    finally:
+        wb.close()
+    assert wb.errors.outputs == ()

@@ -13,7 +13,14 @@
 //   data-keys = [[track, index, time, x, y], ...], data-tangents =
 //   [[track, index, side, x, y], ...] (curve view), data-playing, data-selected,
 //   data-draws, data-scrub-sent, data-error, data-head-pose = [yaw, pitch, roll]
-//   as the sliders show them.
+//   as the sliders show them; on the chip strip, data-thumbs = number of chips
+//   showing a picture.
+//
+// Expression chips: one per name in `expressions`, draggable (HTML5 drag with the
+// name as application/x-fwb-expression) onto the tracks or the ruler. When
+// `_thumbnails` (name -> PNG bytes, arriving as binary buffers) has pictures, the
+// strip is a one-row, horizontally scrolling gallery of small thumbnails with the
+// name under each; without any, the chips are text.
 
 const GUTTER = 150; // px: track labels
 const RULER = 30; // px: time ruler height
@@ -24,6 +31,7 @@ const KEY_R = 6; // diamond half size
 const HANDLE_R = 5;
 const DRAG_START_PX = 3;
 const ACK_TIMEOUT_MS = 2000;
+const THUMB = 48; // px: chip picture (CSS size; the PNGs are larger, sharp on HiDPI)
 
 const COLORS = {
   bg: "#fbfbfc",
@@ -69,6 +77,18 @@ const CSS = `
   cursor: grab; font-size: 11px; }
 .fwb-tl-chip.fwb-saved { background: #fdf1d8; border-color: #e8c880; font-weight: 600; }
 .fwb-tl-chips-label { color: ${COLORS.textDim}; font-size: 11px; padding: 1px 2px; }
+.fwb-tl-chips.fwb-tl-thumbs { flex-wrap: nowrap; max-height: none; overflow-x: auto; overflow-y: hidden;
+  align-items: stretch; padding-bottom: 2px; }
+.fwb-tl-thumbs .fwb-tl-chips-label { align-self: center; flex: 0 0 52px; white-space: normal; }
+.fwb-tl-chip.fwb-tl-thumb { flex: 0 0 auto; display: flex; flex-direction: column; align-items: center;
+  gap: 1px; width: ${THUMB + 8}px; padding: 2px 1px 1px; border-radius: 4px; box-sizing: border-box; }
+.fwb-tl-chip.fwb-tl-thumb:hover { border-color: #7aa7f0; }
+.fwb-tl-thumb img, .fwb-tl-thumb .fwb-tl-noimg { display: block; width: ${THUMB}px; height: ${THUMB}px;
+  border-radius: 3px; background: #fff; pointer-events: none; }
+.fwb-tl-thumb .fwb-tl-noimg { display: flex; align-items: center; justify-content: center;
+  color: ${COLORS.textDim}; font-size: 18px; background: #e4e7ec; }
+.fwb-tl-chip-name { max-width: ${THUMB + 6}px; overflow: hidden; text-overflow: ellipsis; white-space: nowrap;
+  font-size: 10px; line-height: 12px; }
 .fwb-tl-canvas, .fwb-tl-curve-canvas { display: block; width: 100%; touch-action: none; }
 .fwb-tl-curve-box { border-top: 1px solid #e2e5ea; }
 .fwb-tl-head { display: flex; flex-wrap: wrap; align-items: center; gap: 8px; }
@@ -99,6 +119,21 @@ function el(tag, attrs = {}, children = []) {
   return e;
 }
 
+// PNG bytes of a `_thumbnails` value: a DataView (ipywidgets' binary buffers) or any view
+function asBytes(v) {
+  if (!v) return null;
+  if (v instanceof Uint8Array) return v;
+  if (v instanceof ArrayBuffer) return new Uint8Array(v);
+  if (ArrayBuffer.isView(v)) return new Uint8Array(v.buffer, v.byteOffset, v.byteLength);
+  return null;
+}
+
+function sameBytes(a, b) {
+  if (a.length !== b.length) return false;
+  for (let i = 0; i < a.length; i++) if (a[i] !== b[i]) return false;
+  return true;
+}
+
 function fmtTime(t) {
   return `${t.toFixed(2)} s`;
 }
@@ -120,6 +155,8 @@ class TimelineView {
     this.raf = 0;
     this.geom = null; // last layout, for hit tests and hooks
     this.disposers = [];
+    this.thumbs = new Map(); // name -> {bytes, url}: object URLs of the chip pictures
+    this.thumbsRaw = undefined; // the `_thumbnails` value they were made from
     this.build();
     this.bind();
     this.sync();
@@ -198,7 +235,7 @@ class TimelineView {
     m.on("change:time", onTime);
     this.disposers.push(() => m.off("change:time", onTime));
     for (const name of ["_tracks", "_curve", "playing", "loop", "status", "_error", "expressions",
-      "_saved_expressions", "_gallery_selected", "selected_keys", "selected_track", "_has_handles",
+      "_saved_expressions", "_thumbnails", "_gallery_selected", "selected_keys", "selected_track", "_has_handles",
       "_head_pose"]) {
       m.on(`change:${name}`, redraw);
       this.disposers.push(() => m.off(`change:${name}`, redraw));
@@ -286,6 +323,8 @@ class TimelineView {
     this.announcePlayback(false);
     for (const d of this.disposers) d();
     this.disposers = [];
+    for (const { url } of this.thumbs.values()) URL.revokeObjectURL(url);
+    this.thumbs.clear();
     if (this.raf) cancelAnimationFrame(this.raf);
   }
 
@@ -355,28 +394,76 @@ class TimelineView {
     this.requestDraw();
   }
 
+  // object URLs of the chip pictures, remade only for PNGs whose bytes changed
+  syncThumbs() {
+    const raw = this.model.get("_thumbnails") || {};
+    if (raw === this.thumbsRaw) return false;
+    this.thumbsRaw = raw;
+    let changed = false;
+    const seen = new Set();
+    for (const [name, value] of Object.entries(raw)) {
+      const bytes = asBytes(value);
+      if (!bytes || !bytes.length) continue;
+      seen.add(name);
+      const old = this.thumbs.get(name);
+      if (old && sameBytes(old.bytes, bytes)) continue;
+      if (old) URL.revokeObjectURL(old.url);
+      const copy = bytes.slice(); // the message buffer may be reused
+      this.thumbs.set(name, { bytes: copy, url: URL.createObjectURL(new Blob([copy], { type: "image/png" })) });
+      changed = true;
+    }
+    for (const [name, { url }] of [...this.thumbs]) {
+      if (seen.has(name)) continue;
+      URL.revokeObjectURL(url);
+      this.thumbs.delete(name);
+      changed = true;
+    }
+    return changed;
+  }
+
   syncChips() {
+    const thumbsChanged = this.syncThumbs();
     const names = this.model.get("expressions") || [];
     const saved = new Set(this.model.get("_saved_expressions") || []);
     const key = JSON.stringify([names, [...saved]]);
-    if (key === this.chipsKey) return;
+    if (key === this.chipsKey && !thumbsChanged) return;
     this.chipsKey = key;
+    const pictures = names.some((n) => this.thumbs.has(n));
+    this.chips.classList.toggle("fwb-tl-thumbs", pictures);
     this.chips.replaceChildren(el("span", { class: "fwb-tl-chips-label", text: "Drag onto the timeline:" }));
+    let shown = 0;
     for (const n of names) {
+      const kind = saved.has(n) ? "saved expression" : "blendshape";
       const chip = el("span", {
-        class: "fwb-tl-chip" + (saved.has(n) ? " fwb-saved" : ""),
+        class: "fwb-tl-chip" + (saved.has(n) ? " fwb-saved" : "") + (pictures ? " fwb-tl-thumb" : ""),
         draggable: "true",
         "data-name": n,
-        title: saved.has(n) ? `saved expression ${n}` : `blendshape ${n}`,
-        text: n,
+        title: `${kind} ${n}: drag onto the timeline to key it`,
       });
+      let img = null;
+      if (pictures) {
+        const th = this.thumbs.get(n);
+        if (th) {
+          // the chip is dragged, not the picture (whose own drag would carry its URL)
+          img = el("img", { src: th.url, alt: n, draggable: "false", width: THUMB, height: THUMB });
+          shown += 1;
+        }
+        chip.append(
+          img || el("span", { class: "fwb-tl-noimg", text: saved.has(n) ? "★" : n.slice(0, 1) }),
+          el("span", { class: "fwb-tl-chip-name", text: saved.has(n) ? `★ ${n}` : n }),
+        );
+      } else {
+        chip.textContent = n;
+      }
       chip.addEventListener("dragstart", (e) => {
         e.dataTransfer.setData("application/x-fwb-expression", n);
         e.dataTransfer.setData("text/plain", n);
         e.dataTransfer.effectAllowed = "copy";
+        if (img) e.dataTransfer.setDragImage(img, THUMB / 2, THUMB / 2);
       });
       this.chips.appendChild(chip);
     }
+    this.chips.setAttribute("data-thumbs", String(shown));
   }
 
   onMessage(msg) {
