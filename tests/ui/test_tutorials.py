@@ -13,6 +13,12 @@ workbench notebook autosaves) and renders through EGL
 The executed notebooks and a table of run times are kept in
 ``test-artifacts/tutorials/``.
 
+Every tutorial (each notebook but the ``workbench.ipynb`` app) must show
+pictures a reader can see without a live kernel: an image output when it runs
+(e.g. ``IPython.display.Image`` of a ``render_png`` PNG, or a matplotlib figure)
+or a markdown image of a file that exists in ``notebooks/``. Live widgets do
+not count: they render neither in a static view nor on a docs page.
+
 Lives in ``tests/ui`` because it needs the ``ui`` and ``test`` extras (nbclient,
 ipykernel, pyvista); the core-only CI job does not collect ``tests/ui``.
 """
@@ -20,10 +26,12 @@ ipykernel, pyvista); the core-only CI job does not collect ``tests/ui``.
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -33,11 +41,51 @@ ARTIFACTS = REPO / "test-artifacts" / "tutorials"
 #: one cell may take this long (the slowest cells fit WPSD on the 100k head)
 CELL_TIMEOUT_S = 900
 
+#: notebooks that are apps rather than tutorials: live widgets only, no pictures required
+NOT_TUTORIALS = frozenset({"workbench.ipynb"})
+#: ``![alt](path "title")`` or ``<img src="path">`` in a markdown cell
+_MARKDOWN_IMAGE = re.compile(
+    r"!\[[^\]]*\]\(\s*<?([^)\s>]+)>?[^)]*\)|<img\b[^>]*\bsrc\s*=\s*[\"']([^\"']+)[\"']",
+    re.IGNORECASE,
+)
+
 pytestmark = [pytest.mark.ui, pytest.mark.slow]
 
 
 def _notebooks() -> list[Path]:
     return sorted(NOTEBOOKS.glob("*.ipynb"))
+
+
+def _markdown_images(nb: Any) -> list[str]:
+    """Local image paths referenced by the markdown cells (URLs and data: URIs left out)."""
+    refs = []
+    for cell in nb.cells:
+        if cell.cell_type != "markdown":
+            continue
+        for m in _MARKDOWN_IMAGE.finditer(cell.source):
+            ref = m.group(1) or m.group(2)
+            # http:, https:, data:, ... are not files of the repository
+            if not re.match(r"^[a-z][a-z0-9+.-]*:", ref, re.IGNORECASE):
+                refs.append(ref)
+    return refs
+
+
+def _pictures(nb: Any, folder: Path) -> list[str]:
+    """What a reader sees as pictures: image outputs, and markdown images of existing files.
+
+    ``folder`` is where the notebook lives (markdown paths are relative to it).
+    """
+    found = [
+        f"output {mime} of code cell {i}"
+        for i, cell in enumerate(nb.cells)
+        if cell.cell_type == "code"
+        for out in cell.get("outputs", [])
+        if out.get("output_type") in ("display_data", "execute_result")
+        for mime in out.get("data", {})
+        if mime.startswith("image/")
+    ]
+    found += [f"markdown image {ref}" for ref in _markdown_images(nb) if (folder / ref).is_file()]
+    return found
 
 
 @pytest.fixture(scope="module")
@@ -113,3 +161,41 @@ def test_notebook_runs_without_errors(
     assert tracebacks == [], f"{notebook.name} printed tracebacks:\n" + "\n".join(tracebacks)
     unexecuted = [i for i, c in enumerate(code) if c.get("execution_count") is None]
     assert unexecuted == [], f"{notebook.name}: code cells {unexecuted} did not run"
+    if notebook.name not in NOT_TUTORIALS:
+        # markdown images must exist in the repository, not only in the executed copy
+        assert _pictures(nb, NOTEBOOKS), (
+            f"{notebook.name} shows no pictures: no image output when executed and no markdown "
+            "image of an existing file (live widgets do not render in a static view)"
+        )
+
+
+@pytest.mark.parametrize("notebook", _notebooks(), ids=lambda p: p.stem)
+def test_markdown_images_exist(notebook: Path) -> None:
+    import nbformat
+
+    nb = nbformat.read(notebook, as_version=4)
+    missing = [ref for ref in _markdown_images(nb) if not (NOTEBOOKS / ref).is_file()]
+    assert missing == [], f"{notebook.name} shows images that do not exist: {missing}"
+
+
+def test_picture_check_fails_without_pictures() -> None:
+    """The picture check counts image outputs and existing markdown images, nothing else."""
+    import nbformat
+    from nbformat.v4 import new_code_cell, new_markdown_cell, new_notebook, new_output
+
+    widget = {"application/vnd.jupyter.widget-view+json": {"model_id": "x"}, "text/plain": "VBox()"}
+    nb = new_notebook(
+        cells=[
+            new_markdown_cell("# Text only\n\n![gone](images/no_such_picture.png)"),
+            new_code_cell("print(1)", outputs=[new_output("stream", name="stdout", text="1\n")]),
+            new_code_cell("W.VBox()", outputs=[new_output("display_data", data=widget)]),
+        ]
+    )
+    assert _pictures(nb, NOTEBOOKS) == []
+    png = {"image/png": "iVBORw0KGgo=", "text/plain": "<IPython.core.display.Image object>"}
+    nb.cells.append(new_code_cell("show()", outputs=[new_output("display_data", data=png)]))
+    assert _pictures(nb, NOTEBOOKS) == ["output image/png of code cell 3"]
+    existing = next(NOTEBOOKS.glob("images/*.png")).relative_to(NOTEBOOKS).as_posix()
+    nb = new_notebook(cells=[new_markdown_cell(f"![a picture]({existing})")])
+    assert _pictures(nb, NOTEBOOKS) == [f"markdown image {existing}"]
+    nbformat.validate(nb)
