@@ -284,7 +284,8 @@ class FaceModelEvents(SignalGroup):
     weights = Signal(dict)
     weights_changing = Signal(dict)
     shapes = Signal()
-    vertices = Signal()
+    # no ``vertices`` signal: the neutral mesh and topology never change after
+    # construction (another mesh is another model)
     handles = Signal()
     handles_changing = Signal()
     regions = Signal()
