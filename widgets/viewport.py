@@ -629,16 +629,7 @@ class Viewport(anywidget.AnyWidget):
                 self.errors.report(f"paint stroke ({phase})", exc)
                 self.send({"type": "paint_cancel"})
         finally:
-            self.send(
-                {
-                    "type": "paint_ack",
-                    "seq": content.get("seq"),
-                    "phase": phase,
-                    "version": self._version,
-                    "paint_version": self._paint_version,
-                    "kernel_ms": round(ms, 3),
-                }
-            )
+            self._send_paint_ack(content.get("seq"), phase, ms)
 
     def begin_stroke(self, expression: str | None = None) -> None:
         """Start a paint stroke (what the front end's "start" message does).
@@ -1166,16 +1157,20 @@ class Viewport(anywidget.AnyWidget):
                 self.errors.report(f"paint stroke ({phase})", exc)
                 self.send({"type": "paint_cancel"})
         finally:
-            self.send(
-                {
-                    "type": "paint_ack",
-                    "seq": content.get("seq"),
-                    "phase": phase,
-                    "version": self._version,
-                    "paint_version": self._paint_version,
-                    "kernel_ms": round(ms, 3),
-                }
-            )
+            self._send_paint_ack(content.get("seq"), phase, ms)
+
+    def _send_paint_ack(self, seq: Any, phase: str, ms: float) -> None:
+        """Acknowledge one stroke message (the front end keeps one dab in flight)."""
+        self.send(
+            {
+                "type": "paint_ack",
+                "seq": seq,
+                "phase": phase,
+                "version": self._version,
+                "paint_version": self._paint_version,
+                "kernel_ms": round(ms, 3),
+            }
+        )
 
     def _push_geometry_event(self, final: bool = True, *_args: Any) -> None:
         if self._hold_pushes:
