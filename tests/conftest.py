@@ -4,21 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from grid_meshes import grid_polygons
 
 from workbench.model import BlendShape, FaceModel
-from workbench.polygons import Polygons
-
-
-def grid_polygons(nx: int, ny: int) -> tuple[np.ndarray, Polygons]:
-    """A flat (nx x ny)-quad grid in the z=0 plane, quads counter-clockwise seen from +z."""
-    xs, ys = np.meshgrid(np.arange(nx + 1, dtype=float), np.arange(ny + 1, dtype=float))
-    V = np.stack([xs.ravel(), ys.ravel(), np.zeros(xs.size)], axis=1)
-    quads = []
-    for j in range(ny):
-        for i in range(nx):
-            a = j * (nx + 1) + i
-            quads.append([a, a + 1, a + nx + 2, a + nx + 1])
-    return V, Polygons.from_lists(quads)
 
 
 @pytest.fixture

@@ -55,7 +55,7 @@ def test_crashed_session_is_recoverable(tmp_path: Path) -> None:
         f"""
         import os, sys, time
         sys.path.insert(0, {str(Path(__file__).parent)!r})
-        from conftest import grid_polygons
+        from grid_meshes import grid_polygons
         import numpy as np
         from workbench.model import BlendShape, FaceModel
         from workbench.autosave import Autosaver

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import csv
 import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 import workbench
@@ -41,20 +43,75 @@ def test_info_on_a_gltf_with_morph_targets(tmp_path: Path, capsys: pytest.Captur
     assert "units       m (1 m per unit)" in out
 
 
-def test_export_command_writes_a_glb(tmp_path: Path) -> None:
+def _accessor_floats(gltf, index: int) -> np.ndarray:
+    """The float32 values of a glTF accessor, read through pygltflib (not our importer)."""
+    acc = gltf.accessors[index]
+    view = gltf.bufferViews[acc.bufferView]
+    start = (view.byteOffset or 0) + (acc.byteOffset or 0)
+    width = {"SCALAR": 1, "VEC3": 3, "VEC4": 4}[acc.type]
+    return np.frombuffer(gltf.binary_blob(), "<f4", acc.count * width, start)
+
+
+def _weight_sampler(path: Path):
+    from pygltflib import GLTF2
+
+    gltf = GLTF2().load(str(path))
+    (anim,) = gltf.animations
+    (channel,) = [c for c in anim.channels if c.target.path == "weights"]
+    return gltf, anim.samplers[channel.sampler]
+
+
+@pytest.fixture(scope="module")
+def saved_animation(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, int]:
+    """Two keys, at 0 s and 1.5 s; returns the saved file and its shape count."""
     model = workbench.load_sample("head")
     model.key_expression(0.0, "jawOpen")
-    model.key_expression(1.0, "mouthSmileLeft")
-    saved = tmp_path / "anim.fwb"
+    model.key_expression(1.5, "mouthSmileLeft")
+    saved = tmp_path_factory.mktemp("cli") / "anim.fwb"
     model.save(saved)
-    out = tmp_path / "anim.glb"
+    return saved, len(model.shapes)
+
+
+def _export(saved: Path, out: Path, *extra: str) -> None:
     r = subprocess.run(
-        [sys.executable, "-m", "workbench.cli", "export", str(saved), str(out), "--fps", "24"],
+        [sys.executable, "-m", "workbench.cli", "export", str(saved), str(out), *extra],
         capture_output=True, text=True, check=False,
     )
     assert r.returncode == 0, r.stderr
-    assert out.is_file() and out.read_bytes()[:4] == b"glTF"
-    assert r.stdout.strip() == str(out)
+    assert r.stdout.strip() == str(out) and out.is_file()
+
+
+def test_export_command_writes_the_keys_of_a_glb(saved_animation, tmp_path: Path) -> None:
+    saved, k = saved_animation
+    out = tmp_path / "anim.glb"
+    _export(saved, out, "--fps", "24")
+    assert out.read_bytes()[:4] == b"glTF"
+    gltf, sampler = _weight_sampler(out)
+    # not baked: the two keys themselves (Bézier -> CUBICSPLINE: in-tangent, value, out-tangent)
+    assert sampler.interpolation == "CUBICSPLINE"
+    np.testing.assert_allclose(_accessor_floats(gltf, sampler.input), [0.0, 1.5])
+    assert gltf.accessors[sampler.output].count == 3 * 2 * k
+
+
+@pytest.mark.parametrize(("fps", "frames"), [(24, 37), (10, 16)])  # 1.5 s * fps + 1
+def test_export_bake_writes_one_sample_per_frame(saved_animation, tmp_path: Path, fps: int, frames: int) -> None:
+    saved, k = saved_animation
+    out = tmp_path / "baked.glb"
+    _export(saved, out, "--fps", str(fps), "--bake")
+    gltf, sampler = _weight_sampler(out)
+    assert sampler.interpolation == "LINEAR"
+    times = _accessor_floats(gltf, sampler.input)
+    np.testing.assert_allclose(times, np.arange(frames) / fps, atol=1e-6)
+    assert gltf.accessors[sampler.output].count == frames * k
+    # the CSV is per frame as well, one row per frame at the same times
+    csv_out = tmp_path / "anim.csv"
+    _export(saved, csv_out, "--fps", str(fps))
+    with open(csv_out, newline="", encoding="utf-8") as fh:
+        rows = list(csv.reader(fh))
+    assert len(rows[0]) == 1 + k and len(rows) == 1 + frames
+    np.testing.assert_allclose([float(r[0]) for r in rows[1:]], np.arange(frames) / fps, atol=1e-9)
+    jaw = rows[0].index("jawOpen")
+    assert float(rows[1][jaw]) == pytest.approx(1.0) and float(rows[-1][jaw]) == pytest.approx(0.0)
 
 
 def test_cli_errors_name_the_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -234,7 +234,7 @@ def test_regions_and_region_weights_round_trip(tmp_path: Path) -> None:
 
 def _rich_model() -> FaceModel:
     """The 3x3-vertex grid with every saved feature: mask, handles, expression, paint, keys, regions."""
-    from conftest import grid_polygons
+    from grid_meshes import grid_polygons
 
     from workbench.model import BlendShape
     from workbench.paint import Brush

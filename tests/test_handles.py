@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 
@@ -136,3 +138,21 @@ def test_set_handles_validates(face: FaceModel) -> None:
     with pytest.raises(ModelError, match="HandleSet"):
         face.set_handles([1, 2, 3])  # type: ignore[arg-type]
     assert isinstance(face.handles, HandleSet)
+
+
+def test_basis_precompute_reports_progress_through_the_model(face: FaceModel) -> None:
+    calls: list[tuple[float, str]] = []
+    face.set_handle_progress(lambda f, m: calls.append((f, m)))
+    face.prepare_handles()
+    fractions = [f for f, _ in calls]
+    assert len(calls) >= 4 and 0.0 < fractions[0]
+    assert all(b >= a for a, b in itertools.pairwise(fractions)), fractions
+    assert calls[-1] == (1.0, "done")
+    h = len(face.handles)
+    assert f"solving handle columns {h}/{h}" in [m for _, m in calls]
+    # offsets alone never rebuild the basis: no more reports
+    calls.clear()
+    face.move_handle(0, [0.0, 0.05, 0.0])
+    face.evaluate()
+    assert calls == []
+    face.set_handle_progress(None)

@@ -17,8 +17,9 @@ from workbench.marker_fit import (
     generate_synthetic_marker_performance,
 )
 from workbench.model import FaceModel
+from workbench.operators import mass_matrix
 from workbench.region_blend import RegionWeights, region_blend_positions
-from workbench.regions import RegionError, Regions, segment_blend_regions
+from workbench.regions import RegionError, Regions, component_roles, segment_blend_regions
 
 
 @pytest.fixture(scope="module")
@@ -113,7 +114,18 @@ def test_region_fit_beats_the_global_fit(head: FaceModel, regions: Regions, perf
     assert reg["marker_rms"] < 0.7 * glob["marker_rms"]
     assert reg["vertex_rms"] < glob["vertex_rms"]
     assert glob["marker_rms_rbf"] < 1e-6 and reg["marker_rms_rbf"] < 1e-6
-    assert 0 < glob["weight_rms"] < 1 and 0 < reg["weight_rms"] < 1
+    # weight recovery: the same error as fidelity_table's (area-weighted over the moving
+    # skin) for the trivial estimate "every weight 0" sets the scale
+    roles = component_roles(head)
+    maxd = np.linalg.norm(head.deltas, axis=2).max(axis=0)
+    ev = np.flatnonzero((roles == 0) & (maxd > 1e-3 * maxd.max()))
+    area = mass_matrix(head.vertices, head.faces).diagonal()[ev]
+    area /= area.sum()
+    zero_rms = np.sqrt(np.mean([area @ np.mean(perf.vertex_weights(t)[ev] ** 2, axis=1) for t in range(perf.n_frames)]))
+    # measured: zero estimate 0.168, global 0.1101, regions L0 0.1099 (a 0.15 % gain only:
+    # with 71 markers for 52 shapes neither fit pins most weights down)
+    assert reg["weight_rms"] < glob["weight_rms"] < 0.75 * zero_rms
+    assert reg["weight_rms"] < 0.125
     text = format_fidelity_table(rows)
     assert text.count("\n") == 4 and "regions L0" in text
 

@@ -342,7 +342,7 @@ def test_set_metadata_is_one_undoable_step_with_events(tiny_model: FaceModel) ->
 
 
 def test_set_shell_stiffness_is_one_undoable_step_with_events() -> None:
-    from conftest import grid_polygons
+    from grid_meshes import grid_polygons
 
     V, polys = grid_polygons(6, 6)  # the boundary is held, so inner vertices follow the shell
     m = FaceModel(V, None, [], polygons=polys)

@@ -8,8 +8,19 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import workbench
-from workbench.model import FaceModel, ModelError
-from workbench.paint import Brush, PaintMix, feathered_presets, regional_mix
+import workbench.paint as paint_module
+from workbench.model import BlendShape, FaceModel, ModelError
+from workbench.paint import (
+    Brush,
+    PaintMix,
+    PaintSurface,
+    Stroke,
+    apply_dab,
+    feathered_presets,
+    flood,
+    normalize,
+    regional_mix,
+)
 from workbench.tracks import evaluate_mesh
 
 
@@ -41,6 +52,31 @@ def test_hard_opaque_brush_reproduces_the_expression_inside(head: FaceModel) -> 
     expected = head.vertices[ids] + head.shape("mouthSmileLeft").delta[ids]
     np.testing.assert_allclose(head.evaluate()[ids], expected, atol=1e-6)
     assert np.all(head.paint_layers["mouthSmileLeft"][ids] == 1.0)
+
+
+def test_opaque_brush_reproduces_the_expression_over_region_weights(head: FaceModel) -> None:
+    # the region blend is a layer below the paint: it belongs to the base, which an
+    # opacity-1 dab replaces by the expression, however the regions are weighted
+    from workbench.region_blend import RegionWeights
+
+    state = head.segment_regions(0.25)
+    c = _mouth_corner(head)
+    lv = state.level
+    under = state.regions.regions_at(lv, c)
+    region = max(under, key=lambda r: under[r])
+    rw = RegionWeights.from_global(head, state.regions, lv)
+    head.set_region_weights(rw.with_region(region, {"jawOpen": 1.0, "mouthSmileLeft": 0.3}))
+    head.set_weight("browInnerUp", 0.5)
+    ids, _ = head.paint_surface.within(c, 0.4)
+    assert np.abs(head.evaluate()[ids] - head.blended()[ids]).max() > 0.05  # the regions move it
+    head.paint_dab("mouthPucker", c, Brush(radius=0.4, opacity=1.0, falloff="constant"))
+    expected = head.vertices[ids] + head.shape("mouthPucker").delta[ids]
+    np.testing.assert_allclose(head.evaluate()[ids], expected, atol=1e-5)
+    # half opacity: halfway between the region-blended face and the expression
+    head.clear_paint()
+    below = head.evaluate()[ids].copy()
+    head.paint_dab("mouthPucker", c, Brush(radius=0.4, opacity=0.5, falloff="constant"))
+    np.testing.assert_allclose(head.evaluate()[ids], 0.5 * (below + expected), atol=1e-5)
 
 
 def test_brush_uses_surface_distance_not_straight_line(head: FaceModel) -> None:
@@ -85,6 +121,79 @@ def test_weights_stay_convex_after_any_strokes(head: FaceModel, strokes) -> None
         assert np.sum(maps, axis=0).max() <= 1.0 + 1e-6
 
 
+_EXPRESSIONS = ["mouthSmileLeft", "eyeBlinkLeft", "browInnerUp"]
+_dab = st.tuples(
+    st.just("dab"),
+    st.sampled_from(_EXPRESSIONS),
+    st.integers(0, 5083),
+    st.floats(0.05, 0.6),
+    st.floats(0.0, 1.0),
+    st.sampled_from(["smooth", "linear", "constant", "sphere"]),
+    st.sampled_from(["add", "subtract", "smooth"]),
+    st.booleans(),  # mirror
+    st.booleans(),  # inside a stroke (opacity capped against the stroke's start)
+)
+_flood = st.tuples(st.just("flood"), st.sampled_from(_EXPRESSIONS), st.floats(0.0, 1.0), st.booleans())
+_regional = st.tuples(
+    st.just("regional"),
+    st.lists(
+        st.tuples(st.sampled_from(_EXPRESSIONS), st.floats(0.0, 1.0), st.sampled_from(_EXPRESSIONS), st.floats(0.0, 1.0)),
+        min_size=6,
+        max_size=6,
+    ),
+    st.floats(0.01, 0.5),
+)
+_ops = st.lists(st.one_of(_dab, _dab, _flood, st.tuples(st.just("normalize")), _regional), min_size=1, max_size=10)
+
+
+@pytest.fixture(scope="module")
+def head_surface(head_data: FaceModel) -> PaintSurface:
+    return PaintSurface(head_data.vertices, head_data.faces)
+
+
+@settings(max_examples=40, deadline=None)
+@given(_ops)
+def test_paint_arithmetic_is_convex_before_the_round_off_clamp(head_data: FaceModel, head_surface: PaintSurface, ops) -> None:
+    """Every paint operation keeps W >= 0 and sum W <= 1 by itself (to 1e-6): the
+    clamp of ``_clip_convex`` only guards float round-off, so it is switched off here."""
+    n = head_data.n_vertices
+    rng = np.random.default_rng(len(ops))
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(paint_module, "_clip_convex", lambda maps, ids: None)
+        mix = PaintMix()
+        stroke: Stroke | None = None
+        for op in ops:
+            if op[0] == "dab":
+                _, name, centre, radius, opacity, falloff, mode, mirror, in_stroke = op
+                if in_stroke and stroke is None:
+                    stroke = Stroke(mix, n)
+                elif not in_stroke:
+                    stroke = None  # a new stroke starts from the current mix
+                brush = Brush(radius, opacity, falloff, mode, mirror)
+                mix = apply_dab(mix, name, head_surface, brush, centre, stroke)
+            else:
+                stroke = None
+                if op[0] == "flood":
+                    _, name, opacity, everywhere = op
+                    ids = None if everywhere else rng.choice(n, n // 3, replace=False)
+                    mix = flood(mix, name, opacity, n, ids)
+                elif op[0] == "normalize":
+                    mix = normalize(mix, n)
+                else:
+                    _, per_region, feather = op
+                    _, R = feathered_presets(head_data.vertices, "six", feather=feather)
+                    mixes = []
+                    for e1, a, e2, b in per_region:  # two expressions, scaled to sum to <= 1
+                        m: dict[str, float] = {}
+                        for e, w in ((e1, a), (e2, b)):
+                            m[e] = m.get(e, 0.0) + w / max(1.0, a + b)
+                        mixes.append(m)
+                    mix = regional_mix(R, mixes, n)
+            maps = np.array([np.asarray(w, np.float64) for w in mix.values()]).reshape(-1, n)
+            assert maps.min(initial=0.0) >= -1e-6, op
+            assert maps.sum(axis=0).max(initial=0.0) <= 1.0 + 1e-6, op
+
+
 def test_mirror_painting_is_symmetric(head: FaceModel) -> None:
     c = _mouth_corner(head)
     head.paint_dab("mouthPucker", c, Brush(radius=0.35, opacity=0.8, mirror=True))
@@ -92,10 +201,75 @@ def test_mirror_painting_is_symmetric(head: FaceModel) -> None:
     mirror = head.paint_surface.mirror
     painted = np.flatnonzero(w > 0.05)
     assert painted.size > 10
+    off_plane = painted[np.abs(head.vertices[painted, 0]) > 1e-6]
+    assert (mirror[off_plane] != off_plane).all()  # the sample head is symmetric: all have partners
     np.testing.assert_allclose(w[mirror[painted]], w[painted], atol=0.05)
     left = (head.vertices[painted, 0] > 0.01).sum()
     right = (head.vertices[painted, 0] < -0.01).sum()
     assert abs(left - right) <= 0.1 * painted.size
+
+
+def _grid(n: int = 9, x0: float = 5.0) -> tuple[np.ndarray, np.ndarray]:
+    """An n x n grid over x in [x0 - 1, x0 + 1], y in [0, 2]: mirror plane x = x0."""
+    xs, ys = np.meshgrid(np.linspace(-1, 1, n), np.linspace(0, 2, n))
+    V = np.stack([xs.ravel() + x0, ys.ravel(), np.zeros(n * n)], 1)
+    F = []
+    for j in range(n - 1):
+        for i in range(n - 1):
+            a = j * n + i
+            F += [[a, a + 1, a + n + 1], [a, a + n + 1, a + n]]
+    return V, np.array(F)
+
+
+def test_mirror_map_uses_the_mid_plane_and_skips_vertices_without_a_partner() -> None:
+    n = 9
+    V, F = _grid(n)
+    i, j = np.arange(n * n) % n, np.arange(n * n) // n
+    expected = j * n + (n - 1 - i)  # column i <-> column n - 1 - i, about x = 5 (not x = 0)
+    p = 4 * n + 6  # right of the plane; its partner is 4 * n + 2
+    V[p, 1] += 0.05  # far beyond the tolerance (1e-3 of the diagonal, 0.0028)
+    expected[[p, 4 * n + 2]] = [p, 4 * n + 2]  # no partner: mapped to themselves
+    surf = PaintSurface(V, F)
+    np.testing.assert_array_equal(surf.mirror, expected)
+    np.testing.assert_array_equal(surf.mirror[4::n], np.arange(4, n * n, n))  # on the plane: itself
+    # the model's surface mirrors about the middle of its skin, with the same tolerance
+    m = FaceModel(V, F, [BlendShape("up", np.tile([0.0, 0.0, 1.0], (n * n, 1)))])
+    np.testing.assert_array_equal(m.paint_surface.mirror, expected)
+
+    brush = Brush(radius=0.3, opacity=0.8, falloff="linear", mirror=True)
+    # a centre with a partner: the same dab on the other side
+    c = 6 * n + 7
+    w = apply_dab(PaintMix(), "up", surf, brush, c)["up"]
+    assert w[V[:, 0] < 5.0].max() > 0.5
+    np.testing.assert_allclose(w[expected[c]], w[c])
+    # a centre without one: one side only, exactly the dab without mirror
+    q = 4 * n + 2
+    w_mirror = apply_dab(PaintMix(), "up", surf, brush, q)["up"]
+    w_plain = apply_dab(PaintMix(), "up", surf, Brush(0.3, 0.8, "linear"), q)["up"]
+    np.testing.assert_array_equal(w_mirror, w_plain)
+    assert not w_mirror[V[:, 0] > 5.0 + 1e-9].any()
+
+
+def test_paint_follows_a_change_of_the_shell_stiffness(head: FaceModel) -> None:
+    from workbench.handle_presets import default_face_handles
+
+    def prepared(m: FaceModel) -> FaceModel:
+        m.set_handles(default_face_handles(m))
+        m.move_handle(3, [0.0, 0.2, 0.1])
+        return m
+
+    prepared(head)
+    head.paint_flood("mouthSmileLeft", 0.5)
+    before = head.evaluate().copy()
+    head.set_shell_stiffness(1.0, 100.0)
+    fresh = prepared(FaceModel(
+        head.vertices, head.faces, head.shapes,
+        component_labels=head.component_labels, component_names=head.component_names,
+    ))
+    fresh.set_shell_stiffness(1.0, 100.0)
+    fresh.paint_flood("mouthSmileLeft", 0.5)
+    assert np.abs(head.evaluate() - before).max() > 1e-3  # the stiffness matters here
+    np.testing.assert_allclose(head.evaluate(), fresh.evaluate(), atol=1e-6)
 
 
 def test_stroke_is_one_undo_step_and_undo_is_bit_exact(head: FaceModel) -> None:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -272,3 +274,79 @@ def test_bending_weight_is_area_over_reference_count() -> None:
     bending = L.T @ sp.diags(1 / M.diagonal()) @ L
     expected = -2.0 * L + 3.0 * (area / REFERENCE_VERTEX_COUNT) * bending
     assert _relative_error(shell_system_matrix(V, F, 2.0, 3.0), sp.csr_matrix(expected)) < 1e-12
+
+
+# ------------------------------------------------- k_s = 0, seam copies, progress
+def _flat_grid(n: int = 14) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The _disk triangulation laid flat (z = 0) and each vertex's ring index from the border."""
+    V, F = _disk(n)
+    V[:, 2] = 0.0
+    i, j = np.arange(n * n) % n, np.arange(n * n) // n
+    ring = np.minimum.reduce([i, j, n - 1 - i, n - 1 - j])
+    return V, F, ring
+
+
+@pytest.mark.parametrize(("k_s", "k_b"), [(0.0, 1.0), (1.0, 0.0), (DEFAULT_K_S, DEFAULT_K_B), (0.3, 200.0)])
+def test_fields_the_energy_does_not_bend_are_reproduced_exactly(k_s: float, k_b: float) -> None:
+    """Hand-worked on a flat regular grid (the cotangent Laplacian is the 5-point stencil,
+    exact on cubics). With the two outer rings prescribed, a field ``u`` with
+    ``-k_s Δu + k_b Δ²u = 0`` is the solution: harmonic fields (linear, x² - y², xy) for
+    every k_s, k_b; the biharmonic but not harmonic x² + y² and (x² + y²) x only when
+    stretching is off (Δ(x² + y²) = 4, Δ((x² + y²) x) = 8x, then Δ² = 0), and never with k_s > 0."""
+    V, F, ring = _flat_grid()
+    H = np.flatnonzero(ring <= 1)
+    x, y = V[:, 0], V[:, 1]
+    zero = np.zeros_like(x)
+    harmonic = np.stack([0.1 * x - 0.2 * y + 0.05 + 0.1 * (x * x - y * y), 0.2 * x * y, 0.1 * x + 0.1 * y], 1)
+    biharmonic = np.stack([0.1 * (x * x + y * y), 0.1 * (x * x + y * y) * x, zero], 1)
+    d = ShellDeformer(V, F, H, k_s, k_b, pin_boundary=False)
+    np.testing.assert_allclose(d.displacement(harmonic[H]), harmonic, atol=1e-6)
+    err = np.abs(d.displacement(biharmonic[H]) - biharmonic).max()
+    if k_s == 0:
+        assert err < 1e-6
+    else:  # measured: 0.083 (k_b = 0), 0.072 (defaults), 0.008 (k_b / k_s = 667)
+        assert err > 1e-3, err
+
+
+def test_handles_at_distinct_vertices_with_one_position_are_independent() -> None:
+    """Seam copies: a slit along the upper half of one grid column, whose vertices are duplicated."""
+    n = 14
+    V, F, _ = _flat_grid(n)
+    col = n // 2
+    seam = np.arange(col, n * n, n)[n // 2 + 1 :]  # the slit's vertices (up to the border)
+    copy = np.full(n * n, -1)
+    copy[seam] = n * n + np.arange(seam.size)
+    right = (F % n >= col).all(axis=1)  # triangles right of the column take the copies
+    F2 = F.copy()
+    F2[right] = np.where(np.isin(F[right], seam), copy[F[right]], F[right])
+    V2 = np.vstack([V, V[seam]])
+    ncomp, _ = sp.csgraph.connected_components(trimesh.Trimesh(V2, F2, process=False).edges_sparse)
+    assert ncomp == 1  # still one surface, cut open along the slit
+    a, b = int(seam[2]), int(copy[seam[2]])
+    np.testing.assert_array_equal(V2[a], V2[b])
+    H = [a, b, 2 * n + 2, 2 * n + n - 3]
+    d = ShellDeformer(V2, F2, H, pin_boundary=False)
+    assert d.basis_.shape[1] == 4  # two columns, not one as for a listed-twice vertex
+    P = V2[H].copy()
+    P[:2] += [0.0, 0.0, 0.3]  # equal displacements: the two copies stay together
+    out = d.deform(P)
+    np.testing.assert_allclose(out[[a, b]], P[:2], atol=1e-6)
+    P[1] += [0.0, 0.0, 0.2]  # different ones: each copy goes to its own target, the seam opens
+    out = d.deform(P)
+    np.testing.assert_allclose(out[[a, b]], P[:2], atol=1e-6)
+    assert out[b, 2] - out[a, 2] == pytest.approx(0.2, abs=1e-6)
+
+
+def test_precompute_reports_monotonic_progress_ending_at_done() -> None:
+    V, F = _disk()
+    inner = np.flatnonzero((np.abs(V[:, 0]) < 0.8) & (np.abs(V[:, 1]) < 0.8))
+    H = inner[:: max(1, inner.size // 70)][:70]  # 70 handles: three blocks of 32 columns
+    calls: list[tuple[float, str]] = []
+    d = ShellDeformer(V, F, H, progress=lambda f, m: calls.append((f, m)))
+    fractions = [f for f, _ in calls]
+    assert all(isinstance(m, str) and m for _, m in calls)
+    assert 0.0 < fractions[0] and all(b >= a for a, b in itertools.pairwise(fractions)), fractions
+    assert calls[-1] == (1.0, "done")
+    solving = [m for _, m in calls if m.startswith("solving")]
+    assert solving == [f"solving handle columns {k}/{len(H)}" for k in (32, 64, 70)]
+    assert d.basis_.shape[1] == len(H)

@@ -1113,7 +1113,7 @@ class FaceModel:
         self.set_slot("paint_layers", PaintMix(), "Clear paint")
 
     def paint_displacement(self) -> NDArray[np.float32]:
-        """(n, 3) float32: what the paint layer adds on top of blend + handles (a copy)."""
+        """(n, 3) float32: what the paint layer adds on top of blend, regions and handles (a copy)."""
         with self._lock:
             d = self._paint_layer(self)
             return np.zeros((self.n_vertices, 3), np.float32) if d is None else d.copy()

@@ -7,9 +7,9 @@ vertices. We keep, at every vertex,
     W_e(v) >= 0,      sum_e W_e(v) <= 1,
 
 and give the **remainder** ``1 - sum_e W_e(v)`` to the *base*: whatever the
-layers below paint produce (the global blend of the sliders plus the handle
-layer; the neutral face when the sliders are at zero). The painted face is
-therefore
+layers below paint produce (the global blend of the sliders, the region blend
+when region weights are set, and the handle layer; the neutral face when all
+are at rest). The painted face is therefore
 
     x(v) = (1 - sum_e W_e) base(v) + sum_e W_e (neutral(v) + D_e(v)),
 
@@ -30,15 +30,34 @@ falloff(d / radius)``; modes:
 * ``subtract``: ``W_e <- (1 - s) W_e`` (the freed share goes to the base);
 * ``smooth``: ``W <- (1 - s) W + s * mean of the 1-ring`` for every expression.
 
-X-mirror applies the same dab at the mirrored vertex (nearest vertex to the
-x-reflection). Written here because no kept library offers expression
-painting; graph search is scipy's.
+X-mirror applies the same dab centred at the dab centre's mirror partner:
+the vertex at the reflection of the centre about the mid-plane ``x = mid`` —
+on a model, the middle of the skin's x range, the plane the region
+segmentation mirrors about (:func:`workbench.regions.segment_blend_regions`)
+— found within the same tolerance, ``1e-3`` of the bounding-box diagonal
+(:func:`mirror_map`). A centre without a partner there (an asymmetric mesh)
+gets no mirrored dab: the dab paints on its own side only, rather than at
+whichever vertex happens to be nearest to the reflection.
+
+Storage: every painted expression keeps a *dense* ``(n,)`` float32 map, in
+memory and in the ``.fwb`` file (``paint_maps`` ``(P, n) <f4``,
+:mod:`workbench.fileformat`), although most strokes touch a small part of the
+face. Dense is the deliberate choice: a map is 0.3 MB at 80k vertices per
+expression (a handful are painted), the copy-on-write per dab copies only the
+maps the dab changes, the layer's evaluation is a dense
+``sum_e W_e (D_e - base)`` over (n, 3) arrays that a sparse map would have to
+scatter first, and the file format's schema stores dense maps — a sparse
+``ids + values`` form would change the on-disk schema for a few hundred
+kilobytes.
+
+Written here because no kept library offers expression painting; graph
+search is scipy's.
 """
 
 from __future__ import annotations
 
 import threading
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Literal
 
@@ -88,7 +107,8 @@ class Brush:
     falloff : {"smooth", "linear", "constant", "sphere"}
     mode : {"add", "subtract", "smooth"}
     mirror : bool
-        Also paint at the x-mirrored position.
+        Also paint around the centre's mirror partner (:attr:`PaintSurface.mirror`;
+        nothing more where the centre has none).
     """
 
     radius: float = 0.3
@@ -140,6 +160,45 @@ def _freeze(maps: dict[str, NDArray[np.float32]]) -> dict[str, NDArray[np.float3
     return maps
 
 
+def mirror_map(
+    vertices: ArrayLike, mid: float | None = None, tolerance: float | None = None
+) -> NDArray[np.int64]:
+    """Mirror partner of every vertex across the plane ``x = mid`` (itself if it has none).
+
+    Parameters
+    ----------
+    vertices : (n, 3) float
+    mid : float, optional
+        The mirror plane (default: the middle of the vertices' x range).
+    tolerance : float, optional
+        Largest distance between a vertex's reflection and its partner (default
+        ``1e-3`` of the bounding-box diagonal, as the region segmentation uses).
+
+    Returns
+    -------
+    (n,) int64
+        ``mirror[v]`` is the vertex nearest to the reflection of ``v`` if it lies
+        within ``tolerance`` (``v`` itself on the plane), else ``v`` itself: no
+        partner, so a mirrored dab there has nothing to add (as in
+        :func:`workbench.regions.segment_blend_regions`, identity where unmirrored).
+    """
+    V = np.asarray(vertices, dtype=np.float64)
+    if V.ndim != 2 or V.shape[1] != 3:
+        raise ValueError(f"vertices must be (n, 3), got {V.shape}")
+    if V.shape[0] == 0:
+        return np.zeros(0, np.int64)
+    m = 0.5 * float(V[:, 0].min() + V[:, 0].max()) if mid is None else float(mid)
+    tol = 1e-3 * float(np.linalg.norm(V.max(0) - V.min(0))) if tolerance is None else float(tolerance)
+    if not (np.isfinite(m) and np.isfinite(tol) and tol >= 0):
+        raise ValueError(
+            f"mirror_map: mid must be finite and tolerance finite and >= 0, got mid={mid}, tolerance={tolerance}"
+        )
+    refl = V.copy()
+    refl[:, 0] = 2.0 * m - refl[:, 0]
+    d, j = cKDTree(V).query(refl)
+    return np.where(d <= tol, np.asarray(j, dtype=np.int64), np.arange(V.shape[0])).astype(np.int64)
+
+
 class PaintSurface:
     """Per-mesh precompute for painting: edge graph, 1-ring averaging, mirror map.
 
@@ -148,9 +207,25 @@ class PaintSurface:
     vertices : (n, 3) float
         Rest pose (distances are measured on it).
     faces : (m, 3) int
+    mirror_plane : float, optional
+        ``x`` of the mirror plane (default: the middle of the x range).
+    mirror_tolerance : float, optional
+        See :func:`mirror_map`.
+
+    Attributes
+    ----------
+    mirror : (n,) int64
+        :func:`mirror_map`: each vertex's partner across the mirror plane (itself if none).
     """
 
-    def __init__(self, vertices: ArrayLike, faces: ArrayLike) -> None:
+    def __init__(
+        self,
+        vertices: ArrayLike,
+        faces: ArrayLike,
+        *,
+        mirror_plane: float | None = None,
+        mirror_tolerance: float | None = None,
+    ) -> None:
         V = np.asarray(vertices, dtype=np.float64)
         F = np.asarray(faces, dtype=np.int64)
         self.n = V.shape[0]
@@ -163,9 +238,7 @@ class PaintSurface:
         deg[deg == 0] = 1.0
         self.ring_mean = sp.csr_matrix(sp.diags(1.0 / deg) @ (A > 0).astype(np.float64))
         self.vertices = V
-        tree = cKDTree(V)
-        _, self.mirror = tree.query(V * np.array([-1.0, 1.0, 1.0]))
-        self.mirror = np.asarray(self.mirror, dtype=np.int64)
+        self.mirror = mirror_map(V, mirror_plane, mirror_tolerance)
 
     def within(self, center: int, radius: float) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
         """Vertices within surface distance ``radius`` of ``center`` and their distances."""
@@ -217,8 +290,9 @@ def apply_dab(
     if not 0 <= center < surface.n:
         raise ValueError(f"dab centre must be a vertex id in 0..{surface.n - 1}, got {center}")
     centers = [int(center)]
-    if brush.mirror and surface.mirror[center] != center:
-        centers.append(int(surface.mirror[center]))
+    partner = int(surface.mirror[center])
+    if brush.mirror and partner != center:  # itself: on the plane or no partner, one dab
+        centers.append(partner)
     # copy-on-write: only the maps this dab changes are copied
     maps: dict[str, NDArray[np.float32]] = dict(mix.maps)
     copied: set[str] = set()
@@ -379,9 +453,17 @@ class PaintLayer:
         self._maps: dict[str, NDArray[np.float32]] = {}
 
     def surface(self, model: FaceModel) -> PaintSurface:
+        """The model's :class:`PaintSurface`, mirrored about the skin's mid-plane (built once)."""
         with self._lock:
             if self._surface is None or self._surface.n != model.n_vertices:
-                self._surface = PaintSurface(model.vertices, model.faces)
+                from workbench.regions import component_roles
+
+                V = np.asarray(model.vertices, dtype=np.float64)
+                skin = V[component_roles(model) == 0] if model.n_vertices else V
+                # the plane and tolerance of the region segmentation's mirror
+                mid = 0.5 * float(skin[:, 0].min() + skin[:, 0].max()) if len(skin) else 0.0
+                tol = 1e-3 * float(np.linalg.norm(skin.max(0) - skin.min(0))) if len(skin) else 0.0
+                self._surface = PaintSurface(V, model.faces, mirror_plane=mid, mirror_tolerance=tol)
             return self._surface
 
     @staticmethod
@@ -407,20 +489,45 @@ class PaintLayer:
         ids = np.flatnonzero(changed)
         return ids if ids.size < n // 3 else None
 
+    @staticmethod
+    def _layers_below(model: FaceModel) -> dict[str, Callable[[FaceModel], NDArray[np.float32] | None]]:
+        """The model's layers evaluated before ``"paint"`` (built in: regions, handles)."""
+        below = {}
+        for name, provider in model.layer_providers.items():
+            if name == "paint":
+                break
+            below[name] = provider
+        return below
+
     def __call__(self, model: FaceModel) -> NDArray[np.float32] | None:
         mix = model.paint_layers
         if not isinstance(mix, PaintMix) or not mix.maps:
             return None
         with self._lock:
             blended = model.blended()
-            # the objects themselves (not ids, which can be reused after a free)
-            key = (blended, model.handles.offsets, model.expressions)
+            below = self._layers_below(model)
+            # the objects themselves (not ids, which can be reused after a free); the
+            # stiffness by value: changing it changes the handle layer, so the base.
+            # A replaced (not built-in) layer below the paint has unknown inputs: no reuse.
+            known = all(model.is_builtin_layer(name) for name in below)
+            key = (
+                blended, model.regions, model.handles, model.handles.offsets, model.expressions,
+                tuple(below.values()) if known else object(), model.shell_stiffness,
+            )
             ids = None
-            same_base = len(self._key) == 3 and all(a is b for a, b in zip(key, self._key, strict=True))
+            same_base = (
+                len(self._key) == len(key)
+                and all(a is b for a, b in zip(key[:-1], self._key[:-1], strict=True))
+                and key[-1] == self._key[-1]
+            )
             if same_base and self._cache is not None:
                 ids = self._changed(mix.maps, model.n_vertices)
             if ids is None or self._base is None or self._cache is None:
-                base = blended - model.vertices.astype(np.float32) + model.handle_displacement()
+                base = blended - model.vertices.astype(np.float32)
+                for provider in below.values():
+                    d = provider(model)
+                    if d is not None:
+                        base = base + d
                 self._base = base
                 self._cache = self._rows(model, mix.maps, base, slice(None))
             elif ids.size:

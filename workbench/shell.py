@@ -54,6 +54,11 @@ Set-up rules (documented choices, each pinned by a test):
   :data:`DEFAULT_COMPONENT_POLICY`; anything unnamed is ``"rigid"``.
 * **Duplicate handles** (the same vertex listed twice) share one basis
   column; :meth:`ShellDeformer.deform` uses the mean of their target positions.
+* **Coincident handles** (*distinct* vertices at one position, e.g. the two
+  copies of a seam-split vertex) are independent handles: one basis column
+  each, each interpolated exactly, never averaged. Give them equal
+  displacements to keep the seam closed there (the solve sees only the mesh's
+  connectivity, so the two sides of a cut deform as separate sheets).
 """
 
 from __future__ import annotations
@@ -144,6 +149,10 @@ class ShellDeformer:
     faces : (m, 3) int
     handles : (H,) int
         Handle vertex ids, in the order :meth:`deform` expects their positions.
+        A vertex listed twice is one handle (its targets are averaged);
+        distinct vertices at the same position (seam copies) are separate
+        handles, each meeting its own target exactly, so pass them equal
+        displacements to keep the seam closed.
     k_s, k_b : float
         Stretching and bending stiffness (dimensionless; see module docstring).
     pin_boundary : bool

@@ -15,19 +15,19 @@ weights ``g(t)`` and the handle offsets ``o(t)`` — so with
   linear in the offsets (:mod:`workbench.shell`);
 * **paint** (:class:`workbench.paint.PaintLayer`): with painted maps ``W_e``
   and expression displacements ``D_e`` the layer is
-  ``Σ_e W_e (D_e − base)``, ``base = blended − neutral + D(o) = Σ_k g_k Δ_k + D(o)``
-  (the region correction is *not* part of the base), i.e.
-  ``C_P − P (Σ_k g_k Δ_k + D(o))`` with ``C_P = Σ_e W_e D_e``, ``P = Σ_e W_e``;
+  ``Σ_e W_e (D_e − base)``, ``base = blended − neutral + R + D(o)`` with ``R``
+  the region layer (the layers below the paint), i.e.
+  ``C_P − P (Σ_k g_k Δ_k + R + D(o))`` with ``C_P = Σ_e W_e D_e``, ``P = Σ_e W_e``;
 
 the mesh at time ``t`` before the head pose is exactly::
 
-    x(t) = neutral + C + Σ_k g_k(t) (1 − S_R − P) Δ_k + (1 − P) D(o(t)) + N(t)
+    x(t) = neutral + C + Σ_k g_k(t) (1 − P)(1 − S_R) Δ_k + (1 − P) D(o(t)) + N(t)
 
-with the constant ``C = C_R + C_P`` and ``N(t)`` the sum of every other
+with the constant ``C = (1 − P) C_R + C_P`` and ``N(t)`` the sum of every other
 layer. That is what :class:`MeshEncoding` holds:
 
 ``shape_targets``
-    ``(1 − S_R − P) Δ_k``, one per shape, driven by the shape's own weight.
+    ``(1 − P)(1 − S_R) Δ_k``, one per shape, driven by the shape's own weight.
 ``static``
     ``C`` plus ``(1 − P) D(o)`` when the handles are not keyed: one target at
     weight 1 (instead of one per handle and axis).
@@ -50,8 +50,8 @@ layer. That is what :class:`MeshEncoding` holds:
     The region layer joins them when the timeline keys region weights
     (``"regions/<level>/<region>"`` tracks, e.g. a keyed marker fit): then
     ``w_rk(t)`` varies, ``C_R`` is no constant target, and the layer
-    ``Σ_r W_r Σ_k (w_rk(t) − g_k(t)) Δ_k`` is baked per frame (the shape
-    targets are then not scaled by ``1 − S_R``). Its report says so.
+    ``Σ_r W_r Σ_k (w_rk(t) − g_k(t)) Δ_k`` is baked per frame, times ``1 − P``
+    (the shape targets are then not scaled by ``1 − S_R``). Its report says so.
 
 The head pose is applied after all layers (a rigid transform, as in
 :meth:`FaceModel.evaluate_at`); formats write it on the node / root prim.
@@ -202,7 +202,9 @@ class MeshEncoding:
             providers = model.layer_providers
             builtin = {name: model.is_builtin_layer(name) for name in providers}
             handles_linear = builtin.get("handles", False)
-            paint_linear = builtin.get("paint", False) and handles_linear
+            # the paint's base includes the layers below it (regions, handles): linear
+            # only while those are the built-in ones
+            paint_linear = builtin.get("paint", False) and handles_linear and builtin.get("regions", True)
             reports: dict[str, LayerReport] = {}
             const = np.zeros((n, 3), np.float64)
             scale = np.ones(n, np.float64)  # per-vertex factor of the shape targets
@@ -210,6 +212,8 @@ class MeshEncoding:
 
             # --- regions: C_R - S_R * sum_k g_k delta_k (or baked when the region weights are keyed)
             regions_keyed = False
+            region_const = np.zeros((n, 3), np.float64)
+            region_cover = np.zeros(n, np.float64)
             reasons: dict[str, str] = {}
             if builtin.get("regions", False) and timeline.region_tracks:
                 st = model.regions
@@ -233,8 +237,8 @@ class MeshEncoding:
                     rows = np.flatnonzero(cover > 0)
                     vals = rw.values.astype(np.float64) * (~self.muted)[None, :]
                     coef = np.asarray(W[rows] @ vals, np.float64)  # (m, k)
-                    const[rows] += np.einsum("mk,kmc->mc", coef, eff[:, rows].astype(np.float64))
-                    scale -= cover
+                    region_const[rows] += np.einsum("mk,kmc->mc", coef, eff[:, rows].astype(np.float64))
+                    region_cover = cover
                     has_const = has_const or rows.size > 0
                     reports["regions"] = LayerReport(
                         "regions", "linear" if rows.size else "inactive",
@@ -244,7 +248,7 @@ class MeshEncoding:
                 else:
                     reports["regions"] = LayerReport("regions", "inactive", "no region weights")
 
-            # --- paint: C_P - P * (sum_k g_k delta_k + D(o))
+            # --- paint: C_P - P * (sum_k g_k delta_k + R + D(o)), R the region layer
             paint = np.zeros(n, np.float64)
             if paint_linear:
                 mix = model.paint_layers
@@ -253,7 +257,6 @@ class MeshEncoding:
                         w64 = np.asarray(w, np.float64)
                         paint += w64
                         const += w64[:, None] * expression_displacement(model, name).astype(np.float64)
-                    scale -= paint
                     has_const = True
                     reports["paint"] = LayerReport(
                         "paint", "linear",
@@ -262,6 +265,14 @@ class MeshEncoding:
                     )
                 else:
                     reports["paint"] = LayerReport("paint", "inactive", "nothing painted")
+
+            # the regions and shapes below the paint keep a (1 - P) share of their motion
+            const += (1.0 - paint)[:, None] * region_const
+            scale = (1.0 - paint) * (1.0 - region_cover)
+            # a region layer baked per frame (keyed region weights) is scaled the same way
+            self._region_keep: NDArray[np.float32] | None = (
+                (1.0 - paint).astype(np.float32)[:, None] if paint_linear and np.any(paint) else None
+            )
 
             # --- handles: (1 - P) D(o(t))
             self.handle_track = timeline.handles
@@ -390,6 +401,9 @@ class MeshEncoding:
         t = float(time)
         if t not in self._baked_cache:
             parts = self.model.layers_at(t, self.baked_layers, self.timeline)
+            region = parts.get("regions")
+            if self._region_keep is not None and region is not None:
+                parts["regions"] = region * self._region_keep
             arrs = [p for p in parts.values() if p is not None]
             total: NDArray[np.float32] | None = None
             if arrs:

@@ -12,12 +12,12 @@ registered layers) within float32 round-off:
 * One morph target per blendshape, named by the shape (names in
   ``mesh.extras.targetNames``, the convention Blender and three.js read),
   driven by the shape's weight. Its data is the masked delta times
-  ``1 − S_R − P`` (region coverage and painted weight, see
+  ``(1 − P)(1 − S_R)`` (painted weight and region coverage, see
   :mod:`.encoding`): exactly the delta where nothing is painted and no
   region weights are set. Stored as a sparse accessor when fewer than half
   the vertices move.
 * ``layer:static`` (weight 1, constant) when the layers add a constant: the
-  region constant ``C_R``, the painted expressions ``Σ_e W_e D_e``, and the
+  region constant ``(1 − P) C_R``, the painted expressions ``Σ_e W_e D_e``, and the
   handle layer when its offsets are not keyed — one target instead of one per
   handle and axis.
 * ``handle:basis<i>`` when the handle offsets are keyed: the shell

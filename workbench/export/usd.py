@@ -16,7 +16,7 @@ Every frame evaluates to :meth:`FaceModel.evaluate_at` (all editing layers),
 through the decomposition of :class:`workbench.export.encoding.MeshEncoding`:
 
 * one blend shape per model shape (its masked delta scaled per vertex by
-  ``1 − S_R − P``, region coverage and painted weight; the plain delta where
+  ``(1 − P)(1 − S_R)``, painted weight and region coverage; the plain delta where
   nothing is painted), weight = the shape's weight (clamped to its slider
   range, muted shapes 0);
 * ``layer_static`` (weight 1 at every frame) when the layers add a constant:

@@ -1,0 +1,23 @@
+"""Tiny hand-checkable meshes shared by the core tests.
+
+Its own module, not conftest.py: tests/consumers has a conftest.py too, so
+``from conftest import ...`` would depend on which one pytest imported first.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from workbench.polygons import Polygons
+
+
+def grid_polygons(nx: int, ny: int) -> tuple[np.ndarray, Polygons]:
+    """A flat (nx x ny)-quad grid in the z=0 plane, quads counter-clockwise seen from +z."""
+    xs, ys = np.meshgrid(np.arange(nx + 1, dtype=float), np.arange(ny + 1, dtype=float))
+    V = np.stack([xs.ravel(), ys.ravel(), np.zeros(xs.size)], axis=1)
+    quads = []
+    for j in range(ny):
+        for i in range(nx):
+            a = j * (nx + 1) + i
+            quads.append([a, a + 1, a + nx + 2, a + nx + 1])
+    return V, Polygons.from_lists(quads)
