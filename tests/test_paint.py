@@ -16,6 +16,7 @@ from workbench.paint import (
     PaintSurface,
     Stroke,
     apply_dab,
+    eyes_vertical_extent,
     feathered_presets,
     flood,
     normalize,
@@ -376,6 +377,28 @@ def test_regional_presets_are_partitions_of_unity(head: FaceModel) -> None:
     assert head.paint_layers["mouthSmileLeft"][left_lower].max() == pytest.approx(0.5, abs=1e-6)
     with pytest.raises(ValueError, match="sum to <= 1"):
         regional_mix(R, [{"a": 0.7, "b": 0.7}] * 6, head.n_vertices)
+
+
+def test_regional_presets_put_eyes_up_and_mouth_down_on_the_head(head: FaceModel) -> None:
+    """Pighin's bands on the sample head: eyes with the forehead in "upper", and in "eyes"."""
+    V = head.vertices
+    labels, comps = head.component_labels, list(head.component_names)
+    eyes = np.isin(labels, [comps.index("eye_left"), comps.index("eye_right")])
+    skin = labels == comps.index("skin")
+    mouth = skin & (np.abs(V[:, 0]) < 0.3) & (np.abs(V[:, 1] - 6.62) < 0.08) & (V[:, 2] > 1.0)
+    crown = skin & (V[:, 1] > 8.0)
+    eyes_y = eyes_vertical_extent(V, labels, comps)
+    assert eyes_y is not None and eyes_y[0] < eyes_y[1]
+    for ey in (eyes_y, None):  # from the eye components, and the fallback fractions
+        names, R = feathered_presets(V, "upper_lower", feather=0.05, eyes_y=ey)
+        up = R[names.index("upper")]
+        assert up[eyes].min() > 0.99 and up[mouth].max() < 0.01 and up[crown].min() > 0.99
+        names, R = feathered_presets(V, "six", feather=0.05, eyes_y=ey)
+        band = {b: R[names.index(f"{b}_L")] + R[names.index(f"{b}_R")] for b in ("forehead", "eyes", "lower")}
+        assert band["eyes"][eyes].mean() > 0.9
+        assert band["forehead"][crown].min() > 0.99 and band["lower"][mouth].min() > 0.99
+    mesh_without_eyes = eyes_vertical_extent(V, np.zeros(len(V), int), ["skin"])
+    assert mesh_without_eyes is None
 
 
 def test_bad_brush_and_paint_arguments() -> None:

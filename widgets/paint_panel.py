@@ -46,7 +46,7 @@ from widgets._threading import ErrorSink, InteractionGrouper, close_interactions
 from widgets.gallery import ExpressionGallery
 from widgets.viewport import BRUSH_MODES, FALLOFFS, default_brush_radius, face_height
 from workbench.expressions import expression_names
-from workbench.paint import Brush, feathered_presets, regional_mix
+from workbench.paint import Brush, eyes_vertical_extent, feathered_presets, regional_mix
 
 _HELP = (
     "<div style='line-height:1.35'>Pick an expression in the palette, then <b>paint</b> on "
@@ -399,7 +399,8 @@ class PaintPanel(W.VBox):
             elif preset == "auto":
                 out = _auto_regions(m)
             else:
-                names, R = feathered_presets(np.asarray(m.vertices), preset, feather)
+                eyes = eyes_vertical_extent(m.vertices, m.component_labels, m.component_names)
+                names, R = feathered_presets(np.asarray(m.vertices), preset, feather, eyes_y=eyes)
                 out = (list(names), np.asarray(R))
             self._region_cache = {k: v for k, v in self._region_cache.items() if k[0] != preset}
             self._region_cache[key] = out

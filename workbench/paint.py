@@ -401,31 +401,69 @@ def regional_mix(
     return PaintMix(_freeze(maps))
 
 
-def feathered_presets(vertices: NDArray[np.float64], preset: str, feather: float) -> tuple[list[str], NDArray[np.float64]]:
+def eyes_vertical_extent(
+    vertices: NDArray[np.float64], component_labels: NDArray[np.integer], component_names: Sequence[str]
+) -> tuple[float, float] | None:
+    """``(bottom, top)`` height (y) of the eyeball components, or None without any.
+
+    Eyeballs are components named ``eye`` / ``eye_*`` (not eyelashes or eyebrows),
+    as the importers label them.
+    """
+    ids = [i for i, nm in enumerate(component_names) if nm == "eye" or nm.startswith("eye_")]
+    mask = np.isin(np.asarray(component_labels), ids)
+    if not mask.any():
+        return None
+    y = np.asarray(vertices, dtype=np.float64)[mask, 1]
+    return float(y.min()), float(y.max())
+
+
+def feathered_presets(
+    vertices: NDArray[np.float64],
+    preset: str,
+    feather: float,
+    *,
+    eyes_y: tuple[float, float] | None = None,
+) -> tuple[list[str], NDArray[np.float64]]:
     """Pighin's regional presets as soft memberships, (r, n), summing to 1.
 
     ``preset``: ``"upper_lower"`` (forehead+eyes / lower face) or ``"six"``
     (forehead, eyes, lower face, each split left/right at x = 0). Region borders
-    are horizontal planes at fractions of the face height (y up) and the
-    mid-plane; ``feather`` is the transition half-width in model units.
+    are horizontal planes (y up) and the mid-plane; ``feather`` is the
+    transition half-width in model units.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float
+    preset : str
+    feather : float
+    eyes_y : (bottom, top) float, optional
+        Height range of the eyes (:func:`eyes_vertical_extent`). The eye band
+        then runs from a quarter of the eye height under the eyes (above the
+        nose wings) to a tenth above them (the brows go with the forehead).
+        Without it the borders sit at fractions of the 5th–99.5th percentile
+        height range that give the same bands on the sample head.
     """
     V = np.asarray(vertices, dtype=np.float64)
     y = V[:, 1]
-    lo, hi = np.percentile(y, 5), np.percentile(y, 99.5)
 
     def step(t: NDArray[np.float64]) -> NDArray[np.float64]:
         # smooth 0 -> 1 transition over [-feather, feather]
         u = np.clip((t / max(feather, 1e-12) + 1.0) / 2.0, 0.0, 1.0)
         return u * u * (3.0 - 2.0 * u)
 
-    eyes_line = lo + 0.62 * (hi - lo)
-    brow_line = lo + 0.74 * (hi - lo)
+    if eyes_y is not None:
+        bottom, top = eyes_y
+        h = top - bottom
+        eyes_line, brow_line = bottom - 0.25 * h, top + 0.1 * h
+    else:
+        lo, hi = np.percentile(y, 5), np.percentile(y, 99.5)
+        eyes_line, brow_line = lo + 0.394 * (hi - lo), lo + 0.581 * (hi - lo)
     if preset == "upper_lower":
-        upper = step(y - eyes_line + 0.05 * (hi - lo))
+        upper = step(y - eyes_line)
         return ["upper", "lower"], np.stack([upper, 1.0 - upper])
     if preset == "six":
         fore = step(y - brow_line)
-        eyes = step(y - eyes_line + 0.05 * (hi - lo)) - fore
+        eyes = step(y - eyes_line) - fore
         lower = 1.0 - fore - eyes
         left = step(V[:, 0])
         names, rows = [], []
