@@ -148,7 +148,9 @@ class Workbench(W.VBox):
         self.errors.add_class("fwb-errors")
         self.sink = ErrorSink(self.errors)
         self.viewport = Viewport(model, height=height, errors=self.errors)
-        self.viewport.layout = W.Layout(flex="1 1 auto", min_width="320px")
+        # its own height in the column: growing with a tall tool panel only left a gap
+        # between the canvas and the timeline
+        self.viewport.layout = W.Layout(flex="0 0 auto", min_width="320px")
         self.panel = ExpressionPanel(
             model, errors=self.errors, max_height=f"{max(height - 40, 200)}px"
         )

@@ -145,6 +145,7 @@ class ExportPanel(W.VBox):
             description="Bake (resample every frame)",
             indent=False,
             layout=W.Layout(width="auto"),
+            style={"description_width": "initial"},  # the whole label, not a cut default width
         )
         self.path = W.Text(value=path, description="Path", layout=W.Layout(width="420px"))
         self.export_button = W.Button(description="Export", button_style="primary", icon="download")
@@ -178,7 +179,8 @@ class ExportPanel(W.VBox):
         super().__init__(
             [
                 W.HTML("<b>Export animation</b>"),
-                W.HBox([self.format, self.fps, self.bake]),
+                # wraps: the tab is narrower than format + fps + the Bake label
+                W.HBox([self.format, self.fps, self.bake], layout=W.Layout(flex_flow="row wrap")),
                 W.HBox([self.path, self.export_button]),
                 self.result,
                 W.HTML(
