@@ -107,7 +107,8 @@ def measure(
         t1 = _frame_time_after(nb, prev)
         t0 = float(page.evaluate("() => window.__fwbT0"))
         lat.append(t1 - t0)
-        page.wait_for_timeout(120)
+        # noUiSlider animates a tap for ~300 ms and drops a tap made meanwhile
+        page.wait_for_timeout(500)
     time.sleep(0.8)  # let the slider interaction close
     results["slider jawOpen"] = (lat, list(RENDER_MS), list(WAIT_MS), push_ms())
     for shape in ("jawOpen", "eyeBlinkLeft"):
