@@ -112,7 +112,9 @@ def measure(nb: NotebookPage, fps: float, warmup: float, seconds: float) -> dict
     stats = nb.kernel_eval("import json; print(json.dumps(tl.playback_stats))")
     push = nb.kernel_eval("import json; print(json.dumps(list(vp.push_ms)))")
     nb.screenshot(f"playing-{fps:g}")
-    root.locator(".fwb-tl-pause").click()
+    # force: during playback the page never idles long enough for Playwright's
+    # "element is stable" check, which is about animation, not about the button
+    root.locator(".fwb-tl-pause").click(force=True)
     page.wait_for_function("() => document.querySelector('.fwb-timeline')"
                            ".getAttribute('data-playing') === '0'", timeout=20000)  # fmt: skip
     kernel_fps = (n1 - n0) / (k1 - k0)
