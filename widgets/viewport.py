@@ -838,6 +838,21 @@ class Viewport(anywidget.AnyWidget):
             self.selected_handle = index
             self._arm_watchdog()
 
+    def _unposed(self, position: Any) -> Any:
+        """A point picked on the shown mesh, in model space.
+
+        The view draws :meth:`FaceModel.evaluate`, which applies the keyed head pose
+        last; handle offsets and region pins live before it, so a pointer position
+        is mapped back with the inverse rigid transform (a no-op without a pose).
+        """
+        M = self._model.head_matrix()
+        if np.array_equal(M, np.eye(4)):
+            return position
+        p = np.asarray(position, dtype=np.float64).reshape(-1)
+        if p.shape != (3,):
+            raise ValueError(f"Viewport: a position must be 3 numbers, got {position!r}")
+        return np.linalg.solve(M, np.append(p, 1.0))[:3]
+
     def drag_to(self, position: Any) -> float:
         """Move the dragged handle's vertex to ``position`` (3,) in model space.
 
@@ -1061,7 +1076,8 @@ class Viewport(anywidget.AnyWidget):
                     close_interactions(self._model)
                     handler.begin(int(content["index"]), None if v is None else int(v))
                 elif phase in ("move", "end") and content.get("position") is not None:
-                    ms = float(handler.move(int(content["index"]), content["position"]) or 0.0)
+                    pos = self._unposed(content["position"])
+                    ms = float(handler.move(int(content["index"]), pos) or 0.0)
                 if phase == "end":
                     handler.end()
             except Exception as exc:
@@ -1106,13 +1122,13 @@ class Viewport(anywidget.AnyWidget):
                 # Chromium while it handles pointer input).
                 self._drag_seq = content.get("seq")
                 try:
-                    ms = self.drag_to(content["position"])
+                    ms = self.drag_to(self._unposed(content["position"]))
                 finally:
                     self._drag_seq = None
             elif phase == "end":
                 try:
                     if content.get("position") is not None and self._drag is not None:
-                        ms = self.drag_to(content["position"])
+                        ms = self.drag_to(self._unposed(content["position"]))
                 finally:
                     self.end_drag()
         except Exception as exc:

@@ -85,11 +85,14 @@ def expression_displacement(model: FaceModel, name: str) -> NDArray[np.float32]:
 
 
 def expression_from_state(model: FaceModel, name: str) -> Expression:
-    """Capture the model's current evaluated state as an :class:`Expression`."""
+    """Capture the model's current evaluated state as an :class:`Expression`.
+
+    The head pose is not part of an expression (as in :meth:`FaceModel.save_expression`).
+    """
     with model.lock:
         return Expression(
             name,
-            model.evaluate() - model.vertices.astype(np.float32),
+            model.evaluate(posed=False) - model.vertices.astype(np.float32),
             dict(model.weights),
             model.handles.vertices,
             model.handles.offsets,

@@ -226,6 +226,29 @@ def test_handle_drag_is_one_undo_step_and_every_message_is_acknowledged():
     assert np.abs(np.asarray(m.handles.offsets)).max() == 0.0
 
 
+def test_a_drag_on_a_turned_head_follows_the_pointer():
+    """With a head pose keyed, the pointer's (posed) position is mapped back to model space."""
+    from workbench.tracks import head_rotation_from_euler
+
+    m = _head_with_handles()
+    yaw = head_rotation_from_euler(35.0, 10.0, 0.0)
+    m.key_head_pose(0.0, yaw, [0.1, 0.0, 0.0])
+    m.set_time(0.0)
+    assert not np.allclose(m.head_matrix(), np.eye(4))
+    vp = widgets.Viewport(m)
+    i = m.handles.names.index("mouth_L_1")
+    v = int(m.handles.vertices[i])
+    p0 = m.evaluate()[v].astype(float)  # where the view draws the marker
+    _drag_msg(vp, "start", i, p0, seq=1)
+    target = p0 + np.array([0.03, 0.02, 0.0])  # a move in the view (world) frame
+    _drag_msg(vp, "move", i, target, seq=2)
+    np.testing.assert_allclose(m.evaluate()[v], target, atol=1e-5)  # under the pointer
+    _drag_msg(vp, "end", i, target, seq=3)
+    # the stored offset is the model-space one: the pose's rotation undone
+    R = m.head_matrix()[:3, :3]
+    np.testing.assert_allclose(R @ np.asarray(m.handles.offsets)[i], target - p0, atol=1e-5)
+
+
 def test_drag_frames_skip_invisible_changes_and_the_final_update_is_exact():
     m = _head_with_handles()
     vp = widgets.Viewport(m)
