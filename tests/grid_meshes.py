@@ -21,3 +21,12 @@ def grid_polygons(nx: int, ny: int) -> tuple[np.ndarray, Polygons]:
             a = j * (nx + 1) + i
             quads.append([a, a + 1, a + nx + 2, a + nx + 1])
     return V, Polygons.from_lists(quads)
+
+
+def grid_triangles(n: int) -> np.ndarray:
+    """(2 (n-1)², 3) int: two counter-clockwise triangles per cell of a row-major n x n vertex grid."""
+    j, i = np.divmod(np.arange((n - 1) * (n - 1)), n - 1)
+    a = j * n + i
+    return np.concatenate(
+        [np.stack([a, a + 1, a + n + 1], 1), np.stack([a, a + n + 1, a + n], 1)], axis=1
+    ).reshape(-1, 3)

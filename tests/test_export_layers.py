@@ -19,13 +19,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from grid_meshes import grid_polygons
 
 from workbench.export import ExportResult, export
 from workbench.export.encoding import MeshEncoding, crossing_times, curve_range
 from workbench.export.gltf import Curve, merge_curves
 from workbench.model import BlendShape, FaceModel, ModelMetadata
 from workbench.paint import Brush
-from workbench.polygons import Polygons
 from workbench.region_blend import RegionWeights
 from workbench.tracks import HANDLES, Key, Timeline, Track, region_track_name
 
@@ -34,18 +34,6 @@ TIMES = np.linspace(-0.2, 2.2, 49)  # before, inside and after the keys, on and 
 
 def _bump(V: np.ndarray, cx: float, cy: float) -> np.ndarray:
     return np.exp(-((V[:, 0] - cx) ** 2 + (V[:, 1] - cy) ** 2) / 2.0)
-
-
-def grid_polygons(nx: int, ny: int) -> tuple[np.ndarray, Polygons]:
-    """A flat (nx x ny)-quad grid in the z=0 plane (as in tests/conftest.py)."""
-    xs, ys = np.meshgrid(np.arange(nx + 1, dtype=float), np.arange(ny + 1, dtype=float))
-    V = np.stack([xs.ravel(), ys.ravel(), np.zeros(xs.size)], axis=1)
-    quads = []
-    for j in range(ny):
-        for i in range(nx):
-            a = j * (nx + 1) + i
-            quads.append([a, a + 1, a + nx + 2, a + nx + 1])
-    return V, Polygons.from_lists(quads)
 
 
 def make_model() -> FaceModel:

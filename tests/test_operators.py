@@ -6,6 +6,7 @@ import igl
 import numpy as np
 import scipy.sparse as sp
 import trimesh
+from grid_meshes import grid_triangles
 
 from workbench.operators import bilaplacian, cotangent_laplacian, mass_matrix, vertex_normals
 
@@ -20,12 +21,7 @@ def _plane(n: int = 6) -> tuple[np.ndarray, np.ndarray]:
     xs, ys = np.meshgrid(np.linspace(0, 1, n), np.linspace(0, 1, n))
     V = np.stack([xs.ravel(), ys.ravel(), np.zeros(xs.size)], 1)
     V[:, :2] += rng.uniform(-0.03, 0.03, (V.shape[0], 2))  # irregular but valid triangles
-    F = []
-    for j in range(n - 1):
-        for i in range(n - 1):
-            a = j * n + i
-            F += [[a, a + 1, a + n + 1], [a, a + n + 1, a + n]]
-    return V, np.array(F)
+    return V, grid_triangles(n)
 
 
 def test_laplacian_symmetric_negative_semidefinite_rows_sum_to_zero() -> None:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from grid_meshes import grid_triangles
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -214,12 +215,7 @@ def _grid(n: int = 9, x0: float = 5.0) -> tuple[np.ndarray, np.ndarray]:
     """An n x n grid over x in [x0 - 1, x0 + 1], y in [0, 2]: mirror plane x = x0."""
     xs, ys = np.meshgrid(np.linspace(-1, 1, n), np.linspace(0, 2, n))
     V = np.stack([xs.ravel() + x0, ys.ravel(), np.zeros(n * n)], 1)
-    F = []
-    for j in range(n - 1):
-        for i in range(n - 1):
-            a = j * n + i
-            F += [[a, a + 1, a + n + 1], [a, a + n + 1, a + n]]
-    return V, np.array(F)
+    return V, grid_triangles(n)
 
 
 def test_mirror_map_uses_the_mid_plane_and_skips_vertices_without_a_partner() -> None:

@@ -9,6 +9,7 @@ import pytest
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 import trimesh
+from grid_meshes import grid_triangles
 
 from workbench.operators import cotangent_laplacian, mass_matrix
 from workbench.shell import (
@@ -26,12 +27,7 @@ def _disk(n: int = 14) -> tuple[np.ndarray, np.ndarray]:
     """A gently curved open patch (one boundary loop)."""
     xs, ys = np.meshgrid(np.linspace(-1, 1, n), np.linspace(-1, 1, n))
     V = np.stack([xs.ravel(), ys.ravel(), 0.2 * (xs.ravel() ** 2 + ys.ravel() ** 2)], 1)
-    F = []
-    for j in range(n - 1):
-        for i in range(n - 1):
-            a = j * n + i
-            F += [[a, a + 1, a + n + 1], [a, a + n + 1, a + n]]
-    return V, np.array(F)
+    return V, grid_triangles(n)
 
 
 def _interior(V: np.ndarray, n: int = 14) -> list[int]:
