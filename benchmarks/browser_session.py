@@ -11,9 +11,10 @@ with a screenshot and the next size still runs.
 
 from __future__ import annotations
 
+import contextlib
 import sys
 import tempfile
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -23,7 +24,7 @@ sys.path.insert(0, str(REPO / "tests" / "browser"))
 
 from harness import CHROMIUM, CHROMIUM_ARGS, LabServer, NotebookPage, write_notebook  # noqa: E402
 
-__all__ = ["CHROMIUM", "REPO", "NotebookPage", "chromium_missing", "each_resolution"]
+__all__ = ["CHROMIUM", "REPO", "NotebookPage", "chromium_missing", "each_resolution", "lab_and_browser"]
 
 
 def chromium_missing() -> bool:
@@ -61,10 +62,38 @@ def each_resolution(
     -------
     rows : list of tuple
     """
+    rows: list[tuple[Any, ...]] = []
+    with lab_and_browser("fwb-bench-") as (lab, browser):
+        for res in resolutions:
+            name = f"bench_{tag}_{res}.ipynb"
+            write_notebook(lab.root / name, [setup_cell(res)])
+            ctx = browser.new_context(viewport=viewport or {"width": 1400, "height": 1000})
+            page = ctx.new_page()
+            nb = NotebookPage(page, lab, REPO / "test-artifacts" / f"bench-{tag}", name)
+            page.goto(f"{lab.url}/lab/workspaces/bench-{tag}-{res}/tree/{name}?reset")
+            try:
+                nb.wait_kernel_idle()
+                nb.run_all(timeout=900)
+                nb.wait_viewports(1, timeout=120)
+                rows.extend(measure(res, nb))
+            except Exception as exc:  # report and go on with the next size
+                print(f"[{res}] failed: {type(exc).__name__}: {exc}", file=sys.stderr)
+                nb.screenshot(f"failed-{res}")
+            finally:
+                ctx.close()
+                lab.shutdown_kernels()
+    return rows
+
+
+@contextlib.contextmanager
+def lab_and_browser(prefix: str) -> Iterator[tuple[LabServer, Any]]:
+    """A JupyterLab of our own (temporary dirs, 127.0.0.1) and Debian's headless Chromium.
+
+    Both are stopped on exit, whatever happened inside.
+    """
     from playwright.sync_api import sync_playwright
 
-    rows: list[tuple[Any, ...]] = []
-    with tempfile.TemporaryDirectory(prefix="fwb-bench-") as tmp:
+    with tempfile.TemporaryDirectory(prefix=prefix) as tmp:
         lab = LabServer(Path(tmp))
         lab.start()
         try:
@@ -72,25 +101,9 @@ def each_resolution(
                 browser = pw.chromium.launch(
                     executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS
                 )
-                for res in resolutions:
-                    name = f"bench_{tag}_{res}.ipynb"
-                    write_notebook(lab.root / name, [setup_cell(res)])
-                    ctx = browser.new_context(viewport=viewport or {"width": 1400, "height": 1000})
-                    page = ctx.new_page()
-                    nb = NotebookPage(page, lab, REPO / "test-artifacts" / f"bench-{tag}", name)
-                    page.goto(f"{lab.url}/lab/workspaces/bench-{tag}-{res}/tree/{name}?reset")
-                    try:
-                        nb.wait_kernel_idle()
-                        nb.run_all(timeout=900)
-                        nb.wait_viewports(1, timeout=120)
-                        rows.extend(measure(res, nb))
-                    except Exception as exc:  # report and go on with the next size
-                        print(f"[{res}] failed: {type(exc).__name__}: {exc}", file=sys.stderr)
-                        nb.screenshot(f"failed-{res}")
-                    finally:
-                        ctx.close()
-                        lab.shutdown_kernels()
-                browser.close()
+                try:
+                    yield lab, browser
+                finally:
+                    browser.close()
         finally:
             lab.stop()
-    return rows

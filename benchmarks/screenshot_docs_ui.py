@@ -53,15 +53,14 @@ import argparse
 import contextlib
 import json
 import sys
-import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from browser_session import CHROMIUM, REPO, NotebookPage, chromium_missing  # (sets sys.path)
-from harness import CHROMIUM_ARGS, LabServer
+from browser_session import REPO, NotebookPage, chromium_missing, lab_and_browser  # (sets sys.path)
+from harness import LabServer
 
 WORKBENCH_NB = REPO / "notebooks" / "workbench.ipynb"
 ARTIFACTS = REPO / "test-artifacts" / "screenshot-docs-ui"
@@ -535,7 +534,6 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     if chromium_missing():
         return 1
-    from playwright.sync_api import sync_playwright
 
     out = args.out.resolve()
     glb = args.glb if args.glb.is_absolute() else args.glb.resolve()
@@ -555,42 +553,32 @@ def main(argv: list[str] | None = None) -> int:
             raise
         timings.append((name, time.monotonic() - t0))
 
-    with tempfile.TemporaryDirectory(prefix="fwb-docs-ui-") as tmp:
-        lab = LabServer(Path(tmp))
-        lab.start()
-        try:
-            with sync_playwright() as pw:
-                browser = pw.chromium.launch(
-                    executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS
-                )
+    try:
+        with lab_and_browser("fwb-docs-ui-") as (lab, browser):
+            if args.part in ("all", "main"):
+                t0 = time.monotonic()
+                ctx, s = _open(lab, browser, "workbench.ipynb", _notebook_at(None))
+                timings.append(("open workbench.ipynb", time.monotonic() - t0))
                 try:
-                    if args.part in ("all", "main"):
-                        t0 = time.monotonic()
-                        ctx, s = _open(lab, browser, "workbench.ipynb", _notebook_at(None))
-                        timings.append(("open workbench.ipynb", time.monotonic() - t0))
-                        try:
-                            step("shapes", lambda: shapes(s, out), s)
-                            step("sculpt", lambda: sculpt(s, out), s)
-                            step("regions", lambda: regions(s, out), s)
-                            step("paint", lambda: paint(s, out), s)
-                            step("timeline", lambda: timeline(s, out), s)
-                            step("export", lambda: export(s, out, glb), s)
-                        finally:
-                            _close(lab, ctx, s)
-                    if args.part in ("all", "wrinkles"):
-                        t0 = time.monotonic()
-                        ctx, s = _open(lab, browser, "workbench_25k.ipynb", _notebook_at("25k"))
-                        timings.append(("open workbench.ipynb at 25k", time.monotonic() - t0))
-                        try:
-                            step("wrinkles", lambda: wrinkles(s, out), s)
-                        finally:
-                            _close(lab, ctx, s)
+                    step("shapes", lambda: shapes(s, out), s)
+                    step("sculpt", lambda: sculpt(s, out), s)
+                    step("regions", lambda: regions(s, out), s)
+                    step("paint", lambda: paint(s, out), s)
+                    step("timeline", lambda: timeline(s, out), s)
+                    step("export", lambda: export(s, out, glb), s)
                 finally:
-                    browser.close()
-        finally:
-            lab.stop()
-            if not glb_existed:
-                glb.unlink(missing_ok=True)
+                    _close(lab, ctx, s)
+            if args.part in ("all", "wrinkles"):
+                t0 = time.monotonic()
+                ctx, s = _open(lab, browser, "workbench_25k.ipynb", _notebook_at("25k"))
+                timings.append(("open workbench.ipynb at 25k", time.monotonic() - t0))
+                try:
+                    step("wrinkles", lambda: wrinkles(s, out), s)
+                finally:
+                    _close(lab, ctx, s)
+    finally:
+        if not glb_existed:
+            glb.unlink(missing_ok=True)
     for name, secs in timings:
         print(f"  {name:32s} {secs:6.1f} s")
     print(f"done in {time.monotonic() - t_start:.0f} s; look at the pictures in {out}")
