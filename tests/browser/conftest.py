@@ -28,6 +28,7 @@ import re
 import shutil
 import tempfile
 import uuid
+import warnings
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
@@ -38,6 +39,7 @@ from harness import (
     CHROMIUM,
     CHROMIUM_ARGS,
     LabServer,
+    LostCellReply,
     NotebookPage,
     in_ci,
     write_notebook,
@@ -122,27 +124,40 @@ def open_notebook(
             # make notebooks/workbench.ipynb offer recovery instead of opening the app.
             for f in (lab.base / "recovery").glob("*"):
                 f.unlink()
-        name = f"t_{uuid.uuid4().hex[:10]}.ipynb"
-        target = lab.root / name
-        if isinstance(source, list):
-            write_notebook(target, source)
-        else:
-            shutil.copyfile(source, target)
-        context = browser.new_context(
-            viewport={"width": viewport_size[0], "height": viewport_size[1]}
-        )
-        page = context.new_page()
-        nb = NotebookPage(page, lab, artifacts_dir, name)
-        opened.append((context, nb))
-        page.goto(f"{lab.url}/lab/workspaces/{uuid.uuid4().hex[:12]}/tree/{name}?reset")
-        try:
-            nb.wait_kernel_idle()
-            if run:
-                nb.run_all()
-        except Exception:
-            nb.screenshot("open-failed")
-            raise
-        return nb
+        for attempt in (1, 2):
+            name = f"t_{uuid.uuid4().hex[:10]}.ipynb"
+            target = lab.root / name
+            if isinstance(source, list):
+                write_notebook(target, source)
+            else:
+                shutil.copyfile(source, target)
+            context = browser.new_context(
+                viewport={"width": viewport_size[0], "height": viewport_size[1]}
+            )
+            page = context.new_page()
+            nb = NotebookPage(page, lab, artifacts_dir, name)
+            opened.append((context, nb))
+            kernels = lab.kernel_ids()
+            page.goto(f"{lab.url}/lab/workspaces/{uuid.uuid4().hex[:12]}/tree/{name}?reset")
+            try:
+                nb.wait_kernel_idle()
+                if run:
+                    nb.run_all()
+            except LostCellReply as exc:
+                nb.screenshot(f"lost-cell-reply-{attempt}")
+                if attempt == 2:
+                    raise
+                # JupyterLab's messaging, not the notebook: say so, then a fresh kernel
+                warnings.warn(f"{exc}; reopening the notebook once", stacklevel=2)
+                with contextlib.suppress(Exception):
+                    context.close()
+                lab.shutdown_kernels(lab.kernel_ids() - kernels)
+                continue
+            except Exception:
+                nb.screenshot("open-failed")
+                raise
+            return nb
+        raise AssertionError("unreachable")
 
     yield _open
 

@@ -177,6 +177,17 @@ class KernelError(RuntimeError):
     """Python code run through :meth:`NotebookPage.kernel_eval` raised."""
 
 
+class LostCellReply(RuntimeError):
+    """JupyterLab never got a cell's execute reply although the kernel ran on.
+
+    Seen about once in 35 notebook opens on this machine, always on the first cell
+    right after the kernel started: counts like ``[None, 2, 3]``, the kernel idle and
+    the first cell still "running". It is JupyterLab's messaging, not the notebook's
+    code (the kernel numbered the later cells 2 and 3), so the harness reopens the
+    notebook once in a fresh kernel (:func:`conftest.open_notebook`).
+    """
+
+
 _JS_EXECUTE = """
 async ([code, timeoutMs]) => {
   const kernel = window.jupyterapp.shell.currentWidget.sessionContext.session.kernel;
@@ -244,8 +255,12 @@ class NotebookPage:
             timeout=timeout * 1000,
         )
 
-    def run_all(self, timeout: float = 180.0) -> dict[str, Any]:
-        """Run every cell; wait until all ran and the kernel is idle; fail on errors."""
+    def run_all(self, timeout: float = 180.0, lost_after: float = 15.0) -> dict[str, Any]:
+        """Run every cell; wait until all ran and the kernel is idle; fail on errors.
+
+        Raises :class:`LostCellReply` when a cell's reply is missing for ``lost_after``
+        seconds while later cells finished and the kernel idles.
+        """
         # Fire and poll: the command's promise settles only when every cell has run, and a
         # page.evaluate awaiting it has no timeout (a lost reply hung a CI run for 40 min).
         self.page.evaluate(
@@ -253,6 +268,7 @@ class NotebookPage:
         )
         deadline = time.monotonic() + timeout
         st: dict[str, Any] | None = None
+        stalled_since: float | None = None
         while time.monotonic() < deadline:
             st = self.state()
             if st and st["errors"]:
@@ -264,6 +280,21 @@ class NotebookPage:
                 and all(c is not None for c in st["counts"])
             ):
                 return st
+            # a cell without a count while a LATER cell has one and the kernel idles
+            lost = bool(
+                st
+                and st["kernel"] == "idle"
+                and any(
+                    c is None and any(d is not None for d in st["counts"][i + 1 :])
+                    for i, c in enumerate(st["counts"])
+                )
+            )
+            if not lost:
+                stalled_since = None
+            elif stalled_since is None:
+                stalled_since = time.monotonic()
+            elif time.monotonic() - stalled_since > lost_after:
+                raise LostCellReply(f"notebook {self.name}: a cell reply never arrived: {st}")
             time.sleep(0.2)
         raise AssertionError(f"notebook {self.name} did not finish in {timeout} s: {st}")
 
