@@ -44,7 +44,7 @@ import traitlets as t
 
 from widgets._threading import ErrorSink, InteractionGrouper, close_interactions
 from widgets.gallery import ExpressionGallery
-from widgets.viewport import BRUSH_MODES, FALLOFFS, default_brush_radius, face_height
+from widgets.viewport import BRUSH_MODES, FALLOFFS, brush_radius_slider, face_height
 from workbench.expressions import expression_names
 from workbench.paint import Brush, eyes_vertical_extent, feathered_presets, regional_mix
 
@@ -166,17 +166,9 @@ class PaintPanel(W.VBox):
         self.picked.add_class("fwb-paint-picked")
 
         # ---- brush
-        r0 = float(getattr(viewport, "brush_radius", 0.0) or default_brush_radius(model))
         wide = {"description_width": "90px"}
-        self.radius = W.FloatSlider(
-            value=r0,
-            min=0.005 * H,
-            max=0.3 * H,
-            step=0.001 * H,
-            readout_format=".3f",
-            description=f"radius ({units})",
-            style=wide,
-            layout=W.Layout(width="98%"),
+        self.radius = brush_radius_slider(
+            model, viewport, f"radius ({units})", style=wide, layout=W.Layout(width="98%")
         )
         self.opacity = W.FloatSlider(
             value=float(getattr(viewport, "brush_opacity", 0.5)),

@@ -231,6 +231,27 @@ def default_brush_radius(model: Any) -> float:
     return BRUSH_RADIUS_FRACTION * face_height(model)
 
 
+def brush_radius_slider(
+    model: Any, viewport: Any, description: str, **kwargs: Any
+) -> ipywidgets.FloatSlider:
+    """The brush-radius slider shared by the paint and wrinkle-erase tools.
+
+    Starts at the viewport's brush radius (or :func:`default_brush_radius`) and
+    spans 0.5 %–30 % of the face height; ``kwargs`` go to the slider (style, layout).
+    """
+    H = face_height(model)
+    r0 = float(getattr(viewport, "brush_radius", 0.0) or default_brush_radius(model))
+    return ipywidgets.FloatSlider(
+        value=r0,
+        min=0.005 * H,
+        max=0.3 * H,
+        step=0.001 * H,
+        readout_format=".3f",
+        description=description,
+        **kwargs,
+    )
+
+
 def _changed_rows(new: np.ndarray, old: np.ndarray, tolerance: float) -> np.ndarray:
     """Rows (vertices) of (n, 3) ``new`` that differ from ``old`` by more than ``tolerance``.
 

@@ -535,17 +535,12 @@ class WrinklePanel(W.VBox):
             "Rest pose", "fwb-wrinkle-rest", "Set every weight to 0 (undoable)"
         )
         # ---- eraser brush (shown while an example's "Erase wrinkles" toggle is on)
-        from widgets.viewport import default_brush_radius, face_height
+        from widgets.viewport import brush_radius_slider
 
-        H = face_height(model)
-        r0 = float(getattr(viewport, "brush_radius", 0.0) or default_brush_radius(model))
-        self.erase_radius = W.FloatSlider(
-            value=r0,
-            min=0.005 * H,
-            max=0.3 * H,
-            step=0.001 * H,
-            readout_format=".3f",
-            description="radius",
+        self.erase_radius = brush_radius_slider(
+            model,
+            viewport,
+            "radius",
             style={"description_width": "60px"},
             layout=W.Layout(width="260px"),
         )
