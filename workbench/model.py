@@ -316,6 +316,26 @@ class _Interaction:
     weights_before: dict[str, float] = field(default_factory=dict)
     slots_before: dict[str, Any] = field(default_factory=dict)
     paint_stroke: tuple[str, Stroke] | None = None
+    token: InteractionToken | None = None
+    on_close: Callable[[], None] | None = None
+
+
+@dataclass(frozen=True)
+class InteractionToken:
+    """Names one open interaction (a drag, a stroke) across separate messages.
+
+    Returned by :meth:`FaceModel.begin_interaction`; pass it back to
+    :meth:`FaceModel.end_interaction` (one undo step) or
+    :meth:`FaceModel.cancel_interaction` (everything put back, no undo step).
+    A token of an interaction that was already closed is refused, so a late
+    message of an old gesture can never close a newer one.
+    """
+
+    label: str
+    serial: int
+
+
+_token_serials = itertools.count(1)
 
 
 class FaceModel:
@@ -1882,6 +1902,92 @@ class FaceModel:
         return out
 
     # ------------------------------------------------------------ interactions
+    def begin_interaction(
+        self, label: str, on_close: Callable[[], None] | None = None
+    ) -> InteractionToken:
+        """Open an interaction that spans several messages (a drag); returns its token.
+
+        Edits made until :meth:`end_interaction` emit ``*_changing`` events and
+        become one undo step. ``on_close`` is called (without arguments) when
+        somebody else closes the interaction with :meth:`close_interaction`
+        (a discrete edit elsewhere), so the owner can reset its own state.
+
+        Raises
+        ------
+        ModelError
+            Another interaction is open (close it first with :meth:`close_interaction`).
+        """
+        with self._lock:
+            if self._interaction is not None:
+                raise ModelError(
+                    f"begin_interaction({label!r}): interaction {self._interaction.label!r} is "
+                    "still open; end, cancel or close it first"
+                )
+            token = InteractionToken(label, next(_token_serials))
+            self._interaction = _Interaction(label, token=token, on_close=on_close)
+            return token
+
+    def _take_interaction(self, token: InteractionToken, what: str) -> _Interaction:
+        inter = self._interaction
+        if inter is None or inter.token != token:
+            raise ModelError(
+                f"{what}: interaction {token.label!r} is not the open one "
+                f"({'none is open' if inter is None else repr(inter.label) + ' is'})"
+            )
+        self._interaction = None
+        return inter
+
+    def end_interaction(self, token: InteractionToken) -> None:
+        """Close the interaction of ``token``: one undo step with everything it changed."""
+        with self._lock:
+            self._finish_interaction(self._take_interaction(token, "end_interaction"))
+
+    def cancel_interaction(self, token: InteractionToken) -> None:
+        """Close the interaction of ``token`` and put back what it changed (no undo step)."""
+        with self._lock:
+            inter = self._take_interaction(token, "cancel_interaction")
+            self._revert_interaction(inter)
+
+    def close_interaction(self) -> bool:
+        """End whatever interaction is open (keeping its edits); True if one was open.
+
+        Discrete edits from views (Key, Import, undo buttons) call this first so
+        they never join a drag's undo step. The owner's ``on_close`` is told.
+        """
+        with self._lock:
+            inter = self._interaction
+            if inter is None:
+                return False
+            callback = inter.on_close
+            if inter.token is not None:
+                self.end_interaction(inter.token)
+            else:  # a ``with interaction()`` block on another thread: let it finish
+                return False
+        if callback is not None:
+            callback()
+        return True
+
+    @property
+    def interaction_token(self) -> InteractionToken | None:
+        """The token of the open interaction begun with :meth:`begin_interaction`, or None."""
+        inter = self._interaction
+        return None if inter is None else inter.token
+
+    def _revert_interaction(self, inter: _Interaction) -> None:
+        weights = {k: v for k, v in inter.weights_before.items() if k in self._weights}
+        if weights:
+            self._weights.update(weights)
+            self._evaluated = None
+            self._blended = None
+            self.events.weights.emit(dict(weights))
+        for name, value in inter.slots_before.items():
+            self._slots[name] = value
+            getattr(self.events, name).emit()
+            if _SLOTS[name]:
+                self._evaluated = None
+        if weights or inter.slots_before:
+            self.events.deformed.emit(True)
+
     @contextmanager
     def interaction(self, label: str) -> Iterator[None]:
         """Group edits (a drag, a scrub) into one undo step.
