@@ -44,7 +44,7 @@ _SETUP = """
 import json, time
 import numpy as np
 import workbench, widgets
-from workbench.handle_presets import default_face_handles
+from workbench.methods.handles.presets import default_face_handles
 model = workbench.load_sample("head", resolution="{res}")
 model.set_handles(default_face_handles(model))
 _skin = model.component_labels == model.component_names.index("skin")

@@ -21,7 +21,7 @@ import numpy as np
 
 import workbench
 from workbench.export import export
-from workbench.tracks import Key, Timeline, Track, weight_track_name
+from workbench.animation.tracks import Key, Timeline, Track, weight_track_name
 
 FORMATS = {
     "glb": ("face.glb", {}),

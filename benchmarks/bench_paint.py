@@ -51,7 +51,7 @@ def _pct(values: list[float], q: float) -> float:
 
 def _mouth(model: Any, expression: str = "smile") -> tuple[list[int], int, int]:
     """Skin vertices the expression moves most, and the left / right mouth corners."""
-    from workbench.expressions import expression_displacement
+    from workbench.methods.paint.expressions import expression_displacement
 
     skin = model.component_labels == model.component_names.index("skin")
     V = np.asarray(model.vertices)
@@ -66,7 +66,7 @@ def _mouth(model: Any, expression: str = "smile") -> tuple[list[int], int, int]:
 def bench_core(resolutions: list[str], dabs: int = 40) -> list[tuple[Any, ...]]:
     import workbench
     from widgets.viewport import default_brush_radius
-    from workbench.paint import Brush
+    from workbench.methods.paint.painting import Brush
 
     rows = []
     for res in resolutions:

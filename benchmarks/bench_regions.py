@@ -26,15 +26,15 @@ from collections.abc import Callable
 import numpy as np
 
 import workbench
-from workbench.handle_presets import default_face_handles
-from workbench.marker_fit import fit_markers, generate_synthetic_marker_performance
-from workbench.region_blend import (
+from workbench.methods.handles.presets import default_face_handles
+from workbench.methods.regions.marker_fit import fit_markers, generate_synthetic_marker_performance
+from workbench.methods.regions.blend import (
     RegionWeights,
     drag_system,
     region_blend_positions,
     solve_region_drag,
 )
-from workbench.regions import segment_blend_regions
+from workbench.methods.regions.segmentation import segment_blend_regions
 
 
 def timeit(fn: Callable[[], object], repeat: int = 20) -> tuple[float, float]:
@@ -136,7 +136,7 @@ def _osqp_joint_fit(m, R, mk, P, G):  # type: ignore[no-untyped-def]
     import osqp
     import scipy.sparse as sp
 
-    from workbench.regions import _effective_deltas
+    from workbench.methods.regions.segmentation import _effective_deltas
 
     D = _effective_deltas(m)[:, mk].astype(np.float64)
     M, k = mk.size, D.shape[0]

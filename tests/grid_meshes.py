@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from workbench.polygons import Polygons
+from workbench.core.polygons import Polygons
 
 
 def grid_polygons(nx: int, ny: int) -> tuple[np.ndarray, Polygons]:

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from workbench.animation_io import (
+from workbench.animation.importers import (
     AnimationImportError,
     map_shape_names,
     read_animation,
@@ -19,8 +19,8 @@ from workbench.animation_io import (
 from workbench.export import ExportError, export
 from workbench.export.gltf import _glb_bytes, build_gltf
 from workbench.model import BlendShape, FaceModel
-from workbench.polygons import Polygons
-from workbench.tracks import Timeline
+from workbench.core.polygons import Polygons
+from workbench.animation.tracks import Timeline
 
 SHAPES = ["eyeBlinkLeft", "jawOpen", "mouthSmileRight"]
 

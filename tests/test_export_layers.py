@@ -25,9 +25,9 @@ from workbench.export import ExportResult, export
 from workbench.export.encoding import MeshEncoding, crossing_times, curve_range
 from workbench.export.gltf import Curve, merge_curves
 from workbench.model import BlendShape, FaceModel, ModelMetadata
-from workbench.paint import Brush
-from workbench.region_blend import RegionWeights
-from workbench.tracks import HANDLES, Key, Timeline, Track, region_track_name
+from workbench.methods.paint.painting import Brush
+from workbench.methods.regions.blend import RegionWeights
+from workbench.animation.tracks import HANDLES, Key, Timeline, Track, region_track_name
 
 TIMES = np.linspace(-0.2, 2.2, 49)  # before, inside and after the keys, on and off frames
 

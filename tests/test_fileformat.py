@@ -170,7 +170,7 @@ def test_crash_mid_save_keeps_previous_file(
 
 
 def test_expressions_paint_and_keys_round_trip(tiny_model: FaceModel, tmp_path: Path) -> None:
-    from workbench.paint import Brush
+    from workbench.methods.paint.painting import Brush
 
     m = tiny_model
     m.set_handles(HandleSet([4], [[0.0, 0.0, 0.2]], ("centre",), [-1]))
@@ -209,7 +209,7 @@ def test_timeline_naming_unknown_shapes_is_refused(saved: Path, tmp_path: Path) 
 
 
 def test_regions_and_region_weights_round_trip(tmp_path: Path) -> None:
-    from workbench.region_blend import RegionWeights
+    from workbench.methods.regions.blend import RegionWeights
 
     m = workbench.load_sample("head")
     st = m.segment_regions(0.25)
@@ -237,8 +237,8 @@ def _rich_model() -> FaceModel:
     from grid_meshes import grid_polygons
 
     from workbench.model import BlendShape
-    from workbench.paint import Brush
-    from workbench.region_blend import RegionWeights
+    from workbench.methods.paint.painting import Brush
+    from workbench.methods.regions.blend import RegionWeights
 
     V, polys = grid_polygons(2, 2)
     up = np.zeros((9, 3), np.float32)

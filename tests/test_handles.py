@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 import workbench
-from workbench.handle_presets import default_face_handles
+from workbench.methods.handles.presets import default_face_handles
 from workbench.model import FaceModel, HandleSet, ModelError
-from workbench.shell import ShellDeformer
+from workbench.methods.handles.shell import ShellDeformer
 
 
 @pytest.fixture(scope="module")

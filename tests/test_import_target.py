@@ -9,7 +9,7 @@ import pytest
 
 from workbench.io.makehuman_target import parse_target, read_targets
 from workbench.io.registry import read_any
-from workbench.mesh_checks import MeshFormatError
+from workbench.geometry.mesh_checks import MeshFormatError
 
 BASE_OBJ = """\
 v 0 0 0

@@ -7,8 +7,8 @@ import pytest
 from scipy.interpolate import RBFInterpolator
 
 import workbench
-from workbench.handle_presets import default_face_handles
-from workbench.marker_fit import (
+from workbench.methods.handles.presets import default_face_handles
+from workbench.methods.regions.marker_fit import (
     RBFResidual,
     SyntheticPerformance,
     fidelity_table,
@@ -17,9 +17,9 @@ from workbench.marker_fit import (
     generate_synthetic_marker_performance,
 )
 from workbench.model import FaceModel
-from workbench.operators import mass_matrix
-from workbench.region_blend import RegionWeights, region_blend_positions
-from workbench.regions import RegionError, Regions, component_roles, segment_blend_regions
+from workbench.geometry.operators import mass_matrix
+from workbench.methods.regions.blend import RegionWeights, region_blend_positions
+from workbench.methods.regions.segmentation import RegionError, Regions, component_roles, segment_blend_regions
 
 
 @pytest.fixture(scope="module")

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 import workbench
-from workbench.region_blend import RegionWeights
-from workbench.tracks import evaluate_mesh
+from workbench.methods.regions.blend import RegionWeights
+from workbench.animation.tracks import evaluate_mesh
 
 
 def test_a_regional_expression_keys_exactly_as_saved() -> None:

@@ -9,9 +9,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import workbench
-import workbench.paint as paint_module
+import workbench.methods.paint.painting as paint_module
 from workbench.model import BlendShape, FaceModel, ModelError
-from workbench.paint import (
+from workbench.methods.paint.painting import (
     Brush,
     PaintMix,
     PaintSurface,
@@ -23,7 +23,7 @@ from workbench.paint import (
     normalize,
     regional_mix,
 )
-from workbench.tracks import evaluate_mesh
+from workbench.animation.tracks import evaluate_mesh
 
 
 @pytest.fixture(scope="module")
@@ -59,7 +59,7 @@ def test_hard_opaque_brush_reproduces_the_expression_inside(head: FaceModel) -> 
 def test_opaque_brush_reproduces_the_expression_over_region_weights(head: FaceModel) -> None:
     # the region blend is a layer below the paint: it belongs to the base, which an
     # opacity-1 dab replaces by the expression, however the regions are weighted
-    from workbench.region_blend import RegionWeights
+    from workbench.methods.regions.blend import RegionWeights
 
     state = head.segment_regions(0.25)
     c = _mouth_corner(head)
@@ -248,7 +248,7 @@ def test_mirror_map_uses_the_mid_plane_and_skips_vertices_without_a_partner() ->
 
 
 def test_paint_follows_a_change_of_the_shell_stiffness(head: FaceModel) -> None:
-    from workbench.handle_presets import default_face_handles
+    from workbench.methods.handles.presets import default_face_handles
 
     def prepared(m: FaceModel) -> FaceModel:
         m.set_handles(default_face_handles(m))

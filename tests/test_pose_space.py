@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 import workbench
-from workbench.handle_presets import default_face_handles
-from workbench.pose_space import (
+from workbench.methods.handles.presets import default_face_handles
+from workbench.methods.wrinkles.pose_space import (
     COMPARISON_METHODS,
     FeatureGraph,
     HybridDeformer,
@@ -24,8 +24,8 @@ from workbench.pose_space import (
     to_world,
     vertex_normals,
 )
-from workbench.shell import ShellDeformer
-from workbench.wrinkle_examples import EXAMPLE_POSES, WrinkleSculptor, performance_weights
+from workbench.methods.handles.shell import ShellDeformer
+from workbench.methods.wrinkles.examples import EXAMPLE_POSES, WrinkleSculptor, performance_weights
 
 
 def _rot(axis: np.ndarray, deg: float) -> np.ndarray:
@@ -276,7 +276,7 @@ def test_numba_wpsd_matches_numpy_for_any_number_of_poses(head, poses) -> None:
     # the numba kernel sums poses in groups of eight (zero padded): 3, 8 and 11 poses
     # exercise a partial group, an exact one and two groups
     pytest.importorskip("numba")
-    from workbench.pose_space import DetailEvaluator
+    from workbench.methods.wrinkles.pose_space import DetailEvaluator
 
     m, h, _shell, _sculptor, _examples = head
     V = np.asarray(m.vertices, np.float64)
@@ -304,7 +304,7 @@ def test_numba_wpsd_matches_numpy_for_any_number_of_poses(head, poses) -> None:
 def test_numba_basis_product_matches_numpy(n) -> None:
     # blocks of 1024 rows: sizes below, at and across a block boundary; zero handle rows skipped
     pytest.importorskip("numba")
-    from workbench import _kernels
+    from workbench.methods.wrinkles import kernels as _kernels
 
     rng = np.random.default_rng(n)
     B = np.asfortranarray(rng.normal(size=(n, 7)).astype(np.float32))
@@ -320,7 +320,7 @@ def test_numba_wpsd_skips_vertices_without_details(head) -> None:
     # vertices whose examples have no detail get exactly X (or 0): the fast path
     # only visits vertices with non-zero RBF weights, and must agree with numpy
     pytest.importorskip("numba")
-    from workbench.pose_space import DetailEvaluator
+    from workbench.methods.wrinkles.pose_space import DetailEvaluator
 
     m, h, _shell, _sculptor, _examples = head
     V = np.asarray(m.vertices, np.float64)

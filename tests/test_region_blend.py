@@ -7,7 +7,7 @@ import pytest
 
 import workbench
 from workbench.model import FaceModel
-from workbench.region_blend import (
+from workbench.methods.regions.blend import (
     RegionState,
     RegionWeights,
     damp_drag,
@@ -17,7 +17,7 @@ from workbench.region_blend import (
     region_layer,
     solve_region_drag,
 )
-from workbench.regions import RegionError, Regions, segment_blend_regions
+from workbench.methods.regions.segmentation import RegionError, Regions, segment_blend_regions
 
 
 @pytest.fixture(scope="module")
@@ -203,7 +203,7 @@ def test_region_layer_in_a_model(regions: Regions) -> None:
 def test_bounded_lsq_matches_bvls_on_random_boxes() -> None:
     from scipy.optimize import lsq_linear
 
-    from workbench.region_blend import bounded_lsq
+    from workbench.methods.regions.blend import bounded_lsq
 
     rng = np.random.default_rng(0)
     for _ in range(60):

@@ -12,7 +12,7 @@ from scipy.sparse.csgraph import connected_components
 
 import workbench
 from workbench.model import BlendShape, FaceModel
-from workbench.regions import (
+from workbench.methods.regions.segmentation import (
     RegionError,
     Regions,
     deformation_map,
@@ -289,7 +289,7 @@ def test_stored_in_the_model_slot_is_undoable(head: FaceModel, regions: Regions)
 
 
 # --------------------------------------------------------------- user edits
-from workbench.regions import (  # noqa: E402
+from workbench.methods.regions.segmentation import (  # noqa: E402
     RegionTopology,
     adjacent_regions,
     merge_regions,

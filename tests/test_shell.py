@@ -11,16 +11,16 @@ import scipy.sparse.linalg as spla
 import trimesh
 from grid_meshes import grid_triangles
 
-from workbench.operators import cotangent_laplacian, mass_matrix
-from workbench.shell import (
+from workbench.geometry.operators import cotangent_laplacian, mass_matrix
+from workbench.methods.handles.shell import (
     DEFAULT_K_B,
     DEFAULT_K_S,
     REFERENCE_VERTEX_COUNT,
     ShellDeformer,
     shell_system_matrix,
 )
-from workbench.sparse_cholesky import SparseSPDSolver, cholmod_available
-from workbench.subdivision import loop_subdivision
+from workbench.geometry.sparse_cholesky import SparseSPDSolver, cholmod_available
+from workbench.geometry.subdivision import loop_subdivision
 
 
 def _disk(n: int = 14) -> tuple[np.ndarray, np.ndarray]:
@@ -205,7 +205,7 @@ def _relative_error(A: sp.spmatrix, B: sp.spmatrix) -> float:
 def skin_head() -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, int]]:
     """Skin of the base sample head as its own mesh, with the default handles on it."""
     import workbench
-    from workbench.handle_presets import default_face_handles
+    from workbench.methods.handles.presets import default_face_handles
 
     model = workbench.load_sample("head", resolution="base")
     skin = np.flatnonzero(model.component_labels == model.component_names.index("skin"))

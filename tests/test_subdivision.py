@@ -1,4 +1,4 @@
-"""Loop subdivision operator (workbench.subdivision): stencils, identities, model transfer."""
+"""Loop subdivision operator (workbench.geometry.subdivision): stencils, identities, model transfer."""
 
 from __future__ import annotations
 
@@ -10,8 +10,8 @@ import pytest
 import scipy.sparse as sp
 
 from workbench.model import BlendShape, FaceModel, ModelMetadata
-from workbench.polygons import Polygons
-from workbench.subdivision import loop_subdivision, subdivide_model, subdivided_vertex_count
+from workbench.core.polygons import Polygons
+from workbench.geometry.subdivision import loop_subdivision, subdivide_model, subdivided_vertex_count
 
 HEAD_OBJ = Path(__file__).resolve().parent.parent / "sample_models" / "head" / "head.obj"
 

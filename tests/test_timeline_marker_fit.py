@@ -14,11 +14,11 @@ import workbench
 from workbench.export import ExportError, export
 from workbench.export.encoding import MeshEncoding
 from workbench.fileformat import load_model
-from workbench.handle_presets import default_face_handles
-from workbench.marker_fit import MarkerFit, fit_markers, generate_synthetic_marker_performance
+from workbench.methods.handles.presets import default_face_handles
+from workbench.methods.regions.marker_fit import MarkerFit, fit_markers, generate_synthetic_marker_performance
 from workbench.model import FaceModel, ModelError
-from workbench.region_blend import RegionState
-from workbench.tracks import TrackError, region_track_name
+from workbench.methods.regions.blend import RegionState
+from workbench.animation.tracks import TrackError, region_track_name
 
 FRAMES = 8
 LEVEL = 1  # not the level segment_regions shows (0): keying must switch to it in the same step

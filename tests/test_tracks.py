@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from workbench.tracks import (
+from workbench.animation.tracks import (
     HANDLES,
     HEAD_POSE,
     Key,

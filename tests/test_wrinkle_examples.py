@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 import workbench
-from workbench.pose_space import local_frames, tangent_neighbours, to_world
-from workbench.wrinkle_examples import EXAMPLE_POSES, WrinkleSculptor, performance_weights
-from workbench.wrinkle_layer import WrinkleLayer, fit_sample_wrinkles
+from workbench.methods.wrinkles.pose_space import local_frames, tangent_neighbours, to_world
+from workbench.methods.wrinkles.examples import EXAMPLE_POSES, WrinkleSculptor, performance_weights
+from workbench.methods.wrinkles.layer import WrinkleLayer, fit_sample_wrinkles
 
 
 @pytest.fixture(scope="module")

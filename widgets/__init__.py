@@ -117,7 +117,7 @@ class Workbench(W.VBox):
         Default: the recovery folder (``$WORKBENCH_RECOVERY_DIR``).
     height : int
         Viewport height in pixels.
-    wrinkle_layer : workbench.wrinkle_layer.WrinkleLayer, optional
+    wrinkle_layer : workbench.methods.wrinkles.layer.WrinkleLayer, optional
         An already fitted wrinkle layer of ``model`` for the Sculpt tab's
         :class:`WrinklePanel` (default: none until its *Fit* button).
 

@@ -1,7 +1,7 @@
 """``ExportPanel``: write the model's animation to glTF/USD/point caches/CSV, or import one.
 
 A thin form over :func:`workbench.export.export` (Export) and
-:func:`workbench.animation_io.read_animation` + ``model.set_timeline`` (Import):
+:func:`workbench.animation.importers.read_animation` + ``model.set_timeline`` (Import):
 format, fps, bake and path fields, a button, and a result area listing the
 files written (with sizes) or the error message. Nothing here knows a file
 format; the panel only picks the suffix the export registry dispatches on.
@@ -218,7 +218,7 @@ class ExportPanel(W.VBox):
     def do_export(self) -> list[Path]:
         """Export ``model.tracks`` as the form says; show and return the files (or the error)."""
         from workbench.export import ExportError, export
-        from workbench.tracks import TrackError
+        from workbench.animation.tracks import TrackError
 
         path = Path(self.path.value.strip() or f"animation{self.suffix}").expanduser()
         if path.suffix.lower() != self.suffix:
@@ -239,8 +239,8 @@ class ExportPanel(W.VBox):
 
     def do_import(self) -> bool:
         """Read the animation file and make it the model's timeline (one undo step)."""
-        from workbench.animation_io import AnimationImportError, read_animation
-        from workbench.tracks import TrackError
+        from workbench.animation.importers import AnimationImportError, read_animation
+        from workbench.animation.tracks import TrackError
 
         text = self.import_path.value.strip()
         if not text:

@@ -16,7 +16,7 @@ size, camera), so rebuilding the gallery or editing one shape re-renders only
 what changed.
 
 With ``expressions=True`` (the paint palette of :class:`widgets.PaintPanel`) the
-gallery shows every *expression* (:func:`workbench.expressions.expression_names`):
+gallery shows every *expression* (:func:`workbench.methods.paint.expressions.expression_names`):
 the saved expressions first, then the blendshapes, and follows
 ``model.events.expressions`` so an expression saved from any cell appears at once.
 """
@@ -34,7 +34,7 @@ import traitlets
 
 from widgets.render import delta_hash, expression_thumbnails, render_png
 from workbench import FaceModel
-from workbench.expressions import expression_names
+from workbench.methods.paint.expressions import expression_names
 
 __all__ = ["ExpressionGallery", "cached_thumbnails", "clear_thumbnail_cache"]
 

@@ -1,7 +1,7 @@
 """``PaintPanel``: painterly expression blending (Pighin et al. 1998, §4.2 of the SIGGRAPH 2006 course).
 
 A new expression is a locally varying convex combination of existing ones
-(:mod:`workbench.paint`). The panel offers the paper's three ways of specifying
+(:mod:`workbench.methods.paint.painting`). The panel offers the paper's three ways of specifying
 the blend functions:
 
 * **painterly**: a palette whose "colours" are expressions
@@ -17,7 +17,7 @@ the blend functions:
   split left/right, or the automatic regions of ``model.regions`` when
   segmented), one slider per region for the selected expression. Each region
   keeps its own mix of expressions; moving a slider rebuilds the whole paint
-  layer with :func:`workbench.paint.regional_mix` (it *replaces* brush strokes —
+  layer with :func:`workbench.methods.paint.painting.regional_mix` (it *replaces* brush strokes —
   paint on top afterwards). One slider drag is one undo step.
 
 Also: the weight-map overlay toggle (the selected expression's weights tinted
@@ -45,8 +45,8 @@ import traitlets as t
 from widgets._threading import ErrorSink, InteractionGrouper, close_interactions
 from widgets.gallery import ExpressionGallery
 from widgets.viewport import BRUSH_MODES, FALLOFFS, brush_radius_slider, face_height
-from workbench.expressions import expression_names
-from workbench.paint import Brush, eyes_vertical_extent, feathered_presets, regional_mix
+from workbench.methods.paint.expressions import expression_names
+from workbench.methods.paint.painting import Brush, eyes_vertical_extent, feathered_presets, regional_mix
 
 _HELP = (
     "<div style='line-height:1.35'>Pick an expression in the palette, then <b>paint</b> on "
@@ -79,7 +79,7 @@ def _next_free(name: str, taken: Iterable[str]) -> str:
 def _auto_regions(model: Any) -> tuple[list[str], np.ndarray]:
     """(names, (r, n) memberships) of the model's automatic regions on the level shown.
 
-    ``model.regions`` is a :class:`workbench.region_blend.RegionState` (the
+    ``model.regions`` is a :class:`workbench.methods.regions.blend.RegionState` (the
     segmentation, the level the Regions tab shows and edits, and its weights);
     the memberships are the soft per-vertex region weights of that level (they
     sum to ``1 - background`` per vertex, so <= 1 as :func:`regional_mix` needs).
@@ -119,7 +119,7 @@ class PaintPanel(W.VBox):
     ----------
     expression : str or None
         The picked expression (the palette's selection).
-    brush : workbench.paint.Brush
+    brush : workbench.methods.paint.painting.Brush
         The brush the controls describe.
     """
 

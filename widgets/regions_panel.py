@@ -2,8 +2,8 @@
 
 Paper: "Learning Controls for Blend Shape Based Realistic Facial Animation"
 (``shared/papers/siggraph2006-course-performance-driven-facial-animation.md``).
-The numerics live in the headless core (:mod:`workbench.regions`,
-:mod:`workbench.region_blend`); this panel is the notebook front of them:
+The numerics live in the headless core (:mod:`workbench.methods.regions.segmentation`,
+:mod:`workbench.methods.regions.blend`); this panel is the notebook front of them:
 
 * **Find regions** + a threshold ``t`` slider: segmentation runs again when the
   slider is released (``model.segment_regions``, undoable), with a progress bar
@@ -16,21 +16,21 @@ The numerics live in the headless core (:mod:`workbench.regions`,
   while the panel is active and the previous colours come back on
   :meth:`RegionsPanel.deactivate` / :meth:`RegionsPanel.close`;
 * a **region** dropdown with one slider per *driver* shape of that region (the
-  shapes that move it most, :attr:`workbench.regions.Regions.drivers`; more can
+  shapes that move it most, :attr:`workbench.methods.regions.segmentation.Regions.drivers`; more can
   be added), editing that region's weights only
   (:meth:`RegionWeights.with_region` → ``model.set_region_weights``). A slider drag
   is one undo step (:class:`widgets._threading.InteractionGrouper`, as in the
   expression panel). "Reset region" puts the region back on the global weights;
 * **Drag to sculpt**: the viewport shows pin markers (the mocap-like default
   marker set plus the model's handles) in its sculpt tool, and dragging a pin
-  solves the region weights under it (:func:`workbench.region_blend.solve_region_drag`,
+  solves the region weights under it (:func:`workbench.methods.regions.blend.solve_region_drag`,
   bounded least squares, paper §4) with motion damping
-  (:func:`workbench.region_blend.damp_drag`); the face follows while dragging and
+  (:func:`workbench.methods.regions.blend.damp_drag`); the face follows while dragging and
   the drag is one undo step. Optionally the other pins of the touched regions are
   held where they are ("hold other pins");
 * **Edit regions** (the selected region, on the shown level; each one undo step
   through ``model.rename_region`` / ``merge_regions`` / ``split_region`` /
-  ``paint_region``, see :mod:`workbench.regions` for the rules): *Rename* (text +
+  ``paint_region``, see :mod:`workbench.methods.regions.segmentation` for the rules): *Rename* (text +
   button); *Merge* with a touching region chosen in a dropdown (the merged region
   keeps the larger one's name and weights); *Split…*: markers spread over the
   region, click two and the region is cut halfway between them along the surface
@@ -143,7 +143,7 @@ def region_colors(
 
     Parameters
     ----------
-    regions : workbench.regions.Regions
+    regions : workbench.methods.regions.segmentation.Regions
     level : int
     background : (3,) float
         Colour of the background (weight ``regions.background[level]``).
@@ -232,12 +232,12 @@ class RegionDragHandler(_DragWatchdog):
         The pin vertices (the viewport's markers; ``index`` in :meth:`begin` and
         :meth:`move` is into this array).
     damping : bool
-        Scale the mouse motion by :func:`workbench.region_blend.drag_damping`.
+        Scale the mouse motion by :func:`workbench.methods.regions.blend.drag_damping`.
     hold_others : bool
         Also pin the other pins that lie in the touched regions at their
         current positions.
     regularization : float
-        Passed to :func:`workbench.region_blend.solve_region_drag`.
+        Passed to :func:`workbench.methods.regions.blend.solve_region_drag`.
     """
 
     def __init__(
@@ -277,11 +277,11 @@ class RegionDragHandler(_DragWatchdog):
 
         Raises
         ------
-        workbench.regions.RegionError / workbench.model.ModelError
+        workbench.methods.regions.segmentation.RegionError / workbench.model.ModelError
             No regions yet, or the pin lies in the background of the current level.
         """
-        from workbench.region_blend import RegionWeights
-        from workbench.regions import RegionError
+        from workbench.methods.regions.blend import RegionWeights
+        from workbench.methods.regions.segmentation import RegionError
 
         model = self.model
         with self._lock:
@@ -340,7 +340,7 @@ class RegionDragHandler(_DragWatchdog):
 
     def move(self, index: int, position: Any) -> float:
         """Solve for the mouse at ``position`` (3,) model space; returns kernel ms (0 without a drag)."""
-        from workbench.region_blend import damp_drag, solve_region_drag
+        from workbench.methods.regions.blend import damp_drag, solve_region_drag
 
         p = np.asarray(position, dtype=np.float64).reshape(-1)
         if p.shape != (3,) or not np.isfinite(p).all():
@@ -455,7 +455,7 @@ def brush_vertices(model: Any, center: int, radius: float) -> np.ndarray:
     """
     from scipy.sparse.csgraph import connected_components
 
-    from workbench.regions import region_topology
+    from workbench.methods.regions.segmentation import region_topology
 
     topo = region_topology(model)
     c = int(center)
@@ -557,7 +557,7 @@ class RegionBrushHandler(_DragWatchdog):
 
     def dab(self, center: int) -> int:
         """Paint (or erase) the brush at vertex ``center``; returns the vertices that changed label."""
-        from workbench.regions import RegionError
+        from workbench.methods.regions.segmentation import RegionError
 
         tgt = self.target()
         if tgt is None:
@@ -597,7 +597,7 @@ class RegionBrushHandler(_DragWatchdog):
             tgt = self.target()
             if tgt is None or model.regions is None:
                 raise ValueError("region brush: find regions and select a region first")
-            from workbench.regions import region_topology
+            from workbench.methods.regions.segmentation import region_topology
 
             skin = np.flatnonzero(region_topology(model).skin)
             with model.lock:
@@ -982,7 +982,7 @@ class RegionsPanel(W.VBox):
         self._model.set_region_level(int(change["new"]))
 
     def _current_weights(self) -> Any:
-        from workbench.region_blend import RegionWeights
+        from workbench.methods.regions.blend import RegionWeights
 
         st = self._model.regions
         if st is None:
@@ -1051,7 +1051,7 @@ class RegionsPanel(W.VBox):
     # ------------------------------------------------------------ drag mode
     def _pin_vertices(self) -> np.ndarray:
         """(p,) int: the default marker set plus the model's handles (the drag-mode markers)."""
-        from workbench.handle_presets import default_face_handles
+        from workbench.methods.handles.presets import default_face_handles
 
         if self._default_pins is None:
             try:
@@ -1140,7 +1140,7 @@ class RegionsPanel(W.VBox):
             return 0.05
 
     def _topology(self) -> Any:
-        from workbench.regions import region_topology
+        from workbench.methods.regions.segmentation import region_topology
 
         return region_topology(self._model)
 
@@ -1178,7 +1178,7 @@ class RegionsPanel(W.VBox):
 
     def _refresh_edit_controls(self) -> None:
         """Merge candidates, rename placeholder and edit-mode markers for the selection."""
-        from workbench.regions import adjacent_regions
+        from workbench.methods.regions.segmentation import adjacent_regions
 
         self._split_seeds = []
         sel = self._selected()

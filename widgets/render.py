@@ -51,7 +51,7 @@ from PIL import Image
 
 from workbench import FaceModel, ModelMetadata
 from workbench.converters import register_mesh_converter
-from workbench.polygons import Polygons
+from workbench.core.polygons import Polygons
 
 __all__ = [
     "CAMERAS",

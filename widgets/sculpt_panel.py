@@ -3,7 +3,7 @@
 Dragging happens in the :class:`widgets.Viewport` (``tool="sculpt"``); this panel
 holds everything else a person needs around it:
 
-* handle sets: the default mocap-like set (:func:`workbench.handle_presets.default_face_handles`),
+* handle sets: the default mocap-like set (:func:`workbench.methods.handles.presets.default_face_handles`),
   clear, reset offsets (the face goes back to the blend);
 * symmetric drag (the mirror handle follows with x reflected) and "click adds
   handles" (plain clicks add, without holding Shift);
@@ -222,7 +222,7 @@ class SculptPanel(W.VBox):
             fn()
 
     def _on_default(self, _b: Any = None) -> None:
-        from workbench.handle_presets import default_face_handles
+        from workbench.methods.handles.presets import default_face_handles
 
         self._flush()
         self._model.set_handles(default_face_handles(self._model), label="Default handles")

@@ -1,12 +1,12 @@
 """``TimelineWidget``: keyframe timeline of a :class:`workbench.FaceModel` (Pighin et al. 1998 §5).
 
-The widget draws ``model.tracks`` (a :class:`workbench.tracks.Timeline`): a time
+The widget draws ``model.tracks`` (a :class:`workbench.animation.tracks.Timeline`): a time
 ruler with frame ticks at the timeline's fps, a playhead, one row per track with
 its keys as diamonds (squares for step keys), and a curve view of the selected
 weight track with the Bézier tangent handles of its keys. Region-weight tracks
 (a keyed marker fit) and the head pose are vector tracks: rows without a
 curve view. Three sliders give the head's yaw, pitch and roll (degrees about
-the model's up, side and front axes, :func:`workbench.tracks.head_rotation_from_euler`);
+the model's up, side and front axes, :func:`workbench.animation.tracks.head_rotation_from_euler`);
 they show the pose keyed at the playhead and "Key head pose" keys what they
 say there (the face turns at once: the model shows the keyed head pose). It only *observes*
 the model (``events.tracks``, ``events.time``, ``events.expressions``,
@@ -87,7 +87,7 @@ import traitlets as t
 
 from widgets._threading import ErrorSink, close_interactions
 from workbench.model import ModelError
-from workbench.tracks import (
+from workbench.animation.tracks import (
     HANDLES,
     HEAD_POSE,
     IDENTITY_POSE,
@@ -401,7 +401,7 @@ class TimelineWidget(anywidget.AnyWidget):
         """Key the head turned by ``yaw``, ``pitch``, ``roll`` degrees at ``time`` (default: playhead).
 
         The rotation is about the model's axes (``metadata.up_axis`` /
-        ``front_axis``, see :func:`workbench.tracks.head_rotation_from_euler`);
+        ``front_axis``, see :func:`workbench.animation.tracks.head_rotation_from_euler`);
         the translation keeps the one keyed at ``time`` (0 when the head pose
         is not keyed). One undo step (``model.key_head_pose``).
         """

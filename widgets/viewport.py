@@ -82,7 +82,7 @@ its mirror image with ``brush_mirror``); :class:`widgets.PaintPanel` links its
 controls to these traits.
 
 Feature-graph overlay (pose-space wrinkles, Bickel et al. 2008 §5.1): the edges
-between handles on which a :class:`workbench.wrinkle_layer.WrinkleLayer` measures
+between handles on which a :class:`workbench.methods.wrinkles.layer.WrinkleLayer` measures
 skin strain, drawn as line segments coloured by their relative stretch (blue =
 compressed, grey = rest, red = stretched, full colour at ±:attr:`Viewport.strain_range`).
 Two binary traits, each sent only when it changes: ``_feature_edges`` (uint32,
@@ -314,7 +314,7 @@ class Viewport(anywidget.AnyWidget):
         The expression the brush paints (a blendshape or saved expression name;
         "" = none: the left button then orbits in paint mode).
     brush_radius, brush_opacity, brush_falloff, brush_mode, brush_mirror
-        The brush (:class:`workbench.paint.Brush`); the radius is a surface
+        The brush (:class:`workbench.methods.paint.painting.Brush`); the radius is a surface
         distance in model units (default :func:`default_brush_radius`).
     paint_overlay : bool
         Tint the surface by the painted weight of :attr:`paint_expression`
@@ -549,8 +549,8 @@ class Viewport(anywidget.AnyWidget):
 
     @property
     def brush(self) -> Any:
-        """The current :class:`workbench.paint.Brush` (built from the brush traits)."""
-        from workbench.paint import Brush
+        """The current :class:`workbench.methods.paint.painting.Brush` (built from the brush traits)."""
+        from workbench.methods.paint.painting import Brush
 
         return Brush(
             radius=self.brush_radius,
@@ -660,7 +660,7 @@ class Viewport(anywidget.AnyWidget):
         its idle timer), is ended first. ``expression`` defaults to
         :attr:`paint_expression`.
         """
-        from workbench.expressions import expression_names
+        from workbench.methods.paint.expressions import expression_names
 
         model = self._model
         expr = expression if expression is not None else self.paint_expression
@@ -985,7 +985,7 @@ class Viewport(anywidget.AnyWidget):
 
         A pair is one undo step. Returns the new handle's index.
         """
-        from workbench.handle_presets import mirror_vertices
+        from workbench.methods.handles.presets import mirror_vertices
         from workbench.model import HandleSet
 
         model = self._model

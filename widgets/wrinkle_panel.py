@@ -1,14 +1,14 @@
 """``WrinklePanel``: pose-space wrinkles while dragging handles (Bickel et al. 2008, §5–6).
 
-The core (:mod:`workbench.wrinkle_layer`) learns fine-scale detail from a few
+The core (:mod:`workbench.methods.wrinkles.layer`) learns fine-scale detail from a few
 *detailed example poses* as a function of the strain of a feature graph
 between the handles, and adds it on top of the large-scale shell deformation
 (§4) on every :meth:`~workbench.FaceModel.evaluate`. This panel is its view, in
 the Sculpt tab under the handle controls:
 
-* **Fit wrinkles from examples**: :func:`workbench.wrinkle_layer.fit_sample_wrinkles`
+* **Fit wrinkles from examples**: :func:`workbench.methods.wrinkles.layer.fit_sample_wrinkles`
   (default handles if the model has none, six procedural detailed expressions
-  from :mod:`workbench.wrinkle_examples`, WPSD fit, layer attached) with a
+  from :mod:`workbench.methods.wrinkles.examples`, WPSD fit, layer attached) with a
   progress bar; errors go to the panel's error line and the shared error Output.
 * **Wrinkles** on/off and **strength** (0–2): undoable (one history command
   each, see :func:`set_wrinkle_strength`); the strength applies on release.
@@ -19,7 +19,7 @@ the Sculpt tab under the handle controls:
   example's detailed mesh, grooves tinted, and its name). Clicking the name
   *views* the example (sets its weights on the model, one undo step). **Scale
   wrinkles** multiplies the chosen example's details
-  (:meth:`~workbench.wrinkle_layer.WrinkleLayer.edit_example`; the change
+  (:meth:`~workbench.methods.wrinkles.layer.WrinkleLayer.edit_example`; the change
   propagates to every pose near it). **Erase wrinkles** (a toggle on each
   card) paints the example's wrinkles out with the brush: while it is on, the
   viewport's paint tool sends its strokes to a :class:`WrinkleEraser` (the
@@ -96,7 +96,7 @@ def _record(
     nbytes: int = 64,
 ) -> None:
     """Push an already-applied edit onto the model's undo history (one step)."""
-    from workbench.history import Command
+    from workbench.core.history import Command
 
     model.history.push(Command(label, undo, redo, nbytes))
     model.events.history.emit()
@@ -109,7 +109,7 @@ def set_wrinkle_strength(model: Any, layer: Any, strength: float) -> bool:
     ----------
     model : workbench.FaceModel
         The model the layer is attached to (its history records the step).
-    layer : workbench.wrinkle_layer.WrinkleLayer
+    layer : workbench.methods.wrinkles.layer.WrinkleLayer
     strength : float
         ``>= 0``; 1 = as learned.
 
@@ -228,17 +228,17 @@ def example_detailed(
     Parameters
     ----------
     model : workbench.FaceModel
-    layer : workbench.wrinkle_layer.WrinkleLayer
+    layer : workbench.methods.wrinkles.layer.WrinkleLayer
         Fitted.
     example : name or index
     neighbours : (n,) int, optional
-        :func:`workbench.pose_space.tangent_neighbours` of the mesh (computed if omitted).
+        :func:`workbench.methods.wrinkles.pose_space.tangent_neighbours` of the mesh (computed if omitted).
 
     Returns
     -------
     blend, detailed : (n, 3) float64
     """
-    from workbench.pose_space import local_frames, tangent_neighbours, to_world
+    from workbench.methods.wrinkles.pose_space import local_frames, tangent_neighbours, to_world
 
     if layer.pose_space is None:
         raise RuntimeError("example_detailed: the wrinkle layer is not fitted")
@@ -263,7 +263,7 @@ def example_thumbnail(
     """
     from widgets.render import _model_axes, render_png, vertex_colors
     from widgets.viewport import face_height
-    from workbench.pose_space import vertex_normals
+    from workbench.methods.wrinkles.pose_space import vertex_normals
 
     _, front = _model_axes(model)
     base = vertex_colors(model, front).astype(np.float64) / 255.0
@@ -343,7 +343,7 @@ class WrinkleEraser:
 
     def dab(self, vertices: Any) -> None:
         """Brush dabs centred at vertex ids ``vertices`` (int or sequence)."""
-        from workbench.paint import falloff_curve
+        from workbench.methods.paint.painting import falloff_curve
 
         mask, brush = self._mask, self._brush
         if mask is None:
@@ -387,7 +387,7 @@ class WrinkleEraser:
 
 
 def _sculptor_class() -> type:
-    from workbench.wrinkle_examples import WrinkleSculptor
+    from workbench.methods.wrinkles.examples import WrinkleSculptor
 
     class ProgressSculptor(WrinkleSculptor):
         """A WrinkleSculptor that reports each detailed pose it makes (progress bar)."""
@@ -412,7 +412,7 @@ class WrinklePanel(W.VBox):
     viewport : widgets.Viewport, optional
         Draws the feature graph coloured by strain; its ``feature_graph`` trait
         follows the panel's checkbox.
-    layer : workbench.wrinkle_layer.WrinkleLayer, optional
+    layer : workbench.methods.wrinkles.layer.WrinkleLayer, optional
         An already fitted (and attached) layer; default none until **Fit**.
     errors : ipywidgets.Output, optional
         Where callback errors are shown (``Workbench`` passes a shared one); the
@@ -664,12 +664,12 @@ class WrinklePanel(W.VBox):
     def fit(self) -> Any:
         """Fit the wrinkle layer to the procedural example poses (refit if fitted).
 
-        Calls :func:`workbench.wrinkle_layer.fit_sample_wrinkles` (which sets the
+        Calls :func:`workbench.methods.wrinkles.layer.fit_sample_wrinkles` (which sets the
         default handles first if the model has none) with a progress bar, then
         renders the example thumbnails. Returns the fitted layer.
         """
-        from workbench.wrinkle_examples import EXAMPLE_POSES
-        from workbench.wrinkle_layer import fit_sample_wrinkles
+        from workbench.methods.wrinkles.examples import EXAMPLE_POSES
+        from workbench.methods.wrinkles.layer import fit_sample_wrinkles
 
         self._flush()
         self.error_line.value = ""
@@ -765,9 +765,9 @@ class WrinklePanel(W.VBox):
         return None if self.eraser is None else self.eraser.example
 
     def eraser_brush(self) -> Any:
-        """The eraser's :class:`workbench.paint.Brush`: the panel's radius and strength,
+        """The eraser's :class:`workbench.methods.paint.painting.Brush`: the panel's radius and strength,
         the viewport's falloff and x-mirror."""
-        from workbench.paint import Brush
+        from workbench.methods.paint.painting import Brush
 
         vp = self.viewport
         return Brush(
@@ -955,7 +955,7 @@ class WrinklePanel(W.VBox):
             return self._sculptor
 
     def _tangent_neighbours(self) -> NDArray[np.int32]:
-        from workbench.pose_space import tangent_neighbours
+        from workbench.methods.wrinkles.pose_space import tangent_neighbours
 
         if self._neighbours is None:
             self._neighbours = tangent_neighbours(self._model.faces, self._model.n_vertices)

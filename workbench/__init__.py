@@ -11,11 +11,11 @@ __version__ = "0.1.0"
 
 from workbench.io import load
 from workbench.model import BlendShape, FaceModel, HandleSet, ModelError, ModelMetadata
-from workbench.paint import Brush
-from workbench.regions import Regions, segment_blend_regions
+from workbench.methods.paint.painting import Brush
+from workbench.methods.regions.segmentation import Regions, segment_blend_regions
 from workbench.samples import load_sample
-from workbench.shell import ShellDeformer
-from workbench.tracks import Timeline
+from workbench.methods.handles.shell import ShellDeformer
+from workbench.animation.tracks import Timeline
 
 __all__ = [
     "BlendShape",

@@ -93,7 +93,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.command == "export":
         from workbench.export import ExportError, export
         from workbench.io import load
-        from workbench.tracks import TrackError
+        from workbench.animation.tracks import TrackError
 
         try:
             model = load(args.saved_file)

@@ -33,7 +33,7 @@ Arrays: ``neutral`` (n,3) <f8, ``faces`` (m,3) <i4, ``polygon_indices`` (s,) <i4
 schema 2 adds ``expression_displacements`` (E,n,3) <f4, ``expression_handle_vertices``
 (sum of n_handles,) <i4 and ``expression_handle_offsets`` (sum of n_handles, 3) <f4
 (expressions in manifest order), and ``paint_maps`` (P,n) <f4 in the order of ``paint``.
-The timeline is JSON in the manifest (:meth:`workbench.tracks.Timeline.to_json`).
+The timeline is JSON in the manifest (:meth:`workbench.animation.tracks.Timeline.to_json`).
 Regions (schema 2): ``regions_deformation`` (n,) <f4 and, per level ``l``,
 ``regions_labels_l``, ``regions_weight_rows_l``, ``regions_weight_cols_l`` <i4,
 ``regions_weight_vals_l``, ``regions_background_l`` <f4, ``regions_parents_l``
@@ -72,8 +72,8 @@ from typing import TYPE_CHECKING, Any, NoReturn
 
 import numpy as np
 
-from workbench.expressions import expressions_to_json
-from workbench.polygons import Polygons
+from workbench.methods.paint.expressions import expressions_to_json
+from workbench.core.polygons import Polygons
 
 if TYPE_CHECKING:
     from workbench.model import FaceModel
@@ -460,7 +460,7 @@ def _check_expressions(c: _Checker, value: Any) -> list[dict[str, Any]]:
 
 def _check_tracks(c: _Checker, value: Any) -> dict[str, Any] | None:
     """Structure of the timeline JSON; :meth:`Timeline.from_json` checks the meaning."""
-    from workbench.tracks import INTERPOLATIONS, TANGENT_MODES
+    from workbench.animation.tracks import INTERPOLATIONS, TANGENT_MODES
 
     if value is None:
         return None
@@ -766,8 +766,8 @@ def _check_values(c: _Checker, m: dict[str, Any], arrays: dict[str, np.ndarray])
 
 def _load_regions(path: Path, rj: dict[str, Any], arrays: dict[str, np.ndarray]) -> Any:
     """The regions slot from checked JSON and arrays (:func:`_array_specs` made sure all exist)."""
-    from workbench.region_blend import RegionState, RegionWeights
-    from workbench.regions import Regions
+    from workbench.methods.regions.blend import RegionState, RegionWeights
+    from workbench.methods.regions.segmentation import Regions
 
     L = rj["n_levels"]
     regions = Regions(
@@ -851,11 +851,11 @@ def load_model(path: str | os.PathLike[str]) -> FaceModel:
     Every problem with the file raises :class:`WorkbenchFileError` naming the file
     and the field; the model is built only after all checks passed.
     """
-    from workbench.expressions import Expression
+    from workbench.methods.paint.expressions import Expression
     from workbench.model import BlendShape, FaceModel, HandleSet, ModelError, ModelMetadata
-    from workbench.paint import PaintMix
-    from workbench.regions import RegionError
-    from workbench.tracks import Timeline, TrackError
+    from workbench.methods.paint.painting import PaintMix
+    from workbench.methods.regions.segmentation import RegionError
+    from workbench.animation.tracks import Timeline, TrackError
 
     path = Path(path)
     c = _Checker(path)

@@ -2,7 +2,7 @@
 
 :class:`FaceModel` is a pure-Python evented model in the style of napari's
 ``components``: views subscribe to its psygnal events and change it only
-through its methods. Every edit is undoable (see :mod:`workbench.history`);
+through its methods. Every edit is undoable (see :mod:`workbench.core.history`);
 an *interaction* (a mouse drag, a slider scrub) emits cheap ``*_changing``
 events while it lasts and one undo step plus one ``changed`` event on release.
 
@@ -31,13 +31,13 @@ from numpy.typing import ArrayLike, NDArray
 from psygnal import Signal, SignalGroup
 
 from workbench.converters import mesh_converter
-from workbench.expressions import Expression
-from workbench.handle_layer import HandleLayer
-from workbench.history import Command, History, payload_nbytes
-from workbench.paint import Brush, PaintLayer, PaintMix, Stroke, apply_dab, flood, normalize
-from workbench.polygons import Polygons
-from workbench.region_blend import RegionState, RegionWeights, region_layer
-from workbench.tracks import (
+from workbench.methods.paint.expressions import Expression
+from workbench.methods.handles.layer import HandleLayer
+from workbench.core.history import Command, History, payload_nbytes
+from workbench.methods.paint.painting import Brush, PaintLayer, PaintMix, Stroke, apply_dab, flood, normalize
+from workbench.core.polygons import Polygons
+from workbench.methods.regions.blend import RegionState, RegionWeights, region_layer
+from workbench.animation.tracks import (
     HEAD_POSE,
     IDENTITY_POSE,
     Interpolation,
@@ -813,12 +813,12 @@ class FaceModel:
 
     @property
     def expressions(self) -> Mapping[str, Expression]:
-        """Saved expressions (name -> :class:`~workbench.expressions.Expression`)."""
+        """Saved expressions (name -> :class:`~workbench.methods.paint.expressions.Expression`)."""
         return self._slots["expressions"]
 
     @property
     def tracks(self) -> Timeline:
-        """The keyframe :class:`~workbench.tracks.Timeline` (no tracks until something is keyed)."""
+        """The keyframe :class:`~workbench.animation.tracks.Timeline` (no tracks until something is keyed)."""
         return self._slots["tracks"]
 
     def _apply_slot(self, name: str, value: Any, final: bool) -> None:
@@ -1070,7 +1070,7 @@ class FaceModel:
 
     @property
     def paint_surface(self) -> Any:
-        """The :class:`~workbench.paint.PaintSurface` (edge graph, mirror map) of this mesh."""
+        """The :class:`~workbench.methods.paint.painting.PaintSurface` (edge graph, mirror map) of this mesh."""
         return self._paint_layer.surface(self)
 
     def _check_expression(self, name: str) -> None:
@@ -1085,7 +1085,7 @@ class FaceModel:
         Undoable; call inside ``model.interaction("Paint ...")`` so that a
         stroke (press, move, release) is one undo step — and so that the stroke
         never paints beyond the brush opacity where its dabs overlap
-        (:class:`~workbench.paint.Stroke`).
+        (:class:`~workbench.methods.paint.painting.Stroke`).
         """
         with self._lock:
             self._check_expression(expression)
@@ -1154,10 +1154,10 @@ class FaceModel:
     def segment_regions(self, threshold: float = 0.25, **options: Any) -> RegionState:
         """Find local blend regions (Joshi et al. 2003) and store them (undoable).
 
-        ``options`` go to :func:`workbench.regions.segment_blend_regions`. The
+        ``options`` go to :func:`workbench.methods.regions.segmentation.segment_blend_regions`. The
         region weights start equal to the global weights (the face does not change).
         """
-        from workbench.regions import segment_blend_regions
+        from workbench.methods.regions.segmentation import segment_blend_regions
 
         with self._lock:
             regions = segment_blend_regions(self, threshold, **options)
@@ -1189,7 +1189,7 @@ class FaceModel:
         return st
 
     # ------------------------------------------- region edits (merge/split/rename/paint)
-    # Thin undoable wrappers of the pure edits in workbench.regions: each is one
+    # Thin undoable wrappers of the pure edits in workbench.methods.regions.segmentation: each is one
     # set_slot("regions", ...) step (undo restores the previous RegionState object,
     # so the regions come back bit-exact). The per-region blend weights follow the
     # edit's ``origins``: a merged region keeps the weights of the larger region,
@@ -1208,12 +1208,12 @@ class FaceModel:
         return state
 
     def merge_regions(self, level: int, a: int | str, b: int | str, name: str | None = None) -> RegionState:
-        """Merge two touching regions of ``level`` (undoable); see :func:`workbench.regions.merge_regions`.
+        """Merge two touching regions of ``level`` (undoable); see :func:`workbench.methods.regions.segmentation.merge_regions`.
 
         The merged region keeps the lower index and the name and blend weights of
         the larger region (or ``name``); coarser levels merge too if needed to stay nested.
         """
-        from workbench.regions import merge_regions, region_topology
+        from workbench.methods.regions.segmentation import merge_regions, region_topology
 
         with self._lock:
             st = self._require_regions("merge_regions")
@@ -1227,12 +1227,12 @@ class FaceModel:
         self, level: int, region: int | str, seeds_a: ArrayLike, seeds_b: ArrayLike,
         names: tuple[str, str] | None = None,
     ) -> RegionState:
-        """Split a region around two clicked vertices (undoable); see :func:`workbench.regions.split_region`.
+        """Split a region around two clicked vertices (undoable); see :func:`workbench.methods.regions.segmentation.split_region`.
 
         Geodesic Voronoi of the seeds on level 0; on coarser levels whole children
         are grouped. Both halves inherit the region's blend weights.
         """
-        from workbench.regions import region_topology, split_region
+        from workbench.methods.regions.segmentation import region_topology, split_region
 
         with self._lock:
             st = self._require_regions("split_region")
@@ -1243,7 +1243,7 @@ class FaceModel:
 
     def rename_region(self, level: int, region: int | str, name: str) -> RegionState:
         """Rename a region of ``level`` (undoable; labels and weights unchanged)."""
-        from workbench.regions import rename_region
+        from workbench.methods.regions.segmentation import rename_region
 
         with self._lock:
             st = self._require_regions("rename_region")
@@ -1257,9 +1257,9 @@ class FaceModel:
     def paint_region(self, level: int, region: int | str, vertices: ArrayLike, add: bool = True) -> RegionState:
         """Assign skin vertices to a region (``add``) or return them to the background (undoable).
 
-        See :func:`workbench.regions.paint_region`; a paint that changes nothing adds no undo step.
+        See :func:`workbench.methods.regions.segmentation.paint_region`; a paint that changes nothing adds no undo step.
         """
-        from workbench.regions import paint_region, region_topology
+        from workbench.methods.regions.segmentation import paint_region, region_topology
 
         with self._lock:
             st = self._require_regions("paint_region")
@@ -1457,7 +1457,7 @@ class FaceModel:
         """Key the rigid head transform at ``time`` (one undo step).
 
         The head pose maps a point ``p`` of the deformed face to ``R p + t``
-        (track ``"head_pose"``, see :mod:`workbench.tracks`). It is applied by
+        (track ``"head_pose"``, see :mod:`workbench.animation.tracks`). It is applied by
         :meth:`evaluate` at the current :attr:`time`, by :meth:`evaluate_at`
         and by every export; the rotation is always slerped between keys,
         ``interpolation`` shapes the translation.
@@ -1470,7 +1470,7 @@ class FaceModel:
             Unit quaternion ``(x, y, z, w)`` (glTF order; normalised here) or a
             rotation matrix. Default: the rotation the timeline has at ``time``
             (identity when the head pose is not keyed).
-            :func:`workbench.tracks.head_rotation_from_euler` makes one from
+            :func:`workbench.animation.tracks.head_rotation_from_euler` makes one from
             yaw/pitch/roll about the model's axes.
         translation : (3,) float, optional
             Model units. Default: the translation at ``time`` (0 when not keyed).
@@ -1547,7 +1547,7 @@ class FaceModel:
         :attr:`tracks`): the fitted global weights of every shape as weight
         keys (the regions' background and the global sliders) and the fitted
         weights of every region of ``fit.level`` as region keys
-        (``"regions/<level>/<region>"``, see :mod:`workbench.tracks`). If the
+        (``"regions/<level>/<region>"``, see :mod:`workbench.animation.tracks`). If the
         model's region level is not ``fit.level`` it is set to it in the same
         undo step. At a keyed frame, :meth:`evaluate_at` (and :meth:`set_time`
         then :meth:`evaluate`) gives ``fit.positions(model, regions, f,
@@ -1566,7 +1566,7 @@ class FaceModel:
 
         Parameters
         ----------
-        fit : workbench.marker_fit.MarkerFit
+        fit : workbench.methods.regions.marker_fit.MarkerFit
             Made for this model's shapes (same names, same order) and regions
             (the names of ``fit.level`` must be the current ones).
         start : float
@@ -1590,7 +1590,7 @@ class FaceModel:
             the model has no regions, ``every``/``start`` are invalid, or the
             timeline already has region keys on another level.
         """
-        from workbench.marker_fit import MarkerFit
+        from workbench.methods.regions.marker_fit import MarkerFit
 
         if not isinstance(fit, MarkerFit):
             raise ModelError(f"key_marker_fit: fit must be a MarkerFit, got {type(fit).__name__}")
@@ -1701,7 +1701,7 @@ class FaceModel:
 
         Like changing the frame in Blender this is not an undo step; unkeyed
         shapes keep their values. With region tracks the regions slot gets the
-        keyed region weights (see :mod:`workbench.tracks`); the head pose is the
+        keyed region weights (see :mod:`workbench.animation.tracks`); the head pose is the
         one keyed at ``time`` (:attr:`head_pose`). Afterwards :meth:`evaluate`
         equals ``evaluate_at(time)``. Emits ``time``, ``weights``, ``handles``,
         ``regions`` (with region tracks) and ``deformed`` (final) events.

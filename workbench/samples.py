@@ -103,7 +103,7 @@ def load_sample(name: str = "head", resolution: str = "base") -> FaceModel:
     cached = cache_dir() / f"head_{resolution}_{key}.fwb"
     if cached.is_file():
         return load_model(cached)
-    from workbench.subdivision import subdivide_model
+    from workbench.geometry.subdivision import subdivide_model
 
     model = subdivide_model(_load_base_head(), levels)
     model.history.clear()

@@ -26,7 +26,7 @@ _CELLS = [
     """import json
 import numpy as np
 import workbench, widgets
-from workbench.paint import Brush
+from workbench.methods.paint.painting import Brush
 
 model = workbench.load_sample("head")
 # "smile" = both smile shapes at 1, saved as an expression (a palette colour)
@@ -205,7 +205,7 @@ def test_pick_smile_in_the_palette_paint_the_mouth_then_undo(open_notebook):
 
 _DEBAUCHED = """
 import json, numpy as np
-from workbench.expressions import expression_displacement
+from workbench.methods.paint.expressions import expression_displacement
 _skin = model.component_labels == model.component_names.index("skin")
 def _top(name, k, side=None):
     d = np.linalg.norm(expression_displacement(model, name), axis=1) * _skin

@@ -319,7 +319,7 @@ _APP = (
 # jaw open, and the lips pulled forward by a sculpt edit (out of the neutral mesh's box).
 _POSE = """
 import numpy as np
-from workbench.handle_presets import default_face_handles
+from workbench.methods.handles.presets import default_face_handles
 model.set_weight("jawOpen", 1.0)
 model.set_handles(default_face_handles(model))
 _V = np.asarray(model.vertices)

@@ -20,7 +20,7 @@ import widgets
 from widgets.expression_panel import layout_rows
 from widgets.viewport import BUNDLE
 from workbench.model import BlendShape, FaceModel
-from workbench.polygons import Polygons
+from workbench.core.polygons import Polygons
 
 pytestmark = pytest.mark.skipif(
     not BUNDLE.exists(), reason="viewport bundle not built (npm --prefix widgets/js run build)"
@@ -180,7 +180,7 @@ def test_missing_bundle_error_names_the_build_command(tmp_path):
 
 def _head_with_handles():
     from workbench import load_sample
-    from workbench.handle_presets import default_face_handles
+    from workbench.methods.handles.presets import default_face_handles
 
     m = load_sample("head")
     m.set_handles(default_face_handles(m))
@@ -228,7 +228,7 @@ def test_handle_drag_is_one_undo_step_and_every_message_is_acknowledged():
 
 def test_a_drag_on_a_turned_head_follows_the_pointer():
     """With a head pose keyed, the pointer's (posed) position is mapped back to model space."""
-    from workbench.tracks import head_rotation_from_euler
+    from workbench.animation.tracks import head_rotation_from_euler
 
     m = _head_with_handles()
     yaw = head_rotation_from_euler(35.0, 10.0, 0.0)

@@ -331,8 +331,8 @@ def test_brow_drag_wrinkles_the_forehead_then_undo(open_notebook) -> None:
 _GRAPH_CELLS = [
     """
 import numpy as np, widgets, workbench
-from workbench.handle_presets import default_face_handles
-from workbench.pose_space import FeatureGraph
+from workbench.methods.handles.presets import default_face_handles
+from workbench.methods.wrinkles.pose_space import FeatureGraph
 model = workbench.load_sample("head")
 _h = default_face_handles(model)
 graph = FeatureGraph.from_handles(np.asarray(model.vertices)[_h.vertices])

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from workbench.tracks import HANDLES, HEAD_POSE, Timeline
+from workbench.animation.tracks import HANDLES, HEAD_POSE, Timeline
 
 
 def expression_timeline(kind: str) -> Timeline:

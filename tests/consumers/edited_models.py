@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from workbench import Brush, FaceModel, load_sample
-from workbench.handle_presets import default_face_handles
+from workbench.methods.handles.presets import default_face_handles
 
 #: times inside and between the keys (0, 0.5, 1 s); 0.2 and 0.8 are frames at 30 fps, 0.37 is not
 SAMPLE_TIMES = [0.0, 0.2, 0.37, 0.8, 1.0]
@@ -56,7 +56,7 @@ def painted_head(interpolation: str = "bezier") -> FaceModel:
 def regions_head(interpolation: str = "bezier") -> FaceModel:
     m = painted_head(interpolation)
     st = m.segment_regions(0.25)
-    from workbench.region_blend import RegionWeights
+    from workbench.methods.regions.blend import RegionWeights
 
     rw = RegionWeights.from_global(m, st.regions, st.level)
     m.set_region_weights(rw.with_region(0, {"mouthPucker": 0.7, "jawOpen": 0.3}))
@@ -72,7 +72,7 @@ def regions_head(interpolation: str = "bezier") -> FaceModel:
 
 
 def wrinkled_head() -> FaceModel:
-    from workbench.wrinkle_layer import fit_sample_wrinkles
+    from workbench.methods.wrinkles.layer import fit_sample_wrinkles
 
     m = load_sample("head")
     fit_sample_wrinkles(m)
@@ -87,8 +87,8 @@ def fitted_head(n_frames: int = 10) -> FaceModel:
     """A synthetic marker performance fitted on region level 1 and keyed frame by frame
     (``key_marker_fit``: global weights + one region-weight track per region), with the
     head turning (head-pose keys) over the same frames."""
-    from workbench.marker_fit import fit_markers, generate_synthetic_marker_performance
-    from workbench.tracks import head_rotation_from_euler
+    from workbench.methods.regions.marker_fit import fit_markers, generate_synthetic_marker_performance
+    from workbench.animation.tracks import head_rotation_from_euler
 
     m = load_sample("head")
     st = m.segment_regions(0.25)

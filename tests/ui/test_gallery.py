@@ -12,7 +12,7 @@ import widgets.gallery as gallery_mod
 from widgets.gallery import ExpressionGallery, cached_thumbnails, clear_thumbnail_cache
 from widgets.render import png_to_array
 from workbench import BlendShape, FaceModel
-from workbench.polygons import Polygons
+from workbench.core.polygons import Polygons
 
 pytestmark = pytest.mark.ui
 

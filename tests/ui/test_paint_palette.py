@@ -10,7 +10,7 @@ pytest.importorskip("ipywidgets")
 
 from widgets.gallery import ExpressionGallery, clear_thumbnail_cache
 from workbench import BlendShape, FaceModel
-from workbench.polygons import Polygons
+from workbench.core.polygons import Polygons
 
 pytestmark = pytest.mark.ui
 

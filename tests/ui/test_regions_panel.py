@@ -165,7 +165,7 @@ def test_drag_handler_solves_and_moves_the_dragged_point_toward_the_target(setup
     assert len(labels) == n_undo + 1 and labels[-1].startswith("Region drag ")
     X1 = np.array(model.evaluate(), dtype=np.float64)
     # motion damping: the goal is the mouse motion scaled by drag_damping at v
-    from workbench.region_blend import drag_damping
+    from workbench.methods.regions.blend import drag_damping
 
     goal = X0[v] + mouse * drag_damping(model, [v])[0]
     assert np.linalg.norm(X1[v] - goal) < 0.5 * np.linalg.norm(X0[v] - goal)
@@ -213,7 +213,7 @@ def test_drag_in_the_background_is_refused_without_an_open_interaction(setup):
 
 
 def test_leaving_drag_mode_gives_the_viewport_back(setup):
-    from workbench.handle_presets import default_face_handles
+    from workbench.methods.handles.presets import default_face_handles
 
     model, vp, panel, _ = setup
     model.set_handles(default_face_handles(model, per_side=5), label="few handles")
@@ -264,7 +264,7 @@ def test_rename_and_merge_controls_are_one_undo_step_each(setup):
     assert "already used" in panel.edit_status.value and "b00020" in panel.edit_status.value
     assert len(model.history.undo_labels) == n + 1 and panel.errors.count == 0
     # merge: the dropdown lists the touching regions only
-    from workbench.regions import adjacent_regions, region_topology
+    from workbench.methods.regions.segmentation import adjacent_regions, region_topology
 
     nb = adjacent_regions(R, region_topology(model), 0, r)
     assert [idx for _label, idx in panel.merge_with.options] == nb
@@ -318,7 +318,7 @@ def test_split_mode_splits_between_two_clicked_markers(setup):
 
 
 def test_paint_mode_brush_stroke_grows_the_region_in_one_undo_step(setup):
-    from workbench.regions import region_topology
+    from workbench.methods.regions.segmentation import region_topology
 
     model, vp, panel, _ = setup
     panel.find_button.click()

@@ -32,7 +32,7 @@ from widgets.render import (  # noqa: E402
     vertex_normals,
 )
 from workbench import BlendShape, FaceModel, ModelMetadata, load_sample  # noqa: E402
-from workbench.polygons import Polygons  # noqa: E402
+from workbench.core.polygons import Polygons  # noqa: E402
 
 pytestmark = pytest.mark.ui
 

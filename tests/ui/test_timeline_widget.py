@@ -17,7 +17,7 @@ import pytest
 pytest.importorskip("anywidget")
 
 from widgets.timeline import TimelineWidget, curve_samples, timeline_state, view_range
-from workbench.tracks import Timeline
+from workbench.animation.tracks import Timeline
 
 pytestmark = pytest.mark.ui
 

@@ -286,7 +286,7 @@ def test_import_right_after_a_slider_drag_is_an_undo_step_of_its_own(
 
 
 def test_handle_drag_right_after_a_slider_drag_is_an_undo_step_of_its_own(wb: Workbench) -> None:
-    from workbench.handle_presets import default_face_handles
+    from workbench.methods.handles.presets import default_face_handles
 
     m = wb.model
     m.set_handles(default_face_handles(m), label="Default handles")
@@ -306,7 +306,7 @@ def test_viewport_frames_the_neutral_mesh_whatever_the_expression() -> None:
     import numpy as np
 
     from widgets import Viewport
-    from workbench.handle_presets import default_face_handles
+    from workbench.methods.handles.presets import default_face_handles
 
     fresh = load_sample("head")
     posed = load_sample("head")  # opened mid-expression, as a recovered session may be:
@@ -331,7 +331,7 @@ def test_viewport_frames_the_neutral_mesh_whatever_the_expression() -> None:
 
 
 def test_changing_the_tool_clears_the_dragged_handle_highlight(wb: Workbench) -> None:
-    from workbench.handle_presets import default_face_handles
+    from workbench.methods.handles.presets import default_face_handles
 
     m = wb.model
     m.set_handles(default_face_handles(m), label="Default handles")

@@ -19,7 +19,7 @@ from widgets import Viewport, Workbench, WrinklePanel
 from widgets.wrinkle_panel import example_detailed, set_wrinkle_strength
 from workbench import load_sample
 from workbench.model import HandleSet
-from workbench.wrinkle_examples import EXAMPLE_POSES
+from workbench.methods.wrinkles.examples import EXAMPLE_POSES
 
 pytestmark = pytest.mark.ui
 

@@ -54,7 +54,7 @@ from numpy.typing import NDArray
 
 if TYPE_CHECKING:
     from workbench.model import FaceModel
-    from workbench.tracks import Timeline
+    from workbench.animation.tracks import Timeline
 
 __all__ = [
     "FORMATS",
@@ -198,7 +198,7 @@ def export(
         The files written (a list of Path); ``.layers`` reports how every
         editing layer was encoded.
     """
-    from workbench.tracks import TrackError
+    from workbench.animation.tracks import TrackError
 
     fmt = format_for_path(path, format)
     tl = timeline

@@ -40,7 +40,7 @@ from workbench.export import ExportError, ExportResult, atomic_path
 
 if TYPE_CHECKING:
     from workbench.model import FaceModel
-    from workbench.tracks import Timeline
+    from workbench.animation.tracks import Timeline
 
 _SCRIPT = r"""
 import json, sys

@@ -1,4 +1,4 @@
-"""CSV of per-frame blendshape weights (re-importable with :mod:`workbench.animation_io`).
+"""CSV of per-frame blendshape weights (re-importable with :mod:`workbench.animation.importers`).
 
 Two layouts:
 
@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING
 from workbench.arkit import canonical_arkit_name
 from workbench.export import ExportError, ExportResult, LayerReport, atomic_path
 from workbench.export.encoding import MeshEncoding
-from workbench.tracks import Timeline
+from workbench.animation.tracks import Timeline
 
 if TYPE_CHECKING:
     from workbench.model import FaceModel

@@ -7,13 +7,13 @@ weights ``g(t)`` and the handle offsets ``o(t)`` — so with
 
 * ``Δ_k`` the effective (masked) delta of shape ``k``, muted shapes at weight 0,
   keyed weights clamped to the slider range (as :meth:`FaceModel.set_time` does);
-* **regions** (:func:`workbench.region_blend.region_layer`): with region
+* **regions** (:func:`workbench.methods.regions.blend.region_layer`): with region
   weights ``w_rk`` on the shown level and memberships ``W_r(v)``, the layer is
   ``Σ_r W_r Σ_k (w_rk − g_k) Δ_k = C_R − S_R Σ_k g_k Δ_k`` with the constant
   ``C_R = Σ_k (Σ_r W_r w_rk) Δ_k`` and the coverage ``S_R = Σ_r W_r``;
-* **handles** (:class:`workbench.handle_layer.HandleLayer`): ``D(o) = B o``,
-  linear in the offsets (:mod:`workbench.shell`);
-* **paint** (:class:`workbench.paint.PaintLayer`): with painted maps ``W_e``
+* **handles** (:class:`workbench.methods.handles.layer.HandleLayer`): ``D(o) = B o``,
+  linear in the offsets (:mod:`workbench.methods.handles.shell`);
+* **paint** (:class:`workbench.methods.paint.painting.PaintLayer`): with painted maps ``W_e``
   and expression displacements ``D_e`` the layer is
   ``Σ_e W_e (D_e − base)``, ``base = blended − neutral + R + D(o)`` with ``R``
   the region layer (the layers below the paint), i.e.
@@ -69,7 +69,7 @@ from workbench.export import ExportError, LayerReport
 
 if TYPE_CHECKING:
     from workbench.model import FaceModel
-    from workbench.tracks import Timeline, Track
+    from workbench.animation.tracks import Timeline, Track
 
 __all__ = ["MeshEncoding", "crossing_times", "curve_range", "segment_polynomials"]
 
@@ -179,8 +179,8 @@ class MeshEncoding:
     """
 
     def __init__(self, model: FaceModel, timeline: Timeline) -> None:
-        from workbench.expressions import expression_displacement
-        from workbench.region_blend import RegionState, region_layer
+        from workbench.methods.paint.expressions import expression_displacement
+        from workbench.methods.regions.blend import RegionState, region_layer
 
         timeline.check_model(model)
         self.model = model

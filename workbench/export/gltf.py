@@ -22,7 +22,7 @@ registered layers) within float32 round-off:
   handle and axis.
 * ``handle:basis<i>`` when the handle offsets are keyed: the shell
   displacement is linear in the offsets, ``D(o) = B o``
-  (:mod:`workbench.shell`), and the keyed offsets live in the span of the
+  (:mod:`workbench.methods.handles.shell`), and the keyed offsets live in the span of the
   keys' values and tangents; one target per basis vector of that span
   (usually one per distinct key pose, never more than ``3 × h``), weights
   mapped onto ``[0, 1]`` over their exact range (so Blender, which clamps
@@ -51,7 +51,7 @@ glTF has one sampler for all morph weights, so the key times of every weight
 track are merged. The sampler's interpolation is ``STEP`` if every segment is
 step, ``CUBICSPLINE`` if any is Bézier, else ``LINEAR``. At every merged time
 the value and the left/right derivatives of each curve are written; since our
-Bézier segments are cubic polynomials of ``t`` (:mod:`workbench.tracks`),
+Bézier segments are cubic polynomials of ``t`` (:mod:`workbench.animation.tracks`),
 splitting one at an extra time with the true derivatives reproduces it
 exactly, and a linear segment is a cubic with both tangents equal to its
 slope. glTF ``CUBICSPLINE`` stores per key ``(a_k, v_k, b_k)`` with
@@ -80,7 +80,7 @@ from numpy.typing import NDArray
 
 from workbench.export import ExportError, ExportResult, LayerReport, atomic_write_bytes
 from workbench.export.encoding import MeshEncoding, crossing_times
-from workbench.tracks import HEAD_POSE, Key, Timeline, Track
+from workbench.animation.tracks import HEAD_POSE, Key, Timeline, Track
 
 if TYPE_CHECKING:
     from workbench.model import FaceModel

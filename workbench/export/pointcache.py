@@ -52,7 +52,7 @@ from numpy.typing import NDArray
 
 from workbench.export import ExportError, ExportResult, LayerReport, atomic_path
 from workbench.export.encoding import MeshEncoding
-from workbench.tracks import Timeline
+from workbench.animation.tracks import Timeline
 
 if TYPE_CHECKING:
     from workbench.model import FaceModel

@@ -49,7 +49,7 @@ import numpy as np
 
 from workbench.export import ExportError, ExportResult, LayerReport, atomic_path
 from workbench.export.encoding import MeshEncoding
-from workbench.tracks import Timeline
+from workbench.animation.tracks import Timeline
 
 if TYPE_CHECKING:
     from workbench.model import FaceModel

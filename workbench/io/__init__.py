@@ -17,7 +17,7 @@ import numpy as np
 
 from workbench.fileformat import SUFFIX, load_model
 from workbench.io.registry import ImportedFace, read_any
-from workbench.mesh_checks import label_components
+from workbench.geometry.mesh_checks import label_components
 from workbench.model import BlendShape, FaceModel, ModelMetadata
 
 __all__ = ["ImportedFace", "load", "model_from_imported"]

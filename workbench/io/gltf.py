@@ -40,8 +40,8 @@ from pygltflib import (
 )
 
 from workbench.io.registry import ImportedFace, check_shape_names
-from workbench.mesh_checks import MeshFormatError, check_faces, check_vertices
-from workbench.polygons import Polygons
+from workbench.geometry.mesh_checks import MeshFormatError, check_faces, check_vertices
+from workbench.core.polygons import Polygons
 
 __all__ = ["DESCRIPTION", "detect", "read", "read_gltf"]
 

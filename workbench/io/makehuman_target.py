@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 
 from workbench.io.obj import read_obj
 from workbench.io.registry import ImportedFace, check_shape_names
-from workbench.mesh_checks import MeshFormatError, check_vertices
+from workbench.geometry.mesh_checks import MeshFormatError, check_vertices
 
 __all__ = ["DESCRIPTION", "detect", "parse_target", "read", "read_targets"]
 

@@ -21,8 +21,8 @@ from pathlib import Path
 import numpy as np
 
 from workbench.io.registry import ImportedFace
-from workbench.mesh_checks import MeshFormatError, check_faces, check_vertices
-from workbench.polygons import Polygons
+from workbench.geometry.mesh_checks import MeshFormatError, check_faces, check_vertices
+from workbench.core.polygons import Polygons
 
 __all__ = ["DESCRIPTION", "detect", "parse_obj_text", "read", "read_obj"]
 

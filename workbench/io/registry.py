@@ -17,8 +17,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from workbench.arkit import canonical_arkit_name
-from workbench.mesh_checks import MeshFormatError, label_components
-from workbench.polygons import Polygons
+from workbench.geometry.mesh_checks import MeshFormatError, label_components
+from workbench.core.polygons import Polygons
 
 __all__ = [
     "ImportedFace",
@@ -75,7 +75,7 @@ class ImportedFace:
     def components(self) -> tuple[NDArray[np.int32], list[str]]:
         """Connected parts of the mesh: ``(labels (n,) int32, names)``.
 
-        See :func:`workbench.mesh_checks.label_components`.
+        See :func:`workbench.geometry.mesh_checks.label_components`.
         """
         return label_components(
             self.polygons, self.n_vertices, self.face_groups, self.group_names or None

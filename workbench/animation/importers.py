@@ -48,7 +48,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from workbench.arkit import canonical_arkit_name
-from workbench.tracks import Interpolation, Key, Timeline, Track, TrackError, weight_track_name
+from workbench.animation.tracks import Interpolation, Key, Timeline, Track, TrackError, weight_track_name
 
 __all__ = [
     "AnimationImportError",
@@ -457,7 +457,7 @@ def read_gltf_animation(
         non-increasing times, output counts that do not match.
     """
     from workbench.io.gltf import _GLB_MAGIC, _Gltf, _parse_json, _split_glb
-    from workbench.mesh_checks import MeshFormatError
+    from workbench.geometry.mesh_checks import MeshFormatError
 
     p = Path(path)
     src = str(p)

@@ -1,6 +1,6 @@
 """Procedural detailed example poses for the sample head (no scan data with real wrinkles exists).
 
-Pose-space wrinkles (:mod:`workbench.pose_space`) learn from *detailed*
+Pose-space wrinkles (:mod:`workbench.methods.wrinkles.pose_space`) learn from *detailed*
 example meshes. The sample head's ARKit blendshapes are smooth, and there is
 no permissively licensed scan with expression wrinkles, so this module sculpts
 them procedurally — the same rule for the few example poses and for every
@@ -51,9 +51,9 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 
-from workbench.operators import cotangent_laplacian, mass_matrix
-from workbench.pose_space import vertex_normals
-from workbench.sparse_cholesky import SparseSPDSolver
+from workbench.geometry.operators import cotangent_laplacian, mass_matrix
+from workbench.methods.wrinkles.pose_space import vertex_normals
+from workbench.geometry.sparse_cholesky import SparseSPDSolver
 
 if TYPE_CHECKING:
     from workbench.model import FaceModel

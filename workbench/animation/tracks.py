@@ -13,7 +13,7 @@ A :class:`Timeline` holds named :class:`Track` objects:
 * ``"regions/<level>/<region>"`` — per-region blend weights (Joshi et al. 2003
   §3/§4), a vector track whose value is ``(k,)``: the weight of every model
   shape (in the model's shape order, as a row of
-  :class:`workbench.region_blend.RegionWeights`) inside region ``<region>`` of
+  :class:`workbench.methods.regions.blend.RegionWeights`) inside region ``<region>`` of
   hierarchy level ``<level>``. All region tracks of a timeline are on one
   level and have the same ``k``. While a timeline has region tracks, they
   define the region weights of that level: keyed regions take their keyed
@@ -1190,7 +1190,7 @@ class MeshSampler:
     clamp either; auto-clamped keys never leave the keys' value range).
 
     The shell displacement is linear in the offsets, ``D(o) = B o`` (see
-    :mod:`workbench.shell`); :meth:`handle_basis` exposes it per handle
+    :mod:`workbench.methods.handles.shell`); :meth:`handle_basis` exposes it per handle
     component for exports. The region, paint and registered layers (and so
     region tracks) are not evaluated here: :meth:`FaceModel.evaluate_at` and
     :class:`workbench.export.encoding.MeshEncoding` are the full evaluation.
@@ -1252,9 +1252,9 @@ class MeshSampler:
 
     def _shell(self) -> Any:
         if self._deformer is None:
-            # Same construction as workbench.handle_layer.HandleLayer (deterministic),
+            # Same construction as workbench.methods.handles.layer.HandleLayer (deterministic),
             # so the displacement equals the model's own handle layer.
-            from workbench.shell import ShellDeformer
+            from workbench.methods.handles.shell import ShellDeformer
 
             k_s, k_b = self.model.shell_stiffness
             self._deformer = ShellDeformer(

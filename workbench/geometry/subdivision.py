@@ -34,7 +34,7 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 
-from workbench.polygons import Polygons
+from workbench.core.polygons import Polygons
 
 if TYPE_CHECKING:
     from workbench.model import FaceModel

@@ -97,7 +97,7 @@ from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import cKDTree
 
 from workbench.arkit import canonical_arkit_name, shape_group
-from workbench.operators import cotangent_laplacian, mass_matrix
+from workbench.geometry.operators import cotangent_laplacian, mass_matrix
 
 if TYPE_CHECKING:
     from workbench.model import FaceModel
@@ -1131,7 +1131,7 @@ def _identity_origins(regions: Regions) -> tuple[NDArray[np.int32], ...]:
 def _check_topology(regions: Regions, topology: Any) -> RegionTopology:
     if not isinstance(topology, RegionTopology):
         raise RegionError(
-            f"topology must be a RegionTopology (workbench.regions.region_topology(model)), "
+            f"topology must be a RegionTopology (workbench.methods.regions.segmentation.region_topology(model)), "
             f"got {type(topology).__name__}"
         )
     if topology.n_vertices != regions.n_vertices:

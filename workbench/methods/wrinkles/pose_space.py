@@ -1,7 +1,7 @@
 """Fine-scale detail in a strain pose space: PSD and weighted PSD (Bickel et al. 2008, §5–6).
 
 The large-scale motion of a face comes from a linear shell driven by ``H``
-handle vertices (:mod:`workbench.shell`). What the shell misses — wrinkles,
+handle vertices (:mod:`workbench.methods.handles.shell`). What the shell misses — wrinkles,
 bulges — is learned from a few detailed example poses as a function of skin
 *strain*:
 
@@ -57,7 +57,7 @@ Documented choices (each pinned by ``tests/test_pose_space.py``):
 
 Hand-written because no library offers strain pose spaces; the linear algebra
 is numpy's batched ``eigh`` and scipy's sparse products. Per-frame kernels for
-large meshes are in :mod:`workbench._kernels` (numba, optional).
+large meshes are in :mod:`workbench.methods.wrinkles.kernels` (numba, optional).
 """
 
 from __future__ import annotations
@@ -71,8 +71,8 @@ import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
-from workbench import _kernels
-from workbench.shell import ShellDeformer
+from workbench.methods.wrinkles import kernels as _kernels
+from workbench.methods.handles.shell import ShellDeformer
 
 FloatArray = NDArray[np.float64]
 FitMode = Literal["interp", "lsq"]
@@ -437,7 +437,7 @@ class PoseSpace:
         return np.sqrt(np.maximum(np.asarray(r2), 0.0))
 
     def evaluate(self, features: ArrayLike) -> NDArray[np.float32]:
-        """Values for one pose, (n, 3) float32 (numpy path; see :mod:`workbench._kernels`)."""
+        """Values for one pose, (n, 3) float32 (numpy path; see :mod:`workbench.methods.wrinkles.kernels`)."""
         phi = self.distances(features)
         if self.alpha is None:
             P = self.weights.shape[0]
@@ -817,7 +817,7 @@ class DetailEvaluator:
 
     Holds float32, contiguous copies of everything a frame needs and reuses its
     buffers, so a frame allocates nothing. Uses the numba kernels of
-    :mod:`workbench._kernels` when available (``backend="auto"``), else numpy.
+    :mod:`workbench.methods.wrinkles.kernels` when available (``backend="auto"``), else numpy.
 
     Parameters
     ----------

@@ -18,7 +18,7 @@ import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 from scipy.sparse.csgraph import connected_components
 
-from workbench.polygons import Polygons
+from workbench.core.polygons import Polygons
 
 __all__ = ["MeshFormatError", "check_faces", "check_vertices", "label_components"]
 

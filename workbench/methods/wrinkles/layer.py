@@ -17,7 +17,7 @@ and dragging handles adds wrinkles according to the strain they cause.
 Cheap when idle: returns None (no work, no allocation) when nothing is
 fitted, the layer is disabled, the strength is 0, the model's handles differ
 from the fitted ones, or the strain is zero (the rest pose has zero detail).
-Hand-written glue; the numerics are in :mod:`workbench.pose_space`.
+Hand-written glue; the numerics are in :mod:`workbench.methods.wrinkles.pose_space`.
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from workbench.pose_space import (
+from workbench.methods.wrinkles.pose_space import (
     DetailEvaluator,
     FeatureGraph,
     FitMode,
@@ -250,12 +250,12 @@ def fit_sample_wrinkles(
     poses: Mapping[str, Mapping[str, float]] | None = None,
     sculptor: object | None = None,
 ) -> WrinkleLayer:
-    """Convenience: procedural example poses (:mod:`workbench.wrinkle_examples`) -> fitted, attached layer.
+    """Convenience: procedural example poses (:mod:`workbench.methods.wrinkles.examples`) -> fitted, attached layer.
 
     Sets the default handles first if the model has none.
     """
-    from workbench.handle_presets import default_face_handles
-    from workbench.wrinkle_examples import EXAMPLE_POSES, WrinkleSculptor
+    from workbench.methods.handles.presets import default_face_handles
+    from workbench.methods.wrinkles.examples import EXAMPLE_POSES, WrinkleSculptor
 
     if len(model.handles) == 0:
         model.set_handles(default_face_handles(model), label="Default handles")

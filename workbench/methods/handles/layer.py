@@ -2,7 +2,7 @@
 
 The model's handles (:class:`workbench.model.HandleSet`) carry offsets that sit
 *on top of* the current blendshape expression. This layer turns them into a
-smooth displacement of the whole face with a :class:`~workbench.shell.ShellDeformer`
+smooth displacement of the whole face with a :class:`~workbench.methods.handles.shell.ShellDeformer`
 built on the neutral mesh, and caches it:
 
 * the basis is rebuilt only when the handle *vertex set* or the stiffness
@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
-from workbench.shell import DEFAULT_K_B, DEFAULT_K_S, ShellDeformer
+from workbench.methods.handles.shell import DEFAULT_K_B, DEFAULT_K_S, ShellDeformer
 
 if TYPE_CHECKING:
     from workbench.model import FaceModel
@@ -35,7 +35,7 @@ class HandleLayer:
     Parameters
     ----------
     k_s, k_b : float
-        Shell stiffness (see :mod:`workbench.shell`).
+        Shell stiffness (see :mod:`workbench.methods.handles.shell`).
     progress : callable, optional
         ``progress(fraction, message)`` during basis precomputes.
     """

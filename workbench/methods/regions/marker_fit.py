@@ -33,7 +33,7 @@ Per frame ``t`` with marker vertices ``m`` and measured positions ``M_t``:
    :func:`fidelity_table`. The residual moves the skin and the parts attached to
    it (lashes), not eyeballs, teeth or tongue.
 
-Solvers: :func:`workbench.region_blend.bounded_lsq` (``scipy.optimize.nnls`` with
+Solvers: :func:`workbench.methods.regions.blend.bounded_lsq` (``scipy.optimize.nnls`` with
 an upper-bound active set, BVLS fallback) for the bounded fits, block
 Gauss–Seidel over regions for the joint region fit, a dense LU
 (``scipy.linalg.lu_factor``) for the RBF system. The RBF is hand-written
@@ -54,13 +54,13 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 from scipy.spatial.distance import cdist
 
-from workbench.region_blend import (
+from workbench.methods.regions.blend import (
     RegionWeights,
     _mute,
     _vertex_ids,
     bounded_lsq,
 )
-from workbench.regions import RegionError, Regions, _effective_deltas, component_roles
+from workbench.methods.regions.segmentation import RegionError, Regions, _effective_deltas, component_roles
 
 if TYPE_CHECKING:
     from workbench.model import FaceModel
@@ -592,7 +592,7 @@ def fidelity_table(
         vertex_rms_rbf, weight_rms``.
     """
     lvls = list(range(regions.n_levels)) if levels is None else [regions.check_level(x) for x in levels]
-    from workbench.operators import mass_matrix
+    from workbench.geometry.operators import mass_matrix
 
     roles = component_roles(model)
     D = _effective_deltas(model)

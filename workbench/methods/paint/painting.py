@@ -33,7 +33,7 @@ falloff(d / radius)``; modes:
 X-mirror applies the same dab centred at the dab centre's mirror partner:
 the vertex at the reflection of the centre about the mid-plane ``x = mid`` —
 on a model, the middle of the skin's x range, the plane the region
-segmentation mirrors about (:func:`workbench.regions.segment_blend_regions`)
+segmentation mirrors about (:func:`workbench.methods.regions.segmentation.segment_blend_regions`)
 — found within the same tolerance, ``1e-3`` of the bounding-box diagonal
 (:func:`mirror_map`). A centre without a partner there (an asymmetric mesh)
 gets no mirrored dab: the dab paints on its own side only, rather than at
@@ -68,7 +68,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
-from workbench.expressions import expression_displacement
+from workbench.methods.paint.expressions import expression_displacement
 
 if TYPE_CHECKING:
     from workbench.model import FaceModel
@@ -180,7 +180,7 @@ def mirror_map(
         ``mirror[v]`` is the vertex nearest to the reflection of ``v`` if it lies
         within ``tolerance`` (``v`` itself on the plane), else ``v`` itself: no
         partner, so a mirrored dab there has nothing to add (as in
-        :func:`workbench.regions.segment_blend_regions`, identity where unmirrored).
+        :func:`workbench.methods.regions.segmentation.segment_blend_regions`, identity where unmirrored).
     """
     V = np.asarray(vertices, dtype=np.float64)
     if V.ndim != 2 or V.shape[1] != 3:
@@ -494,7 +494,7 @@ class PaintLayer:
         """The model's :class:`PaintSurface`, mirrored about the skin's mid-plane (built once)."""
         with self._lock:
             if self._surface is None or self._surface.n != model.n_vertices:
-                from workbench.regions import component_roles
+                from workbench.methods.regions.segmentation import component_roles
 
                 V = np.asarray(model.vertices, dtype=np.float64)
                 skin = V[component_roles(model) == 0] if model.n_vertices else V

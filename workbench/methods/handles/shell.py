@@ -6,7 +6,7 @@ energy whose Euler–Lagrange equations are
     -k_s Δu + k_b Δ²u = 0
 
 under the displacements ``u_H`` prescribed at ``H`` handle vertices. With the
-cotangent Laplacian ``L`` (negative semi-definite, :mod:`workbench.operators`)
+cotangent Laplacian ``L`` (negative semi-definite, :mod:`workbench.geometry.operators`)
 and the Voronoi mass ``M`` this is ``A u = 0`` with
 
     A = -k_s L + k_b L^T M̃^{-1} L,      M̃ = M · N_REF / area
@@ -35,7 +35,7 @@ so the same ``k_s``, ``k_b`` and drag give the same shape
 bending weight shrink like ``1 / n`` on finer meshes) and its look is
 unchanged. Splitting the vertices into free ``f`` and
 handle ``H`` ones, ``A_ff u_f = -A_fH u_H``. We factor ``A_ff`` once (CHOLMOD
-when installed, see :mod:`workbench.sparse_cholesky`), solve all ``H`` columns
+when installed, see :mod:`workbench.geometry.sparse_cholesky`), solve all ``H`` columns
 and keep the basis ``B = -A_ff^{-1} A_fH`` in float32, so a drag is
 ``u = B u_H`` — and moving one handle is a rank-1 update ``u += B[:, j] d^T``.
 
@@ -74,8 +74,8 @@ import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
-from workbench.operators import bilaplacian, cotangent_laplacian, mass_matrix
-from workbench.sparse_cholesky import Backend, SparseSPDSolver
+from workbench.geometry.operators import bilaplacian, cotangent_laplacian, mass_matrix
+from workbench.geometry.sparse_cholesky import Backend, SparseSPDSolver
 
 Policy = Literal["fixed", "follow", "rigid"]
 
