@@ -46,7 +46,7 @@ import numpy as np
 import workbench, widgets
 from workbench.methods.handles.presets import default_face_handles
 model = workbench.load_sample("head", resolution="{res}")
-model.set_handles(default_face_handles(model))
+model.handles.set(default_face_handles(model))
 _skin = model.component_labels == model.component_names.index("skin")
 _V = np.asarray(model.vertices)
 _d = np.linalg.norm(model.shape("mouthSmileLeft").delta, axis=1) * _skin
@@ -57,7 +57,7 @@ HANDLE = int(np.argmin(np.linalg.norm(_V[model.handles.vertices] - _V[_corner], 
 _t = time.perf_counter()
 model.move_handle(HANDLE, [1e-3, 0, 0]); model.evaluate()
 PRECOMPUTE_S = time.perf_counter() - _t
-model.reset_handle_offsets()
+model.handles.reset_offsets()
 wb = widgets.show_workbench(model)
 wb.viewport.tool = "sculpt"
 """

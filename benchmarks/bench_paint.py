@@ -72,11 +72,11 @@ def bench_core(resolutions: list[str], dabs: int = 40) -> list[tuple[Any, ...]]:
     for res in resolutions:
         model = workbench.load_sample("head", resolution=res)
         model.set_weights({"mouthSmileLeft": 1.0, "mouthSmileRight": 1.0})
-        model.save_expression("smile")
+        model.expressions.save("smile")
         model.reset_weights()
         top, _, _ = _mouth(model)
         t0 = time.perf_counter()
-        surface = model.paint_surface
+        surface = model.paint.surface
         setup = time.perf_counter() - t0
         model.evaluate()
         r0 = default_brush_radius(model)
@@ -88,7 +88,7 @@ def bench_core(resolutions: list[str], dabs: int = 40) -> list[tuple[Any, ...]]:
                     v = top[k % len(top)]
                     touched.append(surface.within(v, brush.radius)[0].size)
                     t = time.perf_counter()
-                    model.paint_dab("smile", v, brush)
+                    model.paint.dab("smile", v, brush)
                     t1 = time.perf_counter()
                     model.evaluate()
                     t2 = time.perf_counter()
@@ -110,9 +110,9 @@ import workbench, widgets
 from IPython.display import display
 model = workbench.load_sample("head", resolution="{res}")
 model.set_weights({"mouthSmileLeft": 1.0, "mouthSmileRight": 1.0})
-model.save_expression("smile")
+model.expressions.save("smile")
 model.reset_weights()
-_t = time.perf_counter(); model.paint_surface; SURFACE_S = time.perf_counter() - _t
+_t = time.perf_counter(); model.paint.surface; SURFACE_S = time.perf_counter() - _t
 vp = widgets.Viewport(model, height=560, tool="paint", paint_expression="smile", brush_opacity=0.3)
 display(vp)
 """

@@ -49,7 +49,7 @@ import widgets, workbench
 from widgets.timeline import TimelineWidget
 model = workbench.load_sample("head", resolution="{res}")
 model.set_weights({{"mouthSmileLeft": 1.0, "mouthSmileRight": 1.0}})
-model.save_expression("smile")
+model.expressions.save("smile")
 model.reset_weights()
 model.key_expression(0.0, "jawOpen")
 model.key_expression(1.0, "smile")
@@ -89,7 +89,7 @@ def measure(nb: NotebookPage, fps: float, warmup: float, seconds: float) -> dict
     page = nb.page
     root = page.locator(".fwb-timeline")
     nb.kernel_eval(
-        f"model.set_timeline(model.tracks.replace(fps={fps}), 'bench fps'); model.set_time(0.0)"
+        f"model.timeline.set(model.tracks.replace(fps={fps}), 'bench fps'); model.set_time(0.0)"
     )
     if not root.locator(".fwb-tl-loop").is_checked():
         root.locator(".fwb-tl-loop").check()

@@ -136,9 +136,8 @@ def _osqp_joint_fit(m, R, mk, P, G):  # type: ignore[no-untyped-def]
     import osqp
     import scipy.sparse as sp
 
-    from workbench.methods.regions.segmentation import _effective_deltas
 
-    D = _effective_deltas(m)[:, mk].astype(np.float64)
+    D = m.effective_deltas[:, mk].astype(np.float64)
     M, k = mk.size, D.shape[0]
     Wm = R.weight_matrix(0)[mk].toarray()
     touched = np.flatnonzero(Wm.max(0) > 0)

@@ -327,7 +327,7 @@ def regions(s: Session, out: Path) -> None:
     button.wait_for(timeout=120_000)
     renders = int(s.nb.viewport(0).get_attribute("data-render-count") or 0)
     button.click()
-    s.wait_py("model.regions is not None", bool, "Find regions", timeout=300)
+    s.wait_py("model.regions.state is not None", bool, "Find regions", timeout=300)
     s.page.wait_for_function(
         "(r) => Number(document.querySelector('.fwb-viewport')"
         ".getAttribute('data-render-count')) > r",
@@ -356,7 +356,7 @@ def paint(s: Session, out: Path) -> None:
         s.stroke(a, a + 0.7 * (mid - a))  # from the corner most of the way to the middle
         s.wait_frame_after(frame)
         s.wait_quiet(f"stroke {expression}")
-    painted = s.py("{k: float(v.max()) for k, v in model.paint_layers.items()}")
+    painted = s.py("{k: float(v.max()) for k, v in model.paint.items()}")
     assert set(painted) == {"mouthSmileLeft", "mouthSmileRight"}, painted
     assert s.py("wb.viewport.paint_overlay") is True
     s.shot(out / "ui_paint.png")
@@ -365,7 +365,7 @@ def paint(s: Session, out: Path) -> None:
     # tear at the painted mouth corners.
     s.page.locator(".fwb-paint-bake").click()
     s.wait_py(
-        '"paint_1" in model.shape_names and not model.paint_layers', bool, "Bake to new shape"
+        '"paint_1" in model.shape_names and not model.paint', bool, "Bake to new shape"
     )
 
 
@@ -461,7 +461,7 @@ def wrinkles(s: Session, out: Path) -> None:
     # raise the whole brow (middle, inner, outer marker; the mirror side follows)
     for name, dy in (("brows_L_2", -30.0), ("brows_L_1", -22.0), ("brows_L_3", -18.0)):
         s.drag_handle(name, 0.0, dy)
-    detail = s.py("float(abs(wb.wrinkles.layer.details(model)).max())")
+    detail = s.py("float(abs(wb.wrinkles.layer.details()).max())")
     assert detail > 1e-3, f"no wrinkle detail after the brow raise ({detail})"
     assert s.py("wb.viewport.feature_graph") is True
     s.shot(out / "ui_sculpt_wrinkles.png")

@@ -64,7 +64,7 @@ def test_crashed_session_is_recoverable(tmp_path: Path) -> None:
         m = FaceModel(V, None, [BlendShape("up", up)], polygons=p)
         s = Autosaver(m, "crashy", delay=0.05, folder={str(tmp_path)!r})
         m.set_weight("up", 0.75)
-        m.key_weights(1.0)
+        m.timeline.key_weights(1.0)
         while s.state != "saved":
             time.sleep(0.01)
         os._exit(1)   # the kernel dies without closing anything

@@ -34,7 +34,7 @@ def test_info_on_a_gltf_with_morph_targets(tmp_path: Path, capsys: pytest.Captur
         model.remove_shape(name)
     model.rename_shape("browDownLeft", "BrowDown_L")  # a non-canonical spelling
     glb = tmp_path / "face.glb"
-    model.key_weights(0.0, ["cheekPuff"])
+    model.timeline.key_weights(0.0, ["cheekPuff"])
     export(model, model.tracks, glb)
     assert main(["info", str(glb)]) == 0
     out = capsys.readouterr().out

@@ -18,6 +18,8 @@ import struct
 from pathlib import Path
 
 import numpy as np
+
+from workbench.core.pipeline import FunctionLayer
 import pytest
 from grid_meshes import grid_polygons
 
@@ -64,29 +66,29 @@ def keyed(model: FaceModel) -> None:
     """Three weight keys (Bézier); b's user tangent overshoots its slider range."""
     for t, w in ((0.0, {"a": 0.0, "b": -0.5}), (1.0, {"a": 1.0, "b": 0.9}), (2.0, {"a": 0.3, "b": 0.0})):
         model.set_weights(w)
-        model.key_weights(t, ["a", "b"])
-    model.set_timeline(model.tracks.set_tangents("weights/b", 1, in_tangent=3.0, out_tangent=3.0))
+        model.timeline.key_weights(t, ["a", "b"])
+    model.timeline.set(model.tracks.set_tangents("weights/b", 1, in_tangent=3.0, out_tangent=3.0))
 
 
 def add_layers(model: FaceModel, *, keyed_handles: bool, regions: bool = True) -> None:
-    model.add_handle(20)
-    model.add_handle(50)
-    model.set_handle_offsets([[0.0, 0.0, 0.4], [0.2, -0.1, 0.0]])
+    model.handles.add(20)
+    model.handles.add(50)
+    model.handles.set_offsets([[0.0, 0.0, 0.4], [0.2, -0.1, 0.0]])
     if keyed_handles:
-        model.key_handles(0.0, "linear")
-        model.set_handle_offsets([[0.1, 0.0, -0.3], [0.0, 0.0, 0.0]])
-        model.key_handles(1.5)
-        model.set_handle_offsets([[0.0, 0.2, 0.1], [0.1, 0.1, 0.1]])
-        model.key_handles(2.0)
+        model.timeline.key_handles(0.0, "linear")
+        model.handles.set_offsets([[0.1, 0.0, -0.3], [0.0, 0.0, 0.0]])
+        model.timeline.key_handles(1.5)
+        model.handles.set_offsets([[0.0, 0.2, 0.1], [0.1, 0.1, 0.1]])
+        model.timeline.key_handles(2.0)
     model.set_weights({"a": 0.8, "c": 1.0})
-    model.save_expression("smile")
+    model.expressions.save("smile")
     model.set_weights({"a": 0.0, "c": 0.25})  # c stays unkeyed at 0.25
     model.paint_stroke("smile", [30, 31], Brush(radius=2.0, opacity=0.7))
-    model.paint_flood("b", 0.4, vertices=np.arange(60, 70))
+    model.paint.flood("b", 0.4, vertices=np.arange(60, 70))
     if regions:
         st = model.segment_regions(0.25, levels=1, min_region_size=0.0)
         rw = RegionWeights.from_global(model, st.regions, 0, [0.5, -0.2, 0.7])
-        model.set_region_weights(rw.with_region(0, {"a": 1.0}))
+        model.regions.set_weights(rw.with_region(0, {"a": 1.0}))
 
 
 def wobble(model: FaceModel) -> np.ndarray | None:
@@ -106,7 +108,7 @@ def test_encoding_reproduces_evaluate_at_with_every_layer(keyed_handles):
     m = make_model()
     add_layers(m, keyed_handles=keyed_handles)
     keyed(m)
-    m.register_layer("wobble", wobble)
+    m.register_layer(FunctionLayer("wobble", wobble))
     enc = MeshEncoding(m, m.tracks)
     kinds = {r.name: r.encoding for r in enc.layers}
     assert kinds == {"regions": "linear", "handles": "linear", "paint": "linear", "wobble": "baked"}
@@ -145,12 +147,12 @@ def test_paint_layer_is_the_documented_linear_form():
     m = make_model()
     add_layers(m, keyed_handles=False, regions=False)
     m.set_weights({"a": 0.4, "b": -0.3})
-    mix = m.paint_layers
+    mix = m.paint
     P = mix.total(m.n_vertices).astype(np.float64)
     C = sum(w.astype(np.float64)[:, None] * (m.expressions[e].displacement if e in m.expressions
                                               else m.shape(e).effective_delta()) for e, w in mix.items())
-    base = m.blended().astype(np.float64) - m.vertices + m.handle_displacement()
-    np.testing.assert_allclose(m.paint_displacement(), C - P[:, None] * base, atol=1e-6)
+    base = m.blended().astype(np.float64) - m.vertices + m.handles.displacement()
+    np.testing.assert_allclose(m.paint.displacement(), C - P[:, None] * base, atol=1e-6)
 
 
 def test_unkeyed_handles_are_one_target_in_the_glb(tmp_path):
@@ -170,7 +172,7 @@ def test_baked_layer_is_reported_and_logged(tmp_path, caplog):
 
     m = make_model()
     keyed(m)
-    m.register_layer("wobble", wobble)
+    m.register_layer(FunctionLayer("wobble", wobble))
     with caplog.at_level(logging.INFO, logger="workbench.export"):
         res = export(m, m.tracks.replace(fps=4.0), tmp_path / "f.glb")
     assert res.by_encoding("baked") == ["wobble"]
@@ -190,7 +192,7 @@ def test_keyed_region_weights_are_baked_per_frame_and_reported(tmp_path):
     keyed(m)
     r0 = m.regions.regions.names[0][0]
     tl = m.tracks.add_key(region_track_name(0, r0), 0.0, [0.0, 0.5, 1.0], interpolation="linear")
-    m.set_timeline(tl.add_key(region_track_name(0, r0), 2.0, [1.0, -0.5, 0.0], interpolation="linear"))
+    m.timeline.set(tl.add_key(region_track_name(0, r0), 2.0, [1.0, -0.5, 0.0], interpolation="linear"))
     enc = MeshEncoding(m, m.tracks)
     kinds = {r.name: r.encoding for r in enc.layers}
     assert kinds == {"regions": "baked", "handles": "linear", "paint": "linear"}
@@ -215,7 +217,7 @@ def test_constant_extra_layer_is_folded_into_the_static_target(tmp_path):
 
     m = make_model()
     keyed(m)
-    m.register_layer("lift", lambda model: np.full((model.n_vertices, 3), 0.01, np.float32))
+    m.register_layer(FunctionLayer("lift", lambda model: np.full((model.n_vertices, 3), 0.01, np.float32)))
     res = export(m, m.tracks, tmp_path / "f.glb")
     assert GLTF2.load(str(res[0])).meshes[0].extras["targetNames"] == ["a", "b", "c", "layer:static"]
     assert res.by_encoding("baked") == []
@@ -288,7 +290,7 @@ def test_point_caches_and_obj_play_every_layer(tmp_path):
     m = make_model()
     add_layers(m, keyed_handles=True)
     keyed(m)
-    m.register_layer("wobble", wobble)
+    m.register_layer(FunctionLayer("wobble", wobble))
     tl = m.tracks.replace(fps=5.0)
     want = np.stack([m.evaluate_at(t, tl) for t in tl.frame_times()]) * m.metadata.metres_per_unit
     np.testing.assert_allclose(_read_pc2(export(m, tl, tmp_path / "f.pc2")[0]), want, atol=1e-7)

@@ -44,7 +44,7 @@ def _edit_manifest(src: Path, dst: Path, change) -> None:
 def saved(tiny_model: FaceModel, tmp_path: Path) -> Path:
     tiny_model.set_weights({"up": 0.5, "left": -0.25})
     tiny_model.set_shape_mask("left", np.linspace(0, 1, 9))
-    tiny_model.set_handles(HandleSet([4], [[0.0, 0.0, 0.1]], ("centre",), [-1]))
+    tiny_model.handles.set(HandleSet([4], [[0.0, 0.0, 0.1]], ("centre",), [-1]))
     p = tmp_path / "face.fwb"
     tiny_model.save(p)
     return p
@@ -173,14 +173,14 @@ def test_expressions_paint_and_keys_round_trip(tiny_model: FaceModel, tmp_path: 
     from workbench.methods.paint.painting import Brush
 
     m = tiny_model
-    m.set_handles(HandleSet([4], [[0.0, 0.0, 0.2]], ("centre",), [-1]))
+    m.handles.set(HandleSet([4], [[0.0, 0.0, 0.2]], ("centre",), [-1]))
     m.set_weight("left", 0.5)
-    m.save_expression("lean")
+    m.expressions.save("lean")
     m.reset_weights()
-    m.reset_handle_offsets()
-    m.paint_dab("lean", 3, Brush(radius=1.5, opacity=0.6))
+    m.handles.reset_offsets()
+    m.paint.dab("lean", 3, Brush(radius=1.5, opacity=0.6))
     m.set_weight("up", 0.2)
-    m.key_weights(0.0)
+    m.timeline.key_weights(0.0)
     m.key_expression(1.0, "lean", interpolation="linear")
     m.save(tmp_path / "full.fwb")
     g = workbench.load(tmp_path / "full.fwb")
@@ -189,8 +189,8 @@ def test_expressions_paint_and_keys_round_trip(tiny_model: FaceModel, tmp_path: 
     np.testing.assert_array_equal(e.displacement, f.displacement)
     np.testing.assert_array_equal(e.handle_offsets, f.handle_offsets)
     assert dict(e.weights) == dict(f.weights)
-    assert list(g.paint_layers) == ["lean"]
-    np.testing.assert_array_equal(g.paint_layers["lean"], m.paint_layers["lean"])
+    assert list(g.paint) == ["lean"]
+    np.testing.assert_array_equal(g.paint["lean"], m.paint["lean"])
     assert g.tracks.to_json() == m.tracks.to_json()
     np.testing.assert_allclose(g.evaluate(), m.evaluate(), atol=1e-6)
     for t in (0.0, 0.3, 1.0):
@@ -213,12 +213,12 @@ def test_regions_and_region_weights_round_trip(tmp_path: Path) -> None:
 
     m = workbench.load_sample("head")
     st = m.segment_regions(0.25)
-    m.set_region_level(1)
+    m.regions.set_level(1)
     rw = RegionWeights.from_global(m, st.regions, 1).with_region(0, {"browInnerUp": 0.7})
-    m.set_region_weights(rw)
+    m.regions.set_weights(rw)
     m.save(tmp_path / "regions.fwb")
     g = workbench.load(tmp_path / "regions.fwb")
-    assert g.regions is not None and g.regions.level == 1
+    assert g.regions.state is not None and g.regions.level == 1
     for lv in range(st.regions.n_levels):
         np.testing.assert_array_equal(g.regions.regions.labels[lv], st.regions.labels[lv])
         assert g.regions.regions.names[lv] == st.regions.names[lv]
@@ -247,16 +247,16 @@ def _rich_model() -> FaceModel:
     left[[0, 3, 6], 0] = -0.5
     m = FaceModel(V, None, [BlendShape("up", up), BlendShape("left", left, -1.0, 2.0)], polygons=polys)
     m.set_shape_mask("left", np.linspace(0, 1, 9))
-    m.set_handles(HandleSet([4], [[0.0, 0.0, 0.1]], ("centre",), [-1]))
+    m.handles.set(HandleSet([4], [[0.0, 0.0, 0.1]], ("centre",), [-1]))
     m.set_weight("left", 0.5)
-    m.save_expression("lean")
+    m.expressions.save("lean")
     m.reset_weights()
-    m.paint_dab("lean", 3, Brush(radius=1.5, opacity=0.6))
+    m.paint.dab("lean", 3, Brush(radius=1.5, opacity=0.6))
     m.set_weight("up", 0.2)
-    m.key_weights(0.0)
+    m.timeline.key_weights(0.0)
     m.key_expression(1.0, "lean", interpolation="linear")
     st = m.segment_regions(0.25)
-    m.set_region_weights(RegionWeights.from_global(m, st.regions, 0).with_region(0, {"up": 0.7}))
+    m.regions.set_weights(RegionWeights.from_global(m, st.regions, 0).with_region(0, {"up": 0.7}))
     return m
 
 
@@ -269,8 +269,8 @@ def rich(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 def test_rich_file_round_trips(rich: Path) -> None:
     g, m = workbench.load(rich), _rich_model()
-    assert g.regions is not None and g.regions.weights is not None
-    assert list(g.expressions) == ["lean"] and list(g.paint_layers) == ["lean"]
+    assert g.regions.state is not None and g.regions.weights is not None
+    assert list(g.expressions) == ["lean"] and list(g.paint) == ["lean"]
     np.testing.assert_allclose(g.evaluate(), m.evaluate(), atol=1e-6)
     np.testing.assert_allclose(g.evaluate_at(0.5), m.evaluate_at(0.5), atol=1e-6)
 

@@ -38,8 +38,8 @@ def test_main_files_keep_their_edits() -> None:
 
     r = workbench.load(DATA / "regions_paint.fwb")
     assert set(r.expressions) == {"smileL", "brows"}
-    assert set(r.paint_layers) == {"smileL", "brows"}
-    assert r.regions is not None and r.regions.weights is not None
+    assert set(r.paint) == {"smileL", "brows"}
+    assert r.regions.state is not None and r.regions.weights is not None
     # the region weights and the paint really move the face (the file is not trivial)
     assert np.abs(r.evaluate() - r.vertices).max() > 1e-3
 

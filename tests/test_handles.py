@@ -24,7 +24,7 @@ def face(head: FaceModel) -> FaceModel:
         head.vertices, head.faces, head.shapes,
         component_labels=head.component_labels, component_names=head.component_names,
     )
-    m.set_handles(default_face_handles(m))
+    m.handles.set(default_face_handles(m))
     m.history.clear()
     return m
 
@@ -59,10 +59,10 @@ def test_handle_offsets_compose_on_top_of_the_blend(face: FaceModel) -> None:
     np.testing.assert_allclose(out[others], blended[others], atol=1e-5)
     # and the layer equals a fresh ShellDeformer on the neutral mesh
     d = ShellDeformer(
-        face.vertices, face.faces, face.handles.vertices, *face.shell_stiffness,
+        face.vertices, face.faces, face.handles.vertices, *face.handles.stiffness,
         component_labels=face.component_labels, component_names=face.component_names,
     )
-    np.testing.assert_allclose(face.handle_displacement(), d.displacement(face.handles.offsets), atol=1e-5)
+    np.testing.assert_allclose(face.handles.displacement(), d.displacement(face.handles.offsets), atol=1e-5)
 
 
 def test_drag_is_one_undo_step_and_rank_one_updates_match(face: FaceModel) -> None:
@@ -74,7 +74,7 @@ def test_drag_is_one_undo_step_and_rank_one_updates_match(face: FaceModel) -> No
     m = face.handles.mirror[0]
     np.testing.assert_allclose(face.handles.offsets[m], [0.0, 0.15, 0.0], atol=1e-7)
     fresh = ShellDeformer(
-        face.vertices, face.faces, face.handles.vertices, *face.shell_stiffness,
+        face.vertices, face.faces, face.handles.vertices, *face.handles.stiffness,
         component_labels=face.component_labels, component_names=face.component_names,
     ).displacement(face.handles.offsets)
     np.testing.assert_allclose(face.evaluate() - face.vertices, fresh, atol=1e-5)
@@ -84,10 +84,10 @@ def test_drag_is_one_undo_step_and_rank_one_updates_match(face: FaceModel) -> No
 
 def test_add_remove_handles_keep_mirror_links(face: FaceModel) -> None:
     n = len(face.handles)
-    i = face.add_handle(100, "extra")
-    j = face.add_handle(101, "extra_R", mirror=i)
+    i = face.handles.add(100, "extra")
+    j = face.handles.add(101, "extra_R", mirror=i)
     assert face.handles.mirror[i] == j and face.handles.mirror[j] == i
-    face.remove_handle(i)
+    face.handles.remove(i)
     assert len(face.handles) == n + 1
     assert face.handles.mirror[-1] == -1 and face.handles.names[-1] == "extra_R"
     face.undo()
@@ -95,13 +95,13 @@ def test_add_remove_handles_keep_mirror_links(face: FaceModel) -> None:
     face.undo()
     assert len(face.handles) == n
     with pytest.raises(ModelError, match="vertex must be in"):
-        face.add_handle(10**9)
+        face.handles.add(10**9)
 
 
 def test_bake_turns_the_layer_into_a_shape_without_changing_the_face(face: FaceModel) -> None:
     face.move_handle(5, [0.0, -0.1, 0.1])
     before = face.evaluate().copy()
-    shape = face.bake_handles_to_shape("myEdit")
+    shape = face.handles.bake_to_shape("myEdit")
     assert face.weights["myEdit"] == 1.0
     assert not np.any(face.handles.offsets)
     np.testing.assert_allclose(face.evaluate(), before, atol=1e-5)
@@ -115,7 +115,7 @@ def test_bake_turns_the_layer_into_a_shape_without_changing_the_face(face: FaceM
 def test_eyes_stay_fixed_and_lashes_follow_the_lids(face: FaceModel) -> None:
     lid = int(np.flatnonzero([n.startswith("eyes_L") for n in face.handles.names])[0])
     face.move_handle(lid, [0.0, -0.1, 0.0])
-    u = face.handle_displacement()
+    u = face.handles.displacement()
     assert np.abs(u[face.component_vertices("eye_left")]).max() == 0.0
     assert np.abs(u[face.component_vertices("eyelashes_left")]).max() > 0.0
     assert np.isfinite(u).all()
@@ -132,18 +132,18 @@ def test_handles_survive_save_and_load(face: FaceModel, tmp_path) -> None:
 
 def test_set_handles_validates(face: FaceModel) -> None:
     with pytest.raises(ModelError, match="expected"):
-        face.set_handle_offsets(np.zeros((2, 3)))
+        face.handles.set_offsets(np.zeros((2, 3)))
     with pytest.raises(ModelError, match="finite"):
-        face.set_handle_offsets(np.full((len(face.handles), 3), np.nan))
+        face.handles.set_offsets(np.full((len(face.handles), 3), np.nan))
     with pytest.raises(ModelError, match="HandleSet"):
-        face.set_handles([1, 2, 3])  # type: ignore[arg-type]
-    assert isinstance(face.handles, HandleSet)
+        face.handles.set([1, 2, 3])  # type: ignore[arg-type]
+    assert isinstance(face.handles.value, HandleSet)
 
 
 def test_basis_precompute_reports_progress_through_the_model(face: FaceModel) -> None:
     calls: list[tuple[float, str]] = []
-    face.set_handle_progress(lambda f, m: calls.append((f, m)))
-    face.prepare_handles()
+    face.handles.set_progress(lambda f, m: calls.append((f, m)))
+    face.handles.prepare()
     fractions = [f for f, _ in calls]
     assert len(calls) >= 4 and 0.0 < fractions[0]
     assert all(b >= a for a, b in itertools.pairwise(fractions)), fractions
@@ -155,4 +155,4 @@ def test_basis_precompute_reports_progress_through_the_model(face: FaceModel) ->
     face.move_handle(0, [0.0, 0.05, 0.0])
     face.evaluate()
     assert calls == []
-    face.set_handle_progress(None)
+    face.handles.set_progress(None)

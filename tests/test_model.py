@@ -8,6 +8,8 @@ import types
 from typing import Any
 
 import numpy as np
+
+from workbench.core.pipeline import FunctionLayer
 import pytest
 
 from workbench.model import BlendShape, FaceModel, HandleSet, ModelError, ModelMetadata
@@ -154,20 +156,20 @@ def test_handles_slot_is_undoable_and_evented(tiny_model: FaceModel) -> None:
     seen: list[str] = []
     tiny_model.events.handles.connect(lambda: seen.append("handles"))
     assert len(tiny_model.handles) == 0
-    tiny_model.set_handles(HandleSet([4, 0], np.zeros((2, 3)), ("centre", "corner"), [-1, -1]))
+    tiny_model.handles.set(HandleSet([4, 0], np.zeros((2, 3)), ("centre", "corner"), [-1, -1]))
     assert tiny_model.handles.vertices.tolist() == [4, 0]
     tiny_model.undo()
     assert len(tiny_model.handles) == 0
     assert seen == ["handles", "handles"]
     with pytest.raises(ModelError, match="vertex ids"):
-        tiny_model.set_handles(HandleSet([99], np.zeros((1, 3))))
-    assert tiny_model.regions is None and dict(tiny_model.paint_layers) == {} and not tiny_model.tracks.tracks
+        tiny_model.handles.set(HandleSet([99], np.zeros((1, 3))))
+    assert tiny_model.regions.state is None and dict(tiny_model.paint) == {} and not tiny_model.tracks.tracks
 
 
 def test_registered_layer_adds_to_evaluation(tiny_model: FaceModel) -> None:
     extra = np.zeros((9, 3), np.float32)
     extra[8, 1] = 2.0
-    tiny_model.register_layer("test", lambda m: extra)
+    tiny_model.register_layer(FunctionLayer("test", lambda m: extra))
     assert tiny_model.evaluate()[8, 1] == 4.0  # grid y=2 plus 2
 
 
@@ -346,28 +348,28 @@ def test_set_shell_stiffness_is_one_undoable_step_with_events() -> None:
 
     V, polys = grid_polygons(6, 6)  # the boundary is held, so inner vertices follow the shell
     m = FaceModel(V, None, [], polygons=polys)
-    m.set_handles(HandleSet([24, 0], [[0.0, 0.0, 0.5], [0.0, 0.0, 0.0]], ("c", "corner"), [-1, -1]))
+    m.handles.set(HandleSet([24, 0], [[0.0, 0.0, 0.5], [0.0, 0.0, 0.0]], ("c", "corner"), [-1, -1]))
     m.history.clear()
     before = m.evaluate().copy()
-    old = m.shell_stiffness
+    old = m.handles.stiffness
     seen: list[str] = []
     m.events.shell_stiffness.connect(lambda: seen.append("stiffness"))
     m.events.deformed.connect(lambda final: seen.append(f"deformed {final}"))
-    m.set_shell_stiffness(old[0] * 100.0, old[1] / 100.0)
+    m.handles.set_stiffness(old[0] * 100.0, old[1] / 100.0)
     after = m.evaluate().copy()
     assert np.abs(after - before).max() > 1e-3  # the stiffness really changes the handle layer
     assert m.history.undo_labels == ["Shell stiffness"]
     m.undo()
-    assert m.shell_stiffness == old
+    assert m.handles.stiffness == old
     np.testing.assert_allclose(m.evaluate(), before, atol=1e-6)
     m.redo()
-    assert m.shell_stiffness == (old[0] * 100.0, old[1] / 100.0)
+    assert m.handles.stiffness == (old[0] * 100.0, old[1] / 100.0)
     np.testing.assert_allclose(m.evaluate(), after, atol=1e-6)
     assert seen == ["stiffness", "deformed True"] * 3
-    m.set_shell_stiffness(*m.shell_stiffness)  # no change: no step
+    m.handles.set_stiffness(*m.handles.stiffness)  # no change: no step
     assert m.history.undo_labels == ["Shell stiffness"]
     with pytest.raises(ModelError, match="finite k_s >= 0"):
-        m.set_shell_stiffness(float("nan"), 1.0)
+        m.handles.set_stiffness(float("nan"), 1.0)
 
 
 def test_a_model_without_blendshapes_evaluates_to_its_neutral() -> None:

@@ -14,11 +14,11 @@ def test_a_regional_expression_keys_exactly_as_saved() -> None:
     st = m.segment_regions(0.25)
     # a smile on the left mouth corner only, with every slider at 0
     rw = RegionWeights.from_global(m, st.regions, 0).with_region("mouth_L_2", {"mouthSmileLeft": 1.0})
-    m.set_region_weights(rw)
+    m.regions.set_weights(rw)
     saved = m.evaluate().copy()
     assert not any(m.weights.values()) and np.abs(saved - m.vertices).max() > 0.01
-    m.save_expression("smirk")
-    m.set_region_weights(None)  # back to the global blend: the neutral face
+    m.expressions.save("smirk")
+    m.regions.set_weights(None)  # back to the global blend: the neutral face
     n_shapes = len(m.shape_names)
     m.key_expression(1.0, "smirk")
     assert len(m.shape_names) == n_shapes + 1

@@ -49,11 +49,11 @@ def _mouth_corner(m: FaceModel, side: float = 1.0) -> int:
 def test_hard_opaque_brush_reproduces_the_expression_inside(head: FaceModel) -> None:
     c = _mouth_corner(head)
     brush = Brush(radius=0.4, opacity=1.0, falloff="constant")
-    head.paint_dab("mouthSmileLeft", c, brush)
-    ids, _ = head.paint_surface.within(c, 0.4)
+    head.paint.dab("mouthSmileLeft", c, brush)
+    ids, _ = head.paint.surface.within(c, 0.4)
     expected = head.vertices[ids] + head.shape("mouthSmileLeft").delta[ids]
     np.testing.assert_allclose(head.evaluate()[ids], expected, atol=1e-6)
-    assert np.all(head.paint_layers["mouthSmileLeft"][ids] == 1.0)
+    assert np.all(head.paint["mouthSmileLeft"][ids] == 1.0)
 
 
 def test_opaque_brush_reproduces_the_expression_over_region_weights(head: FaceModel) -> None:
@@ -67,17 +67,17 @@ def test_opaque_brush_reproduces_the_expression_over_region_weights(head: FaceMo
     under = state.regions.regions_at(lv, c)
     region = max(under, key=lambda r: under[r])
     rw = RegionWeights.from_global(head, state.regions, lv)
-    head.set_region_weights(rw.with_region(region, {"jawOpen": 1.0, "mouthSmileLeft": 0.3}))
+    head.regions.set_weights(rw.with_region(region, {"jawOpen": 1.0, "mouthSmileLeft": 0.3}))
     head.set_weight("browInnerUp", 0.5)
-    ids, _ = head.paint_surface.within(c, 0.4)
+    ids, _ = head.paint.surface.within(c, 0.4)
     assert np.abs(head.evaluate()[ids] - head.blended()[ids]).max() > 0.05  # the regions move it
-    head.paint_dab("mouthPucker", c, Brush(radius=0.4, opacity=1.0, falloff="constant"))
+    head.paint.dab("mouthPucker", c, Brush(radius=0.4, opacity=1.0, falloff="constant"))
     expected = head.vertices[ids] + head.shape("mouthPucker").delta[ids]
     np.testing.assert_allclose(head.evaluate()[ids], expected, atol=1e-5)
     # half opacity: halfway between the region-blended face and the expression
-    head.clear_paint()
+    head.paint.clear()
     below = head.evaluate()[ids].copy()
-    head.paint_dab("mouthPucker", c, Brush(radius=0.4, opacity=0.5, falloff="constant"))
+    head.paint.dab("mouthPucker", c, Brush(radius=0.4, opacity=0.5, falloff="constant"))
     np.testing.assert_allclose(head.evaluate()[ids], 0.5 * (below + expected), atol=1e-5)
 
 
@@ -92,7 +92,7 @@ def test_brush_uses_surface_distance_not_straight_line(head: FaceModel) -> None:
     upper = int(cand[np.argmin(np.linalg.norm(V[cand] - V[lower_lip], axis=1))])
     straight = float(np.linalg.norm(V[upper] - V[lower_lip]))
     radius = 2.0 * straight
-    ids, _ = head.paint_surface.within(upper, radius)
+    ids, _ = head.paint.surface.within(upper, radius)
     assert lower_lip not in ids  # a straight-line radius of 2x the gap would include it
 
 
@@ -113,10 +113,10 @@ def test_brush_uses_surface_distance_not_straight_line(head: FaceModel) -> None:
     )
 )
 def test_weights_stay_convex_after_any_strokes(head: FaceModel, strokes) -> None:
-    head.clear_paint()
+    head.paint.clear()
     for name, centre, radius, opacity, falloff, mode, mirror in strokes:
-        head.paint_dab(name, centre, Brush(radius, opacity, falloff, mode, mirror))
-    maps = list(head.paint_layers.values())
+        head.paint.dab(name, centre, Brush(radius, opacity, falloff, mode, mirror))
+    maps = list(head.paint.values())
     for w in maps:
         assert w.min() >= 0.0 and w.max() <= 1.0
     if maps:
@@ -198,9 +198,9 @@ def test_paint_arithmetic_is_convex_before_the_round_off_clamp(head_data: FaceMo
 
 def test_mirror_painting_is_symmetric(head: FaceModel) -> None:
     c = _mouth_corner(head)
-    head.paint_dab("mouthPucker", c, Brush(radius=0.35, opacity=0.8, mirror=True))
-    w = head.paint_layers["mouthPucker"]
-    mirror = head.paint_surface.mirror
+    head.paint.dab("mouthPucker", c, Brush(radius=0.35, opacity=0.8, mirror=True))
+    w = head.paint["mouthPucker"]
+    mirror = head.paint.surface.mirror
     painted = np.flatnonzero(w > 0.05)
     assert painted.size > 10
     off_plane = painted[np.abs(head.vertices[painted, 0]) > 1e-6]
@@ -231,7 +231,7 @@ def test_mirror_map_uses_the_mid_plane_and_skips_vertices_without_a_partner() ->
     np.testing.assert_array_equal(surf.mirror[4::n], np.arange(4, n * n, n))  # on the plane: itself
     # the model's surface mirrors about the middle of its skin, with the same tolerance
     m = FaceModel(V, F, [BlendShape("up", np.tile([0.0, 0.0, 1.0], (n * n, 1)))])
-    np.testing.assert_array_equal(m.paint_surface.mirror, expected)
+    np.testing.assert_array_equal(m.paint.surface.mirror, expected)
 
     brush = Brush(radius=0.3, opacity=0.8, falloff="linear", mirror=True)
     # a centre with a partner: the same dab on the other side
@@ -251,77 +251,77 @@ def test_paint_follows_a_change_of_the_shell_stiffness(head: FaceModel) -> None:
     from workbench.methods.handles.presets import default_face_handles
 
     def prepared(m: FaceModel) -> FaceModel:
-        m.set_handles(default_face_handles(m))
+        m.handles.set(default_face_handles(m))
         m.move_handle(3, [0.0, 0.2, 0.1])
         return m
 
     prepared(head)
-    head.paint_flood("mouthSmileLeft", 0.5)
+    head.paint.flood("mouthSmileLeft", 0.5)
     before = head.evaluate().copy()
-    head.set_shell_stiffness(1.0, 100.0)
+    head.handles.set_stiffness(1.0, 100.0)
     fresh = prepared(FaceModel(
         head.vertices, head.faces, head.shapes,
         component_labels=head.component_labels, component_names=head.component_names,
     ))
-    fresh.set_shell_stiffness(1.0, 100.0)
-    fresh.paint_flood("mouthSmileLeft", 0.5)
+    fresh.handles.set_stiffness(1.0, 100.0)
+    fresh.paint.flood("mouthSmileLeft", 0.5)
     assert np.abs(head.evaluate() - before).max() > 1e-3  # the stiffness matters here
     np.testing.assert_allclose(head.evaluate(), fresh.evaluate(), atol=1e-6)
 
 
 def test_stroke_is_one_undo_step_and_undo_is_bit_exact(head: FaceModel) -> None:
     c = _mouth_corner(head)
-    head.paint_dab("mouthSmileLeft", c, Brush(opacity=0.3))
-    before = {k: v.copy() for k, v in head.paint_layers.items()}
+    head.paint.dab("mouthSmileLeft", c, Brush(opacity=0.3))
+    before = {k: v.copy() for k, v in head.paint.items()}
     ev_before = head.evaluate().copy()
     head.paint_stroke("eyeBlinkLeft", [c, c + 1, c + 2], Brush(opacity=0.7, radius=0.5))
     assert head.history.undo_labels[-1] == "Paint eyeBlinkLeft"
     head.undo()
-    assert set(head.paint_layers) == set(before)
+    assert set(head.paint) == set(before)
     for k, v in before.items():
-        assert np.array_equal(head.paint_layers[k], v)
+        assert np.array_equal(head.paint[k], v)
     assert np.array_equal(head.evaluate(), ev_before)
 
 
 def test_a_dab_changes_only_the_vertices_under_the_brush(head: FaceModel) -> None:
     c = _mouth_corner(head)
-    head.paint_dab("mouthSmileLeft", c, Brush(opacity=0.5))
+    head.paint.dab("mouthSmileLeft", c, Brush(opacity=0.5))
     a = head.evaluate().copy()
     brush = Brush(radius=0.25, opacity=0.5)
-    head.paint_dab("mouthSmileLeft", c, brush)
+    head.paint.dab("mouthSmileLeft", c, brush)
     b = head.evaluate()
-    ids, _ = head.paint_surface.within(c, 0.25)
+    ids, _ = head.paint.surface.within(c, 0.25)
     changed = np.flatnonzero(np.any(a != b, axis=1))
     assert changed.size > 0 and np.isin(changed, ids).all()
     # the incremental layer equals a from-scratch evaluation
     fresh = FaceModel(head.vertices, head.faces, head.shapes)
-    fresh.set_paint(head.paint_layers)
+    fresh.paint.set(head.paint)
     np.testing.assert_allclose(fresh.evaluate(), b, atol=1e-6)
 
 
 def test_paint_composes_with_the_global_blend_as_a_convex_combination(head: FaceModel) -> None:
     head.set_weight("jawOpen", 0.5)
-    head.paint_flood("mouthSmileLeft", 0.25)
+    head.paint.flood("mouthSmileLeft", 0.25)
     D_base = 0.5 * head.shape("jawOpen").delta
     expected = head.vertices + 0.75 * D_base + 0.25 * head.shape("mouthSmileLeft").delta
     np.testing.assert_allclose(head.evaluate(), expected, atol=1e-5)
-    head.paint_normalize()
+    head.paint.normalize()
     np.testing.assert_allclose(head.evaluate(), head.vertices + head.shape("mouthSmileLeft").delta, atol=1e-5)
 
 
 def test_saved_expressions_paint_and_bake(head: FaceModel) -> None:
     head.set_weights({"mouthSmileLeft": 1.0, "mouthSmileRight": 1.0})
-    smile = head.save_expression("smile")
+    smile = head.expressions.save("smile")
     head.reset_weights()
     assert "smile" in head.expressions
     np.testing.assert_allclose(smile.displacement, head.shape("mouthSmileLeft").delta + head.shape("mouthSmileRight").delta, atol=1e-6)
-    head.paint_dab("smile", _mouth_corner(head), Brush(radius=0.6, opacity=1.0))
+    head.paint.dab("smile", _mouth_corner(head), Brush(radius=0.6, opacity=1.0))
     before = head.evaluate().copy()
-    head.bake_paint_to_shape("painted_smile")
-    assert len(head.paint_layers) == 0 and head.weights["painted_smile"] == 1.0
+    head.paint.bake_to_shape("painted_smile")
+    assert len(head.paint) == 0 and head.weights["painted_smile"] == 1.0
     np.testing.assert_allclose(head.evaluate(), before, atol=1e-5)
     with pytest.raises(KeyError, match="no expression named 'nope'"):
-        head.paint_dab("nope", 0)
+        head.paint.dab("nope", 0)
 
 
 def test_a_painted_expression_keys_exactly_as_saved_and_undo_removes_all_keying_made(head: FaceModel) -> None:
@@ -329,7 +329,7 @@ def test_a_painted_expression_keys_exactly_as_saved_and_undo_removes_all_keying_
     # mouth of the neutral face and a half blink on one lid; the painted blend is a
     # new expression of the library, which the timeline then interpolates.
     head.set_weights({"mouthSmileLeft": 1.0, "mouthSmileRight": 1.0})
-    head.save_expression("smile")
+    head.expressions.save("smile")
     head.reset_weights()
     head.paint_stroke("smile", [_mouth_corner(head)], Brush(radius=0.5, opacity=1.0, mirror=True))
     lid = int(np.argmax(np.linalg.norm(head.shape("eyeBlinkLeft").delta, axis=1)))
@@ -337,8 +337,8 @@ def test_a_painted_expression_keys_exactly_as_saved_and_undo_removes_all_keying_
     saved = head.evaluate().copy()
     assert not any(head.weights.values())  # the look is in the paint only
     assert np.abs(saved - head.vertices).max() > 0.05
-    head.save_expression("debauched")
-    head.clear_paint()
+    head.expressions.save("debauched")
+    head.paint.clear()
     shapes_before, labels_before = head.shape_names, head.history.undo_labels
 
     head.key_expression(1.0, "debauched")
@@ -367,10 +367,10 @@ def test_regional_presets_are_partitions_of_unity(head: FaceModel) -> None:
     names, R = feathered_presets(head.vertices, "six", feather=0.2)
     mixes = [{"browInnerUp": 1.0} if n.startswith("forehead") else {"mouthSmileLeft": 0.5} if n == "lower_L" else {} for n in names]
     mix = regional_mix(R, mixes, head.n_vertices)
-    head.set_paint(mix, "Regional blend")
-    assert set(head.paint_layers) == {"browInnerUp", "mouthSmileLeft"}
+    head.paint.set(mix, "Regional blend")
+    assert set(head.paint) == {"browInnerUp", "mouthSmileLeft"}
     left_lower = (head.vertices[:, 0] > 0.3) & (head.vertices[:, 1] < np.percentile(head.vertices[:, 1], 30))
-    assert head.paint_layers["mouthSmileLeft"][left_lower].max() == pytest.approx(0.5, abs=1e-6)
+    assert head.paint["mouthSmileLeft"][left_lower].max() == pytest.approx(0.5, abs=1e-6)
     with pytest.raises(ValueError, match="sum to <= 1"):
         regional_mix(R, [{"a": 0.7, "b": 0.7}] * 6, head.n_vertices)
 
@@ -406,17 +406,17 @@ def test_bad_brush_and_paint_arguments() -> None:
         Brush(falloff="spiky")  # type: ignore[arg-type]
     m = FaceModel(np.eye(3), [[0, 1, 2]])
     with pytest.raises(ModelError, match="PaintMix"):
-        m.set_paint({"x": np.zeros(3)})  # type: ignore[arg-type]
-    assert isinstance(m.paint_layers, PaintMix)
+        m.paint.set({"x": np.zeros(3)})  # type: ignore[arg-type]
+    assert isinstance(m.paint.mix, PaintMix)
 
 
 def test_a_stroke_never_paints_beyond_the_brush_opacity(head: FaceModel) -> None:
     c = _mouth_corner(head)
     brush = Brush(radius=0.3, opacity=0.5, falloff="constant")
     head.paint_stroke("mouthSmileLeft", [c] * 6, brush)  # six dabs on one spot, one stroke
-    assert head.paint_layers["mouthSmileLeft"][c] == pytest.approx(0.5)
+    assert head.paint["mouthSmileLeft"][c] == pytest.approx(0.5)
     head.paint_stroke("mouthSmileLeft", [c], brush)  # a second stroke builds on the first
-    assert head.paint_layers["mouthSmileLeft"][c] == pytest.approx(0.75)
+    assert head.paint["mouthSmileLeft"][c] == pytest.approx(0.75)
     for _ in range(2):  # outside a stroke, dabs compound
-        head.paint_dab("eyeBlinkLeft", c, brush)
-    assert head.paint_layers["eyeBlinkLeft"][c] == pytest.approx(0.75)
+        head.paint.dab("eyeBlinkLeft", c, brush)
+    assert head.paint["eyeBlinkLeft"][c] == pytest.approx(0.75)

@@ -14,7 +14,6 @@ from workbench.methods.regions.blend import (
     drag_damping,
     region_blend_displacement,
     region_blend_positions,
-    region_layer,
     solve_region_drag,
 )
 from workbench.methods.regions.segmentation import RegionError, Regions, segment_blend_regions
@@ -189,10 +188,9 @@ def test_damping_is_small_where_shapes_barely_move(head: FaceModel) -> None:
 
 def test_region_layer_in_a_model(regions: Regions) -> None:
     m = workbench.load_sample("head")
-    assert region_layer(m) is None
+    assert m.layer_displacement("regions").any() == False  # noqa: E712 - no regions: zero
     rw = RegionWeights.from_global(m, regions, 1).with_region("mouth_L", {"mouthPucker": 1.0})
     m.set_slot("regions", RegionState(regions, 1, rw), "Region weights")
-    m.register_layer("regions", region_layer)
     expected = region_blend_positions(m, regions, rw)
     np.testing.assert_allclose(m.evaluate(), expected, atol=2e-6)
     # a state on another level converts the weights

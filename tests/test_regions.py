@@ -285,7 +285,7 @@ def test_stored_in_the_model_slot_is_undoable(head: FaceModel, regions: Regions)
     m.set_slot("regions", regions, "Segment regions")
     assert m.regions is regions
     m.undo()
-    assert m.regions is None
+    assert m.regions.state is None
 
 
 # --------------------------------------------------------------- user edits

@@ -42,7 +42,7 @@ def fitted() -> tuple[FaceModel, MarkerFit]:
 def test_keyed_fit_plays_back_the_fit_at_every_frame(fitted):
     m, fit = fitted
     regions = m.regions.regions
-    times = m.key_marker_fit(fit)
+    times = m.timeline.key_marker_fit(fit)
     fps = m.tracks.fps
     np.testing.assert_array_equal(times, np.arange(FRAMES) / fps)
     assert m.regions.level == LEVEL
@@ -63,7 +63,7 @@ def test_keyed_fit_plays_back_the_fit_at_every_frame(fitted):
 
 def test_set_time_puts_the_keyed_region_weights_in_the_model(fitted):
     m, fit = fitted
-    m.key_marker_fit(fit)
+    m.timeline.key_marker_fit(fit)
     fps = m.tracks.fps
     seen: list[str] = []
     m.events.regions.connect(lambda: seen.append("regions"))
@@ -82,7 +82,7 @@ def test_key_marker_fit_is_one_undo_step(fitted):
     m, fit = fitted
     before = m.regions
     n_steps = len(m.history.undo_labels)
-    m.key_marker_fit(fit, start=0.5)
+    m.timeline.key_marker_fit(fit, start=0.5)
     assert len(m.history.undo_labels) == n_steps + 1
     assert m.history.undo_labels[-1] == f"Key marker fit ({FRAMES} frames from 0.5s)"
     assert m.undo() == m.history.redo_labels[-1]
@@ -97,7 +97,7 @@ def test_key_marker_fit_is_one_undo_step(fitted):
 
 def test_every_keys_some_frames_and_always_the_last(fitted):
     m, fit = fitted
-    times = m.key_marker_fit(fit, every=3)
+    times = m.timeline.key_marker_fit(fit, every=3)
     fps = m.tracks.fps
     np.testing.assert_allclose(times * fps, [0, 3, 6, 7])
     for tr in m.tracks.tracks.values():
@@ -109,19 +109,19 @@ def test_every_keys_some_frames_and_always_the_last(fitted):
 def test_bad_fits_and_arguments(fitted):
     m, fit = fitted
     with pytest.raises(ModelError, match="every must be an int >= 1"):
-        m.key_marker_fit(fit, every=0)
+        m.timeline.key_marker_fit(fit, every=0)
     with pytest.raises(ModelError, match="fit must be a MarkerFit"):
-        m.key_marker_fit(fit.region_weights)
+        m.timeline.key_marker_fit(fit.region_weights)
     with pytest.raises(ModelError, match="start must be finite"):
-        m.key_marker_fit(fit, start=float("nan"))
-    m.set_region_level(0)
-    m.key_marker_fit(fit)  # switches to the fit's level
+        m.timeline.key_marker_fit(fit, start=float("nan"))
+    m.regions.set_level(0)
+    m.timeline.key_marker_fit(fit)  # switches to the fit's level
     other = fit_markers(m, m.regions.regions, fit.markers, np.zeros((2, fit.markers.size, 3)) + m.vertices[fit.markers], 0)
     with pytest.raises(ModelError, match="region keys on level 1"):
-        m.key_marker_fit(other)
+        m.timeline.key_marker_fit(other)
     m.add_shape("extra", np.zeros((m.n_vertices, 3)))
     with pytest.raises(ModelError, match="fit was made for 52 shapes"):
-        m.key_marker_fit(fit)
+        m.timeline.key_marker_fit(fit)
     assert m.history.undo_labels[-1] == "Add shape extra"  # nothing recorded by the failures
 
 
@@ -129,23 +129,23 @@ def test_region_tracks_need_regions(tiny_model):
     m = tiny_model
     tl = m.tracks.add_key(region_track_name(0, "r0"), 0.0, [0.5, 0.0])
     with pytest.raises(ModelError, match="no regions"):
-        m.set_timeline(tl)
+        m.timeline.set(tl)
     st = m.segment_regions(0.25, levels=1, min_region_size=0.0)
     name = st.regions.names[0][0]
     with pytest.raises(TrackError, match="does not have"):
-        m.set_timeline(tl)
+        m.timeline.set(tl)
     with pytest.raises(TrackError, match="hold 3 shape weights but the model has 2"):
-        m.set_timeline(m.tracks.add_key(region_track_name(0, name), 0.0, [0.5, 0.0, 1.0]))
-    m.set_timeline(m.tracks.add_key(region_track_name(0, name), 0.0, [0.5, 0.0]))
+        m.timeline.set(m.tracks.add_key(region_track_name(0, name), 0.0, [0.5, 0.0, 1.0]))
+    m.timeline.set(m.tracks.add_key(region_track_name(0, name), 0.0, [0.5, 0.0]))
     assert m.tracks.region_tracks[name].value_shape == (2,)
 
 
 def test_keyed_fit_survives_save_and_load(fitted, tmp_path):
     m, fit = fitted
-    m.key_marker_fit(fit, every=2)
+    m.timeline.key_marker_fit(fit, every=2)
     m.save(tmp_path / "fit.fwb")
     back = load_model(tmp_path / "fit.fwb")
-    assert isinstance(back.regions, RegionState) and back.regions.level == LEVEL
+    assert back.regions.state is not None and back.regions.level == LEVEL
     assert sorted(back.tracks.tracks) == sorted(m.tracks.tracks)
     for name, tr in m.tracks.tracks.items():
         np.testing.assert_array_equal(back.tracks.tracks[name].values, tr.values)
@@ -155,7 +155,7 @@ def test_keyed_fit_survives_save_and_load(fitted, tmp_path):
 
 def test_exports_bake_the_keyed_region_weights_and_say_so(fitted, tmp_path):
     m, fit = fitted
-    m.key_marker_fit(fit)
+    m.timeline.key_marker_fit(fit)
     enc = MeshEncoding(m, m.tracks)
     assert enc.baked_layers == ("regions",)
     frames = m.tracks.frame_times()

@@ -11,9 +11,9 @@ from workbench.model import FaceModel, HandleSet, ModelError
 def test_key_scrub_and_evaluate_at(tiny_model: FaceModel) -> None:
     m = tiny_model
     m.set_weight("up", 0.0)
-    m.key_weights(0.0, ["up"], interpolation="linear")
+    m.timeline.key_weights(0.0, ["up"], interpolation="linear")
     m.set_weight("up", 1.0)
-    m.key_weights(2.0, interpolation="linear")
+    m.timeline.key_weights(2.0, interpolation="linear")
     assert m.tracks.start == 0.0 and m.tracks.end == 2.0
     mid = m.evaluate_at(1.0)
     assert mid[4, 2] == pytest.approx(0.5)
@@ -28,14 +28,14 @@ def test_key_scrub_and_evaluate_at(tiny_model: FaceModel) -> None:
 def test_key_edits_are_undoable(tiny_model: FaceModel) -> None:
     m = tiny_model
     m.set_weight("up", 0.3)
-    m.key_weights(1.0)
+    m.timeline.key_weights(1.0)
     assert "weights/up" in m.tracks.tracks
     m.undo()
     assert not m.tracks.tracks
     m.redo()
-    m.move_key("weights/up", 0, 1.5)
+    m.timeline.move_key("weights/up", 0, 1.5)
     assert m.tracks.tracks["weights/up"].times.tolist() == [1.5]
-    m.delete_key("weights/up", 0)
+    m.timeline.delete_key("weights/up", 0)
     assert not m.tracks.tracks
     m.undo()
     m.undo()
@@ -45,7 +45,7 @@ def test_key_edits_are_undoable(tiny_model: FaceModel) -> None:
 def test_key_expression_keys_its_weights_and_zeroes_other_keyed_shapes(tiny_model: FaceModel) -> None:
     m = tiny_model
     m.set_weight("left", 1.0)
-    m.save_expression("west")
+    m.expressions.save("west")
     m.reset_weights()
     m.key_expression(0.0, "up")
     m.key_expression(1.0, "west")
@@ -58,10 +58,10 @@ def test_key_expression_keys_its_weights_and_zeroes_other_keyed_shapes(tiny_mode
 
 def test_a_painted_expression_becomes_a_keyed_blendshape_reused_when_keyed_again(tiny_model: FaceModel) -> None:
     m = tiny_model
-    m.paint_flood("left", 0.5)  # half of 'left' painted on the neutral: no slider moved
+    m.paint.flood("left", 0.5)  # half of 'left' painted on the neutral: no slider moved
     painted = m.evaluate().copy()
-    m.save_expression("half_west")
-    m.clear_paint()
+    m.expressions.save("half_west")
+    m.paint.clear()
     m.key_expression(0.0, "up", interpolation="linear")
     m.key_expression(1.0, "half_west", interpolation="linear")
     (baked,) = set(m.shape_names) - {"up", "left"}
@@ -85,14 +85,14 @@ def test_a_painted_expression_becomes_a_keyed_blendshape_reused_when_keyed_again
 
 def test_a_baked_expression_holds_keyed_handles_at_rest(tiny_model: FaceModel) -> None:
     m = tiny_model
-    m.set_handles(HandleSet([4], [[0, 0, 0]], ("c",), [-1]))
+    m.handles.set(HandleSet([4], [[0, 0, 0]], ("c",), [-1]))
     m.move_handle(0, [0.0, 0.0, 0.4])
-    m.key_handles(0.0, interpolation="linear")
-    m.reset_handle_offsets()
-    m.paint_flood("up", 0.25)
+    m.timeline.key_handles(0.0, interpolation="linear")
+    m.handles.reset_offsets()
+    m.paint.flood("up", 0.25)
     painted = m.evaluate().copy()
-    m.save_expression("quarter_up")
-    m.clear_paint()
+    m.expressions.save("quarter_up")
+    m.paint.clear()
     m.key_expression(1.0, "quarter_up", interpolation="linear")
     assert m.tracks.evaluate(1.0).handle_offsets is not None
     np.testing.assert_array_equal(m.tracks.evaluate(1.0).handle_offsets, [[0.0, 0.0, 0.0]])
@@ -103,7 +103,7 @@ def test_a_plain_expression_keys_its_recipe_without_a_new_shape(tiny_model: Face
     m = tiny_model
     m.set_weights({"up": 0.5, "left": 1.0})
     saved = m.evaluate().copy()
-    m.save_expression("mix")
+    m.expressions.save("mix")
     m.reset_weights()
     m.key_expression(1.0, "mix")
     assert m.shape_names == ["up", "left"]
@@ -113,11 +113,11 @@ def test_a_plain_expression_keys_its_recipe_without_a_new_shape(tiny_model: Face
 
 def test_handle_keys_animate_the_shell_layer(tiny_model: FaceModel) -> None:
     m = tiny_model
-    m.set_handles(HandleSet([4], [[0, 0, 0]], ("c",), [-1]))
-    m.key_handles(0.0, interpolation="linear")
+    m.handles.set(HandleSet([4], [[0, 0, 0]], ("c",), [-1]))
+    m.timeline.key_handles(0.0, interpolation="linear")
     m.move_handle(0, [0.0, 0.0, 0.4])
-    m.key_handles(1.0, interpolation="linear")
-    m.reset_handle_offsets()
+    m.timeline.key_handles(1.0, interpolation="linear")
+    m.handles.reset_offsets()
     assert m.evaluate_at(0.5)[4, 2] == pytest.approx(0.2, abs=1e-6)
     m.set_time(1.0)
     assert m.handles.offsets[0, 2] == pytest.approx(0.4)
@@ -127,9 +127,9 @@ def test_bad_time_and_timeline(tiny_model: FaceModel) -> None:
     with pytest.raises(ModelError, match="finite"):
         tiny_model.set_time(float("nan"))
     with pytest.raises(ModelError, match="Timeline"):
-        tiny_model.set_timeline({"x": 1})  # type: ignore[arg-type]
+        tiny_model.timeline.set({"x": 1})  # type: ignore[arg-type]
     with pytest.raises(ModelError, match="no handles"):
-        tiny_model.key_handles(0.0)
+        tiny_model.timeline.key_handles(0.0)
 
 
 # ------------------------------------------------------------------ head pose
@@ -140,8 +140,8 @@ QZ90 = [0.0, 0.0, HALF, HALF]  # 90 degrees about +z: (x, y, z) -> (-y, x, z)
 def test_head_pose_keys_move_the_shown_face_like_evaluate_at(tiny_model: FaceModel) -> None:
     m = tiny_model
     m.set_weight("up", 1.0)
-    m.key_head_pose(0.0, [0, 0, 0, 1], [0, 0, 0], interpolation="linear")
-    m.key_head_pose(2.0, QZ90, [1.0, 2.0, 3.0], interpolation="linear")
+    m.timeline.key_head_pose(0.0, [0, 0, 0, 1], [0, 0, 0], interpolation="linear")
+    m.timeline.key_head_pose(2.0, QZ90, [1.0, 2.0, 3.0], interpolation="linear")
     assert m.history.undo_labels[-1] == "Key head pose at 2s"
     local = m.evaluate(posed=False).copy()
     # at a key, by hand: vertex 1 = (1, 0, 0) -> R(1, 0, 0) + t = (0, 1, 0) + (1, 2, 3);
@@ -154,7 +154,7 @@ def test_head_pose_keys_move_the_shown_face_like_evaluate_at(tiny_model: FaceMod
         np.testing.assert_array_equal(m.evaluate(), m.evaluate_at(t))
         np.testing.assert_array_equal(m.evaluate(posed=False), local)  # the pose is not a layer
     # half-way: slerp to 45 degrees, translation half-way
-    p = m.head_pose
+    p = m.timeline.head_pose
     assert p is not None
     np.testing.assert_allclose(p, [0.5, 1.0, 1.5, 0, 0, np.sin(np.pi / 8), np.cos(np.pi / 8)], atol=1e-12)
     np.testing.assert_allclose(m.head_matrix()[:3, 3], [0.5, 1.0, 1.5])
@@ -166,12 +166,12 @@ def test_undoing_a_head_pose_key_moves_the_face_back_at_once(tiny_model: FaceMod
     rest = m.evaluate().copy()
     shown: list[bool] = []
     m.events.deformed.connect(shown.append)
-    m.key_head_pose(1.0, QZ90)  # at the playhead: the face turns without set_time
-    assert shown == [True] and m.head_pose is not None
+    m.timeline.key_head_pose(1.0, QZ90)  # at the playhead: the face turns without set_time
+    assert shown == [True] and m.timeline.head_pose is not None
     np.testing.assert_allclose(m.evaluate()[1], [0.0, 1.0, 0.0], atol=1e-6)
     np.testing.assert_array_equal(m.evaluate(), m.evaluate_at(1.0))
     m.undo()
-    assert not m.tracks.tracks and m.head_pose is None and shown == [True, True]
+    assert not m.tracks.tracks and m.timeline.head_pose is None and shown == [True, True]
     np.testing.assert_array_equal(m.evaluate(), rest)
     m.redo()
     np.testing.assert_array_equal(m.evaluate(), m.evaluate_at(1.0))
@@ -180,27 +180,27 @@ def test_undoing_a_head_pose_key_moves_the_face_back_at_once(tiny_model: FaceMod
 def test_key_head_pose_defaults_matrices_and_errors(tiny_model: FaceModel) -> None:
     m = tiny_model
     R = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # the same 90 degrees about z
-    m.key_head_pose(0.0, R, [0.0, 0.0, 1.0])
+    m.timeline.key_head_pose(0.0, R, [0.0, 0.0, 1.0])
     np.testing.assert_allclose(m.tracks.head_pose.keys[0].value, [0, 0, 1, *QZ90], atol=1e-12)
-    m.key_head_pose(1.0, translation=[2.0, 0.0, 0.0])  # rotation defaults to the one at t=1
+    m.timeline.key_head_pose(1.0, translation=[2.0, 0.0, 0.0])  # rotation defaults to the one at t=1
     np.testing.assert_allclose(m.tracks.head_pose.keys[1].value, [2, 0, 0, *QZ90], atol=1e-12)
-    m.key_head_pose(1.0, [0, 0, 0, 2])  # translation defaults to the one at t=1; normalised
+    m.timeline.key_head_pose(1.0, [0, 0, 0, 2])  # translation defaults to the one at t=1; normalised
     np.testing.assert_allclose(m.tracks.head_pose.keys[1].value, [2, 0, 0, 0, 0, 0, 1])
     with pytest.raises(ModelError, match="rotation must be a non-zero finite"):
-        m.key_head_pose(0.0, [0, 0, 0, 0])
+        m.timeline.key_head_pose(0.0, [0, 0, 0, 0])
     with pytest.raises(ModelError, match="orthonormal"):
-        m.key_head_pose(0.0, 2 * np.eye(3))
+        m.timeline.key_head_pose(0.0, 2 * np.eye(3))
     with pytest.raises(ModelError, match="translation must be 3 finite numbers"):
-        m.key_head_pose(0.0, translation=[1.0, 2.0])
+        m.timeline.key_head_pose(0.0, translation=[1.0, 2.0])
     with pytest.raises(ModelError, match="time must be finite"):
-        m.key_head_pose(float("inf"))
+        m.timeline.key_head_pose(float("inf"))
 
 
 def test_expressions_are_saved_without_the_head_pose(tiny_model: FaceModel) -> None:
     m = tiny_model
-    m.key_head_pose(0.0, QZ90, [5.0, 0.0, 0.0])
+    m.timeline.key_head_pose(0.0, QZ90, [5.0, 0.0, 0.0])
     m.set_weight("up", 1.0)
-    m.save_expression("lifted")
+    m.expressions.save("lifted")
     expect = np.zeros((9, 3), np.float32)
     expect[4, 2] = 1.0
     np.testing.assert_array_equal(m.expressions["lifted"].displacement, expect)

@@ -8,7 +8,7 @@ import pytest
 import workbench
 from workbench.methods.wrinkles.pose_space import local_frames, tangent_neighbours, to_world
 from workbench.methods.wrinkles.examples import EXAMPLE_POSES, WrinkleSculptor, performance_weights
-from workbench.methods.wrinkles.layer import WrinkleLayer, fit_sample_wrinkles
+from workbench.methods.wrinkles.family import fit_sample_wrinkles
 
 
 @pytest.fixture(scope="module")
@@ -68,13 +68,13 @@ def test_layer_drag_raises_forehead_detail_and_return_removes_it(sculpted) -> No
     with m.interaction("Drag brows"):
         o = np.zeros((len(m.handles), 3), np.float32)
         o[brow, 1] = 0.05
-        m.set_handle_offsets(o)
+        m.handles.set_offsets(o)
     d = layer(m)
     assert d is not None and np.abs(d[fore]).max() > 1e-3
     after = m.evaluate()
-    large = np.asarray(m.blended()) + m.handle_displacement()
+    large = np.asarray(m.blended()) + m.handles.displacement()
     np.testing.assert_allclose(after, large + d, atol=1e-6)  # one evaluate = large + fine scale
-    m.reset_handle_offsets()
+    m.handles.reset_offsets()
     assert layer(m) is None
     np.testing.assert_allclose(m.evaluate(), before, atol=1e-6)
 
@@ -137,7 +137,7 @@ def test_each_example_posed_like_the_panel_gets_its_own_detail_and_an_edit_stays
     before = {}
     for j, name in enumerate(layer.example_names):
         d = view(layer.example_weights[j])
-        X = np.asarray(layer.large_scale(m), np.float64)
+        X = np.asarray(layer.large_scale(), np.float64)
         own = to_world(local_frames(X, m.faces, nb), ps.train_values[j])
         miss = np.linalg.norm(d - own, axis=1)
         assert np.abs(d).max() > 0.5 * scale[j], name
@@ -161,6 +161,6 @@ def test_each_example_posed_like_the_panel_gets_its_own_detail_and_an_edit_stays
 
 def test_layer_without_fit_is_a_no_op() -> None:
     m = workbench.load_sample("head")
-    layer = WrinkleLayer().attach(m)
+    layer = m.wrinkles
     assert layer(m) is None
     np.testing.assert_array_equal(m.evaluate(), m.blended())

@@ -76,7 +76,7 @@ print(json.dumps({
     "dragging": wb.viewport.dragging, "painting": wb.viewport.painting,
     "weights": {k: v for k, v in model.weights.items() if v},
     "handle_names": list(_h.names), "offsets": np.asarray(_h.offsets, float).tolist(),
-    "paint": {k: float(np.max(w)) for k, w in model.paint_layers.items()},
+    "paint": {k: float(np.max(w)) for k, w in model.paint.items()},
     "shapes": list(model.shape_names), "time": model.time,
     "tracks": {k: [tr.times.tolist(), np.asarray(tr.values, float).ravel().tolist()]
                for k, tr in model.tracks.tracks.items()},

@@ -31,7 +31,7 @@ from workbench.methods.paint.painting import Brush
 model = workbench.load_sample("head")
 # "smile" = both smile shapes at 1, saved as an expression (a palette colour)
 model.set_weights({"mouthSmileLeft": 1.0, "mouthSmileRight": 1.0})
-model.save_expression("smile")
+model.expressions.save("smile")
 model.reset_weights()
 """,
     "wb = widgets.show_workbench(model)",
@@ -60,7 +60,7 @@ print(json.dumps({"corner": _corner, "mid": _mid, "mouth": [int(i) for i in _top
 
 _STATE = """
 import json, numpy as np
-_w = model.paint_layers.get("smile")
+_w = model.paint.get("smile")
 print(json.dumps({"undo": model.history.undo_labels, "interacting": model.interacting,
                   "painting": wb.viewport.painting,
                   "weights": None if _w is None else np.asarray(_w, float).tolist(),
@@ -219,8 +219,8 @@ model.paint_stroke("eyeBlinkLeft", _top("eyeBlinkLeft", 1), Brush(0.12, 0.5, "sm
 model.paint_stroke("eyeBlinkRight", _top("eyeBlinkRight", 1), Brush(0.12, 0.5, "smooth"))
 # 3. a raised outer brow on one side only
 model.paint_stroke("browOuterUpLeft", _top("browOuterUpLeft", 6), _soft)
-model.save_expression("debauched")
-_W = model.paint_layers
+model.expressions.save("debauched")
+_W = model.paint
 print(json.dumps({"undo": model.history.undo_labels[-5:],
                   "painted": sorted(_W),
                   "max_total": float(_W.total(model.n_vertices).max()),

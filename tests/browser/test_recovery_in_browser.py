@@ -45,7 +45,7 @@ print(json.dumps({{
     "weights": {{k: v for k, v in model.weights.items() if v}},
     "handle_names": list(_h.names), "handle_vertices": [int(v) for v in _h.vertices],
     "offsets": np.asarray(_h.offsets, float).tolist(),
-    "shapes": list(model.shape_names), "paint": sorted(model.paint_layers),
+    "shapes": list(model.shape_names), "paint": sorted(model.paint),
     "expressions": sorted(model.expressions), "tracks": model.tracks.to_json(),
     "interacting": model.interacting,
     "autosave": {{"state": wb.autosaver.state, "saves": wb.autosaver.saves,

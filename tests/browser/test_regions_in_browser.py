@@ -44,7 +44,7 @@ _corner = int(_top[np.argmax(_V[_top, 0])])
 _pins = panel.pins
 _k = int(np.argmin(np.linalg.norm(_V[_pins] - _V[_corner], axis=1)))
 _v = int(_pins[_k])
-_st = model.regions
+_st = model.regions.state
 _touched = sorted(_st.regions.regions_at(_st.level, _v))
 _inside = np.unique(np.concatenate([_st.regions.members(_st.level, r) for r in _touched]))
 _brow = np.argsort(-np.linalg.norm(model.shape("browInnerUp").delta, axis=1) * _skin)[:20]
@@ -60,7 +60,7 @@ print(json.dumps({"index": _k, "vertex": _v, "n_pins": int(len(_pins)), "level":
 
 _AFTER = """
 import json, numpy as np
-_st = model.regions
+_st = model.regions.state
 _X1 = np.array(model.evaluate(), dtype=np.float64)
 _out = np.setdiff1d(np.arange(model.n_vertices), _inside)
 _rw = _st.weights
@@ -86,7 +86,7 @@ print(json.dumps((_n[:, 2] > 0.6).tolist()))
 
 _SPLIT_STATE = """
 import json
-_st = model.regions
+_st = model.regions.state
 print(json.dumps({"undo": model.history.undo_labels, "n_regions": _st.regions.n_regions(_st.level),
                   "selected": panel.region.label, "split_mode": panel.split_mode.value,
                   "tool": vp.tool, "errors": panel.errors.count + vp.errors.count,
@@ -117,7 +117,7 @@ def test_drag_mouth_corner_in_region_mode_moves_only_its_region(open_notebook):
     # Find regions: the overlay appears (the face is no longer one skin colour)
     face0 = nb.canvas_shot("face-before-regions")
     page.locator(".fwb-find-regions").click()
-    _wait(nb, "import json; print(json.dumps(model.regions is not None))", bool)
+    _wait(nb, "import json; print(json.dumps(model.regions.state is not None))", bool)
     page.wait_for_function(
         "() => document.querySelector('.fwb-region-status').innerText.includes('segmentation')"
     )

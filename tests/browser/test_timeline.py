@@ -29,7 +29,7 @@ from widgets.timeline import TimelineWidget
 
 model = workbench.load_sample("head")
 model.set_weights({"mouthSmileLeft": 1.0, "mouthSmileRight": 1.0})
-model.save_expression("smile")
+model.expressions.save("smile")
 model.reset_weights()
 model.key_expression(0.0, "jawOpen")
 model.key_expression(1.0, "smile")

@@ -321,7 +321,7 @@ _POSE = """
 import numpy as np
 from workbench.methods.handles.presets import default_face_handles
 model.set_weight("jawOpen", 1.0)
-model.set_handles(default_face_handles(model))
+model.handles.set(default_face_handles(model))
 _V = np.asarray(model.vertices)
 _front = _V[int(np.argmax(_V[:, 2]))]
 _k = int(np.argmin(np.linalg.norm(_V[model.handles.vertices] - _front, axis=1)))

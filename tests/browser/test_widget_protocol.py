@@ -183,7 +183,7 @@ def _head_with_handles():
     from workbench.methods.handles.presets import default_face_handles
 
     m = load_sample("head")
-    m.set_handles(default_face_handles(m))
+    m.handles.set(default_face_handles(m))
     return m
 
 
@@ -232,7 +232,7 @@ def test_a_drag_on_a_turned_head_follows_the_pointer():
 
     m = _head_with_handles()
     yaw = head_rotation_from_euler(35.0, 10.0, 0.0)
-    m.key_head_pose(0.0, yaw, [0.1, 0.0, 0.0])
+    m.timeline.key_head_pose(0.0, yaw, [0.1, 0.0, 0.0])
     m.set_time(0.0)
     assert not np.allclose(m.head_matrix(), np.eye(4))
     vp = widgets.Viewport(m)
@@ -306,7 +306,7 @@ def test_handle_set_edited_while_dragging_and_close_mid_drag():
     v = int(m.handles.vertices[i])
     p0 = m.evaluate()[v].astype(float)
     _drag_msg(vp, "start", i, p0)
-    m.remove_handle(0)  # the dragged handle is now index 9: found again by its vertex
+    m.handles.remove(0)  # the dragged handle is now index 9: found again by its vertex
     vp._on_frontend_msg(
         vp,
         {
@@ -320,7 +320,7 @@ def test_handle_set_edited_while_dragging_and_close_mid_drag():
     )
     assert int(m.handles.vertices[9]) == v
     np.testing.assert_allclose(m.evaluate()[v], p0 + np.array([0, 0.03, 0]), atol=1e-5)
-    m.remove_handle(9)  # the dragged handle itself goes: the drag is cancelled
+    m.handles.remove(9)  # the dragged handle itself goes: the drag is cancelled
     vp._on_frontend_msg(
         vp, {"type": "handle", "phase": "move", "index": 9, "vertex": v, "position": list(p0)}, []
     )
@@ -371,7 +371,7 @@ def test_sculpt_panel_buttons_and_workbench_tabs():
     sp.symmetric.value = True
     assert wb.viewport.symmetric
     # the 3x3 grid's blendshapes move only vertex 4 and everything: handles by hand
-    m.add_handle(4, name="centre")
+    m.handles.add(4, name="centre")
     assert "<b>1</b> handles" in sp.status.value
     m.move_handle(0, [0.0, 0.0, 0.5])
     sp.bake_name.value = "bump"
@@ -385,13 +385,13 @@ def test_sculpt_panel_buttons_and_workbench_tabs():
     sp._on_clear()
     assert len(m.handles) == 0
     sp.k_s.value, sp.k_b.value = 0.1, 100.0
-    assert m.shell_stiffness == (pytest.approx(0.1), pytest.approx(100.0))
+    assert m.handles.stiffness == (pytest.approx(0.1), pytest.approx(100.0))
     sp._on_progress(0.4, "solving")
     assert sp.progress.layout.visibility == "visible" and "solving" in sp.progress_label.value
     sp._on_progress(1.0, "done")
     assert sp.progress.layout.visibility == "hidden"
     wb.close()
-    m.add_handle(4)
+    m.handles.add(4)
     assert "<b>0</b> handles" in sp.status.value  # disconnected
 
 
@@ -439,11 +439,11 @@ def test_paint_stroke_messages_are_one_undo_step_with_overlay_patches_and_acks()
 
     # undo: the overlay goes back to empty, the geometry to the neutral
     m.undo()
-    assert vp._paint_weights == b"" and len(m.paint_layers) == 0
+    assert vp._paint_weights == b"" and len(m.paint) == 0
     np.testing.assert_array_equal(np.frombuffer(vp._positions, "<f4").reshape(-1, 3), m.vertices)
     # overlay off: nothing is sent for the picked expression
     vp.paint_overlay = False
-    m.paint_flood("jawOpen", 0.5)
+    m.paint.flood("jawOpen", 0.5)
     assert vp._paint_weights == b""
     vp.paint_overlay = True
     assert np.frombuffer(vp._paint_weights, "<f4").tolist() == [0.5] * 9
@@ -493,14 +493,14 @@ def test_paint_panel_brush_links_blends_save_and_bake():
     # global blend: one region, weight 0.5 everywhere, one undo step
     assert list(p.region_sliders) == ["all"]
     p.set_region_weight("all", 0.5)
-    np.testing.assert_allclose(m.paint_layers["jawOpen"], 0.5)
+    np.testing.assert_allclose(m.paint["jawOpen"], 0.5)
     assert m.history.undo_labels[-1] == "Global blend"
     np.testing.assert_allclose(m.evaluate()[4], [1.0, 1.0, 0.5], atol=1e-6)
     # a second expression in the same region is scaled so the sum stays <= 1
     p.set_region_weight("all", 0.8, expression="eyeBlinkLeft")
-    total = m.paint_layers.total(m.n_vertices)
+    total = m.paint.mix.total(m.n_vertices)
     assert total.max() <= 1.0 + 1e-6
-    np.testing.assert_allclose(m.paint_layers["jawOpen"], 0.2, atol=1e-6)
+    np.testing.assert_allclose(m.paint["jawOpen"], 0.2, atol=1e-6)
     # upper/lower preset: a slider per region; the mix is per preset
     p.preset.value = "upper_lower"
     assert list(p.region_sliders) == ["upper", "lower"]
@@ -509,12 +509,12 @@ def test_paint_panel_brush_links_blends_save_and_bake():
     assert m.history.undo_labels[-1] == "Blend jawOpen (upper_lower)"
     # flood / normalize / clear / undo
     p._on_clear()
-    assert len(m.paint_layers) == 0
+    assert len(m.paint) == 0
     p.opacity.value = 0.5
     p._on_flood()
-    np.testing.assert_allclose(m.paint_layers["jawOpen"], 0.5)
+    np.testing.assert_allclose(m.paint["jawOpen"], 0.5)
     p._on_normalize()
-    np.testing.assert_allclose(m.paint_layers["jawOpen"], 1.0)
+    np.testing.assert_allclose(m.paint["jawOpen"], 1.0)
     # save as expression: appears first in the palette, name box moves on
     p.save_name.value = "open"
     p._on_save()
@@ -523,7 +523,7 @@ def test_paint_panel_brush_links_blends_save_and_bake():
     # bake: the paint becomes a shape at weight 1, paint cleared
     p.bake_name.value = "openBaked"
     p._on_bake()
-    assert "openBaked" in m.shape_names and len(m.paint_layers) == 0
+    assert "openBaked" in m.shape_names and len(m.paint) == 0
     p._on_undo()
-    assert "openBaked" not in m.shape_names and len(m.paint_layers) == 1
+    assert "openBaked" not in m.shape_names and len(m.paint) == 1
     wb.close()

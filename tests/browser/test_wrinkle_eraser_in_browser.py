@@ -47,7 +47,7 @@ wb
 # runs across them from the subject's right to left, through one vertex per x-bin
 # (the one nearest to their median height).
 _FIND = """
-_d = np.linalg.norm(wb.wrinkles.layer.details(model), axis=1)
+_d = np.linalg.norm(wb.wrinkles.layer.details(), axis=1)
 _top = np.argsort(-_d)[:300]
 _V = np.asarray(model.vertices)
 _ym = np.median(_V[_top, 1])
@@ -72,7 +72,7 @@ print(json.dumps({
     "erasing": wb.wrinkles.erasing,
     "tab": wb.tabs.selected_index,
     "tool": wb.viewport.tool,
-    "painted": len(model.paint_layers),
+    "painted": len(model.paint),
     "interacting": model.interacting,
     "detail": _n.tolist(),
     "furrow_detail": float(_n[_f].sum()),

@@ -86,5 +86,5 @@ def head_with_handles() -> FaceModel:
     V = m.vertices
     front = skin[np.argsort(-V[skin, 2])]
     for v in (front[0], front[40], front[120]):
-        m.add_handle(int(v))
+        m.handles.add(int(v))
     return m

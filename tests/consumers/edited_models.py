@@ -38,18 +38,18 @@ def _brow_handles(m: FaceModel) -> list[int]:
 
 def painted_head(interpolation: str = "bezier") -> FaceModel:
     m = load_sample("head")
-    m.set_handles(default_face_handles(m), label="Default handles")
+    m.handles.set(default_face_handles(m), label="Default handles")
     with m.interaction("Drag brows"):
         for i in _brow_handles(m):
             m.move_handle(i, [0.0, 0.06, 0.02])
     m.set_weights({"mouthSmileLeft": 1.0, "mouthSmileRight": 1.0, "cheekSquintLeft": 0.4, "cheekSquintRight": 0.4})
-    m.save_expression("smile")
+    m.expressions.save("smile")
     m.reset_weights()
     left, right = _corners(m)
     m.paint_stroke("smile", [left, right], Brush(radius=0.4, opacity=0.8))
     for t, w in ((0.0, 0.0), (0.5, 0.8), (1.0, 0.3)):
         m.set_weight("jawOpen", w)
-        m.key_weights(t, ["jawOpen"], interpolation=interpolation)  # type: ignore[arg-type]
+        m.timeline.key_weights(t, ["jawOpen"], interpolation=interpolation)  # type: ignore[arg-type]
     return m
 
 
@@ -59,27 +59,27 @@ def regions_head(interpolation: str = "bezier") -> FaceModel:
     from workbench.methods.regions.blend import RegionWeights
 
     rw = RegionWeights.from_global(m, st.regions, st.level)
-    m.set_region_weights(rw.with_region(0, {"mouthPucker": 0.7, "jawOpen": 0.3}))
+    m.regions.set_weights(rw.with_region(0, {"mouthPucker": 0.7, "jawOpen": 0.3}))
     rest = m.handles.offsets.copy()
-    m.key_handles(0.0, interpolation)  # type: ignore[arg-type]
+    m.timeline.key_handles(0.0, interpolation)  # type: ignore[arg-type]
     up = rest.copy()
     up[_brow_handles(m)] += [0.0, 0.05, 0.0]
-    m.set_handle_offsets(up)
-    m.key_handles(0.5, interpolation)  # type: ignore[arg-type]
-    m.set_handle_offsets(0.5 * up)
-    m.key_handles(1.0, interpolation)  # type: ignore[arg-type]
+    m.handles.set_offsets(up)
+    m.timeline.key_handles(0.5, interpolation)  # type: ignore[arg-type]
+    m.handles.set_offsets(0.5 * up)
+    m.timeline.key_handles(1.0, interpolation)  # type: ignore[arg-type]
     return m
 
 
 def wrinkled_head() -> FaceModel:
-    from workbench.methods.wrinkles.layer import fit_sample_wrinkles
+    from workbench.methods.wrinkles.family import fit_sample_wrinkles
 
     m = load_sample("head")
     fit_sample_wrinkles(m)
     for t, w in ((0.0, {"jawOpen": 0.0, "browInnerUp": 0.0}), (0.5, {"jawOpen": 0.8, "browInnerUp": 1.0}),
                  (1.0, {"jawOpen": 0.1, "browInnerUp": 0.3})):
         m.set_weights(w)
-        m.key_weights(t, list(w))
+        m.timeline.key_weights(t, list(w))
     return m
 
 
@@ -95,8 +95,8 @@ def fitted_head(n_frames: int = 10) -> FaceModel:
     markers = np.asarray(default_face_handles(m).vertices)
     perf = generate_synthetic_marker_performance(m, markers, n_frames=n_frames, seed=5, noise=0.001)
     fit = fit_markers(m, st.regions, perf.markers, perf.marker_positions, 1)
-    times = m.key_marker_fit(fit)
-    m.key_head_pose(float(times[0]), head_rotation_from_euler(0, 0, 0), [0, 0, 0], interpolation="linear")
-    m.key_head_pose(float(times[-1]), head_rotation_from_euler(15, -5, 3), [0.05, 0.0, 0.02],
+    times = m.timeline.key_marker_fit(fit)
+    m.timeline.key_head_pose(float(times[0]), head_rotation_from_euler(0, 0, 0), [0, 0, 0], interpolation="linear")
+    m.timeline.key_head_pose(float(times[-1]), head_rotation_from_euler(15, -5, 3), [0.05, 0.0, 0.02],
                     interpolation="linear")
     return m

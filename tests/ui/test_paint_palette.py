@@ -40,7 +40,7 @@ def test_saved_expressions_come_first_and_follow_the_model():
     assert g.names == ["up", "side"]
     tiles = dict(g._tiles)
     m.set_weight("up", 1.0)
-    m.save_expression("lifted")  # displacement == the "up" delta
+    m.expressions.save("lifted")  # displacement == the "up" delta
     assert g.names == ["lifted", "up", "side"]
     _img, btn = g._cells["lifted"]
     assert btn.description == "★ lifted"
@@ -58,7 +58,7 @@ def test_saved_expressions_come_first_and_follow_the_model():
 
 def test_without_expressions_flag_saved_expressions_are_not_shown():
     m = tetra_model()
-    m.save_expression("rest")
+    m.expressions.save("rest")
     g = ExpressionGallery(m, size=SIZE)
     assert g.names == ["up", "side"]
     g2 = ExpressionGallery(m, size=SIZE, expressions=True, names=["side", "rest"])

@@ -40,7 +40,7 @@ def segmented():
 
 def test_automatic_regions_preset_blends_per_region(segmented) -> None:
     model, panel, errors = segmented
-    state = model.regions
+    state = model.regions.state
     names = list(state.regions.names[state.level])
     assert "auto" in [k for _, k in panel.preset.options]
     panel.preset.value = "auto"
@@ -63,9 +63,9 @@ def test_automatic_regions_preset_blends_per_region(segmented) -> None:
 
     # jawOpen painted at 0.6 x the region's soft membership, nothing else painted
     W_region = np.asarray(Wm[:, r].toarray()).ravel()
-    assert list(model.paint_layers) == ["jawOpen"]
-    np.testing.assert_allclose(model.paint_layers["jawOpen"], 0.6 * W_region, atol=1e-6)
-    assert np.count_nonzero(model.paint_layers["jawOpen"]) == np.count_nonzero(W_region)
+    assert list(model.paint) == ["jawOpen"]
+    np.testing.assert_allclose(model.paint["jawOpen"], 0.6 * W_region, atol=1e-6)
+    assert np.count_nonzero(model.paint["jawOpen"]) == np.count_nonzero(W_region)
     # the blend reaches the face only where the region is
     d = np.linalg.norm(model.evaluate() - np.asarray(model.vertices), axis=1)
     assert d[W_region == 0].max() < 1e-5 < 1e-3 < d.max()
@@ -76,7 +76,7 @@ def test_automatic_regions_preset_blends_per_region(segmented) -> None:
     assert panel.region_sliders[region].value == 0.0
 
     model.undo()
-    assert len(model.paint_layers) == 0
+    assert len(model.paint) == 0
 
 
 def test_automatic_regions_follow_the_level_and_resegmentation(segmented) -> None:
@@ -87,7 +87,7 @@ def test_automatic_regions_follow_the_level_and_resegmentation(segmented) -> Non
     panel.set_region_weight(names0[0], 0.5)
     coarse = model.regions.regions.n_levels - 1
     if coarse > 0:
-        model.set_region_level(coarse)
+        model.regions.set_level(coarse)
         lv = model.regions.level
         assert list(panel.region_sliders) == list(model.regions.regions.names[lv])
         assert panel.preset.value == "auto"

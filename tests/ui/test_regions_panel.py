@@ -59,9 +59,9 @@ def test_find_regions_button_segments_and_colours_one_colour_per_region(setup):
     vp.vertex_colors = before
     panel.deactivate()
     panel.activate()  # the panel remembers the colours it covers
-    assert model.regions is None and panel.drag_mode.disabled
+    assert model.regions.state is None and panel.drag_mode.disabled
     panel.find_button.click()
-    st = model.regions
+    st = model.regions.state
     assert st is not None and model.history.undo_labels[-1] == "Segment regions (t=0.25)"
     R, lv = st.regions, st.level
     assert [o[1] for o in panel.level.options] == list(range(R.n_levels - 1, -1, -1))
@@ -100,7 +100,7 @@ def test_threshold_release_resegments_and_undo_moves_the_slider_back(setup):
     panel.find_button.click()
     n_fine = model.regions.regions.n_regions(0)
     panel.threshold.value = 0.6
-    st = model.regions
+    st = model.regions.state
     assert st.regions.threshold == pytest.approx(0.6)
     assert model.history.undo_labels[-1] == "Segment regions (t=0.6)"
     assert st.regions.n_regions(0) < n_fine  # higher t: fewer, smaller regions
@@ -114,7 +114,7 @@ def test_threshold_release_resegments_and_undo_moves_the_slider_back(setup):
 def test_weight_slider_drag_is_one_undo_step_on_that_region_only(setup):
     model, _, panel, _ = setup
     panel.find_button.click()
-    st = model.regions
+    st = model.regions.state
     R, lv = st.regions, st.level
     r = R.names[lv].index("mouth_L_2") if "mouth_L_2" in R.names[lv] else 0
     panel.region.value = r
@@ -151,7 +151,7 @@ def test_drag_handler_solves_and_moves_the_dragged_point_toward_the_target(setup
     assert vp.tool == "sculpt" and vp.drag_handler is panel.drag_handler
     np.testing.assert_array_equal(vp.handles, panel.pins)
     k, v = mouth_corner_pin(model, panel)
-    st = model.regions
+    st = model.regions.state
     R, lv = st.regions, st.level
     touched = sorted(R.regions_at(lv, v))
     inside = np.unique(np.concatenate([R.members(lv, r) for r in touched]))
@@ -200,7 +200,7 @@ def test_drag_in_the_background_is_refused_without_an_open_interaction(setup):
     model, vp, panel, sent = setup
     panel.find_button.click()
     panel.drag_mode.value = True
-    st = model.regions
+    st = model.regions.state
     bg = np.flatnonzero(st.regions.background[st.level] == 1.0)
     v = int(bg[0])
     n_err = panel.errors.count + vp.errors.count
@@ -216,14 +216,14 @@ def test_leaving_drag_mode_gives_the_viewport_back(setup):
     from workbench.methods.handles.presets import default_face_handles
 
     model, vp, panel, _ = setup
-    model.set_handles(default_face_handles(model, per_side=5), label="few handles")
+    model.handles.set(default_face_handles(model, per_side=5), label="few handles")
     model_handles = np.asarray(model.handles.vertices)
     panel.find_button.click()
     panel.drag_mode.value = True
     assert len(vp.handles) == len(panel.pins) > len(model_handles)
     # a handle added in drag mode (Shift-click) becomes a pin as well
     free = int(np.setdiff1d(np.arange(model.n_vertices), panel.pins)[0])
-    model.add_handle(free)
+    model.handles.add(free)
     assert free in panel.pins and free in vp.handles
     panel.drag_mode.value = False
     assert vp.tool == "orbit" and vp.drag_handler is None
@@ -232,7 +232,7 @@ def test_leaving_drag_mode_gives_the_viewport_back(setup):
 
 # --------------------------------------------------------------- region edits
 def select(panel, name: str) -> int:
-    st = panel.model.regions
+    st = panel.model.regions.state
     r = st.regions.names[st.level].index(name)
     panel.region.value = r
     return r

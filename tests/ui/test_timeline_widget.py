@@ -12,6 +12,8 @@ import concurrent.futures
 import itertools
 
 import numpy as np
+
+from workbench.core.pipeline import FunctionLayer
 import pytest
 
 pytest.importorskip("anywidget")
@@ -30,7 +32,7 @@ def keyed(tiny_model):
     m = tiny_model
     for t, w in ((0.0, 0.0), (1.0, 1.0), (2.0, 0.0)):
         m.set_weight("up", w)
-        m.key_weights(t, ["up"])
+        m.timeline.key_weights(t, ["up"])
     m.set_weight("up", 0.0)
     return m
 
@@ -180,7 +182,7 @@ def test_key_expression_drop_and_gallery_button(tiny_model):
     assert tl.evaluate(0.0).weights == {"up": 1.0, "left": 0.0}
     # saved expressions come first in the chip list
     tiny_model.set_weights({"up": 0.5, "left": 0.5})
-    tiny_model.save_expression("half")
+    tiny_model.expressions.save("half")
     assert w.expressions == ["half", "up", "left"] and w._saved_expressions == ["half"]
 
 
@@ -247,7 +249,7 @@ def fake_frontend(w, delay=0.0):
 
 
 def test_playback_sets_times_and_stops_at_the_end(keyed):
-    keyed.set_timeline(keyed.tracks.replace(end=0.2), "short range")
+    keyed.timeline.set(keyed.tracks.replace(end=0.2), "short range")
     w = TimelineWidget(keyed)
     fake_frontend(w)
     seen: list[float] = []
@@ -312,7 +314,7 @@ def test_slow_browser_gets_one_frame_at_a_time_and_frames_are_dropped(keyed):
 
 
 def test_playback_without_any_view_stops_waiting_for_acks(keyed):
-    keyed.set_timeline(keyed.tracks.replace(end=0.3), "short range")
+    keyed.timeline.set(keyed.tracks.replace(end=0.3), "short range")
     w = TimelineWidget(keyed)
     w.frame_ack_timeout = 0.05
     w.send = lambda content, buffers=None: None  # nothing displayed: no acks ever
@@ -467,7 +469,7 @@ def test_export_panel_says_how_each_layer_was_written(keyed, tmp_path):
         d[4, 1] = m.weights["up"] ** 2
         return d
 
-    keyed.register_layer("squared", squared)
+    keyed.register_layer(FunctionLayer("squared", squared))
     p = ExportPanel(keyed, path=str(tmp_path / "anim.glb"))
     assert p.do_export() == [tmp_path / "anim.glb"]
     assert "fwb-export-layers" in p.result.value
@@ -543,7 +545,7 @@ def test_chips_show_the_gallery_thumbnails_as_binary_and_follow_new_expressions(
 
     # a newly saved expression gets a chip (first) with the gallery's picture of it
     tiny_model.set_weights({"up": 0.5, "left": 0.5})
-    tiny_model.save_expression("half")
+    tiny_model.expressions.save("half")
     assert w.expressions == ["half", "up", "left"] and w._saved_expressions == ["half"]
     assert renders.count("<expression>") == 1  # rendered once, by the gallery
     assert w._thumbnails["half"] == gal.thumbnails["half"]
@@ -570,7 +572,7 @@ def test_chips_show_the_gallery_thumbnails_as_binary_and_follow_new_expressions(
 def test_standalone_timeline_has_text_chips(tiny_model):
     w = TimelineWidget(tiny_model)
     assert w.expressions == ["up", "left"] and w._thumbnails == {}
-    tiny_model.save_expression("same")
+    tiny_model.expressions.save("same")
     assert w.expressions == ["same", "up", "left"] and w._thumbnails == {}
 
 
@@ -596,7 +598,7 @@ def test_workbench_shares_its_palette_with_the_timeline_chips(renders):
         assert set(tl._thumbnails) == set(tl.expressions) == set(model.shape_names)
         assert all(tl._thumbnails[k] is wb.gallery.thumbnails[k] for k in tl.expressions)
         model.set_weights({"jawOpen": 1.0})
-        model.save_expression("open")
+        model.expressions.save("open")
         assert tl.expressions[0] == "open" and tl._thumbnails["open"].startswith(PNG_MAGIC)
         assert renders.count("<expression>") == 1
     finally:

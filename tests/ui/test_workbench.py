@@ -260,7 +260,7 @@ def test_key_right_after_a_slider_drag_is_an_undo_step_of_its_own(wb: Workbench)
 def test_timeline_edits_and_scrub_right_after_a_slider_drag(wb: Workbench) -> None:
     m = wb.model
     m.set_weight("jawOpen", 0.5)
-    m.key_weights(1.0, ["jawOpen"])
+    m.timeline.key_weights(1.0, ["jawOpen"])
     _drag_slider(wb.panel.sliders["eyeBlinkLeft"], (0.3, 0.6))
     wb.timeline.handle_message({"type": "add_key", "track": "weights/jawOpen", "time": 2.0})
     assert m.history.undo_labels[-2:] == ["Drag eyeBlinkLeft", "Key 1 weights at 2s"]
@@ -289,7 +289,7 @@ def test_handle_drag_right_after_a_slider_drag_is_an_undo_step_of_its_own(wb: Wo
     from workbench.methods.handles.presets import default_face_handles
 
     m = wb.model
-    m.set_handles(default_face_handles(m), label="Default handles")
+    m.handles.set(default_face_handles(m), label="Default handles")
     _drag_slider(wb.panel.sliders["jawOpen"], (0.3, 0.6))
     vp = wb.viewport
     vp.begin_drag(0)
@@ -311,7 +311,7 @@ def test_viewport_frames_the_neutral_mesh_whatever_the_expression() -> None:
     fresh = load_sample("head")
     posed = load_sample("head")  # opened mid-expression, as a recovered session may be:
     posed.set_weight("jawOpen", 1.0)
-    posed.set_handles(default_face_handles(posed))
+    posed.handles.set(default_face_handles(posed))
     lips = int(np.argmax(np.asarray(posed.vertices)[posed.handles.vertices, 2]))
     posed.move_handle(lips, [0.0, 0.0, 0.6])  # sculpted out of the neutral box
     a, b = Viewport(fresh), Viewport(posed)
@@ -334,7 +334,7 @@ def test_changing_the_tool_clears_the_dragged_handle_highlight(wb: Workbench) ->
     from workbench.methods.handles.presets import default_face_handles
 
     m = wb.model
-    m.set_handles(default_face_handles(m), label="Default handles")
+    m.handles.set(default_face_handles(m), label="Default handles")
     _select(wb, "Sculpt")
     wb.viewport.begin_drag(3)
     wb.viewport.end_drag()

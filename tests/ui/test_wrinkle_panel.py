@@ -53,7 +53,7 @@ def _lift_brows(model, amount: float = 0.05) -> None:
     for i, n in enumerate(names):
         if n.startswith("brows"):
             o[i, 1] = amount
-    model.set_handle_offsets(o, label="Lift brows")
+    model.handles.set_offsets(o, label="Lift brows")
 
 
 def _near(a, b, ref, rel: float = 0.25) -> bool:
@@ -63,7 +63,7 @@ def _near(a, b, ref, rel: float = 0.25) -> bool:
 
 
 def _detail(model, panel) -> np.ndarray:
-    d = panel.layer.details(model)
+    d = panel.layer.details()
     return np.zeros((model.n_vertices, 3), np.float32) if d is None else d
 
 
@@ -112,7 +112,7 @@ def test_dragging_sends_the_strain_only_when_it_changes(fitted) -> None:
     # hidden: kept, not sent; shown again: sent at once
     panel.show_graph.value = False
     assert vp.feature_graph is False
-    model.reset_handle_offsets()
+    model.handles.reset_offsets()
     assert vp.feature_updates_sent == sent
     panel.show_graph.value = True
     assert vp.feature_updates_sent == sent + 1 and np.abs(vp.feature_strain).max() < 1e-5
@@ -123,7 +123,7 @@ def test_wrinkles_toggle_and_strength_are_undoable(fitted) -> None:
     _lift_brows(model)
     d1 = _detail(model, panel)
     assert np.abs(d1).max() > 0.002  # > 0.2 mm on the 5k head (units: dm)
-    shell = np.asarray(model.blended()) + model.handle_displacement()
+    shell = np.asarray(model.blended()) + model.handles.displacement()
     np.testing.assert_allclose(model.evaluate(), shell + d1, atol=1e-5)
 
     panel.enabled.value = False
@@ -247,14 +247,14 @@ def test_a_failing_fit_shows_the_error_and_leaves_the_panel_usable() -> None:
 def test_changed_handles_make_the_fit_stale(fitted) -> None:
     model, vp, panel, _ = fitted
     n = len(panel.layer.graph)
-    model.add_handle(int(np.flatnonzero(model.component_labels == 0)[0]))
+    model.handles.add(int(np.flatnonzero(model.component_labels == 0)[0]))
     assert not panel.fresh
     assert vp.feature_edges.shape == (0, 2)
     assert "handles changed" in panel.status.value
-    assert panel.layer.details(model) is None  # the core ignores a stale fit
+    assert panel.layer.details() is None  # the core ignores a stale fit
     model.undo()
     assert panel.fresh and vp.feature_edges.shape == (n, 2)
-    model.set_handles(HandleSet(), label="Clear")
+    model.handles.set(HandleSet(), label="Clear")
     assert not panel.fresh and panel.current_strain() is None
 
 
@@ -339,7 +339,7 @@ def test_erase_toggle_turns_brush_strokes_into_a_paint_out_mask(fitted) -> None:
     eraser = panel.eraser
     eraser.begin()
     eraser.dab([v])
-    eraser.dab([v, int(model.paint_surface.mirror[v])])
+    eraser.dab([v, int(model.paint.surface.mirror[v])])
     assert eraser.stroking and len(model.history.undo_labels) == depth  # nothing yet
     ov = eraser.overlay()
     assert ov is not None and ov[v] == pytest.approx(1.0) and 0 < np.count_nonzero(ov) < 2000
@@ -395,7 +395,7 @@ def test_eraser_strokes_from_the_viewport_messages(fitted) -> None:
     vp._on_frontend_msg(vp, {**msg, "phase": "end", "vertices": [], "seq": 3}, [])
     assert _errors(errors) == ""
     assert vp.paint_updates_sent != sent
-    assert len(model.paint_layers) == 0 and not model.interacting
+    assert len(model.paint) == 0 and not model.interacting
     assert model.history.undo_labels[-1] == "Erase wrinkles brow_raise"
     assert len(model.history.undo_labels) == depth + 1
     assert vp._paint_weights == b""  # the overlay goes with the stroke

@@ -860,7 +860,7 @@ class Timeline:
                 f"region tracks {bad_k[:4]} hold {rt[bad_k[0]].value_shape[0]} shape weights "
                 f"but the model has {k} shapes (shapes were added or removed after keying)"
             )
-        state = getattr(model, "regions", None)
+        state = model.slot("regions")
         regions = getattr(state, "regions", None)
         if regions is None:
             return
@@ -1256,7 +1256,7 @@ class MeshSampler:
             # so the displacement equals the model's own handle layer.
             from workbench.methods.handles.shell import ShellDeformer
 
-            k_s, k_b = self.model.shell_stiffness
+            k_s, k_b = self.model.handles.stiffness
             self._deformer = ShellDeformer(
                 self.model.vertices,
                 self.model.faces,

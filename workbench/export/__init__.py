@@ -65,7 +65,6 @@ __all__ = [
     "atomic_path",
     "atomic_write_bytes",
     "export",
-    "export_times",
     "format_for_path",
 ]
 
@@ -84,7 +83,7 @@ class LayerReport:
     Attributes
     ----------
     name : str
-        The layer's name in :attr:`FaceModel.layer_providers` (``"regions"``,
+        The layer's name in ``model.pipeline.names`` (``"regions"``,
         ``"handles"``, ``"paint"``, ``"wrinkles"``, ...).
     encoding : {"linear", "baked", "inactive", "omitted"}
         ``linear``: written exactly as morph targets / blend shapes;
@@ -223,11 +222,6 @@ def export(
         level = logging.WARNING if lossy else logging.INFO
         logger.log(level, "%s: layer %r %s: %s", Path(path).name, r.name, r.encoding, r.detail)
     return result
-
-
-def export_times(timeline: Timeline) -> NDArray[np.float64]:
-    """(F,) float: the frame times written by per-frame formats (``timeline.frame_times()``)."""
-    return timeline.frame_times()
 
 
 @contextlib.contextmanager

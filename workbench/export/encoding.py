@@ -179,8 +179,10 @@ class MeshEncoding:
     """
 
     def __init__(self, model: FaceModel, timeline: Timeline) -> None:
+        from workbench.methods.handles.layer import HandleLayer
         from workbench.methods.paint.expressions import expression_displacement
-        from workbench.methods.regions.blend import RegionState, region_layer
+        from workbench.methods.paint.layer import PaintLayer
+        from workbench.methods.regions.blend import RegionLayer, RegionState
 
         timeline.check_model(model)
         self.model = model
@@ -199,8 +201,11 @@ class MeshEncoding:
                 if shapes
                 else np.zeros((0, n, 3), np.float32)
             )
-            providers = model.layer_providers
-            builtin = {name: model.is_builtin_layer(name) for name in providers}
+            live = model.pipeline.run(model.view())
+            providers = {layer.name: layer for layer in model.pipeline.layers}
+            # the layers this encoder knows how to write as targets; any other is baked per frame
+            known = {"regions": RegionLayer, "handles": HandleLayer, "paint": PaintLayer}
+            builtin = {name: type(layer) is known.get(name) for name, layer in providers.items()}
             handles_linear = builtin.get("handles", False)
             # the paint's base includes the layers below it (regions, handles): linear
             # only while those are the built-in ones
@@ -216,7 +221,7 @@ class MeshEncoding:
             region_cover = np.zeros(n, np.float64)
             reasons: dict[str, str] = {}
             if builtin.get("regions", False) and timeline.region_tracks:
-                st = model.regions
+                st = model.regions.state
                 if not isinstance(st, RegionState):
                     raise ExportError(
                         "the timeline keys region weights "
@@ -229,8 +234,8 @@ class MeshEncoding:
                 )
                 reports["regions"] = LayerReport("regions", "baked", reasons["regions"])
             elif builtin.get("regions", False):
-                st = model.regions
-                if isinstance(st, RegionState) and st.weights is not None and region_layer(model) is not None:
+                st = model.regions.state
+                if isinstance(st, RegionState) and st.weights is not None and live.displacements["regions"] is not None:
                     rw = st.weights.to_level(st.regions, st.level)
                     W = st.regions.weight_matrix(st.level)
                     cover = np.asarray(W.sum(axis=1), np.float64).reshape(-1)
@@ -251,7 +256,7 @@ class MeshEncoding:
             # --- paint: C_P - P * (sum_k g_k delta_k + R + D(o)), R the region layer
             paint = np.zeros(n, np.float64)
             if paint_linear:
-                mix = model.paint_layers
+                mix = model.paint
                 if len(mix):
                     for name, w in mix.items():
                         w64 = np.asarray(w, np.float64)
@@ -282,7 +287,7 @@ class MeshEncoding:
             self.handle_shift = np.zeros(0)
             targets: list[NDArray[np.float64]] = []
             if handles_linear and H:
-                deformer = providers["handles"].deformer(model)  # type: ignore[attr-defined]
+                deformer = model.handles.deformer()
                 keep = (1.0 - paint)[:, None]
 
                 def disp(o: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -463,38 +468,22 @@ class MeshEncoding:
 
     # ------------------------------------------------------------------ positions
     def local_points(self, times: ArrayLike) -> NDArray[np.float32]:
-        """(F, n, 3) float32 mesh without the head pose (model units); equals ``evaluate_at``."""
+        """(F, n, 3) float32 mesh without the head pose (model units): the pipeline at each time."""
         ts = np.asarray(times, np.float64).reshape(-1)
-        n, k = self.n_vertices, self.n_shapes
+        n = self.n_vertices
         out = np.empty((ts.size, n, 3), np.float32)
-        flat = out.reshape(ts.size, -1)
-        flat[:] = self.neutral.reshape(-1)
-        if self.static is not None:
-            flat += self.static.reshape(-1)
-        if k:
-            flat += self.weights(ts).astype(np.float32) @ self.shape_targets.reshape(k, -1)
-        r = self.handle_targets.shape[0]
-        if r:
-            flat += self.handle_weights(ts).astype(np.float32) @ self.handle_targets.reshape(r, -1)
         for f, t in enumerate(ts):
-            b = self.baked(float(t))
-            if b is not None:
-                out[f] += b
+            out[f] = self.model.evaluation_at(float(t), self.timeline).mesh
         return out
 
-    def head_matrices(self, times: ArrayLike) -> NDArray[np.float64]:
-        """(F, 4, 4) head transforms (identity when the head pose is not keyed)."""
-        ts = np.asarray(times, np.float64).reshape(-1)
-        return np.stack([self.timeline.evaluate(float(t)).head_matrix() for t in ts]) if ts.size else np.zeros((0, 4, 4))
-
     def points(self, times: ArrayLike) -> NDArray[np.float32]:
-        """(F, n, 3) float32 mesh with the head pose (model units): ``model.evaluate_at(t, timeline)``."""
+        """(F, n, 3) float32 mesh with the head pose (model units): ``model.evaluate_at(t, timeline)``, bit for bit."""
         ts = np.asarray(times, np.float64).reshape(-1)
-        P = self.local_points(ts)
-        if self.timeline.head_pose is not None:
-            M = self.head_matrices(ts).astype(np.float32)
-            P = np.einsum("fij,fnj->fni", M[:, :3, :3], P) + M[:, None, :3, 3]
-        return np.ascontiguousarray(P, np.float32)
+        n = self.n_vertices
+        out = np.empty((ts.size, n, 3), np.float32)
+        for f, t in enumerate(ts):
+            out[f] = self.model.evaluate_at(float(t), self.timeline)
+        return out
 
 
 def _row_basis(rows: NDArray[np.float64]) -> NDArray[np.float64]:

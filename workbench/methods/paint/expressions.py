@@ -21,8 +21,11 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
+from workbench.core.shapes import ModelError
+
 if TYPE_CHECKING:
-    from workbench.model import FaceModel
+    from workbench.core.pipeline import StateView
+    from workbench.core.state import FaceState
 
 
 @dataclass(frozen=True, eq=False)
@@ -48,8 +51,6 @@ class Expression:
     handle_offsets: NDArray[np.float32] = field(default_factory=lambda: np.zeros((0, 3), np.float32))
 
     def __post_init__(self) -> None:
-        from workbench.model import ModelError
-
         if not isinstance(self.name, str) or not self.name.strip():
             raise ModelError(f"expression name must be a non-empty string, got {self.name!r}")
         d = np.array(self.displacement, dtype=np.float32)
@@ -66,37 +67,28 @@ class Expression:
         object.__setattr__(self, "handle_offsets", ho)
 
 
-def expression_names(model: FaceModel) -> list[str]:
+def expression_names(state: FaceState | StateView) -> list[str]:
     """Every expression the palette offers: saved expressions first, then the blendshapes."""
-    saved = list(model.expressions)
-    return saved + [n for n in model.shape_names if n not in model.expressions]
+    saved = list(state.slot("expressions"))
+    return saved + [n for n in state.shape_names if n not in saved]
 
 
-def expression_displacement(model: FaceModel, name: str) -> NDArray[np.float32]:
-    """(n, 3) float32 displacement from the neutral of expression ``name`` (read-only)."""
-    if name in model.expressions:
-        return model.expressions[name].displacement
-    if name in model.shape_names:
-        return model.shape(name).effective_delta()
-    raise KeyError(
-        f"no expression named {name!r}; saved expressions: {list(model.expressions)}, "
-        f"and the {len(model.shape_names)} blendshapes"
-    )
+def expression_displacement(state: FaceState | StateView, name: str) -> NDArray[np.float32]:
+    """(n, 3) float32 displacement from the neutral of expression ``name`` (read-only).
 
-
-def expression_from_state(model: FaceModel, name: str) -> Expression:
-    """Capture the model's current evaluated state as an :class:`Expression`.
-
-    The head pose is not part of an expression (as in :meth:`FaceModel.save_expression`).
+    ``state`` is the model or a pipeline view: a saved expression's displacement,
+    else the blendshape's delta with its vertex mask.
     """
-    with model.lock:
-        return Expression(
-            name,
-            model.evaluate(posed=False) - model.vertices.astype(np.float32),
-            dict(model.weights),
-            model.handles.vertices,
-            model.handles.offsets,
-        )
+    lib = state.slot("expressions")
+    if name in lib:
+        return lib[name].displacement  # type: ignore[no-any-return]
+    names = state.shape_names
+    if name in names:
+        return state.effective_deltas[names.index(name)]
+    raise KeyError(
+        f"no expression named {name!r}; saved expressions: {list(lib)}, "
+        f"and the {len(names)} blendshapes"
+    )
 
 
 def expressions_to_json(expressions: Mapping[str, Expression]) -> list[dict[str, Any]]:

@@ -48,7 +48,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import lsq_linear, nnls
 
-from workbench.methods.regions.segmentation import RegionError, Regions, _effective_deltas
+from workbench.methods.regions.segmentation import RegionError, Regions
 
 if TYPE_CHECKING:
     from workbench.model import FaceModel
@@ -60,7 +60,7 @@ __all__ = [
     "drag_damping",
     "region_blend_displacement",
     "region_blend_positions",
-    "region_layer",
+    "RegionLayer",
     "solve_region_drag",
 ]
 
@@ -246,7 +246,7 @@ def region_blend_displacement(
     rows = np.flatnonzero(np.diff(W.indptr) > 0)
     cols = np.flatnonzero(np.abs(diff[active_r]).max(axis=0) > 0)
     coef = np.asarray(W[rows] @ diff[np.ix_(active_r, cols)], dtype=np.float32)  # (m, kc)
-    D = _effective_deltas(model)
+    D = model.effective_deltas
     out[rows] = np.einsum("mk,kmc->mc", coef, D[cols][:, rows])
     return out
 
@@ -276,24 +276,31 @@ def region_blend_positions(
     Wr = regions.weight_matrix(lv)[idx]
     coef = np.asarray(Wr @ (rw.values * mute[None, :]), dtype=np.float64)
     coef += regions.background[lv][idx, None].astype(np.float64) * g[None, :]
-    D = _effective_deltas(model)[:, idx]
+    D = model.effective_deltas[:, idx]
     disp = np.einsum("mk,kmc->mc", coef, D.astype(np.float64))
     return (model.vertices[idx] + disp).astype(np.float32)
 
 
-def region_layer(model: FaceModel) -> NDArray[np.float32] | None:
-    """Model layer provider: the region blend stored in ``model.regions``.
+class RegionLayer:
+    """Pipeline layer ``"regions"``: the region blend stored in the ``regions`` slot.
 
-    ``model.register_layer("regions", region_layer)``; returns None unless the
-    regions slot holds a :class:`RegionState` with weights.
+    A correction of the blend below (it reads the weights), zero unless the slot
+    holds a :class:`RegionState` with weights; stale weights after a shape edit
+    show the global blend.
     """
-    state = model.regions
-    if not isinstance(state, RegionState) or state.weights is None:
-        return None
-    try:
-        return region_blend_displacement(model, state.regions, state.weights, state.level)
-    except RegionError:
-        return None  # stale weights after a shape edit: show the global blend
+
+    name = "regions"
+    reads = ("regions",)
+    linear = True
+
+    def displacement(self, view: StateView, below: NDArray[np.float32]) -> NDArray[np.float32] | None:
+        state = view.slot("regions")
+        if not isinstance(state, RegionState) or state.weights is None:
+            return None
+        try:
+            return region_blend_displacement(view, state.regions, state.weights, state.level)
+        except RegionError:
+            return None
 
 
 def _vertex_ids(model: FaceModel, vertices: ArrayLike, name: str) -> NDArray[np.intp]:
@@ -357,7 +364,7 @@ def drag_system(
             X0 = X0[ids]
         if X0.shape != (ids.size, 3):
             raise RegionError(f"current_positions: expected ({model.n_vertices}, 3) or ({ids.size}, 3), got {X0.shape}")
-    D = _effective_deltas(model)[:, ids].astype(np.float64) * _mute(model)[:, None, None]  # (k, P, 3)
+    D = model.effective_deltas[:, ids].astype(np.float64) * _mute(model)[:, None, None]  # (k, P, 3)
     moves = np.abs(D).max(axis=(1, 2)) > 0
     ks = np.flatnonzero(moves)
     # unknown (r, k): region r touched, shape k moves some pin in r's support
@@ -534,7 +541,7 @@ def drag_damping(model: FaceModel, vertices: ArrayLike | None = None) -> NDArray
     -------
     (m,) float64 in [0, 1]
     """
-    D = _effective_deltas(model)
+    D = model.effective_deltas
     ranges = np.array([0.0 if s.mute else max(abs(s.slider_min), abs(s.slider_max)) for s in model.shapes])
     if D.shape[0] == 0:
         m = np.zeros(model.n_vertices)

@@ -60,7 +60,7 @@ from workbench.methods.regions.blend import (
     _vertex_ids,
     bounded_lsq,
 )
-from workbench.methods.regions.segmentation import RegionError, Regions, _effective_deltas, component_roles
+from workbench.methods.regions.segmentation import RegionError, Regions, component_roles
 
 if TYPE_CHECKING:
     from workbench.model import FaceModel
@@ -208,7 +208,7 @@ class SyntheticPerformance:
     def positions(self, model: FaceModel, frame: int) -> NDArray[np.float64]:
         """(n, 3) true (noise-free) vertex positions of one frame."""
         W = self.vertex_weights(frame) * _mute(model)[None, :]
-        D = _effective_deltas(model).astype(np.float64)
+        D = model.effective_deltas.astype(np.float64)
         return model.vertices + np.einsum("nk,knc->nc", W, D)
 
 
@@ -277,7 +277,7 @@ def generate_synthetic_marker_performance(
     qw = np.stack([np.clip((1 - a) * base + a * _smooth_curves(rng, T, k, lo, hi), lo, hi) for _ in range(Q)], axis=1)
     # smooth quadrant masks around the centre of the face's motion
     V = model.vertices
-    D = _effective_deltas(model)
+    D = model.effective_deltas
     mag = np.sqrt(np.einsum("knc,knc->n", D, D, dtype=np.float64))
     w = mag / max(float(mag.sum()), 1e-30)
     cx, cy = float(w @ V[:, 0]), float(w @ V[:, 1])
@@ -390,7 +390,7 @@ def _blend_with_global(
     mute = _mute(model).astype(np.float64)
     coef = np.asarray(regions.weight_matrix(lv)[idx] @ (rw.values.astype(np.float64) * mute[None, :]))
     coef += regions.background[lv][idx, None].astype(np.float64) * (np.asarray(g, np.float64) * mute)[None, :]
-    D = _effective_deltas(model)[:, idx].astype(np.float64)
+    D = model.effective_deltas[:, idx].astype(np.float64)
     return model.vertices[idx] + np.einsum("mk,kmc->mc", coef, D)
 
 
@@ -475,7 +475,7 @@ def fit_markers(
     T, M = P.shape[0], ids.size
     k = len(model.shapes)
     mute = _mute(model).astype(np.float64)
-    D = _effective_deltas(model)[:, ids].astype(np.float64) * mute[:, None, None]  # (k, M, 3)
+    D = model.effective_deltas[:, ids].astype(np.float64) * mute[:, None, None]  # (k, M, 3)
     lo = np.array([s.slider_min for s in model.shapes])
     hi = np.array([s.slider_max for s in model.shapes])
     neutral = model.vertices[ids]
@@ -595,7 +595,7 @@ def fidelity_table(
     from workbench.geometry.operators import mass_matrix
 
     roles = component_roles(model)
-    D = _effective_deltas(model)
+    D = model.effective_deltas
     maxd = np.sqrt(np.einsum("knc,knc->kn", D, D, dtype=np.float64)).max(axis=0) if len(D) else np.zeros(model.n_vertices)
     eval_v = np.flatnonzero((roles == 0) & (maxd > 1e-3 * maxd.max(initial=0.0)))
     area = np.asarray(mass_matrix(model.vertices, model.faces).diagonal())[eval_v]

@@ -407,7 +407,7 @@ def deformation_map(
         return np.zeros(n)
     V, F = model.vertices, model.faces
     L = cotangent_laplacian(V, F)
-    X = _effective_deltas(model).transpose(1, 0, 2).reshape(n, 3 * k)
+    X = model.effective_deltas.transpose(1, 0, 2).reshape(n, 3 * k)
     Y = np.asarray(L @ X.astype(np.float64))
     if mass_normalized:
         m = mass_matrix(V, F).diagonal()
@@ -417,13 +417,6 @@ def deformation_map(
     if mask is not None:
         D = np.where(mask, D, 0.0)
     return D
-
-
-def _effective_deltas(model: FaceModel) -> NDArray[np.float32]:
-    """(k, n, 3) float32 deltas with vertex masks applied and muted shapes kept (as stored)."""
-    if all(s.vertex_mask is None for s in model.shapes):
-        return model.deltas
-    return np.stack([s.effective_delta() for s in model.shapes])
 
 
 def _dilate(A: sp.csr_matrix, mask: NDArray[np.bool_], rings: int) -> NDArray[np.bool_]:
@@ -777,7 +770,7 @@ def segment_blend_regions(
     skin = roles == 0
     report(0.05, "deformation map")
     D = deformation_map(model, mass_normalized=mass_normalized, mask=skin)
-    deltas = _effective_deltas(model)
+    deltas = model.effective_deltas
     ranges = np.array([max(abs(s.slider_min), abs(s.slider_max)) for s in model.shapes])
     mags = np.sqrt(np.einsum("knc,knc->kn", deltas, deltas, dtype=np.float32)) * ranges[:, None].astype(np.float32)
     maxdisp = mags.max(axis=0)

@@ -1,0 +1,318 @@
+"""``model.timeline``: keying (Pighin et al. 1998 §5) — the undoable edits of the ``tracks`` slot.
+
+Keys of weights, handle offsets, region weights and the rigid head pose; a
+saved expression is keyed by its recipe when that plays back its look, or
+baked once into a ``<name>_baked`` shape otherwise; a marker fit is keyed
+frame by frame. The timeline itself is an immutable
+:class:`~workbench.animation.tracks.Timeline`; sampling it (``set_time``,
+``evaluate_at``) is the state's, through the hooks in :mod:`.family`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import math
+from collections.abc import Iterable
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from workbench.animation.tracks import (
+    HEAD_POSE,
+    IDENTITY_POSE,
+    Interpolation,
+    Timeline,
+    add_keys,
+    region_track_name,
+    weight_track_name,
+)
+from workbench.core.pipeline import StateView
+from workbench.core.shapes import ModelError
+
+if TYPE_CHECKING:
+    from workbench.core.state import FaceState
+    from workbench.methods.paint.expressions import Expression
+
+#: Tolerance, relative to (1 + the largest neutral coordinate), within which a
+#: saved expression's recipe counts as playing back its look (float32 round-off).
+_PLAYBACK_ATOL = 1e-6
+
+
+def as_quaternion(rotation: ArrayLike, what: str) -> NDArray[np.float64]:
+    """(4,) unit quaternion (x, y, z, w) from a quaternion or a (3, 3) rotation matrix."""
+    r = np.asarray(rotation, np.float64)
+    if r.shape == (4,) and np.isfinite(r).all() and np.linalg.norm(r) > 1e-12:
+        return np.asarray(r / np.linalg.norm(r), np.float64)
+    if r.shape == (3, 3) and np.isfinite(r).all():
+        if np.allclose(r.T @ r, np.eye(3), atol=1e-6) and np.linalg.det(r) > 0:
+            from scipy.spatial.transform import Rotation
+
+            return np.asarray(Rotation.from_matrix(r).as_quat(), np.float64)
+        raise ModelError(f"{what}: rotation matrix must be orthonormal with determinant +1")
+    raise ModelError(
+        f"{what}: rotation must be a non-zero finite (4,) quaternion (x, y, z, w) or a (3, 3) "
+        f"rotation matrix, got shape {r.shape}"
+    )
+
+
+def _grow(tl: Timeline, time: float) -> Timeline:
+    return tl.replace(start=min(tl.start, time), end=max(tl.end, time))
+
+
+class TimelineFacet:
+    """The keyframe timeline of one model (see the module docstring)."""
+
+    def __init__(self, model: FaceState) -> None:
+        self._model = model
+
+    @property
+    def value(self) -> Timeline:
+        return self._model.slot("tracks")  # type: ignore[no-any-return]
+
+    def __repr__(self) -> str:
+        return f"<timeline: {self.value!r}>"
+
+    def set(self, timeline: Timeline, label: str = "Edit keys") -> None:
+        """Replace the timeline (undoable); checked against the model's shapes, handles and regions."""
+        self._model.set_slot("tracks", timeline, label)
+
+    @property
+    def head_pose(self) -> NDArray[np.float64] | None:
+        """(7,) float: the head pose keyed at the model's time (translation + quaternion), or None."""
+        m = self._model
+        with m.lock:
+            hp = self.value.head_pose
+            return None if hp is None else hp.sample([m.time])[0]
+
+    # -------------------------------------------------------------------- keys
+    def key_weights(self, time: float, names: Iterable[str] | None = None,
+                    interpolation: Interpolation = "bezier") -> None:
+        """Key the current weights at ``time`` (one undo step).
+
+        ``names`` default: every shape with a non-zero weight or already keyed.
+        """
+        m = self._model
+        with m.lock:
+            tl = self.value
+            w = m.weights
+            if names is None:
+                keyed = set(tl.weight_tracks)
+                names = [n for n in m.shape_names if w[n] != 0.0 or n in keyed]
+            names = list(names)
+            for n in names:
+                m.shape(n)
+                tl = tl.add_key(weight_track_name(n), time, w[n], interpolation=interpolation)
+            self.set(_grow(tl, time), f"Key {len(names)} weights at {time:g}s")
+
+    def key_handles(self, time: float, interpolation: Interpolation = "bezier") -> None:
+        """Key the handle offsets at ``time`` (undoable)."""
+        m = self._model
+        with m.lock:
+            h = m.slot("handles")
+            if not len(h):
+                raise ModelError("key_handles: the model has no handles")
+            tl = self.value.add_key("handles", time, h.offsets, interpolation=interpolation)
+            self.set(_grow(tl, time), f"Key handles at {time:g}s")
+
+    def key_head_pose(self, time: float, rotation: ArrayLike | None = None,
+                      translation: ArrayLike | None = None, interpolation: Interpolation = "bezier") -> None:
+        """Key the rigid head transform ``p -> R p + t`` at ``time`` (one undo step).
+
+        ``rotation``: unit quaternion (x, y, z, w) or (3, 3) matrix (default: the
+        rotation the timeline has at ``time``); ``translation`` (3,) in model units
+        (default: the keyed one). The rotation is always slerped between keys;
+        ``interpolation`` shapes the translation.
+        """
+        t = float(time)
+        if not math.isfinite(t):
+            raise ModelError(f"key_head_pose: time must be finite, got {time!r}")
+        with self._model.lock:
+            tl = self.value
+            hp = tl.head_pose
+            current = IDENTITY_POSE if hp is None else hp.evaluate(t)
+            q = current[3:] if rotation is None else as_quaternion(rotation, "key_head_pose")
+            if translation is None:
+                tr = current[:3]
+            else:
+                tr = np.asarray(translation, np.float64).reshape(-1)
+                if tr.shape != (3,) or not np.isfinite(tr).all():
+                    raise ModelError(
+                        "key_head_pose: translation must be 3 finite numbers (model units), "
+                        f"got {np.asarray(translation).tolist()!r}"
+                    )
+            tl = tl.add_key(HEAD_POSE, t, np.concatenate([tr, q]), interpolation=interpolation)
+            self.set(_grow(tl, t), f"Key head pose at {t:g}s")
+
+    def delete_key(self, track: str, index: int) -> None:
+        """Delete key ``index`` of ``track`` (undoable)."""
+        self.set(self.value.delete_key(track, index), f"Delete key {index} of {track}")
+
+    def move_key(self, track: str, index: int, time: float, value: ArrayLike | None = None) -> None:
+        """Move key ``index`` of ``track`` to ``time`` (and ``value``), undoable."""
+        with self._model.lock:
+            tl = self.value.move_key(track, index, time, value)
+            self.set(_grow(tl, time), f"Move key of {track}")
+
+    # ------------------------------------------------------------- expressions
+    def key_expression(self, time: float, expression: str, interpolation: Interpolation = "bezier") -> None:
+        """Key an expression at ``time`` (drop from the gallery onto the timeline); one undo step.
+
+        A blendshape keys itself at 1. A saved expression whose recipe plays back
+        its look keys its recipe weights and, when the handle set matches, its
+        handle offsets. Any other saved expression (its look comes from painting,
+        region weights, another handle set, or shapes since removed or edited)
+        is, as in Pighin et al. 1998 §4, a new expression of its own: its
+        displacement becomes the blendshape ``<expression>_baked`` (added once in
+        the same undo step, reused when it already holds exactly that
+        displacement) keyed at 1; keyed handles are keyed at rest there.
+
+        Every other already-keyed shape is keyed at 0, and a shape keyed for the
+        first time gets 0-keys at the earlier key times, so at its time a keyed
+        expression plays back exactly as saved, in ``evaluate_at`` and in every
+        export, as long as the unkeyed state is at rest.
+        """
+        m = self._model
+        with m.lock:
+            label = f"Key {expression} at {time:g}s"
+            with m.undo_group(label):
+                handle_key: NDArray[np.float32] | None = None
+                library = m.slot("expressions")
+                handles = m.slot("handles")
+                if expression in library:
+                    expr = library[expression]
+                    if self._recipe_plays_back(expr):
+                        values = dict(expr.weights)
+                        same = np.array_equal(expr.handle_vertices, handles.vertices)
+                        if same and len(handles) and np.any(expr.handle_offsets):
+                            handle_key = expr.handle_offsets
+                    else:
+                        values = {self._baked_expression_shape(expr): 1.0}
+                        if len(handles) and self.value.handles is not None:
+                            handle_key = np.zeros_like(handles.offsets)
+                elif expression in m.shape_names:
+                    values = {expression: 1.0}
+                else:
+                    raise KeyError(f"no expression named {expression!r}")
+                tl = self.value
+                keyed = set(tl.weight_tracks)
+                earlier = sorted({float(t) for tr in tl.weight_tracks.values() for t in tr.times})
+                for n in keyed | {k for k, v in values.items() if v != 0.0}:
+                    if n not in keyed:  # a newly keyed shape was 0 in the expressions keyed before
+                        for t in earlier:
+                            tl = tl.add_key(weight_track_name(n), t, 0.0, interpolation=interpolation)
+                    tl = tl.add_key(weight_track_name(n), time, values.get(n, 0.0), interpolation=interpolation)
+                if handle_key is not None:
+                    tl = tl.add_key("handles", time, handle_key, interpolation=interpolation)
+                self.set(_grow(tl, time), label)
+
+    def _recipe_plays_back(self, expr: Expression) -> bool:
+        """True if keying ``expr``'s weights and handle offsets reproduces its displacement.
+
+        Evaluated as the timeline plays it: its weights (0 for shapes it does not
+        name), its handle offsets when the handle set is the one it was saved
+        with, no paint and no region weights, every other layer as it is — on a
+        view of the state, so the model itself is untouched.
+        """
+        m = self._model
+        if any(v != 0.0 and k not in m.shape_names for k, v in expr.weights.items()):
+            return False  # a shape of the recipe is gone
+        h = m.slot("handles")
+        same = np.array_equal(expr.handle_vertices, h.vertices)
+        if not same and np.any(expr.handle_offsets):
+            return False
+        from workbench.methods.paint.painting import PaintMix
+        from workbench.methods.regions.blend import RegionState
+
+        weights = {s.name: min(max(expr.weights.get(s.name, 0.0), s.slider_min), s.slider_max) for s in m.shapes}
+        slots = dict(m.view().slots)
+        slots["handles"] = dataclasses.replace(h, offsets=expr.handle_offsets if same else np.zeros_like(h.offsets))
+        regions = slots.get("regions")
+        if isinstance(regions, RegionState) and regions.weights is not None:
+            slots["regions"] = RegionState(regions.regions, regions.level, None)
+        slots["paint_layers"] = PaintMix()
+        versions = {name: -1 - i for i, name in enumerate(("shapes", "weights", *slots))}
+        view = StateView(m, weights, slots, versions, m.time)
+        played = m.pipeline.run(view, cache=False).mesh - m.vertices32
+        atol = _PLAYBACK_ATOL * (1.0 + float(np.abs(m.vertices32).max()))
+        return bool(np.allclose(played, expr.displacement, rtol=0.0, atol=atol))
+
+    def _baked_expression_shape(self, expr: Expression) -> str:
+        """Name of a blendshape holding exactly ``expr.displacement`` (added at weight 0 if none does)."""
+        m = self._model
+        stem = f"{expr.name}_baked"
+        for i in itertools.count(1):
+            name = stem if i == 1 else f"{stem}_{i}"
+            if name not in m.shape_names:
+                m.add_shape(name, expr.displacement)
+                return name
+            s = m.shape(name)
+            if (s.vertex_mask is None and not s.mute and s.slider_min <= 1.0 <= s.slider_max
+                    and np.array_equal(s.delta, expr.displacement)):
+                return name
+        raise AssertionError("unreachable")  # itertools.count never ends
+
+    # ------------------------------------------------------------- marker fits
+    def key_marker_fit(self, fit: Any, start: float = 0.0, every: int = 1, *,
+                       interpolation: Interpolation = "linear") -> NDArray[np.float64]:
+        """Key a marker fit (Joshi et al. 2003 §3) frame by frame; one undo step; returns the key times.
+
+        Frame ``f`` is keyed at ``start + f / fps``: the fitted global weights of
+        every shape and the fitted weights of every region of ``fit.level``
+        (``"regions/<level>/<region>"``); the model's region level is set to
+        ``fit.level`` in the same undo step. The RBF residual is not keyed (the
+        timeline has no track for a displacement field): use
+        ``fit.positions(model, regions, f)`` per frame when it is needed.
+        ``every`` >= 1 keys every ``every``-th frame (and always the last).
+        """
+        from workbench.methods.regions.marker_fit import MarkerFit
+
+        m = self._model
+        if not isinstance(fit, MarkerFit):
+            raise ModelError(f"key_marker_fit: fit must be a MarkerFit, got {type(fit).__name__}")
+        if isinstance(every, bool) or not isinstance(every, int | np.integer) or every < 1:
+            raise ModelError(f"key_marker_fit: every must be an int >= 1, got {every!r}")
+        t0 = float(start)
+        if not math.isfinite(t0):
+            raise ModelError(f"key_marker_fit: start must be finite seconds, got {start!r}")
+        with m.lock:
+            regions_facet: Any = m.regions  # type: ignore[attr-defined]
+            st = regions_facet.require("key_marker_fit")
+            if tuple(fit.shape_names) != tuple(m.shape_names):
+                raise ModelError(
+                    f"key_marker_fit: fit was made for {len(fit.shape_names)} shapes "
+                    f"{list(fit.shape_names[:4])}..., the model has {len(m.shape_names)} "
+                    f"{m.shape_names[:4]}... (shape list edited since fitting: fit again)"
+                )
+            L = int(fit.level)
+            R = st.regions
+            if L >= R.n_levels or tuple(R.names[L]) != tuple(fit.region_names):
+                raise ModelError(
+                    f"key_marker_fit: fit was made for other regions on level {L} "
+                    "(the regions were edited or re-segmented since fitting: fit again)"
+                )
+            tl = self.value
+            if tl.region_level is not None and tl.region_level != L:
+                raise ModelError(
+                    f"key_marker_fit: the timeline has region keys on level {tl.region_level}, "
+                    f"the fit is on level {L}; delete those keys or fit on level {tl.region_level}"
+                )
+            T = fit.n_frames
+            frames = np.arange(0, T, int(every))
+            if frames[-1] != T - 1:
+                frames = np.append(frames, T - 1)
+            times = t0 + frames / tl.fps
+            G = np.asarray(fit.global_weights, np.float64)[frames]
+            RW = np.asarray(fit.region_weights, np.float64)[frames]
+            for k, name in enumerate(m.shape_names):
+                tl = add_keys(tl, weight_track_name(name), times, G[:, k], interpolation=interpolation)
+            for r, region in enumerate(fit.region_names):
+                tl = add_keys(tl, region_track_name(L, region), times, RW[:, r, :], interpolation=interpolation)
+            tl = tl.replace(start=min(tl.start, float(times[0])), end=max(tl.end, float(times[-1])))
+            label = f"Key marker fit ({frames.size} frames from {t0:g}s)"
+            with m.undo_group(label):
+                if st.level != L:
+                    regions_facet.set_level(L)
+                self.set(tl, label)
+            return times
