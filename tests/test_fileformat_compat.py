@@ -22,7 +22,9 @@ def test_main_files_evaluate_as_they_did(name: str) -> None:
     model = workbench.load(DATA / f"{name}.fwb")
     want = np.load(DATA / f"{name}.expected.npz")
     if "evaluate" in want.files:
-        np.testing.assert_array_equal(model.evaluate(), want["evaluate"])
+        # the paint layer now takes its base from the mesh below it ((blend + regions) - neutral
+        # instead of (blend - neutral) + regions): float32 sums in another order, <= 2 ulp apart
+        np.testing.assert_array_max_ulp(model.evaluate(), want["evaluate"], maxulp=2)
     for key in want.files:
         if key.startswith("evaluate_at_"):
             t = float(key.removeprefix("evaluate_at_"))

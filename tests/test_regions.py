@@ -11,6 +11,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 import workbench
+from workbench.methods.regions.blend import RegionState
 from workbench.model import BlendShape, FaceModel
 from workbench.methods.regions.segmentation import (
     RegionError,
@@ -282,8 +283,8 @@ def test_model_without_shapes_is_refused(tiny_model: FaceModel) -> None:
 
 def test_stored_in_the_model_slot_is_undoable(head: FaceModel, regions: Regions) -> None:
     m = workbench.load_sample("head")
-    m.set_slot("regions", regions, "Segment regions")
-    assert m.regions is regions
+    m.set_slot("regions", RegionState(regions), "Segment regions")
+    assert m.regions.regions is regions
     m.undo()
     assert m.regions.state is None
 

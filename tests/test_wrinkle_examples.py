@@ -59,7 +59,7 @@ def test_layer_drag_raises_forehead_detail_and_return_removes_it(sculpted) -> No
     m, s = sculpted
     layer = fit_sample_wrinkles(m, sculptor=s)
     assert layer.fitted and len(m.handles) > 0
-    assert layer(m) is None  # rest pose: nothing to add, no work
+    assert layer.details() is None  # rest pose: nothing to add, no work
     V = m.vertices
     hv = V[m.handles.vertices]
     brow = np.argsort(hv[:, 1])[-6:]  # the highest handles sit on the brows
@@ -69,13 +69,13 @@ def test_layer_drag_raises_forehead_detail_and_return_removes_it(sculpted) -> No
         o = np.zeros((len(m.handles), 3), np.float32)
         o[brow, 1] = 0.05
         m.handles.set_offsets(o)
-    d = layer(m)
+    d = layer.details()
     assert d is not None and np.abs(d[fore]).max() > 1e-3
     after = m.evaluate()
     large = np.asarray(m.blended()) + m.handles.displacement()
     np.testing.assert_allclose(after, large + d, atol=1e-6)  # one evaluate = large + fine scale
     m.handles.reset_offsets()
-    assert layer(m) is None
+    assert layer.details() is None
     np.testing.assert_allclose(m.evaluate(), before, atol=1e-6)
 
 
@@ -102,14 +102,14 @@ def test_layer_strength_and_slider_example(sculpted) -> None:
     assert miss[:, singular].max() < 2e-3 < 0.2 * scale.max()
     assert np.all(miss[:, ~singular] <= 2e-4 * scale)
     assert np.all((miss[:, singular] > 1e-4 * scale).any(axis=0))
-    full = layer(m2)
+    full = layer.details()
     layer.set_strength(0.5)
-    np.testing.assert_allclose(layer(m2), 0.5 * full, atol=1e-6)
+    np.testing.assert_allclose(layer.details(), 0.5 * full, atol=1e-6)
     layer.set_enabled(False)
-    assert layer(m2) is None
+    assert layer.details() is None
     layer.set_enabled(True)
     layer.edit_example("brow_raise", scale=0.0)
-    assert np.abs(layer(m2)).max() < 0.2 * np.abs(full).max()
+    assert np.abs(layer.details()).max() < 0.2 * np.abs(full).max()
 
 
 def test_each_example_posed_like_the_panel_gets_its_own_detail_and_an_edit_stays_local() -> None:
@@ -130,7 +130,7 @@ def test_each_example_posed_like_the_panel_gets_its_own_detail_and_an_edit_stays
         w = dict.fromkeys(m.shape_names, 0.0)
         w.update(weights)
         m.set_weights(w)
-        d = layer(m)
+        d = layer.details()
         assert d is not None
         return np.asarray(d, np.float64)
 
@@ -162,5 +162,5 @@ def test_each_example_posed_like_the_panel_gets_its_own_detail_and_an_edit_stays
 def test_layer_without_fit_is_a_no_op() -> None:
     m = workbench.load_sample("head")
     layer = m.wrinkles
-    assert layer(m) is None
+    assert layer.details() is None
     np.testing.assert_array_equal(m.evaluate(), m.blended())

@@ -118,7 +118,7 @@ def test_callback_errors_go_to_the_output_widget():
     def broken(*_a, **_kw):
         raise RuntimeError("boom")
 
-    vp._push_geometry = broken  # type: ignore[method-assign]
+    vp.sync.push_geometry = broken  # type: ignore[method-assign]
     m.set_weight("jawOpen", 0.2)  # must not raise into the model's emit
     assert vp.errors.count == 1
     assert "boom" in vp.errors.output.outputs[-1]["text"]
@@ -456,7 +456,7 @@ def test_paint_stroke_messages_are_one_undo_step_with_overlay_patches_and_acks()
 
 
 def test_paint_watchdog_ends_an_abandoned_stroke(monkeypatch):
-    import widgets.viewport as vpmod
+    import widgets.viewport.gestures as vpmod
 
     monkeypatch.setattr(vpmod, "DRAG_WATCHDOG_S", 0.2)
     m = _grid()

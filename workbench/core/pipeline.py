@@ -153,7 +153,8 @@ class Layer(Protocol):
         Linear in the timeline's keys (weights, handle offsets): exporters may
         write it as morph targets instead of baking it per frame.
 
-    A layer may also set ``uses_below = False`` when its displacement does not
+    A layer may also define ``active(view) -> bool`` (False: it adds nothing for
+    this state whatever the time; exporters then need not bake it), and set ``uses_below = False`` when its displacement does not
     depend on the mesh below (the handle shell): the cache then keeps it while
     the blend changes.
     """

@@ -340,10 +340,20 @@ class MeshEncoding:
                 np.stack(targets).astype(np.float32) if targets else np.zeros((0, n, 3), np.float32)
             )
             self.shape_targets = eff if np.all(scale == 1.0) else (eff * scale[None, :, None].astype(np.float32))
+            view = model.view()
+            # a layer that says it is off for this model (wrinkles not fitted) is not baked
+            silent = {
+                name for name, layer in providers.items()
+                if not builtin[name] and hasattr(layer, "active") and not layer.active(view)
+            }
+            for name in silent:
+                reports[name] = LayerReport(name, "inactive", "off for this model")
             self.baked_layers = tuple(
                 name for name in providers
-                if not (builtin[name] and (name != "paint" or paint_linear))
-                or (name == "regions" and regions_keyed)
+                if name not in silent and (
+                    not (builtin[name] and (name != "paint" or paint_linear))
+                    or (name == "regions" and regions_keyed)
+                )
             )
             for name in self.baked_layers:
                 reasons.setdefault(name, "not linear in the keyed weights/offsets")

@@ -154,6 +154,10 @@ class WrinkleLayer:
         with self._lock:
             return ev.apply(X32, f, st.strength, add_base=False)
 
+    def active(self, view: FaceState | StateView) -> bool:
+        """Whether the layer can add anything for this state (fitted, shown, for these handles)."""
+        return bool(view.slot("wrinkles").active_for(view.slot("handles").vertices))
+
     def displacement(self, view: StateView, below: NDArray[np.float32]) -> NDArray[np.float32] | None:
         return self.details(view, below)
 
