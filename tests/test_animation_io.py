@@ -16,11 +16,11 @@ from workbench.animation.importers import (
     read_weights_csv,
     reduce_keys,
 )
+from workbench.animation.tracks import Timeline
+from workbench.core.polygons import Polygons
 from workbench.export import ExportError, export
 from workbench.export.gltf import _glb_bytes, build_gltf
 from workbench.model import BlendShape, FaceModel
-from workbench.core.polygons import Polygons
-from workbench.animation.tracks import Timeline
 
 SHAPES = ["eyeBlinkLeft", "jawOpen", "mouthSmileRight"]
 

@@ -18,18 +18,17 @@ import struct
 from pathlib import Path
 
 import numpy as np
-
-from workbench.core.pipeline import FunctionLayer
 import pytest
 from grid_meshes import grid_polygons
 
+from workbench.animation.tracks import HANDLES, Key, Timeline, Track, region_track_name
+from workbench.core.pipeline import FunctionLayer
 from workbench.export import ExportResult, export
 from workbench.export.encoding import MeshEncoding, crossing_times, curve_range
 from workbench.export.gltf import Curve, merge_curves
-from workbench.model import BlendShape, FaceModel, ModelMetadata
 from workbench.methods.paint.painting import Brush
 from workbench.methods.regions.blend import RegionWeights
-from workbench.animation.tracks import HANDLES, Key, Timeline, Track, region_track_name
+from workbench.model import BlendShape, FaceModel, ModelMetadata
 
 TIMES = np.linspace(-0.2, 2.2, 49)  # before, inside and after the keys, on and off frames
 

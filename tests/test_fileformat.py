@@ -236,9 +236,9 @@ def _rich_model() -> FaceModel:
     """The 3x3-vertex grid with every saved feature: mask, handles, expression, paint, keys, regions."""
     from grid_meshes import grid_polygons
 
-    from workbench.model import BlendShape
     from workbench.methods.paint.painting import Brush
     from workbench.methods.regions.blend import RegionWeights
+    from workbench.model import BlendShape
 
     V, polys = grid_polygons(2, 2)
     up = np.zeros((9, 3), np.float32)

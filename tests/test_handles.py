@@ -9,8 +9,8 @@ import pytest
 
 import workbench
 from workbench.methods.handles.presets import default_face_handles
-from workbench.model import FaceModel, HandleSet, ModelError
 from workbench.methods.handles.shell import ShellDeformer
+from workbench.model import FaceModel, HandleSet, ModelError
 
 
 @pytest.fixture(scope="module")

@@ -14,9 +14,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from workbench.geometry.mesh_checks import MeshFormatError
 from workbench.io.gltf import read_gltf
 from workbench.io.registry import read_any
-from workbench.geometry.mesh_checks import MeshFormatError
 
 # a 2x1 quad strip as 4 triangles
 V0 = (

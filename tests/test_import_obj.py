@@ -9,10 +9,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from workbench.geometry.mesh_checks import MeshFormatError
 from workbench.io.obj import parse_obj_text, read_obj
 from workbench.io.obj_folder import read_obj_folder
 from workbench.io.registry import read_any, supported_inputs
-from workbench.geometry.mesh_checks import MeshFormatError
 
 # 2x1 quads in the z=0 plane, plus a separate triangle in group "eye"
 QUAD_OBJ = """\

@@ -7,9 +7,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from workbench.geometry.mesh_checks import MeshFormatError
 from workbench.io.makehuman_target import parse_target, read_targets
 from workbench.io.registry import read_any
-from workbench.geometry.mesh_checks import MeshFormatError
 
 BASE_OBJ = """\
 v 0 0 0

@@ -5,8 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from workbench.geometry.mesh_checks import MeshFormatError, check_faces, check_vertices, label_components
 from workbench.core.polygons import Polygons
+from workbench.geometry.mesh_checks import (
+    MeshFormatError,
+    check_faces,
+    check_vertices,
+    label_components,
+)
 
 # unit square split in two quads: 0-1-2 / 3-4-5 grid
 GRID_V = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0], [0, 1, 0], [1, 1, 0], [2, 1, 0]], dtype=float)

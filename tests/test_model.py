@@ -8,10 +8,9 @@ import types
 from typing import Any
 
 import numpy as np
-
-from workbench.core.pipeline import FunctionLayer
 import pytest
 
+from workbench.core.pipeline import FunctionLayer
 from workbench.model import BlendShape, FaceModel, HandleSet, ModelError, ModelMetadata
 
 

@@ -6,7 +6,6 @@ import numpy as np
 
 import workbench
 from workbench.methods.regions.blend import RegionWeights
-from workbench.animation.tracks import evaluate_mesh
 
 
 def test_a_regional_expression_keys_exactly_as_saved() -> None:
@@ -23,6 +22,6 @@ def test_a_regional_expression_keys_exactly_as_saved() -> None:
     m.key_expression(1.0, "smirk")
     assert len(m.shape_names) == n_shapes + 1
     np.testing.assert_allclose(m.evaluate_at(1.0), saved, rtol=0, atol=1e-6)
-    np.testing.assert_allclose(evaluate_mesh(m, m.tracks, 1.0), saved, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(m.evaluate_at(1.0, m.tracks), saved, rtol=0, atol=1e-6)
     m.undo()
     assert len(m.shape_names) == n_shapes and not m.tracks.tracks

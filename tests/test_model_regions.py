@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 import workbench
-from workbench.model import ModelError
 from workbench.methods.regions.blend import RegionWeights
+from workbench.model import ModelError
 
 
 def test_region_weights_change_only_their_region_and_undo() -> None:

@@ -8,7 +8,12 @@ import scipy.sparse as sp
 import trimesh
 from grid_meshes import grid_triangles
 
-from workbench.geometry.operators import bilaplacian, cotangent_laplacian, mass_matrix, vertex_normals
+from workbench.geometry.operators import (
+    bilaplacian,
+    cotangent_laplacian,
+    mass_matrix,
+    vertex_normals,
+)
 
 
 def _sphere(subdivisions: int = 4) -> tuple[np.ndarray, np.ndarray]:

@@ -10,7 +10,6 @@ from hypothesis import strategies as st
 
 import workbench
 import workbench.methods.paint.painting as paint_module
-from workbench.model import BlendShape, FaceModel, ModelError
 from workbench.methods.paint.painting import (
     Brush,
     PaintMix,
@@ -23,7 +22,7 @@ from workbench.methods.paint.painting import (
     normalize,
     regional_mix,
 )
-from workbench.animation.tracks import evaluate_mesh
+from workbench.model import BlendShape, FaceModel, ModelError
 
 
 @pytest.fixture(scope="module")
@@ -344,7 +343,7 @@ def test_a_painted_expression_keys_exactly_as_saved_and_undo_removes_all_keying_
     head.key_expression(1.0, "debauched")
     np.testing.assert_allclose(head.evaluate_at(1.0), saved, rtol=0, atol=1e-6)
     # the exporters' sampler plays it too: the look is a blendshape keyed at 1
-    np.testing.assert_allclose(evaluate_mesh(head, head.tracks, 1.0), saved, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(head.evaluate_at(1.0, head.tracks), saved, rtol=0, atol=1e-6)
     (baked,) = set(head.shape_names) - set(shapes_before)
     assert "debauched" in baked
     np.testing.assert_array_equal(head.shape(baked).delta, head.expressions["debauched"].displacement)

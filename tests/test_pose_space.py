@@ -9,6 +9,8 @@ import pytest
 
 import workbench
 from workbench.methods.handles.presets import default_face_handles
+from workbench.methods.handles.shell import ShellDeformer
+from workbench.methods.wrinkles.examples import EXAMPLE_POSES, WrinkleSculptor, performance_weights
 from workbench.methods.wrinkles.pose_space import (
     COMPARISON_METHODS,
     FeatureGraph,
@@ -24,8 +26,6 @@ from workbench.methods.wrinkles.pose_space import (
     to_world,
     vertex_normals,
 )
-from workbench.methods.handles.shell import ShellDeformer
-from workbench.methods.wrinkles.examples import EXAMPLE_POSES, WrinkleSculptor, performance_weights
 
 
 def _rot(axis: np.ndarray, deg: float) -> np.ndarray:

@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 
 import workbench
-from workbench.model import FaceModel
 from workbench.methods.regions.blend import (
     RegionState,
     RegionWeights,
@@ -17,6 +16,7 @@ from workbench.methods.regions.blend import (
     solve_region_drag,
 )
 from workbench.methods.regions.segmentation import RegionError, Regions, segment_blend_regions
+from workbench.model import FaceModel
 
 
 @pytest.fixture(scope="module")

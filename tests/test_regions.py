@@ -12,7 +12,6 @@ from scipy.sparse.csgraph import connected_components
 
 import workbench
 from workbench.methods.regions.blend import RegionState
-from workbench.model import BlendShape, FaceModel
 from workbench.methods.regions.segmentation import (
     RegionError,
     Regions,
@@ -20,6 +19,7 @@ from workbench.methods.regions.segmentation import (
     mesh_adjacency,
     segment_blend_regions,
 )
+from workbench.model import BlendShape, FaceModel
 
 
 @pytest.fixture(scope="module")

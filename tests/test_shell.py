@@ -12,6 +12,8 @@ import trimesh
 from grid_meshes import grid_triangles
 
 from workbench.geometry.operators import cotangent_laplacian, mass_matrix
+from workbench.geometry.sparse_cholesky import SparseSPDSolver, cholmod_available
+from workbench.geometry.subdivision import loop_subdivision
 from workbench.methods.handles.shell import (
     DEFAULT_K_B,
     DEFAULT_K_S,
@@ -19,8 +21,6 @@ from workbench.methods.handles.shell import (
     ShellDeformer,
     shell_system_matrix,
 )
-from workbench.geometry.sparse_cholesky import SparseSPDSolver, cholmod_available
-from workbench.geometry.subdivision import loop_subdivision
 
 
 def _disk(n: int = 14) -> tuple[np.ndarray, np.ndarray]:

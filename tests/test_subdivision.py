@@ -9,9 +9,13 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from workbench.model import BlendShape, FaceModel, ModelMetadata
 from workbench.core.polygons import Polygons
-from workbench.geometry.subdivision import loop_subdivision, subdivide_model, subdivided_vertex_count
+from workbench.geometry.subdivision import (
+    loop_subdivision,
+    subdivide_model,
+    subdivided_vertex_count,
+)
+from workbench.model import BlendShape, FaceModel, ModelMetadata
 
 HEAD_OBJ = Path(__file__).resolve().parent.parent / "sample_models" / "head" / "head.obj"
 

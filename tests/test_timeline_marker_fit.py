@@ -11,14 +11,17 @@ import numpy as np
 import pytest
 
 import workbench
+from workbench.animation.tracks import TrackError, region_track_name
 from workbench.export import ExportError, export
 from workbench.export.encoding import MeshEncoding
 from workbench.fileformat import load_model
 from workbench.methods.handles.presets import default_face_handles
-from workbench.methods.regions.marker_fit import MarkerFit, fit_markers, generate_synthetic_marker_performance
+from workbench.methods.regions.marker_fit import (
+    MarkerFit,
+    fit_markers,
+    generate_synthetic_marker_performance,
+)
 from workbench.model import FaceModel, ModelError
-from workbench.methods.regions.blend import RegionState
-from workbench.animation.tracks import TrackError, region_track_name
 
 FRAMES = 8
 LEVEL = 1  # not the level segment_regions shows (0): keying must switch to it in the same step

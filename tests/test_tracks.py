@@ -11,7 +11,6 @@ from workbench.animation.tracks import (
     HANDLES,
     HEAD_POSE,
     Key,
-    MeshSampler,
     Timeline,
     Track,
     TrackError,
@@ -19,7 +18,6 @@ from workbench.animation.tracks import (
     add_keys,
     auto_clamped_slopes,
     delete_key,
-    evaluate_mesh,
     head_euler_from_rotation,
     head_rotation_from_euler,
     move_key,
@@ -286,13 +284,13 @@ def test_evaluate_mesh_matches_the_model_with_the_same_weights(tiny_model):
     )
     for t in (0.0, 0.3, 1.0):
         tiny_model.set_weights(tl.evaluate(t).weights)
-        assert evaluate_mesh(tiny_model, tl, t) == pytest.approx(tiny_model.evaluate(), abs=1e-6)
+        assert tiny_model.evaluate_at(t, tl) == pytest.approx(tiny_model.evaluate(), abs=1e-6)
 
 
 def test_head_pose_moves_points_rigidly(tiny_model):
     half = math.sqrt(0.5)
     tl = Timeline().add_key(HEAD_POSE, 0.0, [1, 2, 3, 0, 0, half, half])  # 90 deg about z
-    P = evaluate_mesh(tiny_model, tl, 0.0)
+    P = tiny_model.evaluate_at(0.0, tl)
     V = tiny_model.vertices
     expect = np.stack([-V[:, 1], V[:, 0], V[:, 2]], axis=1) + np.array([1.0, 2.0, 3.0])
     assert P == pytest.approx(expect, abs=1e-6)
@@ -301,8 +299,7 @@ def test_head_pose_moves_points_rigidly(tiny_model):
 def test_muted_shape_contributes_nothing(tiny_model):
     tiny_model.set_shape_mute("up", True)
     tl = Timeline().add_key(W, 0.0, 1.0)
-    assert MeshSampler(tiny_model, tl).weights([0.0])[0, 0] == 0.0
-    assert evaluate_mesh(tiny_model, tl, 0.0) == pytest.approx(tiny_model.vertices)
+    assert tiny_model.evaluate_at(0.0, tl) == pytest.approx(tiny_model.vertices)
 
 
 def test_json_round_trip_is_exact():

@@ -9,13 +9,13 @@ from __future__ import annotations
 
 __version__ = "0.1.0"
 
+from workbench.animation.tracks import Timeline
 from workbench.io import load
-from workbench.model import BlendShape, FaceModel, HandleSet, ModelError, ModelMetadata
+from workbench.methods.handles.shell import ShellDeformer
 from workbench.methods.paint.painting import Brush
 from workbench.methods.regions.segmentation import Regions, segment_blend_regions
+from workbench.model import BlendShape, FaceModel, HandleSet, ModelError, ModelMetadata
 from workbench.samples import load_sample
-from workbench.methods.handles.shell import ShellDeformer
-from workbench.animation.tracks import Timeline
 
 __all__ = [
     "BlendShape",

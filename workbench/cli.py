@@ -91,9 +91,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(format_info(model, args.path))
         return 0
     if args.command == "export":
+        from workbench.animation.tracks import TrackError
         from workbench.export import ExportError, export
         from workbench.io import load
-        from workbench.animation.tracks import TrackError
 
         try:
             model = load(args.saved_file)

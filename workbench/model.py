@@ -26,7 +26,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 import workbench.animation.family
-import workbench.methods  # noqa: F401  (registers the method families)
+import workbench.methods
 from workbench.converters import mesh_converter
 from workbench.core.families import set_hook
 from workbench.core.shapes import AXES, UNIT_TO_METRES, BlendShape, ModelError, ModelMetadata

@@ -19,8 +19,8 @@ pytest.importorskip("ipywidgets")
 import widgets
 from widgets.expression_panel import layout_rows
 from widgets.viewport import BUNDLE
-from workbench.model import BlendShape, FaceModel
 from workbench.core.polygons import Polygons
+from workbench.model import BlendShape, FaceModel
 
 pytestmark = pytest.mark.skipif(
     not BUNDLE.exists(), reason="viewport bundle not built (npm --prefix widgets/js run build)"

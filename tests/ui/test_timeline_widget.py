@@ -12,9 +12,9 @@ import concurrent.futures
 import itertools
 
 import numpy as np
+import pytest
 
 from workbench.core.pipeline import FunctionLayer
-import pytest
 
 pytest.importorskip("anywidget")
 

@@ -18,8 +18,8 @@ import ipywidgets as W
 from widgets import Viewport, Workbench, WrinklePanel
 from widgets.wrinkle_panel import example_detailed, set_wrinkle_strength
 from workbench import load_sample
-from workbench.model import HandleSet
 from workbench.methods.wrinkles.examples import EXAMPLE_POSES
+from workbench.model import HandleSet
 
 pytestmark = pytest.mark.ui
 

@@ -40,7 +40,7 @@ def check_timeline(model: FaceState, value: Any) -> Timeline:
 
 
 def sample(view: StateView) -> TimelineSample:
-    return view.slot("tracks").evaluate(view.time)  # type: ignore[no-any-return]
+    return view.slot("tracks").evaluate(view.time)
 
 
 def head_matrix(view: StateView) -> NDArray[np.float64] | None:
@@ -58,7 +58,7 @@ def head_matrix(view: StateView) -> NDArray[np.float64] | None:
 class TracksFilePart:
     """``tracks``: the timeline as JSON (:meth:`Timeline.to_json`); no arrays."""
 
-    keys = ("tracks",)
+    keys: tuple[str, ...] = ("tracks",)
 
     def save(self, model: FaceState) -> tuple[dict[str, Any], dict[str, Any]]:
         return {"tracks": model.slot("tracks").to_json()}, {}

@@ -47,8 +47,15 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from workbench.animation.tracks import (
+    Interpolation,
+    Key,
+    Timeline,
+    Track,
+    TrackError,
+    weight_track_name,
+)
 from workbench.arkit import canonical_arkit_name
-from workbench.animation.tracks import Interpolation, Key, Timeline, Track, TrackError, weight_track_name
 
 __all__ = [
     "AnimationImportError",
@@ -456,8 +463,8 @@ def read_gltf_animation(
         No weights animation, unnamed targets, unknown names, NaN values,
         non-increasing times, output counts that do not match.
     """
-    from workbench.io.gltf import _GLB_MAGIC, _Gltf, _parse_json, _split_glb
     from workbench.geometry.mesh_checks import MeshFormatError
+    from workbench.io.gltf import _GLB_MAGIC, _Gltf, _parse_json, _split_glb
 
     p = Path(path)
     src = str(p)

@@ -69,7 +69,7 @@ class TimelineFacet:
 
     @property
     def value(self) -> Timeline:
-        return self._model.slot("tracks")  # type: ignore[no-any-return]
+        return self._model.slot("tracks")
 
     def __repr__(self) -> str:
         return f"<timeline: {self.value!r}>"

@@ -94,7 +94,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 if TYPE_CHECKING:
-    from workbench.model import FaceModel
+    from workbench.core.state import FaceState as FaceModel
 
 __all__ = [
     "HANDLES",
@@ -104,7 +104,6 @@ __all__ = [
     "TANGENT_MODES",
     "WEIGHTS_PREFIX",
     "Key",
-    "MeshSampler",
     "Timeline",
     "TimelineSample",
     "Track",
@@ -113,7 +112,6 @@ __all__ = [
     "add_keys",
     "auto_clamped_slopes",
     "delete_key",
-    "evaluate_mesh",
     "head_euler_from_rotation",
     "head_rotation_from_euler",
     "move_key",
@@ -845,10 +843,11 @@ class Timeline:
                 f"{sorted(names)[:8]}{'...' if len(names) > 8 else ''}"
             )
         h = self.handles
-        if h is not None and h.value_shape[0] != len(model.handles):
+        n_handles = len(model.slot("handles"))
+        if h is not None and h.value_shape[0] != n_handles:
             raise TrackError(
                 f"the 'handles' track keys {h.value_shape[0]} handles but the model has "
-                f"{len(model.handles)}"
+                f"{n_handles}"
             )
         rt = self.region_tracks
         if not rt:
@@ -1172,163 +1171,3 @@ def set_tangents(
     keys = list(tr.keys)
     keys[i] = new
     return timeline.with_track(Track(track, tuple(keys)))
-
-
-# ------------------------------------------------------------------ mesh evaluation
-class MeshSampler:
-    """Evaluate the animated mesh of ``model`` under ``timeline`` at many times.
-
-    The mesh at time ``t`` is (model units)::
-
-        p(t) = R(t) (neutral + Σ_k w_k(t) δ_k + D(o(t))) + T(t)
-
-    with ``δ_k`` the effective (masked) deltas of unmuted shapes, ``w_k`` the
-    keyed weights (unkeyed shapes: the model's current weight), ``D(o)`` the
-    handle layer's shell displacement for the keyed handle offsets ``o(t)``
-    (unkeyed: the model's current offsets) and ``R, T`` the head pose. Weights
-    are *not* clamped to the shapes' slider range (glTF/USD consumers do not
-    clamp either; auto-clamped keys never leave the keys' value range).
-
-    The shell displacement is linear in the offsets, ``D(o) = B o`` (see
-    :mod:`workbench.methods.handles.shell`); :meth:`handle_basis` exposes it per handle
-    component for exports. The region, paint and registered layers (and so
-    region tracks) are not evaluated here: :meth:`FaceModel.evaluate_at` and
-    :class:`workbench.export.encoding.MeshEncoding` are the full evaluation.
-
-    Parameters
-    ----------
-    model : FaceModel
-    timeline : Timeline
-        Checked against the model (:meth:`Timeline.check_model`).
-    """
-
-    def __init__(self, model: FaceModel, timeline: Timeline) -> None:
-        timeline.check_model(model)
-        self.model = model
-        self.timeline = timeline
-        with model.lock:
-            self.shape_names = list(model.shape_names)
-            self.neutral = np.asarray(model.vertices, np.float32)
-            shapes = model.shapes
-            self.muted = np.array([s.mute for s in shapes], bool)
-            self.deltas = np.stack(
-                [s.effective_delta() for s in shapes]
-            ) if shapes else np.zeros((0, model.n_vertices, 3), np.float32)
-            self.static_weights = np.array([model.weights[n] for n in self.shape_names])
-            self.static_offsets = np.asarray(model.handles.offsets, np.float64)
-        self._deformer: Any = None
-
-    @property
-    def n_vertices(self) -> int:
-        return int(self.neutral.shape[0])
-
-    def weights(self, times: ArrayLike) -> NDArray[np.float64]:
-        """(F, k) weights of every model shape (muted shapes: 0)."""
-        ts = np.asarray(times, np.float64).reshape(-1)
-        W = np.repeat(self.static_weights[None, :], ts.size, axis=0)
-        index = {n: i for i, n in enumerate(self.shape_names)}
-        for s, tr in self.timeline.weight_tracks.items():
-            W[:, index[s]] = tr.sample(ts)[:, 0]
-        W[:, self.muted] = 0.0
-        return W
-
-    def handle_offsets(self, times: ArrayLike) -> NDArray[np.float64]:
-        """(F, h, 3) handle offsets (model units)."""
-        ts = np.asarray(times, np.float64).reshape(-1)
-        h = self.timeline.handles
-        if h is None:
-            return np.repeat(self.static_offsets[None], ts.size, axis=0)
-        return h.sample(ts).reshape(ts.size, -1, 3)
-
-    @property
-    def has_handle_layer(self) -> bool:
-        """True when the handle layer moves the mesh at some time."""
-        h = self.timeline.handles
-        if len(self.model.handles) == 0:
-            return False
-        if h is None:
-            return bool(np.any(self.static_offsets))
-        return bool(np.any(h.values)) or bool(np.any(h._in)) or bool(np.any(h._out))
-
-    def _shell(self) -> Any:
-        if self._deformer is None:
-            # Same construction as workbench.methods.handles.layer.HandleLayer (deterministic),
-            # so the displacement equals the model's own handle layer.
-            from workbench.methods.handles.shell import ShellDeformer
-
-            k_s, k_b = self.model.handles.stiffness
-            self._deformer = ShellDeformer(
-                self.model.vertices,
-                self.model.faces,
-                self.model.handles.vertices,
-                k_s,
-                k_b,
-                component_labels=self.model.component_labels,
-                component_names=self.model.component_names,
-            )
-        return self._deformer
-
-    def handle_basis(self) -> NDArray[np.float32]:
-        """(h, 3, n, 3) float32: displacement of every vertex per unit offset of handle j, axis a."""
-        h = len(self.model.handles)
-        out = np.zeros((h, 3, self.n_vertices, 3), np.float32)
-        d = self._shell()
-        for j in range(h):
-            for a in range(3):
-                e = np.zeros((h, 3))
-                e[j, a] = 1.0
-                out[j, a] = d.displacement(e)
-        return out
-
-    def handle_displacement(self, offsets: ArrayLike) -> NDArray[np.float32]:
-        """(n, 3) float32 shell displacement for (h, 3) offsets."""
-        o = np.asarray(offsets, np.float64).reshape(-1, 3)
-        if not np.any(o):
-            return np.zeros((self.n_vertices, 3), np.float32)
-        return np.asarray(self._shell().displacement(o), np.float32)
-
-    def local_points(self, times: ArrayLike) -> NDArray[np.float32]:
-        """(F, n, 3) float32 positions without the head pose (model units)."""
-        ts = np.asarray(times, np.float64).reshape(-1)
-        W = self.weights(ts).astype(np.float32)
-        k = len(self.shape_names)
-        n = self.n_vertices
-        out = np.empty((ts.size, n, 3), np.float32)
-        flat = out.reshape(ts.size, -1)
-        flat[:] = self.neutral.reshape(-1)
-        if k:
-            flat += W @ self.deltas.reshape(k, -1)
-        if self.has_handle_layer:
-            offsets = self.handle_offsets(ts)
-            for f in range(ts.size):
-                out[f] += self.handle_displacement(offsets[f])
-        return out
-
-    def head_matrices(self, times: ArrayLike) -> NDArray[np.float64]:
-        """(F, 4, 4) head transforms (identity when the head pose is not keyed)."""
-        ts = np.asarray(times, np.float64).reshape(-1)
-        M = np.repeat(np.eye(4)[None], ts.size, axis=0)
-        hp = self.timeline.head_pose
-        if hp is not None:
-            P = hp.sample(ts)
-            for f in range(ts.size):
-                M[f, :3, :3] = quaternion_to_matrix(P[f, 3:])
-                M[f, :3, 3] = P[f, :3]
-        return M
-
-    def points(self, times: ArrayLike) -> NDArray[np.float32]:
-        """(F, n, 3) float32 positions including the head pose (model units)."""
-        ts = np.asarray(times, np.float64).reshape(-1)
-        P = self.local_points(ts)
-        if self.timeline.head_pose is not None:
-            M = self.head_matrices(ts).astype(np.float32)
-            P = np.einsum("fij,fnj->fni", M[:, :3, :3], P) + M[:, None, :3, 3]
-        return np.ascontiguousarray(P, np.float32)
-
-
-def evaluate_mesh(
-    model: FaceModel, timeline: Timeline, time: float, *, head_pose: bool = True
-) -> NDArray[np.float32]:
-    """(n, 3) float32 animated mesh at ``time`` (see :class:`MeshSampler`), model units."""
-    s = MeshSampler(model, timeline)
-    return (s.points([time]) if head_pose else s.local_points([time]))[0]

@@ -28,7 +28,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 if TYPE_CHECKING:
     from workbench.core.manifest import Checker, Spec
-    from workbench.core.pipeline import Layer, StateView
+    from workbench.core.pipeline import StateView
     from workbench.core.state import FaceState
 
 
@@ -90,7 +90,7 @@ class Family:
     name: str
     slots: tuple[SlotSpec, ...] = ()
     facet: Callable[[FaceState], Any] | None = None
-    layer: Callable[[], Layer] | None = None
+    layer: Callable[[], Any] | None = None  # -> Layer
     order: float = 0.0
     file_part: FilePart | None = None
     #: ``animate(view, sample) -> {slot: value}``: its slots' values at a timeline sample

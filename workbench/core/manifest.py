@@ -12,6 +12,7 @@ import json
 import math
 import os
 import re
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, NoReturn
 
@@ -80,7 +81,7 @@ class Checker:
     def expect(self, field: str, what: str, got: Any) -> NoReturn:
         self.fail(field, f"expected {what}, got {show_json(got)}")
 
-    def key(self, obj: dict[str, Any], base: str, key: str, default: Any = _REQUIRED) -> Any:
+    def key(self, obj: Mapping[str, Any], base: str, key: str, default: Any = _REQUIRED) -> Any:
         if key in obj:
             return obj[key]
         if default is _REQUIRED:

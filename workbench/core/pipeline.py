@@ -183,7 +183,7 @@ class FunctionLayer:
         self.fn = fn
 
     def displacement(self, view: StateView, below: NDArray[np.float32]) -> NDArray[np.float32] | None:
-        return self.fn(view)  # type: ignore[no-any-return]
+        return self.fn(view)
 
 
 @dataclass(frozen=True)

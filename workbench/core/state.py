@@ -434,7 +434,7 @@ class FaceState(ShapeStack):
                 s = self._shapes[self._index[name]]
                 weights[name] = min(max(float(w), s.slider_min), s.slider_max)
         view = StateView(self, weights, {**self._slots, **tl}, self._version, t)
-        slots: dict[str, Any] = {}
+        slots: dict[str, Any] = dict(tl)
         for animate in self._animators:
             slots.update(animate(view, sample))
         return weights, slots
@@ -538,7 +538,7 @@ class FaceState(ShapeStack):
         pose = _families._HOOKS.get("head_pose")
         return None if pose is None else pose(view)
 
-    def head_matrix(self, identity: bool = True) -> NDArray[np.float64] | None:  # type: ignore[return]
+    def head_matrix(self, identity: bool = True) -> NDArray[np.float64] | None:
         """(4, 4) rigid transform :meth:`evaluate` applies now (identity when no head pose is keyed).
 
         Tools that pick points on the shown mesh map them back to model space with its inverse.

@@ -49,12 +49,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-import numpy as np
-from numpy.typing import NDArray
-
 if TYPE_CHECKING:
-    from workbench.model import FaceModel
     from workbench.animation.tracks import Timeline
+    from workbench.model import FaceModel
 
 __all__ = [
     "FORMATS",

@@ -39,8 +39,8 @@ from typing import TYPE_CHECKING
 from workbench.export import ExportError, ExportResult, atomic_path
 
 if TYPE_CHECKING:
-    from workbench.model import FaceModel
     from workbench.animation.tracks import Timeline
+    from workbench.model import FaceModel
 
 _SCRIPT = r"""
 import json, sys

@@ -27,10 +27,10 @@ import math
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from workbench.animation.tracks import Timeline
 from workbench.arkit import canonical_arkit_name
 from workbench.export import ExportError, ExportResult, LayerReport, atomic_path
 from workbench.export.encoding import MeshEncoding
-from workbench.animation.tracks import Timeline
 
 if TYPE_CHECKING:
     from workbench.model import FaceModel

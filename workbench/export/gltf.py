@@ -78,9 +78,9 @@ import numpy as np
 import pygltflib
 from numpy.typing import NDArray
 
+from workbench.animation.tracks import HEAD_POSE, Key, Timeline, Track
 from workbench.export import ExportError, ExportResult, LayerReport, atomic_write_bytes
 from workbench.export.encoding import MeshEncoding, crossing_times
-from workbench.animation.tracks import HEAD_POSE, Key, Timeline, Track
 
 if TYPE_CHECKING:
     from workbench.model import FaceModel

@@ -47,9 +47,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from workbench.animation.tracks import Timeline
 from workbench.export import ExportError, ExportResult, LayerReport, atomic_path
 from workbench.export.encoding import MeshEncoding
-from workbench.animation.tracks import Timeline
 
 if TYPE_CHECKING:
     from workbench.model import FaceModel

@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 
 from workbench.fileformat import SUFFIX, load_model
-from workbench.io.registry import ImportedFace, read_any
 from workbench.geometry.mesh_checks import label_components
+from workbench.io.registry import ImportedFace, read_any
 from workbench.model import BlendShape, FaceModel, ModelMetadata
 
 __all__ = ["ImportedFace", "load", "model_from_imported"]

@@ -17,8 +17,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from workbench.arkit import canonical_arkit_name
-from workbench.geometry.mesh_checks import MeshFormatError, label_components
 from workbench.core.polygons import Polygons
+from workbench.geometry.mesh_checks import MeshFormatError, label_components
 
 __all__ = [
     "ImportedFace",

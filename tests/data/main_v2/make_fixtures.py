@@ -12,12 +12,12 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-
-import workbench
 from workbench.handle_presets import default_face_handles
-from workbench.model import BlendShape, FaceModel
 from workbench.paint import Brush
 from workbench.tracks import head_rotation_from_euler
+
+import workbench
+from workbench.model import FaceModel
 
 HERE = Path(__file__).parent
 KEEP = ["jawOpen", "mouthSmileLeft", "mouthSmileRight", "browInnerUp", "eyeBlinkLeft", "browDownLeft"]

@@ -55,7 +55,7 @@ class HandlesFacet:
     # ------------------------------------------------------------------ reading
     @property
     def value(self) -> HandleSet:
-        return self._model.slot("handles")  # type: ignore[no-any-return]
+        return self._model.slot("handles")
 
     @property
     def vertices(self) -> NDArray[np.int32]:
@@ -82,7 +82,7 @@ class HandlesFacet:
     @property
     def stiffness(self) -> tuple[float, float]:
         """``(k_s, k_b)`` of the thin-shell energy."""
-        return self._model.slot("shell_stiffness")  # type: ignore[no-any-return]
+        return self._model.slot("shell_stiffness")
 
     @property
     def layer(self) -> HandleLayer:

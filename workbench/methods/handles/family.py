@@ -28,7 +28,7 @@ class HandlesFilePart:
     ``stiffness`` is new in this release; files without it get the default.
     """
 
-    keys = ("handles",)
+    keys: tuple[str, ...] = ("handles",)
 
     def save(self, model: FaceState) -> tuple[dict[str, Any], dict[str, Any]]:
         h = model.slot("handles")

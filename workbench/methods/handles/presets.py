@@ -27,7 +27,8 @@ from scipy.spatial import cKDTree
 from workbench.arkit import canonical_arkit_name, shape_group
 
 if TYPE_CHECKING:
-    from workbench.model import FaceModel, HandleSet
+    from workbench.core.state import FaceState as FaceModel
+    from workbench.methods.handles.handle_set import HandleSet
 
 
 def mirror_vertices(V: NDArray[np.float64], ids: NDArray[np.int64], candidates: NDArray[np.int64]) -> NDArray[np.int64]:
@@ -56,7 +57,8 @@ def default_face_handles(model: FaceModel, per_side: int = 40, min_fraction: flo
     -------
     HandleSet with zero offsets and mirror links.
     """
-    from workbench.model import HandleSet, ModelError
+    from workbench.core.shapes import ModelError
+    from workbench.methods.handles.handle_set import HandleSet
 
     if not model.shapes:
         raise ModelError("default_face_handles: the model has no blendshapes to find moving regions")

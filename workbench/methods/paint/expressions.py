@@ -81,7 +81,7 @@ def expression_displacement(state: FaceState | StateView, name: str) -> NDArray[
     """
     lib = state.slot("expressions")
     if name in lib:
-        return lib[name].displacement  # type: ignore[no-any-return]
+        return lib[name].displacement
     names = state.shape_names
     if name in names:
         return state.effective_deltas[names.index(name)]

@@ -39,7 +39,7 @@ class ExpressionsFacet(Mapping[str, Expression]):
 
     @property
     def value(self) -> Mapping[str, Expression]:
-        return self._model.slot("expressions")  # type: ignore[no-any-return]
+        return self._model.slot("expressions")
 
     def __getitem__(self, name: str) -> Expression:
         return self.value[name]
@@ -115,7 +115,7 @@ class PaintFacet(Mapping[str, NDArray[np.float32]]):
 
     @property
     def mix(self) -> PaintMix:
-        return self._model.slot("paint_layers")  # type: ignore[no-any-return]
+        return self._model.slot("paint_layers")
 
     def __getitem__(self, name: str) -> NDArray[np.float32]:
         return self.mix[name]

@@ -26,13 +26,13 @@ def _check_library(model: FaceState, value: Any) -> Mapping[str, Expression]:
             raise ModelError(f"expressions: {name!r} must map to an Expression of that name")
         if e.displacement.shape != (model.n_vertices, 3):
             raise ModelError(f"expression {name!r}: displacement must be ({model.n_vertices}, 3)")
-    return value  # type: ignore[no-any-return]
+    return value
 
 
 class ExpressionsFilePart:
     """``expressions: [{"name", "weights", "n_handles"}]`` and the ``expression_*`` arrays."""
 
-    keys = ("expressions",)
+    keys: tuple[str, ...] = ("expressions",)
 
     def save(self, model: FaceState) -> tuple[dict[str, Any], dict[str, Any]]:
         lib = model.slot("expressions")
@@ -102,7 +102,7 @@ class ExpressionsFilePart:
 class PaintFilePart:
     """``paint: ["smile", ...]`` and ``paint_maps`` (P, n) <f4 in that order."""
 
-    keys = ("paint",)
+    keys: tuple[str, ...] = ("paint",)
 
     def save(self, model: FaceState) -> tuple[dict[str, Any], dict[str, Any]]:
         mix = model.slot("paint_layers")

@@ -56,10 +56,9 @@ search is scipy's.
 
 from __future__ import annotations
 
-import threading
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Literal
+from typing import Literal
 
 import igl
 import numpy as np
@@ -67,7 +66,6 @@ import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
-
 
 Falloff = Literal["smooth", "linear", "constant", "sphere"]
 Mode = Literal["add", "subtract", "smooth"]

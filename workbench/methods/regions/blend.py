@@ -51,16 +51,17 @@ from scipy.optimize import lsq_linear, nnls
 from workbench.methods.regions.segmentation import RegionError, Regions
 
 if TYPE_CHECKING:
-    from workbench.model import FaceModel
+    from workbench.core.pipeline import StateView
+    from workbench.core.state import FaceState as FaceModel
 
 __all__ = [
+    "RegionLayer",
     "RegionState",
     "RegionWeights",
     "damp_drag",
     "drag_damping",
     "region_blend_displacement",
     "region_blend_positions",
-    "RegionLayer",
     "solve_region_drag",
 ]
 
@@ -195,7 +196,7 @@ class RegionState:
 
 
 # ------------------------------------------------------------------ evaluation
-def _check(model: FaceModel, regions: Regions, rw: RegionWeights, level: int | None) -> tuple[int, RegionWeights]:
+def _check(model: FaceModel | StateView, regions: Regions, rw: RegionWeights, level: int | None) -> tuple[int, RegionWeights]:
     if regions.n_vertices != model.n_vertices:
         raise RegionError(f"regions: made for {regions.n_vertices} vertices, the model has {model.n_vertices}")
     if tuple(model.shape_names) != rw.shape_names:
@@ -206,16 +207,16 @@ def _check(model: FaceModel, regions: Regions, rw: RegionWeights, level: int | N
     return lv, rw.to_level(regions, lv)
 
 
-def _mute(model: FaceModel) -> NDArray[np.float32]:
+def _mute(model: FaceModel | StateView) -> NDArray[np.float32]:
     return np.array([0.0 if s.mute else 1.0 for s in model.shapes], np.float32)
 
 
-def _global(model: FaceModel) -> NDArray[np.float32]:
+def _global(model: FaceModel | StateView) -> NDArray[np.float32]:
     return np.array([model.weights[nm] for nm in model.shape_names], np.float32)
 
 
 def region_blend_displacement(
-    model: FaceModel, regions: Regions, region_weights: RegionWeights, level: int | None = None
+    model: FaceModel | StateView, regions: Regions, region_weights: RegionWeights, level: int | None = None
 ) -> NDArray[np.float32]:
     """The region blend as a layer on top of the model's global blend.
 

@@ -46,7 +46,7 @@ class RegionsFacet:
     # ------------------------------------------------------------------ reading
     @property
     def state(self) -> RegionState | None:
-        return self._model.slot("regions")  # type: ignore[no-any-return]
+        return self._model.slot("regions")
 
     @property
     def segmented(self) -> bool:

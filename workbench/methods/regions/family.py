@@ -108,7 +108,7 @@ def _check_regions(c: Checker, value: Any) -> dict[str, Any] | None:
 class RegionsFilePart:
     """``regions: null | {...}`` in the manifest and the ``regions_*`` arrays (see :mod:`workbench.fileformat`)."""
 
-    keys = ("regions",)
+    keys: tuple[str, ...] = ("regions",)
 
     def save(self, model: FaceState) -> tuple[dict[str, Any], dict[str, Any]]:
         return {"regions": _regions_json(model)}, _region_arrays(model)

@@ -63,7 +63,7 @@ from workbench.methods.regions.blend import (
 from workbench.methods.regions.segmentation import RegionError, Regions, component_roles
 
 if TYPE_CHECKING:
-    from workbench.model import FaceModel
+    from workbench.core.state import FaceState as FaceModel
 
 __all__ = [
     "MarkerFit",

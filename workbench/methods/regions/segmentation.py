@@ -100,7 +100,7 @@ from workbench.arkit import canonical_arkit_name, shape_group
 from workbench.geometry.operators import cotangent_laplacian, mass_matrix
 
 if TYPE_CHECKING:
-    from workbench.model import FaceModel
+    from workbench.core.state import FaceState as FaceModel
 
 __all__ = [
     "RegionEdit",
@@ -744,9 +744,9 @@ def segment_blend_regions(
     RegionError
         If an argument is out of range or the model has no shapes / no moving skin.
     """
-    from workbench.model import FaceModel
+    from workbench.core.state import FaceState
 
-    if not isinstance(model, FaceModel):
+    if not isinstance(model, FaceState):
         raise RegionError(f"model must be a FaceModel, got {type(model).__name__}")
     t = _check_fraction("threshold", threshold, 0.0, 1.0, closed_hi=True)
     if not isinstance(levels, int | np.integer) or isinstance(levels, bool) or levels < 1:

@@ -52,11 +52,11 @@ import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 
 from workbench.geometry.operators import cotangent_laplacian, mass_matrix
-from workbench.methods.wrinkles.pose_space import vertex_normals
 from workbench.geometry.sparse_cholesky import SparseSPDSolver
+from workbench.methods.wrinkles.pose_space import vertex_normals
 
 if TYPE_CHECKING:
-    from workbench.model import FaceModel
+    from workbench.core.state import FaceState as FaceModel
 
 Weights = Mapping[str, float]
 

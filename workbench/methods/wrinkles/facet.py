@@ -37,7 +37,7 @@ class WrinklesFacet:
     # ------------------------------------------------------------------ reading
     @property
     def state(self) -> WrinkleState:
-        return self._model.slot("wrinkles")  # type: ignore[no-any-return]
+        return self._model.slot("wrinkles")
 
     @property
     def layer(self) -> WrinkleLayer:

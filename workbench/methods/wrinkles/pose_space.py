@@ -71,8 +71,8 @@ import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
-from workbench.methods.wrinkles import kernels as _kernels
 from workbench.methods.handles.shell import ShellDeformer
+from workbench.methods.wrinkles import kernels as _kernels
 
 FloatArray = NDArray[np.float64]
 FitMode = Literal["interp", "lsq"]
