@@ -20,8 +20,8 @@ from pathlib import Path
 import numpy as np
 
 import workbench
-from workbench.export import export
 from workbench.animation.tracks import Key, Timeline, Track, weight_track_name
+from workbench.export import export
 
 FORMATS = {
     "glb": ("face.glb", {}),

@@ -27,13 +27,13 @@ import numpy as np
 
 import workbench
 from workbench.methods.handles.presets import default_face_handles
-from workbench.methods.regions.marker_fit import fit_markers, generate_synthetic_marker_performance
 from workbench.methods.regions.blend import (
     RegionWeights,
     drag_system,
     region_blend_positions,
     solve_region_drag,
 )
+from workbench.methods.regions.marker_fit import fit_markers, generate_synthetic_marker_performance
 from workbench.methods.regions.segmentation import segment_blend_regions
 
 

@@ -30,9 +30,9 @@ import igl
 import numpy as np
 
 import workbench
+from workbench.geometry.sparse_cholesky import cholmod_available
 from workbench.methods.handles.presets import default_face_handles
 from workbench.methods.handles.shell import ShellDeformer
-from workbench.geometry.sparse_cholesky import cholmod_available
 
 
 def ms(fn, repeat: int = 20) -> float:
