@@ -16,11 +16,9 @@ span several messages are held by an :class:`InteractionToken`.
 from __future__ import annotations
 
 import itertools
-import math
 import threading
-from collections.abc import Callable, Iterable, Iterator, Mapping
+from collections.abc import Iterable, Iterator, Mapping
 from contextlib import contextmanager
-from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any
 
@@ -29,11 +27,18 @@ from numpy.typing import ArrayLike, NDArray
 from psygnal import Signal, SignalGroup
 
 from workbench.core import families as _families
+from workbench.core.evaluation import Evaluator
 from workbench.core.history import Command, History, payload_nbytes
-from workbench.core.pipeline import Evaluation, Layer, Pipeline, StateView, posed_points
+from workbench.core.interactions import Interactions, InteractionToken, _Interaction
+from workbench.core.pipeline import Pipeline
 from workbench.core.polygons import Polygons
 from workbench.core.shape_stack import ShapeStack
 from workbench.core.shapes import ModelError, ModelMetadata, readonly
+
+__all__ = ["FaceState", "InteractionToken"]
+
+#: versions of live values (a sampled view's are negative: never equal)
+_versions = itertools.count(1)
 
 _EVENT_CLASSES: dict[tuple[tuple[str, bool], ...], type[SignalGroup]] = {}
 
@@ -61,37 +66,7 @@ def _events_class(slots: Iterable[_families.SlotSpec]) -> type[SignalGroup]:
     return cls
 
 
-@dataclass(frozen=True)
-class InteractionToken:
-    """Names one open interaction (a drag, a stroke) across separate messages.
-
-    Returned by :meth:`FaceState.begin_interaction`; pass it back to
-    :meth:`~FaceState.end_interaction` (one undo step) or
-    :meth:`~FaceState.cancel_interaction` (everything put back, no undo step).
-    A token of an interaction already closed is refused, so a late message of
-    an old gesture can never close a newer one.
-    """
-
-    label: str
-    serial: int
-
-
-_serials = itertools.count(1)
-_versions = itertools.count(1)
-
-
-@dataclass
-class _Interaction:
-    label: str
-    token: InteractionToken | None = None
-    on_close: Callable[[], None] | None = None
-    weights_before: dict[str, float] = field(default_factory=dict)
-    slots_before: dict[str, Any] = field(default_factory=dict)
-    #: scratch space of the facets for this interaction (e.g. the paint stroke's running max)
-    scratch: dict[str, Any] = field(default_factory=dict)
-
-
-class FaceState(ShapeStack):
+class FaceState(ShapeStack, Evaluator, Interactions):
     """Neutral mesh, blendshapes, weights and method slots, with undo and events.
 
     Parameters
@@ -173,7 +148,6 @@ class FaceState(ShapeStack):
         self._interaction: _Interaction | None = None
         self._time = 0.0
         self._version: dict[str, int] = {"shapes": next(_versions), "weights": next(_versions)}
-        self._live: tuple[tuple[Any, ...], Evaluation] | None = None
         self._posed: tuple[NDArray[np.float32], NDArray[np.float64], NDArray[np.float32]] | None = None
         self._init_shapes(tuple(shapes))
         if weights:
@@ -393,279 +367,6 @@ class FaceState(ShapeStack):
     def reset_weights(self) -> None:
         """All weights to 0 (clamped into each slider range); one undo step."""
         self.set_weights({s.name: 0.0 for s in self._shapes}, label="Reset weights")
-
-    # --------------------------------------------------------------- evaluate
-    @property
-    def time(self) -> float:
-        """Current time in seconds (set by :meth:`set_time`)."""
-        return self._time
-
-    def view(self) -> StateView:
-        """The live state as layers see it."""
-        return StateView(self, self._weights, self._slots, self._version, self._time,
-                         self._interaction is not None)
-
-    def view_at(self, time: float, timeline: Any = None) -> StateView:
-        """The state sampled at ``time`` from ``timeline`` (default: the model's own), unchanged live."""
-        t = float(time)
-        if not math.isfinite(t):
-            raise ModelError(f"time must be finite, got {time!r}")
-        with self._lock:
-            weights, slots = self._sampled(t, timeline)
-            versions = dict(self._version)
-            for name in (*slots, "weights"):
-                versions[name] = next(_versions)
-            return StateView(self, weights, {**self._slots, **slots}, versions, t, False)
-
-    def _sampled(self, t: float, timeline: Any) -> tuple[dict[str, float], dict[str, Any]]:
-        """Weights (clamped) and slot values the timeline gives at ``t``; the live state is untouched.
-
-        The timeline's family (registered as the ``"sampler"`` hook) samples it; each
-        family's ``animate`` turns the sample into values of its own slots.
-        """
-        sampler = _families._HOOKS.get("sampler")
-        weights = dict(self._weights)
-        if sampler is None:
-            return weights, {}
-        tl = {} if timeline is None else {"tracks": timeline}
-        sample = sampler(StateView(self, weights, {**self._slots, **tl}, self._version, t))
-        for name, w in sample.weights.items():
-            if name in weights:
-                s = self._shapes[self._index[name]]
-                weights[name] = min(max(float(w), s.slider_min), s.slider_max)
-        view = StateView(self, weights, {**self._slots, **tl}, self._version, t)
-        slots: dict[str, Any] = dict(tl)
-        for animate in self._animators:
-            slots.update(animate(view, sample))
-        return weights, slots
-
-    def set_time(self, time: float) -> None:
-        """Go to ``time``: whatever the timeline keys animates; not an undo step (as in Blender).
-
-        Afterwards :meth:`evaluate` equals ``evaluate_at(time)`` bit for bit.
-        """
-        t = float(time)
-        if not math.isfinite(t):
-            raise ModelError(f"time must be finite, got {time!r}")
-        with self._lock:
-            if self._interaction is not None:
-                raise ModelError("set_time: finish the drag first")
-            weights, slots = self._sampled(t, None)
-            self._time = t
-            changed_w = {k: v for k, v in weights.items() if self._weights[k] != v}
-            self._weights.update(changed_w)
-            if changed_w:
-                self._bump("weights")
-            for name, value in slots.items():
-                if self._slots[name] is not value:
-                    self._slots[name] = value
-                    self._bump(name)
-            self.events.time.emit(t)
-            self.events.weights.emit(dict(self._weights))
-            for name in slots:
-                getattr(self.events, name).emit()
-            self.events.deformed.emit(True)
-
-    def evaluate(self, posed: bool = True) -> NDArray[np.float32]:
-        """(n, 3) float32, read-only: the current mesh (blend + every layer, then the head pose).
-
-        ``posed=False``: without the head pose (model space, where layers,
-        expressions and handle offsets live).
-        """
-        with self._lock:
-            local = self.pipeline.run(self.view()).mesh
-            if not posed:
-                return local
-            M = self.head_matrix(identity=False)
-            if M is None:
-                return local
-            c = self._posed
-            if c is None or c[0] is not local or not np.array_equal(c[1], M):
-                c = (local, M, readonly(posed_points(local, M)))
-                self._posed = c
-            return c[2]
-
-    def evaluate_at(self, time: float, timeline: Any = None) -> NDArray[np.float32]:
-        """(n, 3) float32 mesh at ``time`` (head pose applied), without changing the model.
-
-        ``timeline`` (default: the model's) animates what it keys; exporters pass
-        the one they write. ``set_time(time)`` then :meth:`evaluate` gives the same bits.
-        """
-        with self._lock:
-            view = self.view_at(time, timeline)
-            out = self.pipeline.run(view, cache=False).mesh
-            M = self._head(view)
-            return np.array(out) if M is None else posed_points(out, M)
-
-    def evaluation_at(self, time: float, timeline: Any = None) -> Evaluation:
-        """The whole :class:`Evaluation` (mesh without head pose, each layer's displacement) at ``time``."""
-        with self._lock:
-            return self.pipeline.run(self.view_at(time, timeline), cache=False)
-
-    def layers_at(
-        self, time: float, names: Iterable[str], timeline: Any = None
-    ) -> dict[str, NDArray[np.float32] | None]:
-        """Displacements (n, 3) float32 (or None) of the named layers at ``time``; no head pose."""
-        wanted = list(names)
-        unknown = [n for n in wanted if n not in self.pipeline.names]
-        if unknown:
-            raise KeyError(f"no layers named {unknown}; layers are {self.pipeline.names}")
-        shown = self.evaluation_at(time, timeline).displacements
-        return {n: shown[n] for n in wanted}
-
-    def blended(self) -> NDArray[np.float32]:
-        """(n, 3) float32, read-only: ``neutral + sum_k w_k delta_k`` without the layers."""
-        with self._lock:
-            return self.pipeline.run(self.view()).blend
-
-    def layer_displacement(self, name: str) -> NDArray[np.float32]:
-        """(n, 3) float32 copy of what layer ``name`` adds to the live mesh (zeros when nothing)."""
-        with self._lock:
-            d = self.pipeline.run(self.view()).displacements.get(name)
-            if name not in self.pipeline.names:
-                raise KeyError(f"no layer named {name!r}; layers are {self.pipeline.names}")
-            return np.zeros((self.n_vertices, 3), np.float32) if d is None else np.array(d)
-
-    def register_layer(self, layer: Layer, before: str | None = None) -> None:
-        """Add a layer to this model's pipeline (tests, user extensions); emits ``deformed``."""
-        with self._lock:
-            if not isinstance(layer, Layer):
-                raise ModelError(f"register_layer expects a Layer (name, reads, linear, displacement), got {layer!r}")
-            self.pipeline.add(layer, before)
-            self.events.deformed.emit(True)
-
-    def _head(self, view: StateView) -> NDArray[np.float64] | None:
-        pose = _families._HOOKS.get("head_pose")
-        return None if pose is None else pose(view)
-
-    def head_matrix(self, identity: bool = True) -> NDArray[np.float64] | None:
-        """(4, 4) rigid transform :meth:`evaluate` applies now (identity when no head pose is keyed).
-
-        Tools that pick points on the shown mesh map them back to model space with its inverse.
-        """
-        with self._lock:
-            M = self._head(self.view())
-            if M is None:
-                return np.eye(4) if identity else None
-            return M.copy()
-
-    # ------------------------------------------------------------ interactions
-    def begin_interaction(self, label: str, on_close: Callable[[], None] | None = None) -> InteractionToken:
-        """Open an interaction spanning several messages (a drag); returns its token.
-
-        ``on_close`` is called when somebody else closes it with :meth:`close_interaction`.
-        """
-        with self._lock:
-            if self._interaction is not None:
-                raise ModelError(
-                    f"begin_interaction({label!r}): interaction {self._interaction.label!r} is still "
-                    "open; end, cancel or close it first"
-                )
-            token = InteractionToken(label, next(_serials))
-            self._interaction = _Interaction(label, token=token, on_close=on_close)
-            return token
-
-    def _take(self, token: InteractionToken, what: str) -> _Interaction:
-        inter = self._interaction
-        if inter is None or inter.token != token:
-            open_ = "none is open" if inter is None else f"{inter.label!r} is"
-            raise ModelError(f"{what}: interaction {token.label!r} is not the open one ({open_})")
-        self._interaction = None
-        return inter
-
-    def end_interaction(self, token: InteractionToken) -> None:
-        """Close the interaction of ``token``: one undo step with everything it changed."""
-        with self._lock:
-            self._finish(self._take(token, "end_interaction"))
-
-    def cancel_interaction(self, token: InteractionToken) -> None:
-        """Close the interaction of ``token`` and put back what it changed (no undo step)."""
-        with self._lock:
-            inter = self._take(token, "cancel_interaction")
-            weights = {k: v for k, v in inter.weights_before.items() if k in self._weights}
-            self._settle(weights, dict(inter.slots_before))
-
-    def close_interaction(self) -> bool:
-        """End the open token interaction, keeping its edits; True if one was open.
-
-        Discrete edits from views (Key, Import, undo) call this first so they never
-        join a drag's undo step; the owner's ``on_close`` is told.
-        """
-        with self._lock:
-            inter = self._interaction
-            if inter is None or inter.token is None:
-                return False
-            self.end_interaction(inter.token)
-        if inter.on_close is not None:
-            inter.on_close()
-        return True
-
-    @property
-    def interaction_token(self) -> InteractionToken | None:
-        inter = self._interaction
-        return None if inter is None else inter.token
-
-    @property
-    def interacting(self) -> bool:
-        return self._interaction is not None
-
-    def interaction_scratch(self) -> dict[str, Any] | None:
-        """Per-interaction scratch space for facets (None outside an interaction)."""
-        inter = self._interaction
-        return None if inter is None else inter.scratch
-
-    @contextmanager
-    def interaction(self, label: str) -> Iterator[None]:
-        """Group edits (a drag, a scrub) into one undo step; nested calls join the outer one."""
-        with self._lock:
-            outer = self._interaction is not None
-            if not outer:
-                self._interaction = _Interaction(label)
-        if outer:
-            yield
-            return
-        try:
-            yield
-        finally:
-            with self._lock:
-                inter = self._interaction
-                self._interaction = None
-                assert inter is not None
-                self._finish(inter)
-
-    def _settle(self, weights: dict[str, float], slots: dict[str, Any]) -> None:
-        """Install final values (bumping versions even when unchanged: layers may have been approximate)."""
-        with self._lock:
-            if weights:
-                self._weights.update(weights)
-                self._bump("weights")
-                self.events.weights.emit(dict(weights))
-            for name, value in slots.items():
-                self._slots[name] = value
-                self._bump(name)
-                getattr(self.events, name).emit()
-            self.events.deformed.emit(True)
-
-    def _finish(self, inter: _Interaction) -> None:
-        w_before = {k: v for k, v in inter.weights_before.items() if k in self._weights}
-        w_after = {k: self._weights[k] for k in w_before}
-        w_before = {k: v for k, v in w_before.items() if w_after[k] != v}
-        w_after = {k: w_after[k] for k in w_before}
-        s_before = dict(inter.slots_before)
-        s_after = {k: self._slots[k] for k in s_before}
-        if not w_before and not any(s_before[k] is not s_after[k] for k in s_before):
-            if inter.weights_before or inter.slots_before:
-                self._settle({}, s_after)  # nothing net changed, but views saw "changing"
-            return
-        self._settle(w_after, s_after)
-        self.push(
-            Command(
-                inter.label,
-                lambda: self._settle(w_before, s_before),
-                lambda: self._settle(w_after, s_after),
-                payload_nbytes([w_before, w_after]) + payload_nbytes(list(s_after.values())),
-            )
-        )
 
     # ------------------------------------------------------------------- undo
     def push(self, cmd: Command) -> None:
