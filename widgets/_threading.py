@@ -16,16 +16,19 @@ idle time. Hand-written because neither ipywidgets nor psygnal offers an
 "idle timeout around a context manager".
 
 :func:`close_interactions` ends every interaction that widgets hold open on a
-model (a slider burst waiting for its idle timer, a handle drag, a paint
-stroke): each widget that keeps one open across messages registers its closer
-with :func:`register_interaction_closer`, and every widget calls
-``close_interactions(model)`` before a discrete edit (Key, Import, a handle
-drag's start, undo ...). Without it such an edit made within the idle time of
-a slider drag would join the drag's interaction and share its undo step
-("Drag jawOpen" swallowing "Key 1 weights"), and ``set_time`` / ``undo``,
-which refuse to run inside an interaction, would fail. The registry lives
-here, not in :class:`workbench.FaceModel`, because the interactions it closes
-are the widgets' (the model only knows the innermost ``interaction()``).
+model before a discrete edit (Key, Import, a drag's start, undo ...). Pointer
+gestures (``widgets.viewport.gestures``) and slider bursts hold an interaction
+*token* (``model.begin_interaction(label, on_close=...)``), so this is
+``model.close_interaction()``: the model ends the open one (one undo step) and
+tells its owner through ``on_close``. Without it such an edit made within the
+idle time of a slider drag would join the drag's interaction and share its undo
+step ("Drag jawOpen" swallowing "Key 1 weights"), and ``set_time`` / ``undo``,
+which refuse to run inside an interaction, would fail.
+
+Objects that still hold a ``with model.interaction()`` open across messages
+(the region pin drag and region brush of ``widgets.regions_panel``) register
+their closer with :func:`register_interaction_closer`; :func:`close_interactions`
+calls those too. Once they hold tokens, the registry can go.
 """
 
 from __future__ import annotations
@@ -36,7 +39,6 @@ import threading
 import traceback
 import weakref
 from collections.abc import Callable
-from contextlib import AbstractContextManager
 from typing import Any, TypeVar
 
 import ipywidgets
@@ -137,13 +139,21 @@ def close_interactions(
 
     Call before a discrete edit (a key, an import, undo, the start of a drag),
     so the edit is an undo step of its own instead of joining a slider drag
-    whose idle timer has not fired yet. ``skip``: a closer not to call (the
-    caller's own); ``bursts_only``: only slider bursts (pointer drags stay
-    open). Every closer runs; the first exception is raised after.
+    whose idle timer has not fired yet. The open token interaction is closed
+    with ``model.close_interaction()`` (its owner is told through ``on_close``).
+    ``bursts_only``: only a slider burst (an :class:`InteractionGrouper`'s);
+    pointer drags stay open. ``skip``: a legacy closer not to call. Every
+    closer runs; the first exception is raised after.
     """
+    first: BaseException | None = None
+    token = getattr(model, "interaction_token", None)
+    if token is not None and (not bursts_only or token in _burst_tokens):
+        try:
+            model.close_interaction()
+        except Exception as exc:
+            first = exc
     with _closers_lock:
         refs = list(_closers.get(model, ()))
-    first: BaseException | None = None
     for ref, burst in refs:
         fn = ref()
         if fn is None or (bursts_only and not burst) or (skip is not None and fn == skip):
@@ -157,16 +167,22 @@ def close_interactions(
         raise first
 
 
-class InteractionGrouper:
-    """Wraps bursts of edits in one ``model.interaction(label)``.
+#: tokens of the open slider bursts (``close_interactions(bursts_only=True)`` closes only these)
+_burst_tokens: weakref.WeakSet[Any] = weakref.WeakSet()
 
-    The first :meth:`touch` enters the interaction; every further touch within
-    ``idle_s`` seconds extends it; ``idle_s`` after the last touch a timer
-    thread exits it, which records ONE undo step and emits the final events.
-    :meth:`flush` ends it at once (before undo/redo, reset, closing), and so does
-    :func:`close_interactions` (any other widget's edit of the model): the
-    grouper registers its :meth:`flush`. A new burst first closes the other
-    groupers' bursts on the model (another panel's slider).
+
+class InteractionGrouper:
+    """Wraps bursts of edits in one model interaction (an interaction token).
+
+    The first :meth:`touch` opens ``model.begin_interaction(label)``; every
+    further touch within ``idle_s`` seconds extends it; ``idle_s`` after the last
+    touch a timer thread ends it, which records ONE undo step and emits the
+    final events. :meth:`flush` ends it at once (before undo/redo, reset,
+    closing); :func:`close_interactions` (any other widget's edit of the model)
+    closes it through the model, which calls back :meth:`_closed`. A new burst
+    first closes another panel's burst. While a pointer drag is open the
+    touch joins it (a slider update during a drag is the model's echo, not
+    the user's edit) and no burst is opened.
 
     Parameters
     ----------
@@ -186,32 +202,33 @@ class InteractionGrouper:
         self.idle_s = float(idle_s)
         self.errors = errors or ErrorSink()
         self._lock = threading.RLock()
-        self._cm: AbstractContextManager[None] | None = None
+        self._token: Any = None
         self._label = ""
         self._timer: threading.Timer | None = None
-        register_interaction_closer(model, self.flush, burst=True)
 
     @property
     def active(self) -> bool:
-        return self._cm is not None
+        return self._token is not None
 
     def touch(self, label: str) -> None:
-        """Enter the interaction if needed and restart the idle timer.
+        """Open the burst if needed and restart the idle timer.
 
         A different label (another slider) ends the current burst first, so
         each slider drag is its own undo step.
         """
-        if self._cm is None or label != self._label:
-            # A new burst must not nest into another panel's burst. Pointer drags stay
-            # open: a slider update during one is a model echo, not the user's edit.
-            close_interactions(self.model, skip=self.flush, bursts_only=True)
         with self._lock:
-            if self._cm is not None and label != self._label:
+            if self._token is not None and label != self._label:
                 self._end_locked()
-            if self._cm is None:
-                cm = self.model.interaction(label)
-                cm.__enter__()
-                self._cm, self._label = cm, label
+            if self._token is None:
+                model = self.model
+                # another panel's burst ends first; a pointer drag stays open
+                close_interactions(model, bursts_only=True)
+                with model.lock:
+                    if model.interacting:
+                        return  # joins the open drag (no timer: nothing of ours to end)
+                    token = model.begin_interaction(label, on_close=self._closed)
+                    _burst_tokens.add(token)
+                self._token, self._label = token, label
             if self._timer is not None:
                 self._timer.cancel()
             self._timer = threading.Timer(self.idle_s, self._on_idle)
@@ -225,16 +242,25 @@ class InteractionGrouper:
             self.errors.report("end of slider interaction", exc)
 
     def flush(self) -> None:
-        """End the open interaction now (no-op if none)."""
+        """End the open burst now (no-op if none)."""
         with self._lock:
             self._end_locked()
+
+    def _closed(self) -> None:
+        # the model closed our burst (close_interactions before another edit)
+        with self._lock:
+            if self._timer is not None:
+                self._timer.cancel()
+                self._timer = None
+            self._token = None
 
     def _end_locked(self) -> None:
         if self._timer is not None:
             self._timer.cancel()
             self._timer = None
-        cm, self._cm = self._cm, None
-        if cm is not None:
+        token, self._token = self._token, None
+        if token is not None:
             # Model lock first: the same order as edits (model lock, then events).
             with self.model.lock:
-                cm.__exit__(None, None, None)
+                if self.model.interaction_token == token:
+                    self.model.end_interaction(token)

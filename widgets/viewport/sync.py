@@ -1,0 +1,309 @@
+"""What the viewport ships to the browser: geometry, paint overlay, handle markers, feature graph.
+
+:class:`SceneSync` owns what the front end was last sent and decides, on every
+model event, between a full buffer and a patch. It writes the widget's synced
+traits and sends its custom messages; it never changes the model.
+
+Transfer protocol (binary only, never JSON lists):
+
+* ``_faces`` (uint32, m*3) and ``_labels`` (uint16, n) once per topology;
+* ``_positions`` (float32, n*3): the full buffer, on load and whenever at least
+  a third of the vertices changed;
+* a custom message ``{"type": "patch", "version": v[, "seq": s]}`` with buffers
+  ``[ids uint32 (k), values float32 (k*3)]`` when fewer than a third changed;
+  ``_positions`` is then updated *without* a sync message so that a reloaded
+  page still gets the current full state. ``seq`` is the gesture message whose
+  edit the patch shows (the front end may send its next update on it).
+* The weight-map overlay: ``_paint_weights`` (float32 n, or empty) plus
+  ``{"type": "paint_patch", "version"}`` messages with buffers
+  ``[ids uint32, weights float32]``, the same scheme with ``_paint_version``.
+
+During an interaction (``deformed(False)``) a vertex is re-sent only when it
+moved more than :data:`~widgets.viewport.common.DRAG_TOLERANCE` of the mesh's
+size since the front end last got it (the shell basis of a handle moves almost
+every vertex by a tiny amount); the final event of the interaction sends the
+exact positions.
+
+While a gesture message runs several edits (the dabs of one paint message),
+:meth:`SceneSync.held` turns model events into one overlay + geometry update
+sent after the last edit.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections import deque
+from collections.abc import Iterator
+from contextlib import contextmanager
+from typing import Any
+
+import numpy as np
+
+from widgets.viewport.common import (
+    DRAG_TOLERANCE,
+    SPARSE_FRACTION,
+    STRAIN_TOLERANCE,
+    changed_rows,
+    f32_bytes,
+    neutral_bounds,
+    u32_bytes,
+)
+
+
+class SceneSync:
+    """Keeps one :class:`~widgets.viewport.Viewport`'s front end in step with its model.
+
+    Parameters
+    ----------
+    widget : Viewport
+        Whose traits are written and whose ``send`` is used.
+    model : FaceModel
+    """
+
+    def __init__(self, widget: Any, model: Any) -> None:
+        self.widget = widget
+        self.model = model
+        #: one update at a time, even when edits arrive from several threads
+        self.lock = threading.RLock()
+        self.connected = False
+        self.last: np.ndarray | None = None  # what the front end has, (n, 3) float32
+        self.last_faces: np.ndarray | None = None
+        self.faces_ref: np.ndarray | None = None
+        self.positions_stale = False
+        size = np.ptp(np.asarray(model.vertices), axis=0) if model.n_vertices else np.zeros(3)
+        self.tolerance = float(DRAG_TOLERANCE * np.linalg.norm(size))
+        self.updates_sent = {"full": 0, "patch": 0}
+        #: kernel-side ms per geometry update (diff + serialise + send), for benchmarks
+        self.push_ms: deque[float] = deque(maxlen=256)
+        self.last_push_ms = 0.0
+        #: seq of the gesture message being applied (sent with its geometry patch)
+        self.patch_seq: Any = None
+        self._hold = 0
+        self._pending = False
+        # paint overlay
+        self.paint_last: np.ndarray | None = None  # weights the front end has (None = empty)
+        self.paint_last_ref: Any = None  # the array they came from
+        self.paint_updates_sent = {"full": 0, "patch": 0}
+        #: returns the overlay of a stroke handler, or None to show the model's paint layers
+        self.overlay_source: Any = None
+        self.handles_sent: tuple[bytes, bytes] | None = None
+        # feature graph
+        self.strain_sent: np.ndarray | None = None
+        self.strain_pending: np.ndarray | None = None
+        self.feature_updates_sent = 0
+
+    # ------------------------------------------------------------------ batching
+    @contextmanager
+    def held(self) -> Iterator[None]:
+        """Run several edits; send one overlay + geometry update after the last."""
+        self._hold += 1
+        try:
+            yield
+        finally:
+            self._hold -= 1
+        if self._pending and not self._hold:
+            self._pending = False
+            self.sync_paint()
+            self.push_geometry_event(False)
+
+    @contextmanager
+    def patching(self, seq: Any) -> Iterator[None]:
+        """Geometry patches sent inside carry gesture message ``seq`` (the front end's early ack)."""
+        old, self.patch_seq = self.patch_seq, seq
+        try:
+            yield
+        finally:
+            self.patch_seq = old
+
+    # ------------------------------------------------------------------ geometry
+    def push_geometry_event(self, final: bool = True, *_args: Any) -> None:
+        """A model event: send what changed (exactly when ``final``, else within the tolerance)."""
+        if self._hold:
+            self._pending = True
+            return
+        t0 = time.perf_counter()
+        self.push_geometry(force_full=False, tolerance=0.0 if final else self.tolerance)
+        ms = (time.perf_counter() - t0) * 1e3
+        self.last_push_ms = ms
+        self.push_ms.append(ms)
+
+    def push_geometry(self, force_full: bool, tolerance: float = 0.0) -> None:
+        model, w = self.model, self.widget
+        # Model lock: read a consistent evaluate(); own lock: one update at a time.
+        with model.lock, self.lock:
+            if not self.connected:
+                return
+            pos = np.asarray(model.evaluate(), dtype=np.float32)
+            faces = model.faces
+            topo_changed = (
+                self.last is None
+                or self.last.shape != pos.shape
+                or self.last_faces is None
+                or self.last_faces.shape != faces.shape
+                # the model keeps one read-only faces array: identity is the cheap test
+                or (faces is not self.faces_ref and not np.array_equal(self.last_faces, faces))
+            )
+            self.faces_ref = faces
+            if topo_changed or force_full:
+                self.send_full(pos, faces if topo_changed else None)
+                return
+            assert self.last is not None
+            changed = changed_rows(pos, self.last, tolerance)
+            if changed.size == 0:
+                if tolerance == 0 and self.positions_stale:
+                    self.store_positions_silently()
+                return
+            if changed.size >= SPARSE_FRACTION * pos.shape[0]:
+                self.send_full(pos, None)
+                return
+            self.last[changed] = pos[changed]
+            version = w._version + 1
+            w._trait_values["_version"] = version
+            if tolerance == 0:
+                self.store_positions_silently()
+            else:
+                # Mid-interaction: skip re-serialising the whole buffer on every drag
+                # frame (1 MB at 100k); the exact final update of the interaction does it.
+                self.positions_stale = True
+            content: dict[str, Any] = {"type": "patch", "version": version, "count": int(changed.size)}
+            if self.patch_seq is not None:
+                content["seq"] = self.patch_seq
+            w.send(content, buffers=[u32_bytes(changed), f32_bytes(pos[changed])])
+            self.updates_sent["patch"] += 1
+
+    def store_positions_silently(self) -> None:
+        # Silent update: a page reload must get the current full buffer, but
+        # syncing it would send the full buffer that patches avoid.
+        assert self.last is not None
+        self.widget._trait_values["_positions"] = f32_bytes(self.last)
+        self.positions_stale = False
+
+    def send_full(self, pos: np.ndarray, faces: np.ndarray | None) -> None:
+        model, w = self.model, self.widget
+        self.positions_stale = False
+        self.last = pos.copy()
+        with w.hold_sync():
+            if faces is not None:
+                self.last_faces = faces.copy()
+                labels = np.asarray(model.component_labels)
+                if labels.size and labels.max() >= 65535:
+                    raise ValueError("Viewport: more than 65535 components are not supported")
+                w._labels = labels.astype("<u2").tobytes()
+                w._component_names = list(model.component_names)
+                w._up_axis = str(getattr(model.metadata, "up_axis", "+y"))
+                w._neutral_bounds = neutral_bounds(model)
+                w._faces = u32_bytes(faces.reshape(-1))
+                w._topology = w._topology + 1
+            w._positions = f32_bytes(pos)
+            w._version = w._version + 1
+        self.updates_sent["full"] += 1
+
+    # ------------------------------------------------------------- paint overlay
+    def sync_paint(self, *_args: Any) -> None:
+        """Send the overlay weights (stroke handler's, else the selected expression's)."""
+        if self._hold:
+            self._pending = True
+            return
+        model, w = self.model, self.widget
+        with model.lock, self.lock:
+            if not self.connected:
+                return
+            weights: np.ndarray | None
+            if self.overlay_source is not None:
+                ov = self.overlay_source()
+                weights = None if ov is None else np.asarray(ov, dtype=np.float32)
+            else:
+                expr = w.paint_expression if w.paint_overlay else ""
+                weights = model.paint.get(expr) if expr else None
+            last = self.paint_last
+            if weights is None:
+                if last is not None:
+                    self.send_paint_full(None)
+                return
+            if last is None or last.shape != weights.shape:
+                self.send_paint_full(weights)
+                return
+            if weights is self.paint_last_ref:
+                return
+            changed = np.flatnonzero(weights != last)
+            self.paint_last_ref = weights
+            if changed.size == 0:
+                return
+            if changed.size >= SPARSE_FRACTION * weights.shape[0]:
+                self.send_paint_full(weights)
+                return
+            last[changed] = weights[changed]
+            version = w._paint_version + 1
+            # Silent: a reloaded page gets the current weights without a full sync here.
+            w._trait_values["_paint_version"] = version
+            w._trait_values["_paint_weights"] = f32_bytes(last)
+            w.send(
+                {"type": "paint_patch", "version": version, "count": int(changed.size)},
+                buffers=[u32_bytes(changed), f32_bytes(weights[changed])],
+            )
+            self.paint_updates_sent["patch"] += 1
+
+    def send_paint_full(self, weights: np.ndarray | None) -> None:
+        w = self.widget
+        self.paint_last = None if weights is None else np.array(weights, dtype=np.float32)
+        self.paint_last_ref = weights
+        with w.hold_sync():
+            w._paint_weights = b"" if weights is None else f32_bytes(weights)
+            w._paint_version = w._paint_version + 1
+        self.paint_updates_sent["full"] += 1
+
+    def resend_paint(self) -> None:
+        """The front end lost track of the overlay: send it whole."""
+        with self.model.lock, self.lock:
+            self.paint_last = None
+        self.sync_paint()
+
+    # ------------------------------------------------------------------ handles
+    def sync_handles(self, *_args: Any) -> None:
+        """Send the model's handle vertices / mirror links when the handle *set* changed."""
+        w = self.widget
+        with self.model.lock:
+            h = self.model.handles
+            verts = u32_bytes(h.vertices)
+            mirror = np.ascontiguousarray(h.mirror, dtype="<i4").tobytes()
+        if (verts, mirror) != self.handles_sent:
+            self.handles_sent = (verts, mirror)
+            with w.hold_sync():
+                w._handles = verts
+                w._handle_mirror = mirror
+                if w.selected_handle >= len(h):
+                    w.selected_handle = -1
+
+    # ------------------------------------------------------------- feature graph
+    def set_feature_graph(self, pairs: np.ndarray) -> None:
+        """Send edges (F, 2) and reset their strain to zero."""
+        w = self.widget
+        edges = u32_bytes(pairs.reshape(-1))
+        zero = np.zeros(pairs.shape[0], np.float32)
+        with self.lock:
+            self.strain_pending = None
+            self.strain_sent = zero
+            with w.hold_sync():
+                if edges != w._feature_edges:
+                    w._feature_edges = edges
+                w._feature_strain = f32_bytes(zero)
+
+    def set_feature_strain(self, f: np.ndarray) -> bool:
+        """Send strain (F,) if visible and some edge changed enough; True when sent."""
+        w = self.widget
+        with self.lock:
+            if not w.feature_graph:
+                self.strain_pending = f.copy()
+                return False
+            self.strain_pending = None
+            last = self.strain_sent
+            if last is not None and last.shape == f.shape:
+                moved = bool(f.size) and float(np.abs(f - last).max()) > STRAIN_TOLERANCE
+                settled = not f.any() and bool(last.any())
+                if not (moved or settled):
+                    return False
+            self.strain_sent = f.copy()
+            w._feature_strain = f32_bytes(f)
+            self.feature_updates_sent += 1
+            return True
