@@ -20,6 +20,7 @@ from workbench.methods.regions.segmentation import Regions
 
 if TYPE_CHECKING:
     from workbench.core.state import FaceState
+    from workbench.methods.regions.drag import RegionDrag
     from workbench.methods.regions.segmentation import RegionTopology
 
 
@@ -84,6 +85,15 @@ class RegionsFacet:
 
             self._topology = region_topology(self._model)
         return self._topology
+
+    # -------------------------------------------------------------------- drags
+    def begin_drag(self, vertex: int, *, pins: ArrayLike = (), damping: bool = True,
+                   hold_others: bool = False, regularization: float = 1e-3) -> RegionDrag:
+        """Press on ``vertex`` to sculpt with the regions under it; see :class:`RegionDrag`."""
+        from workbench.methods.regions.drag import RegionDrag
+
+        return RegionDrag(self._model, vertex, pins=pins, damping=damping, hold_others=hold_others,
+                          regularization=regularization)
 
     # -------------------------------------------------------------------- edits
     def set(self, state: RegionState | None, label: str = "Regions") -> None:
