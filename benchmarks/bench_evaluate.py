@@ -47,7 +47,7 @@ def bench_resolution(res: str) -> list[str]:
     rows = []
 
     def ours_all() -> object:
-        model._evaluated = model._blended = None  # measure the computation, not the cache
+        model.pipeline.invalidate()  # measure the computation, not the cache
         return model.evaluate()
 
     model.set_weights({n: float(w) for n, w in zip(names, rng.uniform(0.05, 1.0, len(names)), strict=True)})
