@@ -56,12 +56,15 @@ manifest, and we want the format readable from any language without numpy.
 
 from __future__ import annotations
 
+import glob
 import hashlib
 import io
 import json
+import logging
 import math
 import os
 import tempfile
+import time
 import zipfile
 import zlib
 from collections.abc import Callable
@@ -83,6 +86,8 @@ from workbench.core.shapes import AXES, UNIT_TO_METRES, BlendShape, ModelError, 
 
 if TYPE_CHECKING:
     from workbench.core.state import FaceState
+
+logger = logging.getLogger(__name__)
 
 FORMAT_NAME = "face-workbench"
 SCHEMA_VERSION = 2
@@ -116,6 +121,54 @@ def _container_arrays(model: FaceState) -> dict[str, np.ndarray]:
 def _parts() -> list[families.FilePart]:
     """The file parts of the registered method families, in family order."""
     return [f.file_part for f in families.families() if f.file_part is not None]
+
+
+#: a temporary file of a writer whose pid cannot be read is stale after this many seconds
+_STALE_AFTER_S = 600.0
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's live process
+        return True
+    return True
+
+
+def remove_stale_temporaries(path: str | os.PathLike[str]) -> list[Path]:
+    """Delete what killed saves of ``path`` left beside it; returns the removed files.
+
+    A save writes ``.<name>.<pid>.<random>.tmp`` and renames it over ``path``;
+    killed mid-write (SIGKILL, power loss) the partial file stays. It is stale
+    when its writer's process no longer runs (or, for a name without a pid,
+    when it is older than ten minutes); a save in progress elsewhere is left
+    alone. Called by every save and load of ``path``.
+    """
+    path = Path(path)
+    removed = []
+    try:
+        candidates = list(path.parent.glob(f".{glob.escape(path.name)}.*.tmp"))
+    except OSError:
+        return removed
+    now = time.time()
+    for tmp in candidates:
+        rest = tmp.name[len(path.name) + 2 : -len(".tmp")]
+        pid_text = rest.split(".", 1)[0]
+        try:
+            if pid_text.isdigit() and "." in rest:
+                stale = not _pid_alive(int(pid_text))
+            else:
+                stale = now - tmp.stat().st_mtime > _STALE_AFTER_S
+            if stale:
+                tmp.unlink()
+                removed.append(tmp)
+        except OSError:
+            continue
+    if removed:
+        logger.info("%s: removed %d temporary file(s) left by interrupted saves", path.name, len(removed))
+    return removed
 
 
 def save_model(model: FaceState, path: str | os.PathLike[str]) -> Path:
@@ -167,7 +220,9 @@ def save_model(model: FaceState, path: str | os.PathLike[str]) -> Path:
             "sha256": _sha256(data),
         }
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    remove_stale_temporaries(path)
+    # the writer's pid in the name tells a later save or load whether the writer still lives
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}.", suffix=".tmp", dir=path.parent)
     umask = os.umask(0)
     os.umask(umask)
     try:
@@ -495,6 +550,7 @@ def load_model(path: str | os.PathLike[str]) -> Any:
     """
     path = Path(path)
     c = Checker(path)
+    remove_stale_temporaries(path)
     with _open_zip(path) as zf:
         m = _manifest(zf, path)
         arrays = {name: _read_npy(zf, path, name, e) for name, e in m["arrays"].items()}
