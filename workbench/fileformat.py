@@ -16,7 +16,7 @@ Layout (a plain zip, members stored uncompressed so large arrays load fast)::
       "components": ["skin", "eye_left", ...],
       "shapes": [{"name", "slider_min", "slider_max", "mute", "mask": bool}, ...],
       "weights": {"jawOpen": 0.25, ...},
-      "handles": {"names": [...]},
+      "handles": {"names": [...], "stiffness": [k_s, k_b]},        (stiffness: since 0.2)
       "expressions": [{"name", "weights", "n_handles"}, ...],      (schema >= 2)
       "paint": ["smile", ...],                                      (schema >= 2)
       "tracks": {"fps", "start", "end", "tracks": {...}},           (schema >= 2)
@@ -39,8 +39,19 @@ Regions (schema 2): ``regions_deformation`` (n,) <f4 and, per level ``l``,
 ``regions_weight_vals_l``, ``regions_background_l`` <f4, ``regions_parents_l``
 (levels 0..L-2) <i4; per-region weights ``regions_weight_values`` (R,k) <f4.
 
-Guarantees: saving writes a temporary file beside the target, fsyncs it and
-renames it over the target, so a crash mid-save leaves the previous good file.
+Who writes what: this module is the container (zip, manifest, checksums,
+metadata, mesh, components, shapes and weights); every other key and its
+arrays belong to a method family's file part
+(:class:`workbench.core.families.FilePart`): ``handles`` to
+:mod:`workbench.methods.handles.family`, ``expressions`` and ``paint`` to
+:mod:`workbench.methods.paint.family`, ``regions`` to
+:mod:`workbench.methods.regions.family`, ``tracks`` to
+:mod:`workbench.animation.family`. A new family adds its keys there, not here.
+
+Guarantees: saving writes a temporary file ``.<name>.<pid>.<random>.tmp``
+beside the target, fsyncs it and renames it over the target, so a crash
+mid-save leaves the previous good file; the next save or load of the file
+removes temporaries whose writer no longer runs (:func:`remove_stale_temporaries`).
 Loading checks every manifest field's JSON type, range and cross-references
 (counts against declared array shapes, names against shapes) and every array's
 sha256, documented dtype, shape and value range; unknown arrays are refused.
