@@ -119,11 +119,26 @@ def test_cli_errors_name_the_file(tmp_path: Path, capsys: pytest.CaptureFixture[
     bad.write_text("v 0 0 0\nv 1 0 0\nf 1 2 9\n")
     assert main(["info", str(bad)]) == 2
     assert "broken.obj" in capsys.readouterr().err
+
+
+
+def test_export_of_a_rig_without_keys_writes_the_rig_and_says_so(tmp_path, capsys):
+    import pygltflib
+
     model = workbench.load_sample("head")
+    model.set_weights({"jawOpen": 0.25, "mouthSmileLeft": 0.5})
     saved = tmp_path / "nokeys.fwb"
     model.save(saved)
-    assert main(["export", str(saved), str(tmp_path / "x.glb")]) == 2
-    assert "no keys" in capsys.readouterr().err
+    out = tmp_path / "x.glb"
+    assert main(["export", str(saved), str(out)]) == 0
+    err = capsys.readouterr().err
+    assert "no keys" in err and "no animation" in err
+    gltf = pygltflib.GLTF2().load(str(out))
+    assert not gltf.animations
+    mesh = gltf.meshes[0]
+    names = mesh.extras["targetNames"]
+    weights = dict(zip(names, mesh.weights, strict=True))
+    assert weights["jawOpen"] == 0.25 and weights["mouthSmileLeft"] == 0.5 and len(names) >= 52
 
 
 def test_app_command_binds_localhost_with_a_token(tmp_path):

@@ -98,8 +98,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         try:
             model = load(args.saved_file)
             if not model.tracks.tracks:
-                print(f"workbench export: {args.saved_file}: the timeline has no keys", file=sys.stderr)
-                return 2
+                print(
+                    f"workbench export: {args.saved_file}: the timeline has no keys; writing the rig "
+                    "with its current weights and no animation",
+                    file=sys.stderr,
+                )
             written = export(model, model.tracks, args.out, fps=args.fps, bake=args.bake, format=args.format)
         except (OSError, ValueError, ExportError, TrackError) as exc:
             print(f"workbench export: {exc}", file=sys.stderr)
