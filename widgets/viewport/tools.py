@@ -11,6 +11,8 @@ Each is a :class:`~widgets.viewport.gestures.Gesture` run by the viewport's
   drag, region brush, split-seed pick in :mod:`widgets.regions_panel`) with
   ``begin(index, vertex)``, ``move(index, position) -> ms``, ``end()`` and
   optionally ``cancel()``; the handler owns its model interaction.
+* :func:`add_handle` / :func:`remove_handle`: Shift-click / Alt-click (single
+  messages, not gestures).
 * :class:`HookedStroke`: paint strokes go to the object given to
   ``viewport.set_stroke_handler`` (the wrinkle eraser) with ``begin()``,
   ``dab(vertices)``, ``end()``, ``cancel()`` and optionally ``overlay()``.
@@ -24,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from widgets._threading import close_interactions
 from widgets.viewport.gestures import Gesture, GestureStopped, vertex_ids
 
 
@@ -36,6 +39,7 @@ class HandleDrag(Gesture):
         super().__init__(viewport)
         self.index = int(index)
         self.vertex = vertex
+        self.name = ""
 
     def start(self, content: Mapping[str, Any]) -> float:
         vp, model = self.viewport, self.model
@@ -48,7 +52,8 @@ class HandleDrag(Gesture):
                     f"(the model has {len(h)} handles)"
                 )
             self.index, self.vertex = resolved, int(h.vertices[resolved])
-            self.open_interaction(f"Drag handle {h.names[resolved]}")
+            self.name = str(h.names[resolved])
+            self.open_interaction(f"Drag handle {self.name}")
         vp.selected_handle = self.index
         return 0.0
 
@@ -82,7 +87,8 @@ class HandleDrag(Gesture):
 
     def finished(self) -> None:
         vp = self.viewport
-        vp.last_drag = {k: v for k, v in self.stats().items() if k != "cancelled"}
+        st = self.stats()
+        vp.last_drag = {**{k: v for k, v in st.items() if k != "cancelled"}, "name": self.name}
         if self.label and not self.cancelled:
             for fn in list(vp.drag_listeners):
                 vp.errors.guard("drag listener")(fn)(dict(vp.last_drag))
@@ -246,6 +252,84 @@ class HookedDrag(Gesture):
             cancel()
         else:
             self.handler.end()
+
+
+# ----------------------------------------------------------------- handle clicks
+
+
+def add_handle(viewport: Any, vertex: int) -> int:
+    """Add a model handle at ``vertex`` (Shift-click); with :attr:`symmetric` a mirrored pair.
+
+    A pair is one undo step. Returns the new handle's index.
+    """
+    from workbench.methods.handles.presets import mirror_vertices
+    from workbench.model import HandleSet
+
+    model = viewport.model
+    close_interactions(model)
+    with model.lock:
+        h = model.handles
+        v = int(vertex)
+        if not 0 <= v < model.n_vertices:
+            raise ValueError(
+                f"Viewport.add_handle_at: vertex must be in 0..{model.n_vertices - 1}"
+            )
+        V = np.asarray(model.vertices)
+        labels = np.asarray(model.component_labels)
+        same = (
+            np.flatnonzero(labels == labels[v]) if labels.size else np.arange(model.n_vertices)
+        )
+        mid_tol = 0.01 * float(np.linalg.norm(np.ptp(V[same], axis=0)))
+        idx = len(h)
+        name = f"user_{idx}"
+        if not viewport.symmetric or abs(V[v, 0]) <= mid_tol:
+            return int(model.handles.add(v, name=name))
+        m = int(mirror_vertices(V, np.array([v]), same)[0])
+        side, other = ("L", "R") if V[v, 0] > 0 else ("R", "L")
+        model.handles.set(
+            HandleSet(
+                np.append(h.vertices, [v, m]),
+                np.vstack([h.offsets, np.zeros((2, 3), np.float32)]),
+                (*h.names, f"user_{side}_{idx}", f"user_{other}_{idx}"),
+                np.append(h.mirror, [idx + 1, idx]),
+            ),
+            label=f"Add handle pair user_{idx}",
+        )
+        return idx
+
+def remove_handle(viewport: Any, index: int, vertex: int | None = None) -> None:
+    """Remove a model handle (Alt-click); with :attr:`symmetric` its mirror too (one undo step)."""
+    from workbench.model import HandleSet
+
+    model = viewport.model
+    close_interactions(model)
+    with model.lock:
+        i = viewport._resolve_handle(index, vertex)
+        if i is None:
+            return
+        h = model.handles
+        drop = {i}
+        if viewport.symmetric and h.mirror[i] >= 0:
+            drop.add(int(h.mirror[i]))
+        if len(drop) == 1:
+            model.handles.remove(i)
+        else:
+            keep = np.array([k not in drop for k in range(len(h))])
+            remap = np.cumsum(keep) - 1
+            mir = h.mirror[keep]
+            gone = np.isin(mir, list(drop)) | (mir < 0)
+            mir = np.where(gone, -1, remap[np.maximum(mir, 0)])
+            model.handles.set(
+                HandleSet(
+                    h.vertices[keep],
+                    h.offsets[keep],
+                    tuple(nm for k, nm in enumerate(h.names) if k not in drop),
+                    mir,
+                ),
+                label=f"Remove handle pair {h.names[i]}",
+            )
+        if viewport.selected_handle >= len(model.handles):
+            viewport.selected_handle = -1
 
 
 def time_ms() -> float:

@@ -57,7 +57,7 @@ import ipywidgets
 import numpy as np
 import traitlets as t
 
-from widgets._threading import ErrorSink, close_interactions
+from widgets._threading import ErrorSink
 from widgets.viewport.common import (
     BRUSH_MODES,
     FALLOFFS,
@@ -72,7 +72,14 @@ from widgets.viewport.common import (
 )
 from widgets.viewport.gestures import Gesture, GestureDispatcher, vertex_ids
 from widgets.viewport.sync import SceneSync
-from widgets.viewport.tools import HandleDrag, HookedDrag, HookedStroke, PaintStroke
+from widgets.viewport.tools import (
+    HandleDrag,
+    HookedDrag,
+    HookedStroke,
+    PaintStroke,
+    add_handle,
+    remove_handle,
+)
 
 
 class Viewport(anywidget.AnyWidget):
@@ -514,74 +521,11 @@ class Viewport(anywidget.AnyWidget):
 
         A pair is one undo step. Returns the new handle's index.
         """
-        from workbench.methods.handles.presets import mirror_vertices
-        from workbench.model import HandleSet
-
-        model = self._model
-        close_interactions(model)
-        with model.lock:
-            h = model.handles
-            v = int(vertex)
-            if not 0 <= v < model.n_vertices:
-                raise ValueError(
-                    f"Viewport.add_handle_at: vertex must be in 0..{model.n_vertices - 1}"
-                )
-            V = np.asarray(model.vertices)
-            labels = np.asarray(model.component_labels)
-            same = (
-                np.flatnonzero(labels == labels[v]) if labels.size else np.arange(model.n_vertices)
-            )
-            mid_tol = 0.01 * float(np.linalg.norm(np.ptp(V[same], axis=0)))
-            idx = len(h)
-            name = f"user_{idx}"
-            if not self.symmetric or abs(V[v, 0]) <= mid_tol:
-                return int(model.handles.add(v, name=name))
-            m = int(mirror_vertices(V, np.array([v]), same)[0])
-            side, other = ("L", "R") if V[v, 0] > 0 else ("R", "L")
-            model.handles.set(
-                HandleSet(
-                    np.append(h.vertices, [v, m]),
-                    np.vstack([h.offsets, np.zeros((2, 3), np.float32)]),
-                    (*h.names, f"user_{side}_{idx}", f"user_{other}_{idx}"),
-                    np.append(h.mirror, [idx + 1, idx]),
-                ),
-                label=f"Add handle pair user_{idx}",
-            )
-            return idx
+        return add_handle(self, vertex)
 
     def remove_handle_at(self, index: int, vertex: int | None = None) -> None:
         """Remove a model handle (Alt-click); with :attr:`symmetric` its mirror too (one undo step)."""
-        from workbench.model import HandleSet
-
-        model = self._model
-        close_interactions(model)
-        with model.lock:
-            i = self._resolve_handle(index, vertex)
-            if i is None:
-                return
-            h = model.handles
-            drop = {i}
-            if self.symmetric and h.mirror[i] >= 0:
-                drop.add(int(h.mirror[i]))
-            if len(drop) == 1:
-                model.handles.remove(i)
-            else:
-                keep = np.array([k not in drop for k in range(len(h))])
-                remap = np.cumsum(keep) - 1
-                mir = h.mirror[keep]
-                gone = np.isin(mir, list(drop)) | (mir < 0)
-                mir = np.where(gone, -1, remap[np.maximum(mir, 0)])
-                model.handles.set(
-                    HandleSet(
-                        h.vertices[keep],
-                        h.offsets[keep],
-                        tuple(nm for k, nm in enumerate(h.names) if k not in drop),
-                        mir,
-                    ),
-                    label=f"Remove handle pair {h.names[i]}",
-                )
-            if self.selected_handle >= len(model.handles):
-                self.selected_handle = -1
+        remove_handle(self, index, vertex)
 
     # --------------------------------------------------------------- messages
     def _show_error(self, text: str) -> None:

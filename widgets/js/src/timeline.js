@@ -22,6 +22,8 @@
 // strip is a one-row, horizontally scrolling gallery of small thumbnails with the
 // name under each; without any, the chips are text.
 
+import { announcePlayback as announce } from "./shared/playback.js";
+
 const GUTTER = 150; // px: track labels
 const RULER = 30; // px: time ruler height
 const ROW = 22; // px: one track row
@@ -310,13 +312,14 @@ class TimelineView {
     this.root.fwbHooks = () => this.writeHooks();
   }
 
-  // Viewports on the page draw in draft resolution while a timeline plays (software
-  // WebGL only, see softwareWebGL() in viewport.js): tell them when playback starts/stops.
+  // Viewports of the same face model draw in draft resolution while a timeline plays
+  // (software WebGL only, see softwareWebGL() in viewport/util.js): tell them through the
+  // shared playback registry (shared/playback.js) when playback starts/stops.
   announcePlayback(playing) {
     if (playing === !!this.announcedPlaying) return;
     this.announcedPlaying = playing;
     if (!this.playbackId) this.playbackId = `tl-${Math.random().toString(36).slice(2)}`;
-    window.dispatchEvent(new CustomEvent("fwb-playback", { detail: { id: this.playbackId, playing } }));
+    announce(this.playbackId, this.model.get("_scene") || "", playing);
   }
 
   dispose() {

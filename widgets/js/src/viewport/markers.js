@@ -1,0 +1,139 @@
+// Handle markers of a view: one instanced sphere per handle, coloured by state (dragged,
+// hovered, selected, mirror), and their page coordinates for tests (data-handles).
+//   _handles        bytes, uint32 (h)   handle marker vertex ids (the model's handles)
+//   _handle_mirror  bytes, int32 (h)    mirror handle index or -1 (may be empty)
+// Markers are sized by the NEUTRAL mesh's radius (_neutral_bounds), whatever the expression.
+// Methods mixed into View.
+import * as THREE from "three";
+import { HANDLE_COLOR, HANDLE_HOVER, HANDLE_MIRROR, HANDLE_SELECTED, typed } from "./util.js";
+
+export const markerMethods = {
+  refreshHandleCache() {
+    const ids = typed(this.model.get("_handles"), Uint32Array) || new Uint32Array(0);
+    const mirror = typed(this.model.get("_handle_mirror"), Int32Array);
+    this.handleIds = ids;
+    this.handleMirror = mirror && mirror.length === ids.length ? mirror : null;
+    if (this.drag && (this.drag.index >= ids.length || ids[this.drag.index] !== this.drag.vertex)) {
+      // The handle set changed under the drag: find the dragged vertex again.
+      const k = ids.indexOf(this.drag.vertex);
+      if (k >= 0) this.drag.index = k;
+    }
+    if (this.hover >= ids.length) this.hover = -1;
+    this.handlesDirty = true;
+  },
+
+  markerRadius() {
+    if (!this.markerR) {
+      // The neutral mesh's radius: markers are the same size whatever the expression.
+      const nb = this.model.get("_neutral_bounds") || {};
+      let r = Number(nb.radius);
+      if (!(isFinite(r) && r > 0)) {
+        if (!this.positionAttr) return 0.014; // no geometry yet: do not cache a guess
+        if (!this.geometry.boundingSphere) this.geometry.computeBoundingSphere();
+        r = this.geometry.boundingSphere ? this.geometry.boundingSphere.radius : 1;
+      }
+      this.markerR = (isFinite(r) && r > 0 ? r : 1) * 0.014;
+    }
+    return this.markerR;
+  },
+
+  // World position of marker k: the evaluated vertex, or the pointer target while dragged.
+  markerWorld(k, out) {
+    const d = this.drag;
+    if (d && d.index === k) return out.copy(d.target);
+    const P = this.store.positions;
+    const n = P ? P.length / 3 : 0;
+    const i = Math.min(this.handleIds[k], Math.max(n - 1, 0));
+    return P ? out.set(P[3 * i], P[3 * i + 1], P[3 * i + 2]) : out.set(0, 0, 0);
+  },
+
+  // The last dragged marker, highlighted while the sculpt tool is on (-1: none).
+  selectedHandle() {
+    if (this.model.get("tool") !== "sculpt") return -1;
+    const sel = this.model.get("selected_handle");
+    return sel >= 0 && sel < this.handleIds.length ? sel : -1;
+  },
+
+  // Which marker gets the highlight: the dragged one, else the hovered, else the selected.
+  activeHandle() {
+    if (this.drag) return this.drag.index;
+    if (this.hover >= 0) return this.hover;
+    return this.selectedHandle();
+  },
+
+  updateHandles() {
+    this.handlesDirty = false;
+    const ids = this.handleIds;
+    const P = this.store.positions;
+    if (this.handleMesh && this.handleMesh.count !== ids.length) {
+      this.scene.remove(this.handleMesh);
+      this.handleMesh.geometry.dispose();
+      this.handleMesh.material.dispose();
+      this.handleMesh = null;
+    }
+    if (!ids.length || !P) return;
+    if (!this.handleMesh) {
+      const mesh = new THREE.InstancedMesh(
+        new THREE.SphereGeometry(this.markerRadius(), 12, 8),
+        new THREE.MeshBasicMaterial({ color: 0xffffff }),
+        ids.length,
+      );
+      mesh.frustumCulled = false;
+      mesh.renderOrder = 1;
+      this.handleMesh = mesh;
+      this.scene.add(mesh);
+    }
+    const active = this.activeHandle();
+    const dragged = this.drag ? this.drag.index : -1;
+    const selected = this.selectedHandle();
+    const mirror = this.handleMirror;
+    const mirrorOf = this.model.get("symmetric") && mirror && active >= 0 ? mirror[active] : -1;
+    const m = new THREE.Matrix4();
+    const v = new THREE.Vector3();
+    const one = new THREE.Vector3(1, 1, 1);
+    const big = new THREE.Vector3(1.4, 1.4, 1.4);
+    const q = new THREE.Quaternion();
+    const color = new THREE.Color();
+    for (let k = 0; k < ids.length; k++) {
+      this.markerWorld(k, v);
+      const hot = k === dragged || k === this.hover || k === mirrorOf;
+      m.compose(v, q, hot ? big : one);
+      this.handleMesh.setMatrixAt(k, m);
+      let hex = HANDLE_COLOR;
+      if (k === dragged || (k === selected && k !== this.hover)) hex = HANDLE_SELECTED;
+      if (k === this.hover && k !== dragged) hex = HANDLE_HOVER;
+      if (k === mirrorOf) hex = HANDLE_MIRROR;
+      this.handleMesh.setColorAt(k, color.setHex(hex));
+    }
+    this.handleMesh.instanceMatrix.needsUpdate = true;
+    if (this.handleMesh.instanceColor) this.handleMesh.instanceColor.needsUpdate = true;
+  },
+
+  // Page (client) coordinates of the markers, [[x, y, inFront], ...], computed now.
+  handleScreenPositions() {
+    const ids = this.handleIds;
+    if (!ids.length || !this.renderer) return [];
+    const v = new THREE.Vector3();
+    const rect = this.renderer.domElement.getBoundingClientRect();
+    const out = [];
+    for (let k = 0; k < ids.length; k++) {
+      this.markerWorld(k, v).project(this.camera);
+      out.push([
+        Math.round((rect.left + ((v.x + 1) / 2) * rect.width) * 10) / 10,
+        Math.round((rect.top + ((1 - v.y) / 2) * rect.height) * 10) / 10,
+        v.z > -1 && v.z < 1 ? 1 : 0,
+      ]);
+    }
+    return out;
+  },
+
+  // Test hook: data-handles = the markers' page coordinates at the last render (the page
+  // may have scrolled since: el.fwbHandles() computes them now).
+  writeHandleHook() {
+    const text = JSON.stringify(this.handleScreenPositions());
+    if (this.el.getAttribute("data-handles") !== text) this.el.setAttribute("data-handles", text);
+  },
+
+  // ---- sculpt tool: picking -----------------------------------------------------------
+
+};

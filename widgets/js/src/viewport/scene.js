@@ -1,0 +1,637 @@
+// One view of a viewport widget: renderer, scene, camera, controls, render loop, test hooks.
+// Its handle markers (./markers.js), picking (./picking.js) and pointer tools (./tools.js)
+// live in their own modules; the geometry comes from the widget model's Store (./sync.js).
+//
+// Test hooks (attributes of the root element): data-frame / data-version / data-frame-time
+// after each render with new geometry, data-render-count, data-ready, data-handles (marker
+// page coordinates), data-probe (_probe_ids' page coordinates), data-tool, data-dragging,
+// data-painting, data-hover; el.fwbProject(ids), el.fwbHandles(), el.fwbBrush(),
+// el.fwbDragStats, el.fwbPaintStats.
+import * as THREE from "three";
+import { OrbitControls } from "three/examples/jsm/controls/OrbitControls.js";
+import { isPlaying, onPlayback } from "../shared/playback.js";
+import { markerMethods } from "./markers.js";
+import { pickingMethods } from "./picking.js";
+import { PaintTool, SculptTool } from "./tools.js";
+import {
+  BRUSH_COLOR, DRAFT_PIXEL_RATIO, PAINT_STRENGTH, PAINT_TINT, SKIN,
+  colorForComponent, computeNormals, softwareWebGL, srgbToLinear, typed,
+} from "./util.js";
+
+export class View {
+  constructor(store, model, el) {
+    this.store = store;
+    this.model = model;
+    this.el = el;
+    this.frame = 0; // rendered geometry updates (test hook data-frame)
+    this.renders = 0; // all renders (orbit included)
+    this.pending = false;
+    this.geometryDirty = true;
+    this.seenTopology = -1;
+    this.seenPositions = -1;
+    this.framed = false;
+    this.paintDirty = null; // null | "full" | array of Uint32Array ids with new weights
+    this.renderedPaintVersion = -1;
+    this.build();
+  }
+
+  build() {
+    const el = this.el;
+    el.classList.add("fwb-viewport");
+    el.style.position = "relative";
+    el.style.width = "100%";
+    el.style.minWidth = "240px";
+    el.style.height = `${this.model.get("height")}px`;
+    el.setAttribute("data-frame", "0");
+    el.setAttribute("data-render-count", "0");
+    el.setAttribute("data-vertex-count", "0");
+    el.setAttribute("data-ready", "0");
+
+    let renderer;
+    try {
+      renderer = new THREE.WebGLRenderer({
+        antialias: !softwareWebGL(), // see softwareWebGL()
+        // Keeps the last frame readable (screenshots, toDataURL) after compositing.
+        preserveDrawingBuffer: true,
+      });
+    } catch (err) {
+      el.textContent = `WebGL is not available in this browser: ${err}`;
+      el.setAttribute("data-error", String(err));
+      this.renderer = null;
+      return;
+    }
+    renderer.setPixelRatio(window.devicePixelRatio || 1);
+    el.setAttribute("data-software-webgl", softwareWebGL() ? "1" : "0");
+    el.setAttribute("data-draft", "0");
+    // Draft resolution while a timeline of this face model plays (software WebGL only).
+    this.offPlayback = onPlayback(() => {
+      this.setDraft(isPlaying(this.model.get("_scene")) && softwareWebGL());
+    });
+    renderer.setClearColor(0x2b2f36, 1);
+    renderer.outputColorSpace = THREE.SRGBColorSpace;
+    this.renderer = renderer;
+    renderer.domElement.style.display = "block";
+    renderer.domElement.style.touchAction = "none";
+    el.appendChild(renderer.domElement);
+
+    this.banner = document.createElement("div");
+    Object.assign(this.banner.style, {
+      position: "absolute", left: "0", right: "0", top: "0", padding: "4px 8px",
+      background: "rgba(160,20,20,0.85)", color: "white", font: "12px monospace",
+      whiteSpace: "pre-wrap", display: "none", pointerEvents: "none",
+    });
+    el.appendChild(this.banner);
+
+    const scene = new THREE.Scene();
+    this.scene = scene;
+    const camera = new THREE.PerspectiveCamera(30, 1, 0.01, 1000);
+    this.camera = camera;
+    scene.add(camera);
+    scene.add(new THREE.HemisphereLight(0xffffff, 0x3a3530, 1.2));
+    // Key light rides with the camera so the face stays lit from wherever it is seen.
+    const key = new THREE.DirectionalLight(0xffffff, 2.2);
+    key.position.set(0.6, 0.8, 1.0);
+    camera.add(key);
+    camera.add(key.target);
+    key.target.position.set(0, 0, -1);
+
+    this.geometry = new THREE.BufferGeometry();
+    this.material = new THREE.MeshStandardMaterial({
+      vertexColors: true,
+      roughness: 0.62,
+      metalness: 0.0,
+      side: THREE.DoubleSide,
+      polygonOffset: true, // lets the wireframe overlay win the depth test
+      polygonOffsetFactor: 1,
+      polygonOffsetUnits: 1,
+    });
+    this.mesh = new THREE.Mesh(this.geometry, this.material);
+    this.mesh.frustumCulled = false;
+    scene.add(this.mesh);
+    this.wireMaterial = new THREE.MeshBasicMaterial({
+      color: 0x101418, wireframe: true, transparent: true, opacity: 0.35,
+    });
+    this.wire = new THREE.Mesh(this.geometry, this.wireMaterial);
+    this.wire.frustumCulled = false;
+    this.wire.visible = false;
+    scene.add(this.wire);
+    this.handleMesh = null;
+    this.handlesDirty = true;
+    this.refreshHandleCache();
+    // Brush cursor: a unit ring in the xy plane, placed on the surface along the normal.
+    const ringGeo = new THREE.RingGeometry(0.9, 1.0, 64);
+    const ringMat = new THREE.MeshBasicMaterial({
+      color: BRUSH_COLOR, transparent: true, opacity: 0.9, depthTest: false, side: THREE.DoubleSide,
+    });
+    this.brushRing = new THREE.Mesh(ringGeo, ringMat);
+    this.brushMirrorRing = new THREE.Mesh(ringGeo, ringMat.clone());
+    this.brushMirrorRing.material.opacity = 0.45;
+    for (const r of [this.brushRing, this.brushMirrorRing]) {
+      r.visible = false;
+      r.renderOrder = 2;
+      r.frustumCulled = false;
+      scene.add(r);
+    }
+
+    const controls = new OrbitControls(camera, renderer.domElement);
+    controls.enableDamping = false; // render on demand only: no animation loop
+    // userCamera: the person has orbited, zoomed or panned; from then on the camera is
+    // theirs (a resize no longer re-frames the face, see resize()).
+    this.userCamera = false;
+    this.controlsActive = false;
+    controls.addEventListener("start", () => { this.controlsActive = true; });
+    controls.addEventListener("end", () => { this.controlsActive = false; });
+    controls.addEventListener("change", () => {
+      if (this.controlsActive) this.userCamera = true;
+      this.requestRender(false);
+    });
+    this.controls = controls;
+
+    // Pointer tools. Listeners sit on the container in the CAPTURE phase so a press on a
+    // handle marker (or on the face with the brush) is taken before OrbitControls sees it.
+    this.raycaster = new THREE.Raycaster();
+    this.drag = null; // the handle drag in progress (SculptTool)
+    this.stroke = null; // the paint stroke in progress (PaintTool)
+    this.hover = -1;
+    this.tools = { sculpt: new SculptTool(this), paint: new PaintTool(this) };
+    this.awaitFrame = []; // acked messages waiting for the frame that shows them
+    this.renderedVersion = -1;
+    this.renderedTime = 0;
+    // Test/benchmark hook: one entry per acked move {seq, input, send, ack, frame, kernel}
+    // (performance.now() ms): input = pointer event, frame = first render showing it.
+    this.dragStats = [];
+    el.fwbDragStats = this.dragStats;
+    // Same for paint messages: {seq, input, send, ack, frame, kernel, dabs}.
+    this.paintStats = [];
+    el.fwbPaintStats = this.paintStats;
+    const tool = () => (this.stroke || this.model.get("tool") === "paint" ? this.tools.paint : this.tools.sculpt);
+    this.listeners = {
+      pointerdown: (e) => {
+        if (!this.renderer) return;
+        const t = this.model.get("tool");
+        if (t === "paint") this.tools.paint.down(e);
+        else if (t === "sculpt") this.tools.sculpt.down(e);
+      },
+      pointermove: (e) => tool().move(e),
+      pointerup: (e) => tool().up(e),
+      pointercancel: (e) => tool().up(e),
+    };
+    for (const [ev, fn] of Object.entries(this.listeners)) el.addEventListener(ev, fn, true);
+    // Escape during a drag or stroke cancels it (Python puts its edits back).
+    this.onKey = (e) => {
+      if (e.key !== "Escape") return;
+      if (this.drag) this.tools.sculpt.end(null, true);
+      if (this.stroke) this.tools.paint.end(null, true);
+    };
+    window.addEventListener("keydown", this.onKey);
+    this.onLostCapture = (e) => {
+      if (this.drag && e.pointerId === this.drag.pointerId) this.tools.sculpt.end(null);
+      if (this.stroke && e.pointerId === this.stroke.pointerId) this.tools.paint.end(null);
+    };
+    this.onLeave = () => {
+      this.pointerInside = false;
+      if (!this.stroke && this.brushRing.visible) {
+        this.brushRing.visible = false;
+        this.brushMirrorRing.visible = false;
+        this.requestRender();
+      }
+      if (!this.drag) {
+        // No marker stays lit once the pointer is elsewhere: neither the hovered one nor
+        // the last dragged one (selected_handle, cleared for every view).
+        this.clearHover();
+        if (this.model.get("selected_handle") >= 0) {
+          this.model.set("selected_handle", -1);
+          this.model.save_changes();
+          this.handlesDirty = true;
+          this.requestRender();
+        }
+      }
+    };
+    renderer.domElement.addEventListener("pointerleave", this.onLeave);
+    renderer.domElement.addEventListener("lostpointercapture", this.onLostCapture);
+    this.updateTool();
+
+    this.resizeObserver = new ResizeObserver(() => this.resize());
+    this.resizeObserver.observe(el);
+
+    // Test hook: screen (client) coordinates of vertex ids, [[x, y, inFront], ...].
+    el.fwbProject = (ids) => this.project(ids);
+    el.fwbHandles = () => this.handleScreenPositions();
+    // Test hook: the brush cursor's centre in page coordinates, or null when hidden.
+    el.fwbBrush = () => this.tools.paint.brushScreenPosition();
+
+    this.resize();
+    this.syncAll();
+  }
+
+  syncAll() {
+    this.updateTool();
+    this.updateWireframe();
+    this.updateError();
+    this.geometryChanged();
+  }
+
+  geometryChanged() {
+    this.geometryDirty = true;
+    this.requestRender(true);
+  }
+
+  requestRender() {
+    if (this.pending || !this.renderer) return;
+    this.pending = true;
+    // Coalesce: many patches within one display frame cost one render.
+    requestAnimationFrame(() => {
+      this.pending = false;
+      this.renderNow();
+    });
+  }
+
+  // ---- geometry -----------------------------------------------------------------------
+
+  uploadGeometry() {
+    const s = this.store;
+    if (!s.positions || !s.faces) return false;
+    const g = this.geometry;
+    const n = s.positions.length / 3;
+    if (this.seenTopology !== s.topologyVersion) {
+      this.positionAttr = new THREE.BufferAttribute(new Float32Array(s.positions), 3);
+      this.positionAttr.setUsage(THREE.DynamicDrawUsage);
+      g.setAttribute("position", this.positionAttr);
+      g.setAttribute("normal", new THREE.BufferAttribute(new Float32Array(n * 3), 3));
+      g.setAttribute("color", new THREE.BufferAttribute(new Float32Array(n * 3), 3));
+      this.seenTopology = s.topologyVersion;
+      this.updateIndex();
+      this.updateColors();
+      this.el.setAttribute("data-vertex-count", String(n));
+      this.el.setAttribute("data-face-count", String(s.faces.length / 3));
+    } else {
+      const arr = this.positionAttr.array;
+      const ids = s.lastPatchIds;
+      if (ids && this.seenPositions === s.positionsVersion - 1) {
+        // Only the patched vertices changed since our last upload.
+        const P = s.positions;
+        for (let k = 0; k < ids.length; k++) {
+          const j = 3 * ids[k];
+          arr[j] = P[j]; arr[j + 1] = P[j + 1]; arr[j + 2] = P[j + 2];
+        }
+      } else {
+        arr.set(s.positions);
+      }
+      this.positionAttr.needsUpdate = true;
+    }
+    this.seenPositions = s.positionsVersion;
+    // smooth shading: normals always from the current positions
+    const normals = g.getAttribute("normal");
+    computeNormals(this.positionAttr.array, s.faces, normals.array);
+    normals.needsUpdate = true;
+    if (!this.framed) g.computeBoundingSphere();
+    if (!this.framed) this.frameCamera();
+    this.updateHandles();
+    return true;
+  }
+
+  updateIndex() {
+    const s = this.store;
+    if (!s.faces) return;
+    const names = this.model.get("_component_names") || [];
+    const visible = this.model.get("component_visible") || {};
+    let faces = s.faces;
+    const hidden = names.map((nm) => visible[nm] === false);
+    if (s.labels && hidden.some((h) => h)) {
+      const keep = [];
+      const L = s.labels;
+      for (let f = 0; f < faces.length; f += 3) {
+        if (!hidden[L[faces[f]]]) keep.push(faces[f], faces[f + 1], faces[f + 2]);
+      }
+      faces = new Uint32Array(keep);
+    }
+    this.geometry.setIndex(new THREE.BufferAttribute(faces, 1));
+  }
+
+  updateColors() {
+    const s = this.store;
+    const attr = this.geometry.getAttribute("color");
+    if (!attr || !s.positions) return;
+    const n = s.positions.length / 3;
+    if (!this.baseColors || this.baseColors.length !== n * 3) this.baseColors = new Float32Array(n * 3);
+    const C = this.baseColors;
+    const overlay = typed(this.model.get("_vertex_colors"), Float32Array);
+    if (overlay && overlay.length === n * 3) {
+      // Overlay values are sRGB in [0, 1] (what a user picks); the shader wants linear.
+      for (let i = 0; i < n * 3; i++) C[i] = srgbToLinear(Math.min(1, Math.max(0, overlay[i])));
+    } else {
+      const names = this.model.get("_component_names") || [];
+      const table = names.map((nm) => colorForComponent(nm).map(srgbToLinear));
+      const skin = SKIN.map(srgbToLinear);
+      const L = s.labels;
+      for (let i = 0; i < n; i++) {
+        const rgb = (L && table[L[i]]) || skin;
+        C[3 * i] = rgb[0]; C[3 * i + 1] = rgb[1]; C[3 * i + 2] = rgb[2];
+      }
+    }
+    this.applyPaint(null);
+  }
+
+  // Colour attribute = base colours tinted by the painted weights (all, or only `ids`).
+  applyPaint(idLists) {
+    const attr = this.geometry.getAttribute("color");
+    const B = this.baseColors;
+    if (!attr || !B || attr.array.length !== B.length) return;
+    const C = attr.array;
+    const W = this.store.paintW && this.store.paintW.length * 3 === B.length ? this.store.paintW : null;
+    const T = this.paintTint || (this.paintTint = PAINT_TINT.map(srgbToLinear));
+    const tint = (i) => {
+      const a = W ? PAINT_STRENGTH * Math.min(1, Math.max(0, W[i])) : 0;
+      const j = 3 * i;
+      C[j] = B[j] + a * (T[0] - B[j]);
+      C[j + 1] = B[j + 1] + a * (T[1] - B[j + 1]);
+      C[j + 2] = B[j + 2] + a * (T[2] - B[j + 2]);
+    };
+    if (idLists && W) {
+      for (const ids of idLists) for (let k = 0; k < ids.length; k++) if (ids[k] < W.length) tint(ids[k]);
+    } else {
+      const n = B.length / 3;
+      for (let i = 0; i < n; i++) tint(i);
+    }
+    attr.needsUpdate = true;
+    this.renderedPaintVersion = this.store.paintVersion;
+  }
+
+  paintChanged(ids) {
+    if (ids === null || this.paintDirty === "full") this.paintDirty = "full";
+    else (this.paintDirty || (this.paintDirty = [])).push(ids);
+    this.requestRender();
+  }
+
+  updateWireframe() {
+    if (this.wire) this.wire.visible = !!this.model.get("wireframe");
+  }
+
+  updateError() {
+    if (!this.banner) return;
+    const msg = this.model.get("_error") || "";
+    this.banner.textContent = msg;
+    this.banner.style.display = msg ? "block" : "none";
+    this.el.setAttribute("data-error", msg);
+  }
+
+  // ---- tools, gesture acks and their timing ------------------------------------------
+
+  // Un-highlight the hovered marker (the pointer left the view, or the tool changed).
+  clearHover() {
+    if (this.hover < 0) return;
+    this.hover = -1;
+    this.el.setAttribute("data-hover", "-1");
+    if (this.renderer && !this.drag) {
+      this.renderer.domElement.style.cursor = this.model.get("tool") === "sculpt" ? "crosshair" : "";
+    }
+    this.handlesDirty = true;
+    this.requestRender();
+  }
+
+  updateTool() {
+    const tool = this.model.get("tool");
+    const sculpt = tool === "sculpt";
+    this.el.setAttribute("data-tool", tool === "sculpt" || tool === "paint" ? tool : "orbit");
+    if (!this.tools) return;
+    if (!sculpt) this.tools.sculpt.end(null);
+    this.tools.sculpt.click = null;
+    this.clearHover();
+    if (tool !== "paint") {
+      this.tools.paint.end(null);
+      if (this.brushRing) { this.brushRing.visible = false; this.brushMirrorRing.visible = false; }
+    }
+    if (this.renderer) this.renderer.domElement.style.cursor = sculpt || tool === "paint" ? "crosshair" : "";
+    this.handlesDirty = true;
+    this.requestRender();
+  }
+
+  // A gesture ack, or a geometry patch carrying a gesture message's seq.
+  onAck(content) {
+    for (const t of Object.values(this.tools || {})) t.client.onAck(content);
+    // A dab that changed nothing still moved the brush cursor.
+    if (this.stroke && !this.geometryDirty && !this.paintDirty) this.requestRender();
+    // A move that changed no geometry still moved the marker.
+    if (this.handlesDirty && !this.geometryDirty) this.requestRender();
+  }
+
+  // Python ended the gesture of `kind` ("handle" | "paint").
+  onCancel(kind, content) {
+    if (!this.tools) return;
+    (kind === "handle" ? this.tools.sculpt : this.tools.paint).client.onCancel(content);
+  }
+
+  // The timing of an acked message: reported once a render shows its update.
+  onStat(st) {
+    // The overlay patch of a paint message came before its ack (same channel, in order).
+    st.paintVersion = this.store.paintVersion;
+    if (this.statShown(st)) this.finishStat(st, this.renderedTime);
+    else this.awaitFrame.push(st);
+  }
+
+  // Has a render shown this update (its geometry version and its paint overlay version)?
+  statShown(st) {
+    return (
+      this.renderedVersion >= st.version && !this.geometryDirty &&
+      (st.paintVersion == null || this.renderedPaintVersion >= st.paintVersion) && !this.paintDirty
+    );
+  }
+
+  finishStat(st, frameTime) {
+    // A move that changed nothing shows no new frame: no latency to report.
+    st.frame = frameTime >= st.input ? frameTime : null;
+    const list = st.kind === "paint" ? this.paintStats : this.dragStats;
+    list.push(st);
+    if (list.length > 4000) list.splice(0, 2000);
+    this.el.setAttribute(
+      st.kind === "paint" ? "data-paint-updates" : "data-drag-updates", String(list.length));
+  }
+
+  // ---- paint tool -----------------------------------------------------------------------
+
+
+  frameBox() {
+    const nb = this.model.get("_neutral_bounds") || {};
+    const lo = nb.min, hi = nb.max;
+    if (Array.isArray(lo) && Array.isArray(hi) && lo.length === 3 && hi.length === 3 &&
+        lo.concat(hi).every((x) => isFinite(x)) && hi.some((x, i) => x > lo[i])) {
+      return new THREE.Box3(new THREE.Vector3(...lo), new THREE.Vector3(...hi));
+    }
+    const sphere = this.geometry.boundingSphere;
+    if (!sphere || !isFinite(sphere.radius) || sphere.radius <= 0) return null;
+    return new THREE.Box3().setFromBufferAttribute(this.geometry.getAttribute("position"));
+  }
+
+  frameCamera() {
+    const box = this.frameBox();
+    if (!box) return;
+    const center = box.getCenter(new THREE.Vector3());
+    const size = box.getSize(new THREE.Vector3());
+    const up = this.model.get("_up_axis") || "+y";
+    const cam = this.camera;
+    const half = THREE.MathUtils.degToRad(cam.fov / 2);
+    let dir; // direction from target to camera: the face looks toward +z (y up)
+    if (up === "+z") {
+      cam.up.set(0, 0, 1);
+      dir = new THREE.Vector3(0, -1, 0);
+    } else {
+      cam.up.set(0, 1, 0);
+      dir = new THREE.Vector3(0, 0, 1);
+    }
+    const extentV = up === "+z" ? size.z : size.y;
+    const extentH = size.x;
+    const aspect = cam.aspect || 1;
+    const needV = extentV / 2 / Math.tan(half);
+    const needH = extentH / 2 / (Math.tan(half) * aspect);
+    const depth = up === "+z" ? size.y : size.z;
+    const dist = Math.max(needV, needH) * 1.04 + depth * 0.3;
+    cam.position.copy(center).addScaledVector(dir, dist);
+    cam.near = Math.max(dist / 100, 1e-4);
+    cam.far = dist * 100;
+    cam.updateProjectionMatrix();
+    this.controls.target.copy(center);
+    this.controls.update();
+    this.framed = true;
+  }
+
+  resize() {
+    if (!this.renderer) return;
+    const w = Math.max(this.el.clientWidth, 240);
+    const h = this.model.get("height");
+    this.el.style.height = `${h}px`;
+    this.renderer.setSize(w, h, true);
+    this.camera.aspect = w / h;
+    this.camera.updateProjectionMatrix();
+    // Until the person moves the camera the framing follows the canvas size: the first
+    // geometry usually arrives before the notebook has laid the view out at its width
+    // (it was framed for the 320 px minimum), and a fresh app and one opened later must
+    // look the same.
+    if (this.framed && !this.userCamera) this.frameCamera();
+    this.requestRender(false);
+  }
+
+  setDraft(on) {
+    if (!this.renderer || on === !!this.draft) return;
+    this.draft = on;
+    const dpr = window.devicePixelRatio || 1;
+    this.renderer.setPixelRatio(on ? dpr * DRAFT_PIXEL_RATIO : dpr);
+    this.el.setAttribute("data-draft", on ? "1" : "0");
+    this.resize(); // re-applies the size at the new ratio and redraws
+  }
+
+  renderNow() {
+    const t0 = performance.now();
+    let newGeometry = false;
+    if (this.geometryDirty) {
+      this.geometryDirty = false;
+      newGeometry = this.uploadGeometry();
+    } else if (this.handlesDirty) {
+      this.updateHandles();
+    }
+    if (this.paintDirty && this.positionAttr) {
+      const d = this.paintDirty;
+      this.paintDirty = null;
+      this.applyPaint(d === "full" ? null : d);
+      newGeometry = true; // new pixels: counts as a frame for the test hooks and latency
+      this.el.setAttribute("data-paint-version", String(this.store.paintVersion));
+    }
+    if (this.featureGraph) this.featureGraph.beforeRender(); // feature-graph overlay
+    this.renderer.render(this.scene, this.camera);
+    this.renders += 1;
+    const el = this.el;
+    el.setAttribute("data-render-count", String(this.renders));
+    if (newGeometry) {
+      this.frame += 1;
+      el.setAttribute("data-frame", String(this.frame));
+      el.setAttribute("data-version", String(this.store.version));
+      // performance.now() of the render that first showed this geometry (latency bench).
+      const t1 = performance.now();
+      el.setAttribute("data-frame-time", String(t1));
+      // upload + normals + draw-call time of this frame (benchmark breakdown)
+      el.setAttribute("data-render-ms", (t1 - t0).toFixed(2));
+      // when the geometry message arrived (benchmark: transport vs. wait-for-frame)
+      el.setAttribute("data-update-time", String(this.store.lastUpdateTime || 0));
+      el.setAttribute("data-ready", "1");
+      this.renderedVersion = this.store.version;
+      this.renderedTime = t1;
+      if (this.awaitFrame.length) {
+        const keep = [];
+        for (const st of this.awaitFrame) {
+          if (this.statShown(st)) this.finishStat(st, t1); else keep.push(st);
+        }
+        this.awaitFrame = keep;
+      }
+    }
+    this.writeProbe();
+    this.writeHandleHook();
+  }
+
+  // ---- test hooks ---------------------------------------------------------------------
+
+  project(ids) {
+    const P = this.store.positions;
+    if (!P || !this.renderer) return [];
+    const rect = this.renderer.domElement.getBoundingClientRect();
+    const v = new THREE.Vector3();
+    const n = P.length / 3;
+    const out = [];
+    for (const id of ids) {
+      if (id < 0 || id >= n) { out.push(null); continue; }
+      v.set(P[3 * id], P[3 * id + 1], P[3 * id + 2]).project(this.camera);
+      out.push([
+        rect.left + ((v.x + 1) / 2) * rect.width,
+        rect.top + ((1 - v.y) / 2) * rect.height,
+        v.z > -1 && v.z < 1 ? 1 : 0,
+      ]);
+    }
+    return out;
+  }
+
+  writeProbe() {
+    const ids = typed(this.model.get("_probe_ids"), Uint32Array);
+    if (!ids || !ids.length) return;
+    const pts = this.project(Array.from(ids)).map((p) =>
+      p ? [Math.round(p[0] * 10) / 10, Math.round(p[1] * 10) / 10, p[2]] : null);
+    this.el.setAttribute("data-probe", JSON.stringify(pts));
+  }
+
+  dispose() {
+    // Never leave Python inside a drag interaction when the view goes away.
+    if (this.tools) {
+      try { this.tools.sculpt.end(null); } catch (err) { /* closing */ }
+      try { this.tools.paint.end(null); } catch (err) { /* closing */ }
+    }
+    if (this.onKey) window.removeEventListener("keydown", this.onKey);
+    if (this.listeners) {
+      for (const [ev, fn] of Object.entries(this.listeners)) this.el.removeEventListener(ev, fn, true);
+    }
+    if (this.renderer && this.onLostCapture) {
+      this.renderer.domElement.removeEventListener("lostpointercapture", this.onLostCapture);
+      this.renderer.domElement.removeEventListener("pointerleave", this.onLeave);
+    }
+    if (this.brushRing) {
+      this.brushRing.geometry.dispose();
+      this.brushRing.material.dispose();
+      this.brushMirrorRing.material.dispose();
+    }
+    if (this.resizeObserver) this.resizeObserver.disconnect();
+    if (this.offPlayback) this.offPlayback();
+    if (this.controls) this.controls.dispose();
+    if (this.handleMesh) this.handleMesh.geometry.dispose();
+    if (this.geometry) this.geometry.dispose();
+    if (this.material) this.material.dispose();
+    if (this.wireMaterial) this.wireMaterial.dispose();
+    if (this.renderer) {
+      this.renderer.dispose();
+      this.renderer.forceContextLoss();
+    }
+    delete this.el.fwbProject;
+    delete this.el.fwbDragStats;
+    delete this.el.fwbHandles;
+    delete this.el.fwbPaintStats;
+    delete this.el.fwbBrush;
+  }
+}
+
+
+Object.assign(View.prototype, markerMethods, pickingMethods);
