@@ -165,3 +165,14 @@ def test_cancel_puts_everything_back(base: FaceModel) -> None:
     assert len(m.history.undo_labels) == steps  # no undo step
     with pytest.raises(workbench.ModelError, match="not the open one"):
         m.end_interaction(tok)  # a stale token is refused
+
+
+def test_close_interaction_by_kind(base: FaceModel) -> None:
+    m = fresh_copy(base)
+    closed = []
+    tok = m.begin_interaction("slider", on_close=lambda: closed.append("burst"), kind="burst")
+    assert tok.kind == "burst"
+    assert not m.close_interaction(kind="gesture") and m.interacting
+    assert m.close_interaction(kind="burst") and closed == ["burst"] and not m.interacting
+    m.begin_interaction("drag")
+    assert not m.close_interaction(kind="burst") and m.close_interaction()

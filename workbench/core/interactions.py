@@ -31,11 +31,14 @@ class InteractionToken:
     :meth:`~FaceState.end_interaction` (one undo step) or
     :meth:`~FaceState.cancel_interaction` (everything put back, no undo step).
     A token of an interaction already closed is refused, so a late message of
-    an old gesture can never close a newer one.
+    an old gesture can never close a newer one. ``kind`` says what holds it
+    (``"gesture"``: a pointer drag or stroke; ``"burst"``: a run of slider
+    updates ended by an idle timer), so views can close only one kind.
     """
 
     label: str
     serial: int
+    kind: str = "gesture"
 
 
 _serials = itertools.count(1)
@@ -68,10 +71,13 @@ class Interactions:
     def push(self, cmd: Command) -> None:  # provided by FaceState
         raise NotImplementedError
 
-    def begin_interaction(self, label: str, on_close: Callable[[], None] | None = None) -> InteractionToken:
+    def begin_interaction(
+        self, label: str, on_close: Callable[[], None] | None = None, *, kind: str = "gesture"
+    ) -> InteractionToken:
         """Open an interaction spanning several messages (a drag); returns its token.
 
-        ``on_close`` is called when somebody else closes it with :meth:`close_interaction`.
+        ``on_close`` is called when somebody else closes it with :meth:`close_interaction`;
+        ``kind`` is recorded on the token (``"gesture"`` or ``"burst"``).
         """
         with self._lock:
             if self._interaction is not None:
@@ -79,7 +85,7 @@ class Interactions:
                     f"begin_interaction({label!r}): interaction {self._interaction.label!r} is still "
                     "open; end, cancel or close it first"
                 )
-            token = InteractionToken(label, next(_serials))
+            token = InteractionToken(label, next(_serials), str(kind))
             self._interaction = _Interaction(label, token=token, on_close=on_close)
             return token
 
@@ -103,15 +109,19 @@ class Interactions:
             weights = {k: v for k, v in inter.weights_before.items() if k in self._weights}
             self._settle(weights, dict(inter.slots_before))
 
-    def close_interaction(self) -> bool:
+    def close_interaction(self, kind: str | None = None) -> bool:
         """End the open token interaction, keeping its edits; True if one was open.
 
         Discrete edits from views (Key, Import, undo) call this first so they never
-        join a drag's undo step; the owner's ``on_close`` is told.
+        join a drag's undo step; the owner's ``on_close`` is told. With ``kind``
+        only an interaction of that kind is closed (a new slider burst closes an
+        older burst, never a pointer drag).
         """
         with self._lock:
             inter = self._interaction
             if inter is None or inter.token is None:
+                return False
+            if kind is not None and inter.token.kind != kind:
                 return False
             self.end_interaction(inter.token)
         if inter.on_close is not None:
