@@ -158,7 +158,7 @@ def remove_stale_temporaries(path: str | os.PathLike[str]) -> list[Path]:
     alone. Called by every save and load of ``path``.
     """
     path = Path(path)
-    removed = []
+    removed: list[Path] = []
     try:
         candidates = list(path.parent.glob(f".{glob.escape(path.name)}.*.tmp"))
     except OSError:
