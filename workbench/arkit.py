@@ -16,6 +16,7 @@ public ARKit list and the parser is a small tokenizer.
 from __future__ import annotations
 
 import re
+from collections.abc import Mapping, Sequence
 
 __all__ = ["ARKIT_52", "canonical_arkit_name", "mirror_name", "shape_group"]
 
@@ -230,3 +231,85 @@ def mirror_name(name: str) -> str | None:
     start, end = m.start() + offset, m.end() + offset
     tok = m.group()
     return name[:start] + _swap_case_like(tok, _SWAP[tok.lower()]) + name[end:]
+
+
+def split_half_of(name: str) -> tuple[str, str] | None:
+    """``(ARKit name, side)`` when ``name`` is one side of a split symmetric ARKit shape.
+
+    Rigs often split the unsided ARKit shapes into halves: "browInnerUp_L" /
+    "browInnerUp_R", "CheekPuffLeft", "jawOpen.R". Returns e.g.
+    ``("browInnerUp", "left")``; None for whole shapes and for sided ARKit
+    shapes ("eyeBlink_L" is eyeBlinkLeft itself, not a half).
+    """
+    if not isinstance(name, str) or canonical_arkit_name(name) is not None:
+        return None
+    tokens = _tokens(name)
+    side = _side_token(tokens)
+    if side is None:
+        return None
+    stem = "".join(t.group().lower() for k, t in enumerate(tokens) if k != side[0])
+    whole = _BY_KEY.get(_ALIASES.get(stem, stem))
+    if whole is None or whole.endswith(("Left", "Right")):
+        return None
+    return whole, side[1]
+
+
+def rig_weights(
+    arkit_weights: Mapping[str, float], shape_names: Sequence[str]
+) -> tuple[dict[str, float], list[str]]:
+    """ARKit-named weights expressed on a rig's own shapes.
+
+    Parameters
+    ----------
+    arkit_weights : mapping
+        Weights by ARKit name (or any spelling :func:`canonical_arkit_name` reads).
+    shape_names : sequence of str
+        The rig's shapes.
+
+    Returns
+    -------
+    weights : dict
+        On the rig's names: a shape spelled otherwise ("mouthSmile_L") gets its
+        ARKit weight; the halves of a split shape ("browInnerUp_L" and "_R")
+        both get the whole shape's weight, since split halves sum to the whole;
+        a rig's unsplit shape ("mouthSmile") standing for an ARKit left/right
+        pair gets the mean of the pair.
+    missing : list of str
+        ARKit names with a non-zero weight that the rig has no counterpart for
+        (a rig without a tongue has no ``tongueOut``).
+    """
+    by_canon: dict[str, list[str]] = {}
+    halves: dict[str, list[str]] = {}
+    unsided: dict[str, list[str]] = {}
+    for n in shape_names:
+        c = canonical_arkit_name(n)
+        if c is not None:
+            by_canon.setdefault(c, []).append(n)
+            continue
+        h = split_half_of(n)
+        if h is not None:
+            halves.setdefault(h[0], []).append(n)
+            continue
+        key = "".join(t.group().lower() for t in _tokens(n))
+        key = _ALIASES.get(key, key)
+        if _BY_KEY.get(key + "left") is not None:  # "mouthSmile": both ARKit sides in one shape
+            unsided.setdefault(_BY_KEY[key + "left"][: -len("Left")], []).append(n)
+    out: dict[str, float] = {}
+    missing: list[str] = []
+    pairs: dict[str, list[float]] = {}
+    for name, w in arkit_weights.items():
+        c = canonical_arkit_name(name) or name
+        if c in by_canon:
+            for n in by_canon[c]:
+                out[n] = float(w)
+        elif c in halves:
+            for n in halves[c]:
+                out[n] = float(w)
+        elif c.endswith(("Left", "Right")) and c.removesuffix("Left").removesuffix("Right") in unsided:
+            pairs.setdefault(c.removesuffix("Left").removesuffix("Right"), []).append(float(w))
+        elif w:
+            missing.append(c)
+    for stem, ws in pairs.items():
+        for n in unsided[stem]:
+            out[n] = sum(ws) / 2.0
+    return out, missing

@@ -51,6 +51,7 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 
+from workbench.arkit import rig_weights
 from workbench.geometry.operators import cotangent_laplacian, mass_matrix
 from workbench.geometry.sparse_cholesky import SparseSPDSolver
 from workbench.methods.wrinkles.pose_space import vertex_normals
@@ -258,11 +259,20 @@ class WrinkleSculptor:
 
     # ------------------------------------------------------------------ pieces
     def blend(self, weights: Weights) -> NDArray[np.float64]:
-        """``neutral + Σ w_k δ_k`` for the named weights (others 0), (n, 3) float64."""
+        """``neutral + Σ w_k δ_k`` for the named weights (others 0), (n, 3) float64.
+
+        Names are the rig's own or ARKit's (any spelling, split halves and
+        merged pairs resolved by :func:`workbench.arkit.rig_weights`).
+        """
+        own = {n: w for n, w in weights.items() if n in self._names}
+        rest, missing = rig_weights({n: w for n, w in weights.items() if n not in self._names}, self._names)
+        if missing:
+            raise KeyError(
+                f"WrinkleSculptor.blend: the rig has no shape for {missing} (nor split halves of it); "
+                f"its shapes are {self._names[:6]}..."
+            )
         X = self.V.copy()
-        for name, w in weights.items():
-            if name not in self._names:
-                raise KeyError(f"WrinkleSculptor.blend: unknown blendshape {name!r}")
+        for name, w in {**rest, **own}.items():
             if w and name in self._deltas:
                 X += float(w) * self._deltas[name]
         return X
@@ -322,6 +332,31 @@ class WrinkleSculptor:
     def sequence(self, weights: Sequence[Weights]) -> NDArray[np.float32]:
         """Detailed meshes of a weight sequence, (T, n, 3) float32."""
         return np.stack([self.detailed(w) for w in weights])
+
+
+def example_poses_for(
+    shape_names: Sequence[str], poses: Mapping[str, Weights] | None = None
+) -> tuple[dict[str, dict[str, float]], dict[str, str]]:
+    """The example poses (default :data:`EXAMPLE_POSES`) on a rig's own shape names, and what was left out.
+
+    Returns ``(poses, skipped)``: each buildable pose with its weights on the rig
+    (:func:`workbench.arkit.rig_weights`); ``skipped`` maps a pose the rig cannot
+    express to why (the ARKit shapes it lacks). A pose that keeps at least half
+    of its weight is built without the missing shapes, and reported too.
+    """
+    out: dict[str, dict[str, float]] = {}
+    skipped: dict[str, str] = {}
+    for pose, weights in (poses or EXAMPLE_POSES).items():
+        rig, missing = rig_weights(weights, shape_names)
+        total = sum(abs(w) for w in weights.values())
+        lost = sum(abs(w) for n, w in weights.items() if n in missing)
+        if not rig or lost > 0.5 * total:
+            skipped[pose] = f"the rig has no shape for {missing}"
+            continue
+        if missing:
+            skipped[pose] = f"built without {missing} (the rig has no such shapes)"
+        out[pose] = rig
+    return out, skipped
 
 
 # --------------------------------------------------------------------------- performance

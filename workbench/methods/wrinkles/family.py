@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import logging
 from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
@@ -17,6 +18,8 @@ from workbench.methods.wrinkles.layer import WrinkleLayer, WrinkleState
 if TYPE_CHECKING:
     from workbench.core.state import FaceState
 
+logger = logging.getLogger(__name__)
+
 def fit_sample_wrinkles(
     model: FaceState,
     poses: Mapping[str, Mapping[str, float]] | None = None,
@@ -24,17 +27,33 @@ def fit_sample_wrinkles(
 ) -> WrinklesFacet:
     """Procedural example poses (:mod:`.examples`) fitted onto ``model``; returns ``model.wrinkles``.
 
-    Sets the default handles first if the model has none (one undo step each).
+    Works on any rig: the poses' ARKit weights are mapped onto the rig's own
+    shapes (other spellings, split halves, merged pairs); poses the rig cannot
+    express are left out and logged (:func:`~.examples.example_poses_for`
+    gives the same report). Sets the default handles first if the model has
+    none (one undo step each).
+
+    Raises
+    ------
+    ValueError
+        Not even two example poses can be built on this rig.
     """
-    from workbench.methods.wrinkles.examples import EXAMPLE_POSES, WrinkleSculptor
+    from workbench.methods.wrinkles.examples import WrinkleSculptor, example_poses_for
 
     facet: WrinklesFacet = model.wrinkles  # type: ignore[attr-defined]
     handles = model.handles  # type: ignore[attr-defined]
+    on_rig, skipped = example_poses_for(model.shape_names, poses)
+    for pose, why in skipped.items():
+        logger.warning("wrinkle example %r: %s", pose, why)
+    if len(on_rig) < 2:
+        raise ValueError(
+            f"fit wrinkles: only {len(on_rig)} of the example poses can be built on this rig "
+            f"({'; '.join(f'{k}: {v}' for k, v in skipped.items())})"
+        )
     if len(handles) == 0:
         handles.set(default_face_handles(model), label="Default handles")
     s = sculptor if isinstance(sculptor, WrinkleSculptor) else WrinkleSculptor(model)
-    poses = poses or EXAMPLE_POSES
-    facet.fit({k: (w, s.detailed(w)) for k, w in poses.items()})
+    facet.fit({k: (w, s.detailed(w)) for k, w in on_rig.items()})
     return facet
 
 
