@@ -72,7 +72,7 @@ def test_a_rig_that_cannot_express_the_poses_gets_a_clear_report() -> None:
     keep = [s for s in head.shapes if s.name.startswith("eye")]
     eyes_only = FaceModel(head.vertices, head.faces, keep, component_labels=head.component_labels,
                           component_names=head.component_names, metadata=head.metadata)
-    poses, skipped = example_poses_for(eyes_only.shape_names)
+    _, skipped = example_poses_for(eyes_only.shape_names)
     assert "brow_raise" in skipped and "browInnerUp" in skipped["brow_raise"]
     with pytest.raises(ValueError, match="example poses can be built on this rig"):
         fit_sample_wrinkles(eyes_only)
