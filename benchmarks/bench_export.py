@@ -20,7 +20,8 @@ from pathlib import Path
 import numpy as np
 
 import workbench
-from workbench.animation.tracks import Key, Timeline, Track, weight_track_name
+from workbench.animation.curves import Key, Track, weight_track_name
+from workbench.animation.tracks import Timeline
 from workbench.export import export
 
 FORMATS = {

@@ -29,7 +29,7 @@ from workbench.methods.handles.presets import default_face_handles
 from workbench.methods.handles.shell import ShellDeformer
 from workbench.methods.wrinkles import kernels as _kernels
 from workbench.methods.wrinkles.examples import WrinkleSculptor
-from workbench.methods.wrinkles.pose_space import HybridDeformer
+from workbench.methods.wrinkles.hybrid_deformer import HybridDeformer
 
 
 def timed(fn, repeat: int) -> float:

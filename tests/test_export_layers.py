@@ -21,7 +21,8 @@ import numpy as np
 import pytest
 from grid_meshes import grid_polygons
 
-from workbench.animation.tracks import HANDLES, Key, Timeline, Track, region_track_name
+from workbench.animation.curves import HANDLES, Key, Track, region_track_name
+from workbench.animation.tracks import Timeline
 from workbench.core.pipeline import FunctionLayer
 from workbench.export import ExportResult, export
 from workbench.export.encoding import MeshEncoding, crossing_times, curve_range

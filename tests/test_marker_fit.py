@@ -10,6 +10,7 @@ import workbench
 from workbench.geometry.operators import mass_matrix
 from workbench.methods.handles.presets import default_face_handles
 from workbench.methods.regions.blend import RegionWeights, region_blend_positions
+from workbench.methods.regions.hierarchy import RegionError, Regions
 from workbench.methods.regions.marker_fit import (
     RBFResidual,
     SyntheticPerformance,
@@ -18,12 +19,7 @@ from workbench.methods.regions.marker_fit import (
     format_fidelity_table,
     generate_synthetic_marker_performance,
 )
-from workbench.methods.regions.segmentation import (
-    RegionError,
-    Regions,
-    component_roles,
-    segment_blend_regions,
-)
+from workbench.methods.regions.segmentation import component_roles, segment_blend_regions
 from workbench.model import FaceModel
 
 

@@ -67,7 +67,7 @@ def test_region_edits_are_undoable_and_restore_the_regions_bit_exactly() -> None
     _assert_state_equal(_state_arrays(m.regions), snap)
 
     # split: both halves inherit the weights
-    from workbench.methods.regions.segmentation import region_topology
+    from workbench.methods.regions.topology import region_topology
 
     topo = region_topology(m)
     core = R.core(0, "mouth_L_2")
@@ -113,7 +113,7 @@ def test_region_edits_are_undoable_and_restore_the_regions_bit_exactly() -> None
 
 
 def test_region_edit_errors_leave_no_undo_step() -> None:
-    from workbench.methods.regions.segmentation import RegionError
+    from workbench.methods.regions.hierarchy import RegionError
 
     m = workbench.load_sample("head")
     m.segment_regions(0.25)

@@ -22,7 +22,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import workbench
-from workbench.animation.tracks import head_rotation_from_euler
+from workbench.animation.curves import head_rotation_from_euler
 from workbench.export import export
 from workbench.export.encoding import MeshEncoding
 from workbench.methods.handles.presets import default_face_handles

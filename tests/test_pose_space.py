@@ -11,21 +11,21 @@ import workbench
 from workbench.methods.handles.presets import default_face_handles
 from workbench.methods.handles.shell import ShellDeformer
 from workbench.methods.wrinkles.examples import EXAMPLE_POSES, WrinkleSculptor, performance_weights
-from workbench.methods.wrinkles.pose_space import (
-    COMPARISON_METHODS,
+from workbench.methods.wrinkles.features import (
     FeatureGraph,
-    HybridDeformer,
-    PoseSpace,
-    compare_methods,
     edge_weights,
     extract_details,
-    fit_pose_space,
-    greedy_fit,
     local_frames,
     tangent_neighbours,
     to_world,
     vertex_normals,
 )
+from workbench.methods.wrinkles.hybrid_deformer import (
+    COMPARISON_METHODS,
+    HybridDeformer,
+    compare_methods,
+)
+from workbench.methods.wrinkles.pose_space import PoseSpace, fit_pose_space, greedy_fit
 
 
 def _rot(axis: np.ndarray, deg: float) -> np.ndarray:
@@ -276,7 +276,7 @@ def test_numba_wpsd_matches_numpy_for_any_number_of_poses(head, poses) -> None:
     # the numba kernel sums poses in groups of eight (zero padded): 3, 8 and 11 poses
     # exercise a partial group, an exact one and two groups
     pytest.importorskip("numba")
-    from workbench.methods.wrinkles.pose_space import DetailEvaluator
+    from workbench.methods.wrinkles.hybrid_deformer import DetailEvaluator
 
     m, h, _shell, _sculptor, _examples = head
     V = np.asarray(m.vertices, np.float64)
@@ -320,7 +320,7 @@ def test_numba_wpsd_skips_vertices_without_details(head) -> None:
     # vertices whose examples have no detail get exactly X (or 0): the fast path
     # only visits vertices with non-zero RBF weights, and must agree with numpy
     pytest.importorskip("numba")
-    from workbench.methods.wrinkles.pose_space import DetailEvaluator
+    from workbench.methods.wrinkles.hybrid_deformer import DetailEvaluator
 
     m, h, _shell, _sculptor, _examples = head
     V = np.asarray(m.vertices, np.float64)

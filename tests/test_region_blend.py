@@ -15,7 +15,8 @@ from workbench.methods.regions.blend import (
     region_blend_positions,
     solve_region_drag,
 )
-from workbench.methods.regions.segmentation import RegionError, Regions, segment_blend_regions
+from workbench.methods.regions.hierarchy import RegionError, Regions
+from workbench.methods.regions.segmentation import segment_blend_regions
 from workbench.model import FaceModel
 
 

@@ -7,7 +7,7 @@ import pytest
 
 import workbench
 from workbench.methods.regions.drag import brush_vertices, spread_vertices
-from workbench.methods.regions.segmentation import RegionError
+from workbench.methods.regions.hierarchy import RegionError
 
 
 @pytest.fixture(scope="module")

@@ -12,13 +12,9 @@ from scipy.sparse.csgraph import connected_components
 
 import workbench
 from workbench.methods.regions.blend import RegionState
-from workbench.methods.regions.segmentation import (
-    RegionError,
-    Regions,
-    deformation_map,
-    mesh_adjacency,
-    segment_blend_regions,
-)
+from workbench.methods.regions.hierarchy import RegionError, Regions
+from workbench.methods.regions.mesh_graph import mesh_adjacency
+from workbench.methods.regions.segmentation import deformation_map, segment_blend_regions
 from workbench.model import BlendShape, FaceModel
 
 
@@ -290,16 +286,18 @@ def test_stored_in_the_model_slot_is_undoable(head: FaceModel, regions: Regions)
 
 
 # --------------------------------------------------------------- user edits
-from workbench.methods.regions.segmentation import (  # noqa: E402
-    RegionTopology,
-    adjacent_regions,
+from workbench.methods.regions.edits import (  # noqa: E402
     merge_regions,
     paint_region,
     recompute_region_weights,
-    region_adjacency,
-    region_topology,
     rename_region,
     split_region,
+)
+from workbench.methods.regions.topology import (  # noqa: E402
+    RegionTopology,
+    adjacent_regions,
+    region_adjacency,
+    region_topology,
 )
 
 _ARRAYS = ("labels", "weight_rows", "weight_cols", "weight_vals", "background", "parents")

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import workbench
-from workbench.animation.tracks import TrackError, region_track_name
+from workbench.animation.curves import TrackError, region_track_name
 from workbench.export import ExportError, export
 from workbench.export.encoding import MeshEncoding
 from workbench.fileformat import load_model

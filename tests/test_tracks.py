@@ -7,24 +7,26 @@ import math
 import numpy as np
 import pytest
 
-from workbench.animation.tracks import (
+from workbench.animation.curves import (
     HANDLES,
     HEAD_POSE,
     Key,
-    Timeline,
     Track,
     TrackError,
-    add_key,
-    add_keys,
     auto_clamped_slopes,
-    delete_key,
     head_euler_from_rotation,
     head_rotation_from_euler,
-    move_key,
     parse_region_track,
     quat_slerp,
     quaternion_to_matrix,
     region_track_name,
+)
+from workbench.animation.tracks import (
+    Timeline,
+    add_key,
+    add_keys,
+    delete_key,
+    move_key,
     set_interpolation,
     set_tangents,
 )

@@ -8,7 +8,7 @@ import pytest
 import workbench
 from workbench.methods.wrinkles.examples import EXAMPLE_POSES, WrinkleSculptor, performance_weights
 from workbench.methods.wrinkles.family import fit_sample_wrinkles
-from workbench.methods.wrinkles.pose_space import local_frames, tangent_neighbours, to_world
+from workbench.methods.wrinkles.features import local_frames, tangent_neighbours, to_world
 
 
 @pytest.fixture(scope="module")

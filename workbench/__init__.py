@@ -13,7 +13,8 @@ from workbench.animation.tracks import Timeline
 from workbench.io import load
 from workbench.methods.handles.shell import ShellDeformer
 from workbench.methods.paint.painting import Brush
-from workbench.methods.regions.segmentation import Regions, segment_blend_regions
+from workbench.methods.regions.hierarchy import Regions
+from workbench.methods.regions.segmentation import segment_blend_regions
 from workbench.model import BlendShape, FaceModel, HandleSet, ModelError, ModelMetadata
 from workbench.samples import load_sample
 

@@ -91,7 +91,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(format_info(model, args.path))
         return 0
     if args.command == "export":
-        from workbench.animation.tracks import TrackError
+        from workbench.animation.curves import TrackError
         from workbench.export import ExportError, export
         from workbench.io import load
 

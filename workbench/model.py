@@ -35,8 +35,9 @@ from workbench.fileformat import save_model
 from workbench.methods.handles.handle_set import HandleSet
 
 if TYPE_CHECKING:
+    from workbench.animation.curves import Interpolation
     from workbench.animation.timeline import TimelineFacet
-    from workbench.animation.tracks import Interpolation, Timeline
+    from workbench.animation.tracks import Timeline
     from workbench.methods.handles.facet import HandlesFacet
     from workbench.methods.paint.facet import ExpressionsFacet, PaintFacet
     from workbench.methods.paint.painting import Brush

@@ -228,7 +228,7 @@ def test_handle_drag_is_one_undo_step_and_every_message_is_acknowledged():
 
 def test_a_drag_on_a_turned_head_follows_the_pointer():
     """With a head pose keyed, the pointer's (posed) position is mapped back to model space."""
-    from workbench.animation.tracks import head_rotation_from_euler
+    from workbench.animation.curves import head_rotation_from_euler
 
     m = _head_with_handles()
     yaw = head_rotation_from_euler(35.0, 10.0, 0.0)

@@ -332,7 +332,7 @@ _GRAPH_CELLS = [
     """
 import numpy as np, widgets, workbench
 from workbench.methods.handles.presets import default_face_handles
-from workbench.methods.wrinkles.pose_space import FeatureGraph
+from workbench.methods.wrinkles.features import FeatureGraph
 model = workbench.load_sample("head")
 _h = default_face_handles(model)
 graph = FeatureGraph.from_handles(np.asarray(model.vertices)[_h.vertices])

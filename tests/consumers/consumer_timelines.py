@@ -6,7 +6,8 @@ import math
 
 import numpy as np
 
-from workbench.animation.tracks import HANDLES, HEAD_POSE, Timeline
+from workbench.animation.curves import HANDLES, HEAD_POSE
+from workbench.animation.tracks import Timeline
 
 
 def expression_timeline(kind: str) -> Timeline:

@@ -87,7 +87,7 @@ def fitted_head(n_frames: int = 10) -> FaceModel:
     """A synthetic marker performance fitted on region level 1 and keyed frame by frame
     (``key_marker_fit``: global weights + one region-weight track per region), with the
     head turning (head-pose keys) over the same frames."""
-    from workbench.animation.tracks import head_rotation_from_euler
+    from workbench.animation.curves import head_rotation_from_euler
     from workbench.methods.regions.marker_fit import (
         fit_markers,
         generate_synthetic_marker_performance,

@@ -264,7 +264,7 @@ def test_rename_and_merge_controls_are_one_undo_step_each(setup):
     assert "already used" in panel.edit_status.value and "b00020" in panel.edit_status.value
     assert len(model.history.undo_labels) == n + 1 and panel.errors.count == 0
     # merge: the dropdown lists the touching regions only
-    from workbench.methods.regions.segmentation import adjacent_regions, region_topology
+    from workbench.methods.regions.topology import adjacent_regions, region_topology
 
     nb = adjacent_regions(R, region_topology(model), 0, r)
     assert [idx for _label, idx in panel.merge_with.options] == nb
@@ -318,7 +318,7 @@ def test_split_mode_splits_between_two_clicked_markers(setup):
 
 
 def test_paint_mode_brush_stroke_grows_the_region_in_one_undo_step(setup):
-    from workbench.methods.regions.segmentation import region_topology
+    from workbench.methods.regions.topology import region_topology
 
     model, vp, panel, _ = setup
     panel.find_button.click()

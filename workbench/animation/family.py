@@ -14,8 +14,9 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
+from workbench.animation.curves import TrackError, quaternion_to_matrix
 from workbench.animation.timeline import TimelineFacet
-from workbench.animation.tracks import Timeline, TimelineSample, TrackError, quaternion_to_matrix
+from workbench.animation.tracks import Timeline, TimelineSample
 from workbench.core.families import Family, SlotSpec, register_family, set_hook
 from workbench.core.manifest import Checker, Spec, json_path
 from workbench.core.shapes import ModelError
@@ -65,7 +66,7 @@ class TracksFilePart:
 
     def check(self, c: Checker, manifest: Mapping[str, Any], m: Mapping[str, Any]) -> dict[str, Any]:
         """Structure of the timeline JSON; :meth:`Timeline.from_json` checks the meaning."""
-        from workbench.animation.tracks import INTERPOLATIONS, TANGENT_MODES
+        from workbench.animation.curves import INTERPOLATIONS, TANGENT_MODES
 
         value = c.key(dict(manifest), "", "tracks", None)
         if value is None:

@@ -47,14 +47,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from workbench.animation.tracks import (
-    Interpolation,
-    Key,
-    Timeline,
-    Track,
-    TrackError,
-    weight_track_name,
-)
+from workbench.animation.curves import Interpolation, Key, Track, TrackError, weight_track_name
+from workbench.animation.tracks import Timeline
 from workbench.arkit import canonical_arkit_name
 
 __all__ = [

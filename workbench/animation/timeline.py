@@ -19,15 +19,14 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from workbench.animation.tracks import (
+from workbench.animation.curves import (
     HEAD_POSE,
     IDENTITY_POSE,
     Interpolation,
-    Timeline,
-    add_keys,
     region_track_name,
     weight_track_name,
 )
+from workbench.animation.tracks import Timeline, add_keys
 from workbench.core.pipeline import StateView
 from workbench.core.shapes import ModelError
 

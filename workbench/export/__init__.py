@@ -194,7 +194,7 @@ def export(
         The files written (a list of Path); ``.layers`` reports how every
         editing layer was encoded.
     """
-    from workbench.animation.tracks import TrackError
+    from workbench.animation.curves import TrackError
 
     fmt = format_for_path(path, format)
     tl = timeline

@@ -68,7 +68,8 @@ from numpy.typing import ArrayLike, NDArray
 from workbench.export import ExportError, LayerReport
 
 if TYPE_CHECKING:
-    from workbench.animation.tracks import Timeline, Track
+    from workbench.animation.curves import Track
+    from workbench.animation.tracks import Timeline
     from workbench.model import FaceModel
 
 __all__ = ["MeshEncoding", "crossing_times", "curve_range", "segment_polynomials"]

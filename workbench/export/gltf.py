@@ -51,7 +51,7 @@ glTF has one sampler for all morph weights, so the key times of every weight
 track are merged. The sampler's interpolation is ``STEP`` if every segment is
 step, ``CUBICSPLINE`` if any is Bézier, else ``LINEAR``. At every merged time
 the value and the left/right derivatives of each curve are written; since our
-Bézier segments are cubic polynomials of ``t`` (:mod:`workbench.animation.tracks`),
+Bézier segments are cubic polynomials of ``t`` (:mod:`workbench.animation.curves`),
 splitting one at an extra time with the true derivatives reproduces it
 exactly, and a linear segment is a cubic with both tangents equal to its
 slope. glTF ``CUBICSPLINE`` stores per key ``(a_k, v_k, b_k)`` with
@@ -78,7 +78,8 @@ import numpy as np
 import pygltflib
 from numpy.typing import NDArray
 
-from workbench.animation.tracks import HEAD_POSE, Key, Timeline, Track
+from workbench.animation.curves import HEAD_POSE, Key, Track
+from workbench.animation.tracks import Timeline
 from workbench.export import ExportError, ExportResult, LayerReport, atomic_write_bytes
 from workbench.export.encoding import MeshEncoding, crossing_times
 

@@ -7,7 +7,7 @@ Paper: "Learning Controls for Blend Shape Based Realistic Facial Animation"
 blending weights makes them follow; "Motion Damping" scales the mouse motion.
 
 Evaluation with regions (level ``l``, regions ``r`` with weight fields ``W_r``
-from :class:`workbench.methods.regions.segmentation.Regions`, background weight ``W_bg``)::
+from :class:`workbench.methods.regions.hierarchy.Regions`, background weight ``W_bg``)::
 
     x(v) = neutral(v) + sum_r W_r(v) sum_k w_rk Δ_k(v) + W_bg(v) sum_k g_k Δ_k(v)
 
@@ -48,7 +48,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import lsq_linear, nnls
 
-from workbench.methods.regions.segmentation import RegionError, Regions
+from workbench.methods.regions.hierarchy import RegionError, Regions
 
 if TYPE_CHECKING:
     from workbench.core.pipeline import StateView

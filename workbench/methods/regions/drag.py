@@ -19,7 +19,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from workbench.methods.regions.blend import RegionWeights, damp_drag, solve_region_drag
-from workbench.methods.regions.segmentation import RegionError
+from workbench.methods.regions.hierarchy import RegionError
 
 if TYPE_CHECKING:
     from workbench.core.state import FaceState

@@ -16,12 +16,12 @@ from numpy.typing import ArrayLike
 
 from workbench.core.shapes import ModelError
 from workbench.methods.regions.blend import RegionState, RegionWeights
-from workbench.methods.regions.segmentation import Regions
+from workbench.methods.regions.hierarchy import Regions
 
 if TYPE_CHECKING:
     from workbench.core.state import FaceState
     from workbench.methods.regions.drag import RegionDrag
-    from workbench.methods.regions.segmentation import RegionTopology
+    from workbench.methods.regions.topology import RegionTopology
 
 
 def check_state(model: FaceState, value: Any) -> RegionState | None:
@@ -81,7 +81,7 @@ class RegionsFacet:
     def topology(self) -> RegionTopology:
         """Vertex adjacency and skin mask the region edits need (built once per mesh)."""
         if self._topology is None:
-            from workbench.methods.regions.segmentation import region_topology
+            from workbench.methods.regions.topology import region_topology
 
             self._topology = region_topology(self._model)
         return self._topology
@@ -145,7 +145,7 @@ class RegionsFacet:
 
     def merge(self, level: int, a: int | str, b: int | str, name: str | None = None) -> RegionState:
         """Merge two touching regions of ``level`` (undoable); coarser levels merge too to stay nested."""
-        from workbench.methods.regions.segmentation import merge_regions
+        from workbench.methods.regions.edits import merge_regions
 
         with self._model.lock:
             R = self.require("merge_regions").regions
@@ -157,7 +157,7 @@ class RegionsFacet:
     def split(self, level: int, region: int | str, seeds_a: ArrayLike, seeds_b: ArrayLike,
               names: tuple[str, str] | None = None) -> RegionState:
         """Split a region around two sets of clicked vertices (geodesic Voronoi on level 0); undoable."""
-        from workbench.methods.regions.segmentation import split_region
+        from workbench.methods.regions.edits import split_region
 
         with self._model.lock:
             R = self.require("split_region").regions
@@ -167,7 +167,7 @@ class RegionsFacet:
 
     def rename(self, level: int, region: int | str, name: str) -> RegionState:
         """Rename a region of ``level`` (undoable; labels and weights unchanged)."""
-        from workbench.methods.regions.segmentation import rename_region
+        from workbench.methods.regions.edits import rename_region
 
         with self._model.lock:
             st = self.require("rename_region")
@@ -180,7 +180,7 @@ class RegionsFacet:
 
     def paint(self, level: int, region: int | str, vertices: ArrayLike, add: bool = True) -> RegionState:
         """Assign skin vertices to a region (``add``) or return them to the background (undoable)."""
-        from workbench.methods.regions.segmentation import paint_region
+        from workbench.methods.regions.edits import paint_region
 
         with self._model.lock:
             R = self.require("paint_region").regions

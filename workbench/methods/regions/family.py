@@ -11,7 +11,7 @@ from workbench.core.families import Family, SlotSpec, register_family
 from workbench.core.manifest import Checker, Spec
 from workbench.methods.regions.blend import RegionLayer, RegionState, RegionWeights
 from workbench.methods.regions.facet import RegionsFacet, check_state
-from workbench.methods.regions.segmentation import Regions
+from workbench.methods.regions.hierarchy import Regions
 
 if TYPE_CHECKING:
     from workbench.core.pipeline import StateView

@@ -60,7 +60,8 @@ from workbench.methods.regions.blend import (
     _vertex_ids,
     bounded_lsq,
 )
-from workbench.methods.regions.segmentation import RegionError, Regions, component_roles
+from workbench.methods.regions.hierarchy import RegionError, Regions
+from workbench.methods.regions.segmentation import component_roles
 
 if TYPE_CHECKING:
     from workbench.core.state import FaceState as FaceModel

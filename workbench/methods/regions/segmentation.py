@@ -60,21 +60,11 @@ test in ``tests/test_regions.py``):
    region on every level (weight 1 on its vertices, no overlap). Surface
    attachments (names containing ``lash``, ``eyebrow``, ``hair``, ``beard``) copy
    the labels and weights of their nearest skin vertex, so lashes follow the lid.
-8. **User edits** (:func:`merge_regions`, :func:`split_region`,
-   :func:`rename_region`, :func:`paint_region`; undoable through the
-   ``FaceModel`` methods of the same names). Each edit changes labels only and
-   then recomputes parents, one-ring weights, attachments and rigid parts
-   exactly as above (:func:`recompute_region_weights` of a fresh segmentation
-   is bit-identical), so edited regions keep every invariant: skin regions
-   connected, levels nested, overlaps exactly ``overlap_rings`` rings. Merges
-   need touching regions and merge the coarser parents too when they differ;
-   a split is the geodesic Voronoi partition of two clicked seeds on level 0
-   and a grouping of whole children on coarser levels; painting assigns skin
-   vertices to a region (its ancestors follow, its descendants grow by nearest
-   vertex) or returns them to the background, and refuses to cut a region in
-   pieces. :class:`RegionEdit` ``origins`` say which old region's blend weights
-   each new region takes (the larger one of a merge; both halves of a split
-   inherit).
+
+The user edits of the result are in :mod:`workbench.methods.regions.edits`; the
+:class:`~workbench.methods.regions.hierarchy.Regions` value in
+:mod:`workbench.methods.regions.hierarchy`; the mesh-graph operations in
+:mod:`workbench.methods.regions.mesh_graph`.
 
 Hand-written because no kept dependency segments a blendshape set: the graph
 pieces use scipy (``csgraph.connected_components``, sparse products, ``cKDTree``)
@@ -87,44 +77,42 @@ from __future__ import annotations
 import re
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, NamedTuple
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
-from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import cKDTree
 
 from workbench.arkit import canonical_arkit_name, shape_group
 from workbench.geometry.operators import cotangent_laplacian, mass_matrix
+from workbench.methods.regions.hierarchy import RegionError, Regions
+from workbench.methods.regions.mesh_graph import (
+    absorb_small_pieces,
+    label_pieces,
+    mesh_adjacency,
+    mode_filter,
+    morphological_close,
+    piece_adjacency,
+    smooth_weights,
+)
 
 if TYPE_CHECKING:
     from workbench.core.state import FaceState as FaceModel
 
 __all__ = [
-    "RegionEdit",
-    "RegionError",
-    "RegionTopology",
-    "Regions",
-    "adjacent_regions",
     "component_roles",
     "deformation_map",
-    "merge_regions",
-    "mesh_adjacency",
-    "paint_region",
-    "recompute_region_weights",
-    "region_adjacency",
-    "region_topology",
-    "rename_region",
     "segment_blend_regions",
-    "split_region",
 ]
+
 
 Progress = Callable[[float, str], None] | None
 
+
 _RIGID = re.compile(r"eye|teeth|tooth|tongue|gum", re.IGNORECASE)
 _ATTACHED = re.compile(r"lash|eyebrow|hair|beard", re.IGNORECASE)
+
 
 #: ARKit shape group -> region stem (eye *lids* on the skin; eyeballs are their own components)
 _STEM = {
@@ -137,221 +125,6 @@ _STEM = {
     "tongue": "tongue",
     "other": "region",
 }
-
-
-class RegionError(ValueError):
-    """Bad argument to a region function (the message names the argument)."""
-
-
-def _ro(a: NDArray[Any]) -> NDArray[Any]:
-    a = np.ascontiguousarray(a)
-    a.setflags(write=False)
-    return a
-
-
-# --------------------------------------------------------------------------- data
-@dataclass(frozen=True, eq=False)
-class Regions:
-    """Blend regions of a model on several hierarchy levels (immutable).
-
-    Level 0 is the finest; level ``n_levels - 1`` the coarsest. Every region of
-    level ``l`` lies inside exactly one region of level ``l + 1``.
-
-    Attributes
-    ----------
-    labels : tuple of (n,) int32
-        Per level, the disjoint *core* label of every vertex; ``-1`` = background.
-    weight_rows, weight_cols : tuple of (nnz,) int32
-        Per level, the sparse per-vertex region weights ``W[v, r]`` in COO form
-        (see :meth:`weight_matrix`); the support of column ``r`` is the core of
-        region ``r`` grown by ``overlap_rings`` rings.
-    weight_vals : tuple of (nnz,) float32
-    background : tuple of (n,) float32
-        Per level, the background weight; ``W.sum(1) + background == 1``.
-    names : tuple of tuple of str
-        Per level, one unique name per region ("brow_L", "mouth_R", "eyeball_L").
-    parents : tuple of (R_l,) int32
-        ``parents[l][r]`` is the level ``l + 1`` region containing region ``r`` of
-        level ``l`` (``n_levels - 1`` arrays).
-    kinds : tuple of tuple of str
-        Per level and region: ``"skin"`` (segmented) or ``"rigid"`` (a whole
-        eyeball / teeth / tongue component).
-    drivers : tuple of tuple of tuple of str
-        Per level and region, the (up to) three shapes that move it most
-        (relative to each shape's peak) — the sliders worth showing for it.
-    deformation : (n,) float32
-        The deformation map ``D`` (0 off the segmentable components).
-    threshold : float
-        ``t`` in [0, 1].
-    threshold_value : float
-        ``D_sorted[floor(n_active t)]``.
-    overlap_rings : int
-    """
-
-    labels: tuple[NDArray[np.int32], ...]
-    weight_rows: tuple[NDArray[np.int32], ...]
-    weight_cols: tuple[NDArray[np.int32], ...]
-    weight_vals: tuple[NDArray[np.float32], ...]
-    background: tuple[NDArray[np.float32], ...]
-    names: tuple[tuple[str, ...], ...]
-    parents: tuple[NDArray[np.int32], ...]
-    kinds: tuple[tuple[str, ...], ...]
-    drivers: tuple[tuple[tuple[str, ...], ...], ...]
-    deformation: NDArray[np.float32]
-    threshold: float
-    threshold_value: float
-    overlap_rings: int = 1
-
-    def __post_init__(self) -> None:
-        L = len(self.labels)
-        if L == 0:
-            raise RegionError("Regions: need at least one level of labels")
-        n = self.labels[0].shape[0]
-        for name in ("weight_rows", "weight_cols", "weight_vals", "background", "names", "kinds", "drivers"):
-            if len(getattr(self, name)) != L:
-                raise RegionError(f"Regions.{name}: expected {L} levels, got {len(getattr(self, name))}")
-        if len(self.parents) != L - 1:
-            raise RegionError(f"Regions.parents: expected {L - 1} arrays, got {len(self.parents)}")
-        for lv in range(L):
-            lab = self.labels[lv]
-            if lab.shape != (n,):
-                raise RegionError(f"Regions.labels[{lv}]: expected shape ({n},), got {lab.shape}")
-            R = len(self.names[lv])
-            if lab.size and (lab.min() < -1 or lab.max() >= R):
-                raise RegionError(f"Regions.labels[{lv}]: labels must be in -1..{R - 1}")
-            if len(set(self.names[lv])) != R:
-                raise RegionError(f"Regions.names[{lv}]: names must be unique")
-        for lv, p in enumerate(self.parents):
-            if p.shape != (len(self.names[lv]),):
-                raise RegionError(f"Regions.parents[{lv}]: expected one parent per level-{lv} region")
-        for f in ("labels", "weight_rows", "weight_cols", "weight_vals", "background", "parents"):
-            object.__setattr__(self, f, tuple(_ro(a) for a in getattr(self, f)))
-        object.__setattr__(self, "deformation", _ro(self.deformation))
-
-    # ------------------------------------------------------------------ queries
-    @property
-    def n_levels(self) -> int:
-        """Number of hierarchy levels (0 = finest)."""
-        return len(self.labels)
-
-    @property
-    def n_vertices(self) -> int:
-        return int(self.labels[0].shape[0])
-
-    def check_level(self, level: int) -> int:
-        """``level`` as an int, or a :class:`RegionError` naming the valid range."""
-        if not isinstance(level, int | np.integer) or not 0 <= int(level) < self.n_levels:
-            raise RegionError(f"level must be an int in 0..{self.n_levels - 1}, got {level!r}")
-        return int(level)
-
-    def n_regions(self, level: int) -> int:
-        """Number of regions on ``level`` (background not counted)."""
-        return len(self.names[self.check_level(level)])
-
-    def weight_matrix(self, level: int) -> sp.csr_matrix:
-        """(n, R) sparse CSR float32 per-vertex region weights ``W[v, r]``.
-
-        Built once per level and cached; treat it as read-only.
-        """
-        lv = self.check_level(level)
-        cache: dict[int, sp.csr_matrix] = self.__dict__.setdefault("_wcache", {})
-        if lv not in cache:
-            cache[lv] = sp.csr_matrix(
-                (self.weight_vals[lv], (self.weight_rows[lv], self.weight_cols[lv])),
-                shape=(self.n_vertices, len(self.names[lv])),
-            )
-        return cache[lv]
-
-    def weights_dense(self, level: int) -> NDArray[np.float32]:
-        """(n, R + 1) float32: region weights with the background as the last column."""
-        lv = self.check_level(level)
-        W = self.weight_matrix(lv).toarray()
-        return np.concatenate([W, self.background[lv][:, None]], axis=1).astype(np.float32)
-
-    def core(self, level: int, region: int | str) -> NDArray[np.intp]:
-        """Vertex ids whose core label is ``region`` (an index or a name)."""
-        lv = self.check_level(level)
-        return np.flatnonzero(self.labels[lv] == self.region_index(lv, region))
-
-    def members(self, level: int, region: int | str) -> NDArray[np.intp]:
-        """Vertex ids where the region's weight is > 0 (the core grown by the overlap)."""
-        lv = self.check_level(level)
-        r = self.region_index(lv, region)
-        sel = (self.weight_cols[lv] == r) & (self.weight_vals[lv] > 0)
-        return np.unique(self.weight_rows[lv][sel]).astype(np.intp)
-
-    def region_index(self, level: int, region: int | str) -> int:
-        """Index of a region given by index or name on ``level``."""
-        lv = self.check_level(level)
-        names = self.names[lv]
-        if isinstance(region, str):
-            if region not in names:
-                raise RegionError(f"region {region!r} not on level {lv}; regions are {list(names)}")
-            return names.index(region)
-        if not isinstance(region, int | np.integer) or not 0 <= int(region) < len(names):
-            raise RegionError(f"region must be a name or an int in 0..{len(names) - 1}, got {region!r}")
-        return int(region)
-
-    def regions_at(self, level: int, vertex: int) -> dict[int, float]:
-        """``{region: weight}`` of the regions whose (grown) support contains ``vertex``."""
-        lv = self.check_level(level)
-        if not isinstance(vertex, int | np.integer) or not 0 <= int(vertex) < self.n_vertices:
-            raise RegionError(f"vertex must be an int in 0..{self.n_vertices - 1}, got {vertex!r}")
-        W = self.weight_matrix(lv)
-        row = W.getrow(int(vertex))
-        return {int(c): float(v) for c, v in zip(row.indices, row.data, strict=True) if v > 0}
-
-    def ancestor(self, level: int, region: int, to_level: int) -> int:
-        """The region of ``to_level`` (>= ``level``) that contains ``region`` of ``level``."""
-        lv, tl = self.check_level(level), self.check_level(to_level)
-        if tl < lv:
-            raise RegionError(f"to_level must be >= level ({lv}), got {tl}")
-        r = self.region_index(lv, region)
-        for i in range(lv, tl):
-            r = int(self.parents[i][r])
-        return r
-
-    def renamed(self, level: int, region: int | str, new_name: str) -> Regions:
-        """A copy with one region renamed (user edit; store it with ``model.set_slot``)."""
-        lv = self.check_level(level)
-        r = self.region_index(lv, region)
-        if not isinstance(new_name, str) or not new_name.strip():
-            raise RegionError(f"new_name must be a non-empty string, got {new_name!r}")
-        if new_name in self.names[lv] and self.names[lv][r] != new_name:
-            raise RegionError(f"new_name {new_name!r} is already used on level {lv}")
-        names = list(self.names)
-        lvl = list(names[lv])
-        lvl[r] = new_name
-        names[lv] = tuple(lvl)
-        return Regions(
-            self.labels, self.weight_rows, self.weight_cols, self.weight_vals, self.background,
-            tuple(names), self.parents, self.kinds, self.drivers, self.deformation, self.threshold,
-            self.threshold_value, self.overlap_rings,
-        )
-
-
-# ---------------------------------------------------------------- mesh helpers
-def mesh_adjacency(faces: NDArray[Any], n: int) -> sp.csr_matrix:
-    """Vertex adjacency of a triangle mesh.
-
-    Parameters
-    ----------
-    faces : (m, 3) int
-    n : int
-        Number of vertices.
-
-    Returns
-    -------
-    A : (n, n) sparse CSR int8, symmetric, 1 where two vertices share an edge, 0 diagonal.
-    """
-    F = np.asarray(faces, dtype=np.int64)
-    i = np.concatenate([F[:, 0], F[:, 1], F[:, 2], F[:, 1], F[:, 2], F[:, 0]])
-    j = np.concatenate([F[:, 1], F[:, 2], F[:, 0], F[:, 0], F[:, 1], F[:, 2]])
-    A = sp.csr_matrix((np.ones(i.size, np.int8), (i, j)), shape=(n, n))
-    A.data[:] = 1  # duplicates (an edge in two triangles) summed to 2
-    A.setdiag(0)
-    A.eliminate_zeros()
-    return A
 
 
 def component_roles(model: FaceModel) -> NDArray[np.int8]:
@@ -417,124 +190,6 @@ def deformation_map(
     if mask is not None:
         D = np.where(mask, D, 0.0)
     return D
-
-
-def _dilate(A: sp.csr_matrix, mask: NDArray[np.bool_], rings: int) -> NDArray[np.bool_]:
-    m = mask.copy()
-    for _ in range(rings):
-        m = m | (A @ m.astype(np.int32) > 0)
-    return m
-
-
-def _close(A: sp.csr_matrix, mask: NDArray[np.bool_], domain: NDArray[np.bool_], rings: int) -> NDArray[np.bool_]:
-    """Morphological close (dilate, then erode) inside ``domain``."""
-    m = _dilate(A, mask, rings) & domain
-    for _ in range(rings):
-        # erode: keep v if no neighbour (inside the domain) is outside the mask
-        outside = (domain & ~m).astype(np.int32)
-        m = m & ~(A @ outside > 0)
-    return m
-
-
-def _pieces(A: sp.csr_matrix, labels: NDArray[np.int64]) -> NDArray[np.int64]:
-    """Connected components of equal non-negative labels; -1 stays -1."""
-    n = labels.size
-    coo = A.tocoo()
-    keep = (labels[coo.row] >= 0) & (labels[coo.row] == labels[coo.col])
-    G = sp.csr_matrix((np.ones(int(keep.sum()), np.int8), (coo.row[keep], coo.col[keep])), shape=(n, n))
-    _, comp = connected_components(G, directed=False)
-    out = np.full(n, -1, np.int64)
-    fg = labels >= 0
-    _, out[fg] = np.unique(comp[fg], return_inverse=True)
-    return out
-
-
-def _piece_adjacency(A: sp.csr_matrix, labels: NDArray[np.int64], R: int) -> NDArray[np.float64]:
-    """(R, R) number of mesh edges between pieces (diagonal zeroed)."""
-    fg = np.flatnonzero(labels >= 0)
-    P = sp.csr_matrix((np.ones(fg.size), (fg, labels[fg])), shape=(labels.size, R))
-    C = np.asarray((P.T @ A.astype(np.float64) @ P).todense())
-    np.fill_diagonal(C, 0.0)
-    return C
-
-
-def _absorb_small(
-    A: sp.csr_matrix,
-    labels: NDArray[np.int64],
-    area: NDArray[np.float64],
-    min_area: float,
-    side: NDArray[np.int8] | None = None,
-) -> NDArray[np.int64]:
-    """Merge pieces below ``min_area`` into the neighbour sharing most edges (else background).
-
-    ``labels`` must be connected pieces 0..R-1; returns relabelled connected pieces.
-    With ``side`` (per vertex: 0 = -x, 1 = on the mid-plane, 2 = +x; pieces must
-    not mix sides), a neighbour on the same side is preferred (cross-side edges
-    count 1/1000) and mid-plane pieces are merged last, into the neighbour they
-    share most edges with, so a mirror-symmetric input gives mirror-symmetric
-    regions apart from the mid-plane column itself.
-    """
-    R = int(labels.max()) + 1 if (labels >= 0).any() else 0
-    if R == 0:
-        return labels
-    C = _piece_adjacency(A, labels, R)
-    fg = labels >= 0
-    center = np.zeros(R, bool)
-    if side is not None:
-        pside = np.zeros(R, np.int8)
-        pside[labels[fg]] = side[fg]
-        center = pside == 1
-        C = C * np.where(pside[:, None] == pside[None, :], 1.0, 1e-3)
-    sizes = np.bincount(labels[fg], weights=area[fg], minlength=R)
-    target = np.arange(R)
-    alive = np.ones(R, bool)
-
-    def merge(i: int, allowed: NDArray[np.bool_]) -> None:
-        alive[i] = False
-        row = np.where(allowed & alive, C[i], 0.0)
-        if row.max() > 0:
-            j = int(np.argmax(row))
-            target[target == i] = j
-            sizes[j] += sizes[i]
-            C[j] += C[i]
-            C[:, j] += C[:, i]
-            C[j, j] = 0.0
-        else:
-            target[target == i] = -1
-        C[i] = 0.0
-        C[:, i] = 0.0
-
-    while True:
-        cand = np.flatnonzero(alive & ~center & (sizes < min_area))
-        if cand.size == 0:
-            break
-        merge(int(cand[np.argmin(sizes[cand])]), ~center)
-    for i in np.flatnonzero(center):
-        merge(int(i), ~center)
-    out = np.where(fg, target[np.maximum(labels, 0)], -1)
-    return _pieces(A, out)
-
-
-def _mode_filter(A1: sp.csr_matrix, labels: NDArray[np.int64], iterations: int) -> NDArray[np.int64]:
-    """Each foreground vertex takes the most frequent foreground label of its closed one-ring."""
-    lab = labels.copy()
-    fg = np.flatnonzero(lab >= 0)
-    if fg.size == 0:
-        return lab
-    sub = A1[fg][:, fg]
-    for _ in range(iterations):
-        _, inv = np.unique(lab[fg], return_inverse=True)
-        R = int(inv.max()) + 1
-        H = sp.csr_matrix((np.ones(fg.size), (np.arange(fg.size), inv)), shape=(fg.size, R))
-        counts = np.asarray((sub @ H).todense())
-        counts[np.arange(fg.size), inv] += 0.5  # ties keep the current label
-        new = np.argmax(counts, axis=1)
-        uniq = np.unique(lab[fg])
-        changed = uniq[new] != lab[fg]
-        if not changed.any():
-            break
-        lab[fg] = uniq[new]
-    return lab
 
 
 def _merge_by_motion(
@@ -617,19 +272,6 @@ def _merge_by_motion(
     return out
 
 
-def _smooth_weights(
-    S: sp.csr_matrix, labels: NDArray[np.int64], R: int, domain: NDArray[np.bool_], rings: int
-) -> sp.csr_matrix:
-    """(n, R + 1) weights ``S^rings χ`` on ``domain`` rows (last column = background)."""
-    n = labels.size
-    idx = np.flatnonzero(domain)
-    col = np.where(labels[idx] >= 0, labels[idx], R)
-    X = sp.csr_matrix((np.ones(idx.size), (idx, col)), shape=(n, R + 1))
-    for _ in range(rings):
-        X = S @ X
-    return sp.csr_matrix(X)
-
-
 def _side_sign(model: FaceModel, skin: NDArray[np.bool_], mid: float) -> float:
     """+1 if the subject's left is +x (from shapes named ...Left), else -1."""
     V = model.vertices
@@ -691,7 +333,6 @@ def _unique_names(names: list[str], order: Sequence[float] | None = None) -> tup
     return tuple(out)
 
 
-# ------------------------------------------------------------------ main entry
 def segment_blend_regions(
     model: FaceModel,
     threshold: float = 0.25,
@@ -794,9 +435,9 @@ def segment_blend_regions(
     mean_edge = float(np.linalg.norm(V[coo.row[e_skin]] - V[coo.col[e_skin]], axis=1).mean()) if e_skin.any() else 1.0
     rings = 0 if cr == 0 else max(1, round(cr * diag / mean_edge))
     if rings:
-        fg = _close(A, fg, skin, rings)
+        fg = morphological_close(A, fg, skin, rings)
     min_area = mrs * act_area
-    comp = _pieces(A, np.where(fg, 0, -1))
+    comp = label_pieces(A, np.where(fg, 0, -1))
     if (comp >= 0).any():
         sizes = np.bincount(comp[comp >= 0], weights=area[comp >= 0])
         fg = fg & (comp >= 0) & (sizes[np.maximum(comp, 0)] >= min_area)
@@ -816,12 +457,12 @@ def segment_blend_regions(
     # side of the mid-plane: 0 = -x, 1 = on it (within 1e-4 of the face size), 2 = +x
     side3 = (np.sign(np.where(np.abs(V[:, 0] - mid) <= 1e-4 * diag, 0.0, V[:, 0] - mid)) + 1).astype(np.int8)
     key = dom * 3 + (side3 if split_midline else 0)
-    lab0 = _pieces(A, np.where(fg, key, -1))
+    lab0 = label_pieces(A, np.where(fg, key, -1))
     A1 = (A + sp.identity(n, dtype=np.int8, format="csr")).tocsr()
-    lab0 = _mode_filter(A1, lab0, 2)
+    lab0 = mode_filter(A1, lab0, 2)
     if split_midline:
-        lab0 = _pieces(A, np.where(lab0 >= 0, lab0 * 3 + side3, -1))
-    lab0 = _absorb_small(A, lab0, area, min_area, side3 if split_midline else None)
+        lab0 = label_pieces(A, np.where(lab0 >= 0, lab0 * 3 + side3, -1))
+    lab0 = absorb_small_pieces(A, lab0, area, min_area, side3 if split_midline else None)
     R0 = int(lab0.max()) + 1 if (lab0 >= 0).any() else 0
 
     report(0.7, "hierarchy")
@@ -830,7 +471,7 @@ def segment_blend_regions(
     P = sp.csr_matrix((area[fidx], (lab0[fidx], np.arange(fidx.size))), shape=(R0, fidx.size))
     feats = np.asarray(P @ (rel[:, fidx] ** 2).T)
     wpiece = np.asarray(P.sum(axis=1)).ravel()
-    C = _piece_adjacency(A, lab0, R0)
+    C = piece_adjacency(A, lab0, R0)
     counts: list[int] = []
     c = R0
     for _ in range(levels - 1):
@@ -890,7 +531,7 @@ def segment_blend_regions(
             kinds.append("skin")
             heights.append(-float((V[vv, 1] * area[vv]).sum() / area[vv].sum()))
         names = list(_unique_names(names, heights))
-        W = _smooth_weights(S, lab, Rs, skin, overlap_rings)
+        W = smooth_weights(S, lab, Rs, skin, overlap_rings)
         Wcoo = W.tocoo()
         rows, cols, vals = Wcoo.row.astype(np.int64), Wcoo.col.astype(np.int64), Wcoo.data
         bgw = np.zeros(n, np.float64)
@@ -994,734 +635,3 @@ def _check_fraction(
         hi_b = "]" if closed_hi else ")"
         raise RegionError(f"{name} must be in {lo_b}{lo}, {hi}{hi_b}, got {value!r}")
     return v
-
-
-# ------------------------------------------------------------------ user edits
-# Merge, split, rename and paint (the artist's corrections of the automatic
-# regions). Each edit builds new per-level labels and then recomputes every
-# derived array the way the segmentation does (``_rebuild``): parents from the
-# labels, the smooth one-ring weights ``S^rings χ`` on the skin, attachments
-# copying their nearest skin vertex, rigid parts weight 1. So an edited Regions
-# satisfies the same invariants as a segmented one (levels nest, skin regions
-# are connected, the overlap is exactly ``overlap_rings`` rings, weights sum to 1).
-
-
-@dataclass(frozen=True, eq=False)
-class RegionTopology:
-    """The mesh data region edits need (immutable; build it with :func:`region_topology`).
-
-    Attributes
-    ----------
-    adjacency : (n, n) sparse CSR int8
-        :func:`mesh_adjacency` of the model.
-    smoothing : (n, n) sparse CSR float64
-        ``S``: the row-normalised ``A + I`` the segmentation averages with.
-    skin : (n,) bool
-        Segmented (role 0) vertices, see :func:`component_roles`.
-    attached : (a,) intp
-        Vertices of attached parts (lashes, brows); they copy ``nearest``.
-    nearest : (a,) intp
-        The nearest skin vertex of each attached vertex.
-    skin_graph : (n, n) sparse CSR float64
-        Edge lengths of the skin-to-skin mesh edges (geodesic distances for splits).
-    vertices : (n, 3) float64
-        Neutral positions.
-    """
-
-    adjacency: sp.csr_matrix
-    smoothing: sp.csr_matrix
-    skin: NDArray[np.bool_]
-    attached: NDArray[np.intp]
-    nearest: NDArray[np.intp]
-    skin_graph: sp.csr_matrix
-    vertices: NDArray[np.float64]
-
-    @property
-    def n_vertices(self) -> int:
-        return int(self.skin.shape[0])
-
-
-_TOPOLOGY_CACHE: dict[int, tuple[Any, Any, RegionTopology]] = {}
-
-
-def region_topology(model: FaceModel) -> RegionTopology:
-    """The :class:`RegionTopology` of ``model`` (built exactly as :func:`segment_blend_regions` does).
-
-    Parameters
-    ----------
-    model : FaceModel
-
-    Returns
-    -------
-    RegionTopology
-        Cached per model (a FaceModel's neutral mesh and components never
-        change), so repeated edits cost only the edit itself (~10 ms to build
-        on the 5k-vertex sample head).
-    """
-    key = id(model)
-    hit = _TOPOLOGY_CACHE.get(key)
-    if hit is not None and hit[0] is model.vertices and hit[1] is model.faces:
-        return hit[2]
-    n = model.n_vertices
-    V = np.asarray(model.vertices, dtype=np.float64)
-    A = mesh_adjacency(model.faces, n)
-    A1 = (A + sp.identity(n, dtype=np.int8, format="csr")).tocsr()
-    deg = np.asarray(A1.sum(axis=1)).ravel().astype(np.float64)
-    S = sp.csr_matrix(sp.diags(1.0 / np.maximum(deg, 1.0)) @ A1.astype(np.float64))
-    roles = component_roles(model)
-    skin = roles == 0
-    attached = np.flatnonzero(roles == 2)
-    nearest = np.zeros(0, np.intp)
-    skin_idx = np.flatnonzero(skin)
-    if attached.size and skin_idx.size:
-        _, j = cKDTree(V[skin_idx]).query(V[attached])
-        nearest = skin_idx[np.asarray(j)]
-    else:
-        attached = np.zeros(0, np.intp)
-    coo = A.tocoo()
-    keep = skin[coo.row] & skin[coo.col]
-    r, c = coo.row[keep], coo.col[keep]
-    # a tiny floor keeps coincident vertices connected (csgraph drops explicit zeros)
-    lengths = np.maximum(np.linalg.norm(V[r] - V[c], axis=1), 1e-12)
-    G = sp.csr_matrix((lengths, (r, c)), shape=(n, n))
-    topo = RegionTopology(
-        adjacency=A,
-        smoothing=S,
-        skin=_ro(skin),
-        attached=_ro(attached.astype(np.intp)),
-        nearest=_ro(nearest.astype(np.intp)),
-        skin_graph=G,
-        vertices=_ro(V),
-    )
-    if len(_TOPOLOGY_CACHE) > 8:
-        _TOPOLOGY_CACHE.clear()
-    _TOPOLOGY_CACHE[key] = (model.vertices, model.faces, topo)
-    return topo
-
-
-class RegionEdit(NamedTuple):
-    """Result of a region edit.
-
-    Attributes
-    ----------
-    regions : Regions
-        The edited regions (the input object itself if nothing changed).
-    origins : tuple of (R_l,) int32
-        Per level, for every region of the result, the index of the region of
-        the *input* whose blend weights (and drivers) it takes: itself when
-        unchanged, the larger of two merged regions, the split region for
-        both halves.
-    """
-
-    regions: Regions
-    origins: tuple[NDArray[np.int32], ...]
-
-
-def _identity_origins(regions: Regions) -> tuple[NDArray[np.int32], ...]:
-    return tuple(np.arange(regions.n_regions(lv), dtype=np.int32) for lv in range(regions.n_levels))
-
-
-def _check_topology(regions: Regions, topology: Any) -> RegionTopology:
-    if not isinstance(topology, RegionTopology):
-        raise RegionError(
-            f"topology must be a RegionTopology (workbench.methods.regions.segmentation.region_topology(model)), "
-            f"got {type(topology).__name__}"
-        )
-    if topology.n_vertices != regions.n_vertices:
-        raise RegionError(
-            f"topology: made for {topology.n_vertices} vertices, the regions have {regions.n_vertices}"
-        )
-    return topology
-
-
-def _vertex_ids(value: Any, n: int, what: str) -> NDArray[np.int64]:
-    """Unique vertex ids from an int or a sequence, or a RegionError naming ``what``."""
-    try:
-        a = np.asarray(value)
-    except Exception:  # pragma: no cover - exotic input
-        raise RegionError(f"{what} must be vertex ids, got {value!r}") from None
-    if a.dtype == bool or (a.size and not np.issubdtype(a.dtype, np.integer)):
-        if a.size and np.issubdtype(a.dtype, np.floating) and np.all(a == np.round(a)):
-            a = a.astype(np.int64)
-        else:
-            raise RegionError(f"{what} must be integer vertex ids, got {value!r}")
-    a = a.astype(np.int64).reshape(-1)
-    if a.size and (a.min() < 0 or a.max() >= n):
-        raise RegionError(f"{what}: vertex ids must be in 0..{n - 1}, got {a[(a < 0) | (a >= n)][:5].tolist()}")
-    return np.unique(a)
-
-
-def _n_pieces(topo: RegionTopology, verts: NDArray[np.int64]) -> int:
-    """Connected pieces of a vertex set on the skin graph (0 for an empty set)."""
-    if verts.size == 0:
-        return 0
-    sub = topo.adjacency[verts][:, verts]
-    return int(connected_components(sub, directed=False)[0])
-
-
-def _skin_core(topo: RegionTopology, lab: NDArray[np.int64], r: int) -> NDArray[np.int64]:
-    return np.flatnonzero((lab == r) & topo.skin)
-
-
-def region_adjacency(regions: Regions, topology: RegionTopology, level: int) -> NDArray[np.int64]:
-    """Number of skin mesh edges between the cores of every two regions of ``level``.
-
-    Parameters
-    ----------
-    regions : Regions
-    topology : RegionTopology
-    level : int
-
-    Returns
-    -------
-    C : (R, R) int64
-        Symmetric, zero diagonal; ``C[a, b] > 0`` iff regions ``a`` and ``b`` touch
-        (rigid parts touch nothing).
-    """
-    lv = regions.check_level(level)
-    topo = _check_topology(regions, topology)
-    lab = np.where(topo.skin, regions.labels[lv], -1).astype(np.int64)
-    return np.rint(_piece_adjacency(topo.adjacency, lab, regions.n_regions(lv))).astype(np.int64)
-
-
-def adjacent_regions(regions: Regions, topology: RegionTopology, level: int, region: int | str) -> list[int]:
-    """Regions of ``level`` that touch ``region`` (the ones it can merge with).
-
-    Parameters
-    ----------
-    regions : Regions
-    topology : RegionTopology
-    level : int
-    region : int or str
-
-    Returns
-    -------
-    list of int
-        Region indices, most shared mesh edges first (empty for a rigid part).
-    """
-    lv = regions.check_level(level)
-    r = regions.region_index(lv, region)
-    row = region_adjacency(regions, topology, lv)[r]
-    nb = np.flatnonzero(row > 0)
-    return [int(i) for i in nb[np.argsort(-row[nb], kind="stable")]]
-
-
-def _fresh_name(candidate: str, used: set[str]) -> str:
-    if candidate not in used:
-        return candidate
-    i = 2
-    while f"{candidate}{i}" in used:
-        i += 1
-    return f"{candidate}{i}"
-
-
-def _check_new_name(name: Any, what: str, used: set[str], level: int) -> str:
-    if not isinstance(name, str) or not name.strip():
-        raise RegionError(f"{what} must be a non-empty string, got {name!r}")
-    if name in used:
-        raise RegionError(f"{what} {name!r} is already used on level {level}")
-    return name
-
-
-def _check_skin_region(regions: Regions, level: int, r: int, what: str) -> None:
-    if regions.kinds[level][r] != "skin":
-        raise RegionError(
-            f"{what}: {regions.names[level][r]!r} is a rigid part (a whole eyeball/teeth/tongue "
-            "component); only skin regions can be edited"
-        )
-
-
-class _Draft:
-    """Mutable per-level labels and region tables an edit works on before :func:`_rebuild`."""
-
-    def __init__(self, regions: Regions) -> None:
-        self.src = regions
-        self.labels = [np.array(a, dtype=np.int64) for a in regions.labels]
-        self.names = [list(x) for x in regions.names]
-        self.kinds = [list(x) for x in regions.kinds]
-        self.drivers = [list(x) for x in regions.drivers]
-        self.origins = [list(range(len(x))) for x in regions.names]
-
-    def insert_after(self, level: int, r: int) -> int:
-        """A new (empty) region at index ``r + 1`` of ``level`` copying ``r``'s tables."""
-        lab = self.labels[level]
-        lab[lab > r] += 1
-        self.names[level].insert(r + 1, "")  # set by the caller
-        self.kinds[level].insert(r + 1, self.kinds[level][r])
-        self.drivers[level].insert(r + 1, self.drivers[level][r])
-        self.origins[level].insert(r + 1, self.origins[level][r])
-        return r + 1
-
-
-def _rebuild(draft: _Draft, topo: RegionTopology) -> RegionEdit:
-    """Drop empty regions, derive parents, recompute weights; returns the new Regions and origins."""
-    src = draft.src
-    L = src.n_levels
-    labels: list[NDArray[np.int64]] = []
-    names: list[tuple[str, ...]] = []
-    kinds: list[tuple[str, ...]] = []
-    drivers: list[tuple[tuple[str, ...], ...]] = []
-    origins: list[NDArray[np.int32]] = []
-    for lv in range(L):
-        lab = draft.labels[lv].copy()
-        if topo.attached.size:
-            lab[topo.attached] = lab[topo.nearest]
-        R = len(draft.names[lv])
-        present = np.zeros(R, bool)
-        present[lab[lab >= 0]] = True
-        remap = np.cumsum(present) - 1
-        lab = np.where(lab >= 0, remap[np.maximum(lab, 0)], -1)
-        keep = np.flatnonzero(present)
-        labels.append(lab)
-        names.append(tuple(draft.names[lv][i] for i in keep))
-        kinds.append(tuple(draft.kinds[lv][i] for i in keep))
-        drivers.append(tuple(draft.drivers[lv][i] for i in keep))
-        origins.append(np.array([draft.origins[lv][i] for i in keep], np.int32))
-    parents: list[NDArray[np.int32]] = []
-    for lv in range(L - 1):
-        fine, coarse = labels[lv], labels[lv + 1]
-        R = len(names[lv])
-        has = fine >= 0
-        par = np.full(R, -1, np.int64)
-        par[fine[has]] = coarse[has]
-        if not (np.array_equal(coarse >= 0, has) and np.array_equal(coarse[has], par[fine[has]])):
-            raise RegionError(f"region edit: levels {lv} and {lv + 1} no longer nest (internal error)")
-        parents.append(par.astype(np.int32))
-    rows_out, cols_out, vals_out, bg_out = [], [], [], []
-    for lv in range(L):
-        rows, cols, vals, bgw = _level_weights(topo, labels[lv], kinds[lv], src.overlap_rings)
-        rows_out.append(rows)
-        cols_out.append(cols)
-        vals_out.append(vals)
-        bg_out.append(bgw)
-    out = Regions(
-        labels=tuple(a.astype(np.int32) for a in labels),
-        weight_rows=tuple(rows_out),
-        weight_cols=tuple(cols_out),
-        weight_vals=tuple(vals_out),
-        background=tuple(bg_out),
-        names=tuple(names),
-        parents=tuple(parents),
-        kinds=tuple(kinds),
-        drivers=tuple(drivers),
-        deformation=src.deformation,
-        threshold=src.threshold,
-        threshold_value=src.threshold_value,
-        overlap_rings=src.overlap_rings,
-    )
-    return RegionEdit(out, tuple(origins))
-
-
-def _level_weights(
-    topo: RegionTopology, lab: NDArray[np.int64], kinds: Sequence[str], rings: int
-) -> tuple[NDArray[np.int32], NDArray[np.int32], NDArray[np.float32], NDArray[np.float32]]:
-    """One level's COO weights and background, computed as in :func:`segment_blend_regions`."""
-    n = lab.size
-    R = len(kinds)
-    skin_lab = np.where(topo.skin, lab, -1)
-    W = _smooth_weights(topo.smoothing, skin_lab, R, topo.skin, rings)
-    Wcoo = W.tocoo()
-    rows, cols, vals = Wcoo.row.astype(np.int64), Wcoo.col.astype(np.int64), Wcoo.data
-    bgw = np.zeros(n, np.float64)
-    isbg = cols == R
-    bgw[rows[isbg]] = vals[isbg]
-    rows, cols, vals = rows[~isbg], cols[~isbg], vals[~isbg]
-    att, nearest = topo.attached, topo.nearest
-    if att.size:
-        bgw[att] = bgw[nearest]
-        Wr = sp.csr_matrix((vals, (rows, cols)), shape=(n, R + 1))[nearest].tocoo()
-        rows = np.concatenate([rows, att[Wr.row]])
-        cols = np.concatenate([cols, Wr.col])
-        vals = np.concatenate([vals, Wr.data])
-    for r, kind in enumerate(kinds):
-        if kind != "rigid":
-            continue
-        vv = np.flatnonzero(lab == r)
-        rows = np.concatenate([rows, vv])
-        cols = np.concatenate([cols, np.full(vv.size, r)])
-        vals = np.concatenate([vals, np.ones(vv.size)])
-    order = np.lexsort((cols, rows))
-    return (
-        rows[order].astype(np.int32),
-        cols[order].astype(np.int32),
-        vals[order].astype(np.float32),
-        bgw.astype(np.float32),
-    )
-
-
-def recompute_region_weights(regions: Regions, topology: RegionTopology) -> Regions:
-    """``regions`` with parents and weights recomputed from its labels (a no-op on a fresh segmentation).
-
-    Parameters
-    ----------
-    regions : Regions
-    topology : RegionTopology
-        Of the model the regions belong to.
-
-    Returns
-    -------
-    Regions
-        Bit-identical to ``regions`` if it came from :func:`segment_blend_regions`
-        (the tests pin this: every edit recomputes the weights this way).
-    """
-    topo = _check_topology(regions, topology)
-    return _rebuild(_Draft(regions), topo).regions
-
-
-def rename_region(regions: Regions, level: int, region: int | str, name: str) -> RegionEdit:
-    """Rename one region of ``level`` (labels, weights and the hierarchy are unchanged).
-
-    Parameters
-    ----------
-    regions : Regions
-    level : int
-    region : int or str
-        Index or current name.
-    name : str
-        New name, unique on ``level``.
-
-    Returns
-    -------
-    RegionEdit
-        ``origins`` is the identity.
-    """
-    out = regions.renamed(level, region, name)
-    return RegionEdit(out, _identity_origins(regions))
-
-
-def merge_regions(
-    regions: Regions,
-    topology: RegionTopology,
-    level: int,
-    a: int | str,
-    b: int | str,
-    *,
-    name: str | None = None,
-) -> RegionEdit:
-    """Merge two adjacent skin regions of ``level`` into one.
-
-    The merged region keeps the *lower* of the two indices (regions after the
-    other one move down by one) and the name, drivers and blend weights of the
-    *larger* region (more core vertices; ``a`` on a tie), unless ``name`` is
-    given. Levels stay nested: if ``a`` and ``b`` lie in different regions of
-    the next coarser level, those are merged too (the same rule, up to the
-    coarsest level); finer levels are unchanged (their regions now share the
-    merged parent). Weights and overlaps are recomputed.
-
-    Parameters
-    ----------
-    regions : Regions
-    topology : RegionTopology
-        :func:`region_topology` of the model.
-    level : int
-    a, b : int or str
-        Two different skin regions of ``level`` that share a mesh edge.
-    name : str, optional
-        Name of the merged region (unique on ``level`` apart from ``a`` and ``b``).
-
-    Returns
-    -------
-    RegionEdit
-
-    Raises
-    ------
-    RegionError
-        Unknown level/region (the message names ``level``/``a``/``b``), ``a == b``,
-        a rigid region, regions that do not touch, or a taken ``name``.
-    """
-    topo = _check_topology(regions, topology)
-    lv = regions.check_level(level)
-    try:
-        ia = regions.region_index(lv, a)
-    except RegionError as exc:
-        raise RegionError(f"a: {exc}") from None
-    try:
-        ib = regions.region_index(lv, b)
-    except RegionError as exc:
-        raise RegionError(f"b: {exc}") from None
-    nm = regions.names[lv]
-    if ia == ib:
-        raise RegionError(f"b: cannot merge region {nm[ia]!r} with itself")
-    _check_skin_region(regions, lv, ia, "a")
-    _check_skin_region(regions, lv, ib, "b")
-    C = region_adjacency(regions, topo, lv)
-    if C[ia, ib] == 0:
-        near = [nm[i] for i in np.flatnonzero(C[ia] > 0)]
-        raise RegionError(
-            f"b: region {nm[ib]!r} does not touch {nm[ia]!r} on level {lv}; "
-            f"{nm[ia]!r} can merge with {near}"
-        )
-    if name is not None:
-        _check_new_name(name, "name", set(nm) - {nm[ia], nm[ib]}, lv)
-    d = _Draft(regions)
-    k, x, y = lv, ia, ib
-    while True:
-        lab = d.labels[k]
-        sx, sy = int(np.count_nonzero((lab == x) & topo.skin)), int(np.count_nonzero((lab == y) & topo.skin))
-        big = x if sx >= sy else y
-        keep_i, drop_i = min(x, y), max(x, y)
-        d.names[k][keep_i] = name if (k == lv and name is not None) else regions.names[k][big]
-        d.drivers[k][keep_i] = regions.drivers[k][big]
-        d.origins[k][keep_i] = big
-        lab[lab == drop_i] = keep_i
-        d.names[k][drop_i] = ""  # empty now: dropped by _rebuild
-        if k + 1 >= regions.n_levels:
-            break
-        px, py = int(regions.parents[k][x]), int(regions.parents[k][y])
-        if px == py:
-            break
-        k, x, y = k + 1, px, py
-    return _rebuild(d, topo)
-
-
-def _as_seeds(value: Any, n: int, what: str) -> NDArray[np.int64]:
-    ids = _vertex_ids(value, n, what)
-    if ids.size == 0:
-        raise RegionError(f"{what} must hold at least one vertex")
-    return ids
-
-
-def split_region(
-    regions: Regions,
-    topology: RegionTopology,
-    level: int,
-    region: int | str,
-    seeds_a: Any,
-    seeds_b: Any,
-    *,
-    names: tuple[str, str] | None = None,
-) -> RegionEdit:
-    """Split a skin region in two around two (sets of) clicked vertices.
-
-    On level 0 the split is the **geodesic Voronoi partition** of the region's
-    core: every core vertex goes to the half whose seed is nearer along the
-    skin's mesh edges (Dijkstra on edge lengths), so two clicks give a cut
-    halfway between them that follows the surface. On a coarser level the
-    region is the union of its level-``l-1`` children and the split keeps the
-    hierarchy nested by **grouping whole children**: the children holding the
-    seeds go to their half and every other child to the half whose seed child
-    is nearer in the children's adjacency graph (centroid distances). If both
-    seeds lie in the same child, that child is split first (recursively, down
-    to level 0), so two clicks always succeed. Each half is connected.
-
-    Half A (around ``seeds_a``) keeps the region's index; half B is inserted
-    right after it (later regions move up by one). Both halves inherit the
-    region's drivers and blend weights (``origins``); they are named
-    ``<name>_a`` / ``<name>_b`` unless ``names`` is given. Levels above are
-    unchanged (both halves lie in the old parent).
-
-    Parameters
-    ----------
-    regions : Regions
-    topology : RegionTopology
-    level : int
-    region : int or str
-        A skin region of ``level``.
-    seeds_a, seeds_b : int or (s,) int
-        Skin vertices of the region's core, none in both.
-    names : (str, str), optional
-
-    Returns
-    -------
-    RegionEdit
-
-    Raises
-    ------
-    RegionError
-        Naming ``level``, ``region``, ``seeds_a``/``seeds_b`` (outside the region,
-        shared, empty, or a half that is not connected) or ``names``.
-    """
-    topo = _check_topology(regions, topology)
-    lv = regions.check_level(level)
-    r = regions.region_index(lv, region)
-    _check_skin_region(regions, lv, r, "region")
-    n = regions.n_vertices
-    sa = _as_seeds(seeds_a, n, "seeds_a")
-    sb = _as_seeds(seeds_b, n, "seeds_b")
-    lab = regions.labels[lv]
-    rname = regions.names[lv][r]
-    for what, s in (("seeds_a", sa), ("seeds_b", sb)):
-        bad = s[(lab[s] != r) | ~topo.skin[s]]
-        if bad.size:
-            raise RegionError(
-                f"{what}: vertices {bad[:5].tolist()} are not in the core of region {rname!r} on level {lv}"
-            )
-    both = np.intersect1d(sa, sb)
-    if both.size:
-        raise RegionError(f"seeds_b: vertices {both[:5].tolist()} are also in seeds_a")
-    used = set(regions.names[lv]) - {rname}
-    if names is not None:
-        if not isinstance(names, tuple | list) or len(names) != 2:
-            raise RegionError(f"names must be two strings (half a, half b), got {names!r}")
-        na = _check_new_name(names[0], "names[0]", used, lv)
-        nb = _check_new_name(names[1], "names[1]", used | {na}, lv)
-    else:
-        na = _fresh_name(f"{rname}_a", used)
-        nb = _fresh_name(f"{rname}_b", used | {na})
-    d = _Draft(regions)
-    _split_into(d, topo, lv, r, sa, sb, (na, nb))
-    return _rebuild(d, topo)
-
-
-def _split_into(
-    d: _Draft,
-    topo: RegionTopology,
-    k: int,
-    r: int,
-    sa: NDArray[np.int64],
-    sb: NDArray[np.int64],
-    names: tuple[str, str],
-) -> None:
-    """Split region ``r`` of level ``k`` in the draft (see :func:`split_region`)."""
-    if k == 0:
-        core = _skin_core(topo, d.labels[0], r)
-        G = topo.skin_graph[core][:, core]
-        loc = np.searchsorted(core, np.concatenate([sa, sb]))
-        _, _, src = dijkstra(G, directed=False, indices=loc, min_only=True, return_predecessors=True)
-        if (src < 0).any():  # pragma: no cover - the core is connected
-            raise RegionError("region: the region's core is not connected")
-        in_b = np.isin(src, loc[sa.size:])
-        side_b = core[in_b]
-    else:
-        while True:
-            lab_c = d.labels[k - 1]
-            ca, cb = set(lab_c[sa].tolist()), set(lab_c[sb].tolist())
-            shared = sorted(ca & cb)
-            if not shared:
-                break
-            c = shared[0]
-            sub_a, sub_b = sa[lab_c[sa] == c], sb[lab_c[sb] == c]
-            used = set(d.names[k - 1]) - {d.names[k - 1][c]}
-            base = d.names[k - 1][c]
-            na = _fresh_name(f"{base}_a", used)
-            nb = _fresh_name(f"{base}_b", used | {na})
-            _split_into(d, topo, k - 1, c, sub_a, sub_b, (na, nb))
-        core = _skin_core(topo, d.labels[k], r)
-        ch = d.labels[k - 1][core]
-        kids, inv = np.unique(ch, return_inverse=True)
-        m = kids.size
-        V = topo.vertices
-        cent = np.stack([V[core[inv == i]].mean(axis=0) for i in range(m)])
-        P = sp.csr_matrix((np.ones(core.size), (np.arange(core.size), inv)), shape=(core.size, m))
-        Cc = np.asarray((P.T @ topo.adjacency[core][:, core].astype(np.float64) @ P).todense())
-        np.fill_diagonal(Cc, 0.0)
-        ii, jj = np.nonzero(Cc)
-        w = np.maximum(np.linalg.norm(cent[ii] - cent[jj], axis=1), 1e-12)
-        G = sp.csr_matrix((w, (ii, jj)), shape=(m, m))
-        src_a = np.searchsorted(kids, sorted(ca))
-        src_b = np.searchsorted(kids, sorted(cb))
-        _, _, src = dijkstra(
-            G, directed=False, indices=np.concatenate([src_a, src_b]), min_only=True, return_predecessors=True
-        )
-        kid_b = np.isin(src, src_b)
-        side_b = core[kid_b[inv]]
-    new = d.insert_after(k, r)
-    d.names[k][r], d.names[k][new] = names
-    d.labels[k][side_b] = new
-    for what, half in (("seeds_a", r), ("seeds_b", new)):
-        pieces = _n_pieces(topo, _skin_core(topo, d.labels[k], half))
-        if pieces != 1:
-            raise RegionError(
-                f"{what}: the half around these seeds would be in {pieces} pieces on level {k} "
-                "(seeds of the other half lie between them); click one vertex per half"
-            )
-
-
-def paint_region(
-    regions: Regions,
-    topology: RegionTopology,
-    level: int,
-    region: int | str,
-    vertices: Any,
-    *,
-    add: bool = True,
-) -> RegionEdit:
-    """Assign vertices to a skin region of ``level`` (``add=True``) or take them out of it.
-
-    ``add=True``: the painted skin vertices join ``region`` and, so levels stay
-    nested, its ancestor on every coarser level; on finer levels each painted
-    vertex joins the descendant of ``region`` that holds its geodesically
-    nearest old core vertex (so the children grow into the painted area
-    without breaking apart). The painted vertices, together with the region,
-    must be connected. ``add=False``: the painted vertices of ``region`` go to
-    the background (on every level, as the background is shared by all levels).
-
-    Only segmented skin vertices are painted: other vertices in ``vertices``
-    (lashes follow their nearest skin vertex, eyeballs/teeth are rigid) are
-    ignored. A region that loses all its vertices disappears; a region that
-    would fall into pieces is refused (paint so that it stays in one piece, or
-    split it first). Weights and overlaps are recomputed; every region keeps
-    its blend weights (``origins`` without the removed ones).
-
-    Parameters
-    ----------
-    regions : Regions
-    topology : RegionTopology
-    level : int
-    region : int or str
-        A skin region of ``level``.
-    vertices : int or (m,) int
-        The brush's vertices.
-    add : bool
-
-    Returns
-    -------
-    RegionEdit
-        ``regions`` is the input object itself when no label changes.
-
-    Raises
-    ------
-    RegionError
-        Naming ``level``/``region``/``vertices`` (no skin vertex, not touching
-        the region, or a region that would be cut in pieces).
-    """
-    topo = _check_topology(regions, topology)
-    lv = regions.check_level(level)
-    r = regions.region_index(lv, region)
-    _check_skin_region(regions, lv, r, "region")
-    ids = _vertex_ids(vertices, regions.n_vertices, "vertices")
-    ids = ids[topo.skin[ids]]
-    if ids.size == 0:
-        raise RegionError("vertices: none of them is on the segmented skin")
-    rname = regions.names[lv][r]
-    old = regions.labels[lv]
-    d = _Draft(regions)
-    if add:
-        T = ids[old[ids] != r]
-        if T.size == 0:
-            return RegionEdit(regions, _identity_origins(regions))
-        core = _skin_core(topo, old.astype(np.int64), r)
-        grown = np.union1d(core, T)
-        G = topo.skin_graph[grown][:, grown]
-        loc_core = np.searchsorted(grown, core)
-        _, _, src = dijkstra(G, directed=False, indices=loc_core, min_only=True, return_predecessors=True)
-        loc_T = np.searchsorted(grown, T)
-        lost = T[src[loc_T] < 0]
-        if lost.size:
-            raise RegionError(
-                f"vertices: {lost.size} painted vertices do not touch region {rname!r} on level {lv} "
-                f"(e.g. {lost[:5].tolist()}); paint next to the region"
-            )
-        nearest_core = grown[src[loc_T]]
-        for k in range(regions.n_levels):
-            if k >= lv:
-                d.labels[k][T] = regions.ancestor(lv, r, k)
-            else:
-                d.labels[k][T] = d.labels[k][nearest_core]
-    else:
-        T = ids[old[ids] == r]
-        if T.size == 0:
-            return RegionEdit(regions, _identity_origins(regions))
-        for k in range(regions.n_levels):
-            d.labels[k][T] = -1
-    for k in range(regions.n_levels):
-        touched = set(regions.labels[k][T].tolist()) | set(d.labels[k][T].tolist())
-        touched.discard(-1)
-        for q in sorted(touched):
-            pieces = _n_pieces(topo, _skin_core(topo, d.labels[k], q))
-            if pieces > 1:
-                raise RegionError(
-                    f"vertices: painting would cut region {regions.names[k][q]!r} of level {k} into "
-                    f"{pieces} pieces; paint so that it stays in one piece (or split it first)"
-                )
-    return _rebuild(d, topo)

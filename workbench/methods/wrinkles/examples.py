@@ -54,7 +54,7 @@ from numpy.typing import ArrayLike, NDArray
 from workbench.arkit import rig_weights
 from workbench.geometry.operators import cotangent_laplacian, mass_matrix
 from workbench.geometry.sparse_cholesky import SparseSPDSolver
-from workbench.methods.wrinkles.pose_space import vertex_normals
+from workbench.methods.wrinkles.features import vertex_normals
 
 if TYPE_CHECKING:
     from workbench.core.state import FaceState as FaceModel

@@ -19,7 +19,8 @@ from workbench.methods.wrinkles.layer import WrinkleLayer, WrinkleState, blend_w
 
 if TYPE_CHECKING:
     from workbench.core.state import FaceState
-    from workbench.methods.wrinkles.pose_space import FeatureGraph, PoseSpace
+    from workbench.methods.wrinkles.features import FeatureGraph
+    from workbench.methods.wrinkles.pose_space import PoseSpace
 
 
 def check_state(model: FaceState, value: Any) -> WrinkleState:

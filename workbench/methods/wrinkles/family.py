@@ -154,7 +154,8 @@ class WrinklesFilePart:
         w = m["wrinkles"]
         if w is None:
             return {}
-        from workbench.methods.wrinkles.pose_space import FeatureGraph, edge_weights, fit_pose_space
+        from workbench.methods.wrinkles.features import FeatureGraph, edge_weights
+        from workbench.methods.wrinkles.pose_space import fit_pose_space
 
         h = np.asarray(arrays["wrinkles_handles"], np.int32)
         g = FeatureGraph(arrays["wrinkles_edges"], arrays["wrinkles_rest_lengths"])

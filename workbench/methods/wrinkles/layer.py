@@ -33,18 +33,15 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from workbench.methods.wrinkles.pose_space import (
-    DetailEvaluator,
+from workbench.methods.wrinkles.features import (
     FeatureGraph,
-    FitMode,
-    PoseSpace,
     edge_weights,
     extract_details,
-    fit_pose_space,
-    greedy_fit,
     local_frames,
     tangent_neighbours,
 )
+from workbench.methods.wrinkles.hybrid_deformer import DetailEvaluator
+from workbench.methods.wrinkles.pose_space import FitMode, PoseSpace, fit_pose_space, greedy_fit
 
 if TYPE_CHECKING:
     from workbench.core.pipeline import StateView
