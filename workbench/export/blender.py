@@ -36,7 +36,7 @@ import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from workbench.export import ExportError, ExportResult, atomic_path
+from workbench.export.base import ExportError, ExportResult, atomic_path
 
 if TYPE_CHECKING:
     from workbench.animation.tracks import Timeline

@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING
 
 from workbench.animation.tracks import Timeline
 from workbench.arkit import canonical_arkit_name
-from workbench.export import ExportError, ExportResult, LayerReport, atomic_path
+from workbench.export.base import ExportError, ExportResult, LayerReport, atomic_path
 from workbench.export.encoding import MeshEncoding
 
 if TYPE_CHECKING:

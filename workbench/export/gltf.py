@@ -80,7 +80,7 @@ from numpy.typing import NDArray
 
 from workbench.animation.curves import HEAD_POSE, Key, Track
 from workbench.animation.tracks import Timeline
-from workbench.export import ExportError, ExportResult, LayerReport, atomic_write_bytes
+from workbench.export.base import ExportError, ExportResult, LayerReport, atomic_write_bytes
 from workbench.export.encoding import MeshEncoding, crossing_times
 
 if TYPE_CHECKING:

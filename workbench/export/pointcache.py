@@ -51,7 +51,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from workbench.animation.tracks import Timeline
-from workbench.export import ExportError, ExportResult, LayerReport, atomic_path
+from workbench.export.base import ExportError, ExportResult, LayerReport, atomic_path
 from workbench.export.encoding import MeshEncoding
 
 if TYPE_CHECKING:

@@ -48,7 +48,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from workbench.animation.tracks import Timeline
-from workbench.export import ExportError, ExportResult, LayerReport, atomic_path
+from workbench.export.base import ExportError, ExportResult, LayerReport, atomic_path
 from workbench.export.encoding import MeshEncoding
 
 if TYPE_CHECKING:

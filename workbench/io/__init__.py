@@ -17,7 +17,8 @@ import numpy as np
 
 from workbench.fileformat import SUFFIX, load_model
 from workbench.geometry.mesh_checks import label_components
-from workbench.io.registry import ImportedFace, read_any
+from workbench.io.base import ImportedFace
+from workbench.io.registry import read_any
 from workbench.model import BlendShape, FaceModel, ModelMetadata
 
 __all__ = ["ImportedFace", "load", "model_from_imported"]

@@ -41,7 +41,7 @@ from pygltflib import (
 
 from workbench.core.polygons import Polygons
 from workbench.geometry.mesh_checks import MeshFormatError, check_faces, check_vertices
-from workbench.io.registry import ImportedFace, check_shape_names
+from workbench.io.base import ImportedFace, check_shape_names
 
 __all__ = ["DESCRIPTION", "detect", "read", "read_gltf"]
 

@@ -16,8 +16,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from workbench.geometry.mesh_checks import MeshFormatError, check_vertices
+from workbench.io.base import ImportedFace, check_shape_names
 from workbench.io.obj import read_obj
-from workbench.io.registry import ImportedFace, check_shape_names
 
 __all__ = ["DESCRIPTION", "detect", "parse_target", "read", "read_targets"]
 

@@ -22,7 +22,7 @@ import numpy as np
 
 from workbench.core.polygons import Polygons
 from workbench.geometry.mesh_checks import MeshFormatError, check_faces, check_vertices
-from workbench.io.registry import ImportedFace
+from workbench.io.base import ImportedFace
 
 __all__ = ["DESCRIPTION", "detect", "parse_obj_text", "read", "read_obj"]
 

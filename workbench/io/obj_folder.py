@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 
 from workbench.geometry.mesh_checks import MeshFormatError
+from workbench.io.base import ImportedFace, check_shape_names
 from workbench.io.obj import read_obj
-from workbench.io.registry import ImportedFace, check_shape_names
 
 __all__ = ["DESCRIPTION", "NEUTRAL_STEMS", "detect", "read", "read_obj_folder"]
 

@@ -1,125 +1,35 @@
-"""What every importer returns, and how a path is matched to an importer.
+"""How a path is matched to a reader.
 
 Readers register a ``detect(path) -> bool`` and a ``read(path) -> ImportedFace``;
 :func:`read_any` picks the first reader whose detector accepts the path. The
-built-in readers (OBJ, folder of OBJs, OBJ + MakeHuman targets, glTF/GLB) are
-registered lazily on first use so importing this module stays cheap and free of
-import cycles. A dozen lines of dispatch did not justify a plugin library.
+built-in readers (OBJ + MakeHuman targets, folder of OBJs, OBJ, glTF/GLB) are
+one module each, listed by name in :data:`BUILTIN_READERS` and imported with
+:mod:`importlib` on first use: importing this module stays cheap, and since
+the readers import only :mod:`workbench.io.base` (where :class:`ImportedFace`
+lives), nothing imports back into the registry. A dozen lines of dispatch did
+not justify a plugin library.
+
+A built-in reader module defines ``detect``, ``read`` and ``DESCRIPTION``.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+import importlib
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
-from numpy.typing import NDArray
-
-from workbench.arkit import canonical_arkit_name
-from workbench.core.polygons import Polygons
-from workbench.geometry.mesh_checks import MeshFormatError, label_components
+from workbench.geometry.mesh_checks import MeshFormatError
+from workbench.io.base import ImportedFace, check_shape_names
 
 __all__ = [
+    "BUILTIN_READERS",
     "ImportedFace",
     "check_shape_names",
     "read_any",
     "register_reader",
     "supported_inputs",
 ]
-
-
-@dataclass
-class ImportedFace:
-    """A neutral mesh plus its blendshapes, as read from disk.
-
-    Attributes
-    ----------
-    vertices : (n, 3) float64
-        Neutral positions.
-    polygons : Polygons
-        Faces as in the file (quads and n-gons kept).
-    face_groups : (p,) int32 or None
-        Group id of each polygon (OBJ ``g``/``o``, glTF primitive), -1 for a
-        face outside any group; None when the file has no groups.
-    group_names : list of str
-        Name of each group id.
-    shapes : list of (str, (n, 3) float32)
-        Blendshape name (as in the file) and per-vertex delta from the neutral.
-    source_files : list of str
-        Every file that was read.
-    units : str or None
-        Length unit if the format defines one ("m" for glTF, "dm" for
-        MakeHuman); None when unknown (OBJ).
-    up_axis : str or None
-        "+y" etc. if the format defines it; None when unknown.
-    """
-
-    vertices: NDArray[np.float64]
-    polygons: Polygons
-    face_groups: NDArray[np.int32] | None = None
-    group_names: list[str] = field(default_factory=list)
-    shapes: list[tuple[str, NDArray[np.float32]]] = field(default_factory=list)
-    source_files: list[str] = field(default_factory=list)
-    units: str | None = None
-    up_axis: str | None = None
-
-    @property
-    def n_vertices(self) -> int:
-        return int(self.vertices.shape[0])
-
-    @property
-    def shape_names(self) -> list[str]:
-        return [name for name, _ in self.shapes]
-
-    def components(self) -> tuple[NDArray[np.int32], list[str]]:
-        """Connected parts of the mesh: ``(labels (n,) int32, names)``.
-
-        See :func:`workbench.geometry.mesh_checks.label_components`.
-        """
-        return label_components(
-            self.polygons, self.n_vertices, self.face_groups, self.group_names or None
-        )
-
-
-def check_shape_names(names: Sequence[str], sources: Sequence[str], what: str) -> None:
-    """Reject shape names that would collide after normalisation.
-
-    Two shapes are the same when their names are equal ignoring case
-    ("Smile" vs "smile": they clash on case-insensitive file systems and in
-    most DCC tools) or when they map to the same ARKit name ("eyeBlinkLeft"
-    vs "EyeBlink_L").
-
-    Parameters
-    ----------
-    names : sequence of str
-        Shape names.
-    sources : sequence of str
-        File each name came from (same length), for the message.
-    what : str
-        The container being read (folder or file), used as the error's source.
-    """
-    seen: dict[str, int] = {}
-    for i, name in enumerate(names):
-        keys = [name.lower()]
-        canon = canonical_arkit_name(name)
-        if canon is not None:
-            keys.append("arkit:" + canon)
-        for key in keys:
-            if key in seen:
-                j = seen[key]
-                why = (
-                    f"both are ARKit '{key[6:]}'"
-                    if key.startswith("arkit:")
-                    else "same name ignoring case"
-                )
-                raise MeshFormatError(
-                    what,
-                    "shape names",
-                    f"duplicate shape name: '{names[j]}' ({Path(sources[j]).name}) and "
-                    f"'{name}' ({Path(sources[i]).name}): {why}",
-                )
-            seen[key] = i
 
 
 @dataclass(frozen=True)
@@ -129,6 +39,14 @@ class _Reader:
     read: Callable[[Path], ImportedFace]
     description: str
 
+
+#: (reader name, module) of the built-in readers, in the order they are tried.
+BUILTIN_READERS: tuple[tuple[str, str], ...] = (
+    ("makehuman", "workbench.io.makehuman_target"),
+    ("obj_folder", "workbench.io.obj_folder"),
+    ("obj", "workbench.io.obj"),
+    ("gltf", "workbench.io.gltf"),
+)
 
 _READERS: list[_Reader] = []
 _builtins_done = False
@@ -164,21 +82,15 @@ def _register_builtins() -> None:
     global _builtins_done
     if _builtins_done:
         return
+    builtins = []
+    for name, module in BUILTIN_READERS:
+        mod = importlib.import_module(module)
+        builtins.append(_Reader(name, mod.detect, mod.read, mod.DESCRIPTION))
     _builtins_done = True
-    # imported here: these modules import ImportedFace from this one
-    from workbench.io import gltf, makehuman_target, obj, obj_folder
-
-    builtins = [
-        ("makehuman", makehuman_target.detect, makehuman_target.read, makehuman_target.DESCRIPTION),
-        ("obj_folder", obj_folder.detect, obj_folder.read, obj_folder.DESCRIPTION),
-        ("obj", obj.detect, obj.read, obj.DESCRIPTION),
-        ("gltf", gltf.detect, gltf.read, gltf.DESCRIPTION),
-    ]
     # built-ins go first; readers registered earlier by the user with the same name win
     user = list(_READERS)
     _READERS.clear()
-    for name, detect, read, desc in builtins:
-        _READERS.append(_Reader(name, detect, read, desc))
+    _READERS.extend(builtins)
     for r in user:
         register_reader(r.name, r.detect, r.read, r.description)
 

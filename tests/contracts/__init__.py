@@ -1,0 +1,1 @@
+"""import-linter contracts used by CI (see pyproject.toml [tool.importlinter])."""
