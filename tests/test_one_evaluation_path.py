@@ -62,7 +62,7 @@ edit = st.one_of(
     st.tuples(st.just("weight"), st.sampled_from(SHAPES), unit),
     st.tuples(st.just("drag"), st.integers(0, 60), st.floats(-0.05, 0.05)),
     st.tuples(st.just("region"), st.integers(0, 5), st.sampled_from(SHAPES), unit),
-    st.tuples(st.just("paint"), st.sampled_from(SHAPES + ["saved"]), st.integers(0, 4000), unit),
+    st.tuples(st.just("paint"), st.sampled_from([*SHAPES, "saved"]), st.integers(0, 4000), unit),
     st.tuples(st.just("save"), st.just("saved"), st.just(0)),
     st.tuples(st.just("key"), st.sampled_from(["weights", "handles", "head", "expression"]),
               st.floats(0.0, 2.0)),

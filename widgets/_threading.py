@@ -116,7 +116,7 @@ def register_interaction_closer(
     :class:`InteractionGrouper`), not a pointer drag. It is dropped when its
     object is garbage collected, or by :func:`unregister_interaction_closer`.
     """
-    ref = weakref.WeakMethod(closer)  # type: ignore[arg-type]
+    ref = weakref.WeakMethod(closer)
     with _closers_lock:
         refs = _closers.setdefault(model, [])
         refs[:] = [(r, b) for r, b in refs if r() is not None and r != ref]
@@ -125,7 +125,7 @@ def register_interaction_closer(
 
 def unregister_interaction_closer(model: Any, closer: Callable[[], Any]) -> None:
     """Forget ``closer`` (a widget being closed); no-op if it was not registered."""
-    ref = weakref.WeakMethod(closer)  # type: ignore[arg-type]
+    ref = weakref.WeakMethod(closer)
     with _closers_lock:
         refs = _closers.get(model)
         if refs is not None:

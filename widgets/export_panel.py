@@ -217,8 +217,8 @@ class ExportPanel(W.VBox):
 
     def do_export(self) -> list[Path]:
         """Export ``model.tracks`` as the form says; show and return the files (or the error)."""
+        from workbench.animation.curves import TrackError
         from workbench.export import ExportError, export
-        from workbench.animation.tracks import TrackError
 
         path = Path(self.path.value.strip() or f"animation{self.suffix}").expanduser()
         if path.suffix.lower() != self.suffix:
@@ -239,8 +239,8 @@ class ExportPanel(W.VBox):
 
     def do_import(self) -> bool:
         """Read the animation file and make it the model's timeline (one undo step)."""
+        from workbench.animation.curves import TrackError
         from workbench.animation.importers import AnimationImportError, read_animation
-        from workbench.animation.tracks import TrackError
 
         text = self.import_path.value.strip()
         if not text:
@@ -250,7 +250,7 @@ class ExportPanel(W.VBox):
         self._flush()
         try:
             tl = read_animation(path, self.model.shape_names)
-            self.model.set_timeline(tl, f"Import animation {path.name}")
+            self.model.timeline.set(tl, f"Import animation {path.name}")
         except (AnimationImportError, TrackError, OSError, ValueError) as exc:
             self.import_result.value = _error_html(f"Import failed: {exc}")
             return False

@@ -46,7 +46,12 @@ from widgets._threading import ErrorSink, InteractionGrouper, close_interactions
 from widgets.gallery import ExpressionGallery
 from widgets.viewport import BRUSH_MODES, FALLOFFS, brush_radius_slider, face_height
 from workbench.methods.paint.expressions import expression_names
-from workbench.methods.paint.painting import Brush, eyes_vertical_extent, feathered_presets, regional_mix
+from workbench.methods.paint.painting import (
+    Brush,
+    eyes_vertical_extent,
+    feathered_presets,
+    regional_mix,
+)
 
 _HELP = (
     "<div style='line-height:1.35'>Pick an expression in the palette, then <b>paint</b> on "
@@ -444,16 +449,16 @@ class PaintPanel(W.VBox):
     def _on_flood(self, _b: Any = None) -> None:
         expr = self._require_expression("Flood")
         self._flush()
-        self._model.paint_flood(expr, float(self.opacity.value))
+        self._model.paint.flood(expr, float(self.opacity.value))
 
     def _on_normalize(self, _b: Any = None) -> None:
         self._flush()
-        self._model.paint_normalize()
+        self._model.paint.normalize()
 
     def _on_clear(self, _b: Any = None) -> None:
         self._flush()
-        if len(self._model.paint_layers):
-            self._model.clear_paint()
+        if len(self._model.paint):
+            self._model.paint.clear()
         self._mixes.pop(self.preset.value, None)
         self._sync_region_sliders()
 
@@ -470,17 +475,17 @@ class PaintPanel(W.VBox):
         if not name:
             raise ValueError("Save as expression: type a name first")
         self._flush()
-        self._model.save_expression(name)
+        self._model.expressions.save(name)
         self._update_status(f"saved expression <b>{name}</b>")
 
     def _on_bake(self, _b: Any = None) -> None:
         name = self.bake_name.value.strip()
         if not name:
             raise ValueError("Bake to new shape: type a name for the new shape first")
-        if not len(self._model.paint_layers):
+        if not len(self._model.paint):
             raise ValueError("Bake to new shape: nothing is painted")
         self._flush()
-        self._model.bake_paint_to_shape(name)
+        self._model.paint.bake_to_shape(name)
         self.bake_name.value = _next_free(name, self._model.shape_names)
         self._update_status(f"baked <b>{name}</b>")
 
@@ -551,7 +556,7 @@ class PaintPanel(W.VBox):
         label = "Global blend" if self.preset.value == "global" else "Regional blend"
         if self.viewport is not None:
             self.viewport.end_stroke()
-        self._model.set_paint(mix, label)
+        self._model.paint.set(mix, label)
 
     def _on_preset(self, _change: Any = None) -> None:
         self._build_region_sliders()
@@ -594,7 +599,7 @@ class PaintPanel(W.VBox):
         if "auto" in self._mixes:
             # each region keeps its mix only while the regions are the same ones
             # (another level, a merge, split or re-segmentation starts afresh)
-            new = _auto_regions(self._model)[0] if self._model.regions is not None else None
+            new = _auto_regions(self._model)[0] if self._model.regions.state is not None else None
             if not old or new != old[0]:
                 self._mixes.pop("auto", None)
         self.preset.options = opts
@@ -607,7 +612,7 @@ class PaintPanel(W.VBox):
     def _update_status(self, note: str = "") -> None:
         with self._status_lock:
             model = self._model
-            mix = model.paint_layers
+            mix = model.paint
             parts = []
             if len(mix):
                 n = max(model.n_vertices, 1)

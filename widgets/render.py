@@ -38,7 +38,7 @@ import math
 import os
 import time
 from collections.abc import Iterable, Mapping, Sequence
-from typing import Any
+from typing import Any, cast
 
 # Must be set before vtk is first imported: skips the X11 attempt (and its
 # warning) on machines without a display and goes straight to EGL/llvmpipe.
@@ -143,7 +143,7 @@ def to_pyvista(
         poly = model.polygons
         mesh = pv.PolyData(pts.copy(), faces=_polygon_cell_array(poly.indices, poly.offsets))
     else:
-        faces = np.asarray(model.faces, dtype=np.int64)
+        faces: Any = np.asarray(model.faces, dtype=np.int64)  # pyvista's stubs want int, not int64
         mesh = pv.PolyData.from_regular_faces(pts.copy(), faces)
     mesh.point_data[_LABEL_ARRAY] = np.asarray(model.component_labels, dtype=np.int32)
     mesh.field_data[_NAMES_FIELD] = np.asarray(list(model.component_names), dtype=str)
@@ -482,9 +482,8 @@ class _Scene:
         if w < 8 or h < 8:
             raise ValueError(f"render_png: size must be at least (8, 8), got {size}")
         self.faces = np.asarray(model.faces, dtype=np.int64)
-        self.mesh = pv.PolyData.from_regular_faces(
-            np.asarray(points, np.float64).copy(), self.faces
-        )
+        faces: Any = self.faces  # pyvista's stubs want int, not int64
+        self.mesh = pv.PolyData.from_regular_faces(np.asarray(points, np.float64).copy(), faces)
         self._set_normals(points)
         pl = pv.Plotter(off_screen=True, window_size=[w, h], lighting="light kit")
         pl.set_background(background)
@@ -514,7 +513,7 @@ class _Scene:
                 actor = pl.add_mesh(
                     self.mesh,
                     scalars="scalars",
-                    cmap=cmap or "viridis",
+                    cmap=cast(Any, cmap or "viridis"),  # stubs list names as a Literal
                     clim=clim,
                     show_scalar_bar=False,
                     **prop,

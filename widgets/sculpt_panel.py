@@ -123,7 +123,7 @@ class SculptPanel(W.VBox):
             layout=W.Layout(width="170px"),
         )
         self.add_on_click.add_class("fwb-add-on-click")
-        k_s, k_b = model.shell_stiffness
+        k_s, k_b = model.handles.stiffness
         slider_kw = dict(
             base=10,
             min=_LOG_RANGE[0],
@@ -206,7 +206,7 @@ class SculptPanel(W.VBox):
         model.events.handles_changing.connect(self._cb_handles_changing)
         model.events.history.connect(self._cb_history)
         model.events.shapes.connect(self._cb_shapes)
-        model.set_handle_progress(self._on_progress)
+        model.handles.set_progress(self._on_progress)
         self._connected = True
         self._on_model_history()
         self._update_status()
@@ -225,20 +225,20 @@ class SculptPanel(W.VBox):
         from workbench.methods.handles.presets import default_face_handles
 
         self._flush()
-        self._model.set_handles(default_face_handles(self._model), label="Default handles")
-        self._model.prepare_handles()  # build the basis now, not on the first drag
+        self._model.handles.set(default_face_handles(self._model), label="Default handles")
+        self._model.handles.prepare()  # build the basis now, not on the first drag
 
     def _on_clear(self, _b: Any = None) -> None:
         from workbench.model import HandleSet
 
         self._flush()
         if len(self._model.handles):
-            self._model.set_handles(HandleSet(), label="Clear handles")
+            self._model.handles.set(HandleSet(), label="Clear handles")
 
     def _on_reset(self, _b: Any = None) -> None:
         self._flush()
         if len(self._model.handles):
-            self._model.reset_handle_offsets()
+            self._model.handles.reset_offsets()
 
     def _on_undo(self, _b: Any = None) -> None:
         self._flush()
@@ -253,7 +253,7 @@ class SculptPanel(W.VBox):
         if not name:
             raise ValueError("Bake to shape: type a name for the new shape first")
         self._flush()
-        self._model.bake_handles_to_shape(name)
+        self._model.handles.bake_to_shape(name)
         self.bake_name.value = _next_free(name, self._model.shape_names)
         self._update_status(f"baked <b>{name}</b>")
 
@@ -261,10 +261,10 @@ class SculptPanel(W.VBox):
         if self._syncing:
             return  # the sliders follow the model (undo/redo): not an edit
         k_s, k_b = float(self.k_s.value), float(self.k_b.value)
-        if (k_s, k_b) == tuple(self._model.shell_stiffness):
+        if (k_s, k_b) == tuple(self._model.handles.stiffness):
             return
         self._flush()
-        self._model.set_shell_stiffness(k_s, k_b)
+        self._model.handles.set_stiffness(k_s, k_b)
 
     # ------------------------------------------------------- model -> UI
     def _on_progress(self, fraction: float, message: str) -> None:
@@ -278,7 +278,7 @@ class SculptPanel(W.VBox):
 
     def _on_model_stiffness(self) -> None:
         """Show the model's ``(k_s, k_b)`` (after an undo/redo or an edit from code)."""
-        k_s, k_b = self._model.shell_stiffness
+        k_s, k_b = self._model.handles.stiffness
         lo = 10 ** _LOG_RANGE[0]
         self._syncing = True
         try:
@@ -341,7 +341,7 @@ class SculptPanel(W.VBox):
             ev.handles_changing.disconnect(self._cb_handles_changing)
             ev.history.disconnect(self._cb_history)
             ev.shapes.disconnect(self._cb_shapes)
-            self._model.set_handle_progress(None)
+            self._model.handles.set_progress(None)
             if self.viewport is not None:
                 for link in self._links:
                     link.unlink()

@@ -86,17 +86,17 @@ import numpy as np
 import traitlets as t
 
 from widgets._threading import ErrorSink, close_interactions
-from workbench.model import ModelError
-from workbench.animation.tracks import (
+from workbench.animation.curves import (
     HANDLES,
     HEAD_POSE,
     IDENTITY_POSE,
     WEIGHTS_PREFIX,
-    Timeline,
     head_euler_from_rotation,
     head_rotation_from_euler,
     parse_region_track,
 )
+from workbench.animation.tracks import Timeline
+from workbench.model import ModelError
 
 __all__ = ["TimelineWidget", "load_timeline_bundle"]
 
@@ -412,7 +412,7 @@ class TimelineWidget(anywidget.AnyWidget):
         )
         when = float(m.time if time is None else time)
         self._flush()
-        m.key_head_pose(when, rotation=q)
+        m.timeline.key_head_pose(when, rotation=q)
         self.status = f"keyed head pose (yaw {yaw:.0f}°, pitch {pitch:.0f}°, roll {roll:.0f}°) at {when:.2f} s"
 
     def _flush(self) -> None:
@@ -630,7 +630,7 @@ class TimelineWidget(anywidget.AnyWidget):
 
     def _refresh_head_pose(self, *_args: Any) -> None:
         m = self._model
-        pose = m.head_pose
+        pose = m.timeline.head_pose
         q = IDENTITY_POSE[3:] if pose is None else pose[3:]
         meta = m.metadata
         angles = head_euler_from_rotation(q, up_axis=meta.up_axis, front_axis=meta.front_axis)
@@ -705,7 +705,7 @@ class TimelineWidget(anywidget.AnyWidget):
 
     def _msg_move_key(self, c: dict[str, Any]) -> None:
         track, index, when = str(c["track"]), int(c["index"]), float(c["time"])
-        self._model.move_key(track, index, when)
+        self._model.timeline.move_key(track, index, when)
         i = self._model.tracks.tracks[track].index_at(when)
         self.selected_keys = [[track, i]] if i is not None else []
         self.status = f"moved key of {_track_label(track)} to {when:.2f} s"
@@ -715,13 +715,13 @@ class TimelineWidget(anywidget.AnyWidget):
         if not keys:
             return
         if len(keys) == 1:
-            self._model.delete_key(*keys[0])
+            self._model.timeline.delete_key(*keys[0])
         else:
             tl = self._model.tracks
             # highest index first, so earlier deletions do not shift later ones
             for tn, i in sorted(set(keys), key=lambda k: (k[0], -k[1])):
                 tl = tl.delete_key(tn, i)
-            self._model.set_timeline(tl, f"Delete {len(keys)} keys")
+            self._model.timeline.set(tl, f"Delete {len(keys)} keys")
         self.selected_keys = []
         self.status = f"deleted {len(keys)} key{'s' if len(keys) > 1 else ''}"
 
@@ -729,13 +729,13 @@ class TimelineWidget(anywidget.AnyWidget):
         track, when = str(c["track"]), float(c["time"])
         m = self._model
         if track.startswith(WEIGHTS_PREFIX):
-            m.key_weights(when, [track[len(WEIGHTS_PREFIX) :]])
+            m.timeline.key_weights(when, [track[len(WEIGHTS_PREFIX) :]])
         elif track == HANDLES:
-            m.key_handles(when)
+            m.timeline.key_handles(when)
         else:
             tl = m.tracks
             value = tl.tracks[track].evaluate(m.time)
-            m.set_timeline(
+            m.timeline.set(
                 tl.add_key(track, when, value), f"Key {_track_label(track)} at {when:g}s"
             )
         i = m.tracks.tracks[track].index_at(when)
@@ -751,21 +751,21 @@ class TimelineWidget(anywidget.AnyWidget):
         if not names:
             self.status = "nothing to key: every weight is 0 (move a slider or drop an expression)"
             return
-        m.key_weights(when)
+        m.timeline.key_weights(when)
         self.status = f"keyed {len(names)} weights at {when:.2f} s"
 
     def _msg_key_handles(self, c: dict[str, Any]) -> None:
         m = self._model
         when = float(c.get("time", m.time))
-        m.key_handles(when)
+        m.timeline.key_handles(when)
         self.status = f"keyed handles at {when:.2f} s"
 
     def _msg_key_head_pose(self, c: dict[str, Any]) -> None:
-        angles = [float(c[k]) for k in ("yaw", "pitch", "roll")]
-        if not all(math.isfinite(a) for a in angles):
-            raise ValueError(f"yaw, pitch and roll must be finite degrees, got {angles}")
+        yaw, pitch, roll = (float(c[k]) for k in ("yaw", "pitch", "roll"))
+        if not all(math.isfinite(a) for a in (yaw, pitch, roll)):
+            raise ValueError(f"yaw, pitch and roll must be finite degrees, got {[yaw, pitch, roll]}")
         when = float(c.get("time", self._model.time))
-        self.key_head_pose(*angles, time=when)
+        self.key_head_pose(yaw, pitch, roll, time=when)
 
     def _msg_key_expression(self, c: dict[str, Any]) -> None:
         name, when = str(c["name"]), float(c["time"])
@@ -783,7 +783,7 @@ class TimelineWidget(anywidget.AnyWidget):
         tl = self._model.tracks
         for tn, i in keys:
             tl = tl.set_interpolation(tn, i, interp)
-        self._model.set_timeline(tl, f"Set interpolation {interp}")
+        self._model.timeline.set(tl, f"Set interpolation {interp}")
         self.status = f"{len(keys)} key{'s' if len(keys) > 1 else ''} → {interp}"
 
     def _msg_set_tangent(self, c: dict[str, Any]) -> None:
@@ -797,7 +797,7 @@ class TimelineWidget(anywidget.AnyWidget):
         tl = self._model.tracks
         in_t = slope if (aligned or side == "in") else None
         out_t = slope if (aligned or side == "out") else None
-        self._model.set_timeline(
+        self._model.timeline.set(
             tl.set_tangents(track, index, in_tangent=in_t, out_tangent=out_t),
             f"Edit tangent of {_track_label(track)}",
         )
@@ -806,7 +806,7 @@ class TimelineWidget(anywidget.AnyWidget):
     def _msg_auto_tangent(self, c: dict[str, Any]) -> None:
         track, index = str(c["track"]), int(c["index"])
         tl = self._model.tracks
-        self._model.set_timeline(
+        self._model.timeline.set(
             tl.set_tangents(track, index, mode="auto_clamped"),
             f"Auto tangent of {_track_label(track)}",
         )
@@ -818,5 +818,5 @@ class TimelineWidget(anywidget.AnyWidget):
             raise ValueError(f"fps must be a positive number, got {c['fps']!r}")
         tl = self._model.tracks
         if fps != tl.fps:
-            self._model.set_timeline(tl.replace(fps=fps), f"Set fps {fps:g}")
+            self._model.timeline.set(tl.replace(fps=fps), f"Set fps {fps:g}")
         self.status = f"{fps:g} fps"

@@ -7,8 +7,7 @@ widgets live in the separate ``widgets`` package and only observe the model.
 
 from __future__ import annotations
 
-__version__ = "0.1.0"
-
+from workbench._version import __version__
 from workbench.animation.tracks import Timeline
 from workbench.io import load
 from workbench.methods.handles.shell import ShellDeformer

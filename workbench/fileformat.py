@@ -84,6 +84,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from workbench._version import __version__
 from workbench.core import families
 from workbench.core.manifest import (
     SHA256,
@@ -187,7 +188,6 @@ def save_model(model: FaceState, path: str | os.PathLike[str]) -> Path:
 
     Returns the path written. The suffix ``.fwb`` is recommended, not enforced.
     """
-    from workbench import __version__
 
     path = Path(path)
     with model.lock:

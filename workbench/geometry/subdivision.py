@@ -35,6 +35,7 @@ import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 
 from workbench.core.polygons import Polygons
+from workbench.core.shapes import BlendShape
 
 if TYPE_CHECKING:
     from workbench.model import FaceModel
@@ -247,8 +248,6 @@ def subdivide_model(model: FaceModel, levels: int = 1) -> FaceModel:
     being baked into the delta; bake masks into the deltas before subdividing if
     the exact identity matters.
     """
-    from workbench.model import BlendShape, FaceModel
-
     n = model.n_vertices
     ops, F = _loop_levels(model.faces, n, levels)
     n_new = ops[-1].shape[0] if ops else n
@@ -295,7 +294,8 @@ def subdivide_model(model: FaceModel, levels: int = 1) -> FaceModel:
         "triangles": len(F32),
     }
     meta = model.metadata.with_provenance(entry)
-    return FaceModel(
+    # the input's own class (FaceModel): importing it here would close a cycle
+    return type(model)(
         V,
         F32,
         new_shapes,
