@@ -15,7 +15,7 @@ and in pixels. Screenshots: ``test-artifacts/<test>/``.
 
 How autosave works: ``workbench/autosave.py`` (debounced atomic save after
 each history event, ``<name>.recovery.fwb`` + ``.owner`` with the pid) and
-``widgets.recovery_prompt`` / ``RecoveryPrompt`` in ``widgets/__init__.py``
+``widgets.recovery_prompt`` / ``RecoveryPrompt`` in ``widgets/recovery.py``
 (a file whose owner pid is gone is offered).
 """
 

@@ -1,4 +1,4 @@
-"""The composed Workbench (widgets/__init__.py) without a browser.
+"""The composed Workbench (widgets/app.py) without a browser.
 
 Tabs are switched and buttons clicked from Python; the checks are on the
 viewport's tool, the Regions panel's activation, the status line text, the

@@ -1,0 +1,416 @@
+"""The composed app: one viewport beside the tabs of panels, the timeline, undo/redo and a status line.
+
+:class:`Workbench` builds the panels over one :class:`workbench.FaceModel`
+and wires them to the shared viewport; :func:`show_workbench` displays it.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import time
+from typing import Any
+
+import ipywidgets as W
+import traitlets
+
+from widgets._threading import ErrorSink, close_interactions
+from widgets.export_panel import ExportPanel
+from widgets.expression_panel import ExpressionPanel
+from widgets.gallery import ExpressionGallery
+from widgets.paint_panel import PaintPanel
+from widgets.regions_panel import RegionsPanel
+from widgets.sculpt_panel import SculptPanel
+from widgets.timeline import TimelineWidget
+from widgets.viewport import Viewport
+from widgets.wrinkle_panel import WrinklePanel
+
+__all__ = ["PALETTE_COLUMNS", "PALETTE_THUMB_SIZE", "TAB_TITLES", "Workbench", "show_workbench"]
+
+#: tab titles, in order, and the viewport tool each tab selects
+TAB_TITLES = ("Shapes", "Sculpt", "Regions", "Paint", "Export")
+_TAB_TOOLS = ("orbit", "sculpt", "orbit", "paint", "orbit")
+_SHAPES, _SCULPT, _REGIONS, _PAINT, _EXPORT = range(5)
+#: thumbnail size and columns of the expression palette (Paint tab, timeline chips)
+PALETTE_THUMB_SIZE = (72, 72)
+PALETTE_COLUMNS = 7
+
+
+class Workbench(W.VBox):
+    """The composed app: one viewport over one model, tabs of tools, timeline, status line.
+
+    Layout: a top bar (Undo / Redo, a *Wireframe* checkbox — view state linked
+    to ``viewport.wireframe``, not an undoable edit — and the status line), then the viewport
+    beside a tab of panels ("Shapes", "Sculpt", "Regions", "Paint", "Export"),
+    the :class:`TimelineWidget` under the viewport, and the shared error
+    Output at the bottom (every panel reports callback errors there).
+
+    Selecting "Sculpt" switches the viewport to its sculpt tool (drag handle
+    markers), "Paint" to its paint tool (brush strokes); the other tabs orbit.
+    The Sculpt tab holds the :class:`SculptPanel` and, under it, the
+    :class:`WrinklePanel` (pose-space wrinkles while dragging; its *Erase
+    wrinkles* toggle brushes with the paint tool without leaving the tab).
+    "Regions" activates its panel (colour overlay, and the pin drag mode, which
+    itself switches the viewport to the sculpt tool without leaving the tab)
+    and deactivates it when another tab is selected. The Regions and Paint
+    panels are built the first time their tab is opened (segmentation and the
+    palette thumbnails take seconds), or when :attr:`regions` / :attr:`paint`
+    is read.
+
+    The expression palette (:attr:`gallery`, thumbnails of the saved
+    expressions and blendshapes) is rendered once and shared: the Paint tab
+    shows it and the timeline's expression chips show its pictures (drag one
+    onto the timeline to key it; the timeline's "Key selected expression"
+    button keys the palette's pick). In a kernel it is built right after the
+    cell that made the workbench (on the kernel's event loop, so the app shows
+    at once and the chips get their pictures a moment later); without a
+    running event loop it is built when :attr:`gallery` or :attr:`paint` is
+    first read, and until then the chips are text.
+
+    Parameters
+    ----------
+    model : workbench.FaceModel
+    autosave : str, optional
+        Session name: creates a :class:`workbench.autosave.Autosaver` saving the
+        model atomically a few seconds after each edit; :meth:`close` stops it.
+    autosave_delay : float
+        Seconds of quiet before an autosave.
+    autosave_folder : path, optional
+        Default: the recovery folder (``$WORKBENCH_RECOVERY_DIR``).
+    height : int
+        Viewport height in pixels.
+    wrinkle_layer : workbench.methods.wrinkles.layer.WrinkleLayer, optional
+        An already fitted wrinkle layer of ``model`` for the Sculpt tab's
+        :class:`WrinklePanel` (default: none until its *Fit* button).
+
+    Attributes
+    ----------
+    wrinkles : WrinklePanel
+    gallery : ExpressionGallery
+        The expression palette (built on first use, see above).
+    wireframe : ipywidgets.Checkbox
+        Top-bar toggle of the viewport's triangle-edge overlay (``viewport.wireframe``).
+    status : ipywidgets.HTML
+        "N vertices · last drag X ms (Y updates/s) · undo depth D · saved 12:03:04".
+    autosaver : workbench.autosave.Autosaver or None
+    """
+
+    def __init__(
+        self,
+        model: Any,
+        *,
+        autosave: str | None = None,
+        autosave_delay: float = 2.0,
+        autosave_folder: Any = None,
+        height: int = 520,
+        wrinkle_layer: Any = None,
+    ) -> None:
+        self.model = model
+        self.errors = W.Output(layout=W.Layout(max_height="160px", overflow="auto"))
+        self.errors.add_class("fwb-errors")
+        self.sink = ErrorSink(self.errors)
+        self.viewport = Viewport(model, height=height, errors=self.errors)
+        # its own height in the column: growing with a tall tool panel only left a gap
+        # between the canvas and the timeline
+        self.viewport.layout = W.Layout(flex="0 0 auto", min_width="320px")
+        self.panel = ExpressionPanel(
+            model, errors=self.errors, max_height=f"{max(height - 40, 200)}px"
+        )
+        self.sculpt = SculptPanel(
+            model, self.viewport, errors=self.errors, before_edit=[self.panel.grouper.flush]
+        )
+        self.wrinkles = WrinklePanel(
+            model,
+            self.viewport,
+            layer=wrinkle_layer,
+            errors=self.errors,
+            before_edit=[self.panel.grouper.flush],
+        )
+        self._sculpt_tab = W.VBox([self.sculpt, self.wrinkles], layout=W.Layout(width="100%"))
+        self._sculpt_tab.add_class("fwb-sculpt-tab")
+        self.timeline = TimelineWidget(model, errors=self.errors)
+        self.export = ExportPanel(model, errors=self.errors)
+        self._regions: RegionsPanel | None = None
+        self._switching = False
+        self._paint: PaintPanel | None = None
+        self._gallery: ExpressionGallery | None = None
+        self._regions_slot = W.VBox([W.HTML("<i>finding the blend regions ...</i>")])
+        self._paint_slot = W.VBox([W.HTML("<i>building the expression palette ...</i>")])
+        self.tabs = W.Tab(
+            children=[
+                self.panel,
+                self._sculpt_tab,
+                self._regions_slot,
+                self._paint_slot,
+                self.export,
+            ],
+            titles=TAB_TITLES,
+            layout=W.Layout(flex="0 0 650px", width="650px"),
+        )
+        self.tabs.add_class("fwb-tabs")
+
+        g = self.sink.guard
+        self.undo_button = W.Button(description="Undo", icon="undo", layout=W.Layout(width="auto"))
+        self.redo_button = W.Button(
+            description="Redo", icon="repeat", layout=W.Layout(width="auto")
+        )
+        self.undo_button.add_class("fwb-wb-undo")
+        self.redo_button.add_class("fwb-wb-redo")
+        self.undo_button.on_click(g("undo")(self._on_undo))
+        self.redo_button.on_click(g("redo")(self._on_redo))
+        # View state, not a model edit (no undo step): linked to the viewport's trait.
+        self.wireframe = W.Checkbox(
+            value=bool(self.viewport.wireframe),
+            description="Wireframe",
+            indent=False,
+            tooltip="Draw the triangle edges over the shaded surface",
+            layout=W.Layout(width="auto"),
+        )
+        self.wireframe.add_class("fwb-wb-wireframe")
+        self._wireframe_link = traitlets.link(
+            (self.wireframe, "value"), (self.viewport, "wireframe")
+        )
+        self.status = W.HTML()
+        self.status.add_class("fwb-wb-status")
+        top = W.HBox(
+            [self.undo_button, self.redo_button, self.wireframe, self.status],
+            layout=W.Layout(width="100%", align_items="center", grid_gap="6px"),
+        )
+        top.add_class("fwb-topbar")
+
+        self.autosaver: Any = None
+        if autosave is not None:
+            from workbench.autosave import Autosaver
+
+            self.autosaver = Autosaver(
+                model, autosave, delay=autosave_delay, folder=autosave_folder
+            )
+            self._cb_autosave = g("Workbench autosave status")(self._on_autosave)
+            self.autosaver.changed.connect(self._cb_autosave)
+
+        self.tabs.observe(g("switching tabs")(self._on_tab), "selected_index")
+        self.viewport.observe(g("viewport tool")(self._on_tool), "tool")
+        self._cb_history = g("Workbench history")(self._on_history)
+        model.events.history.connect(self._cb_history)
+        self._cb_drag = g("Workbench drag stats")(self._on_drag)
+        self.viewport.drag_listeners.append(self._cb_drag)
+
+        left = W.VBox(
+            [self.viewport, self.timeline], layout=W.Layout(flex="1 1 auto", min_width="320px")
+        )
+        row = W.HBox([left, self.tabs], layout=W.Layout(width="100%"))
+        super().__init__([top, row, self.errors], layout=W.Layout(width="100%"))
+        self.add_class("fwb-workbench")
+        self._on_history()
+        self._schedule_gallery()
+
+    # ------------------------------------------------------------ lazy panels
+    @property
+    def regions(self) -> RegionsPanel:
+        """The Regions tab's :class:`RegionsPanel` (built on first use)."""
+        if self._regions is None:
+            self._regions = RegionsPanel(
+                self.model,
+                self.viewport,
+                errors=self.errors,
+                before_edit=[self.panel.grouper.flush],
+            )
+            self._regions_slot.children = [self._regions]
+        return self._regions
+
+    @property
+    def gallery(self) -> ExpressionGallery:
+        """The expression palette shared by the Paint tab and the timeline's chips (built once)."""
+        if self._gallery is None:
+            self._gallery = ExpressionGallery(
+                self.model,
+                size=PALETTE_THUMB_SIZE,
+                columns=PALETTE_COLUMNS,
+                expressions=True,
+                label_size="10px",
+            )
+            self.timeline.set_gallery(self._gallery)
+        return self._gallery
+
+    def _schedule_gallery(self) -> None:
+        # In a kernel: render the palette once the current cell is done (the app is
+        # already on screen), so the timeline chips get their pictures without the
+        # Paint tab being opened and without delaying the workbench itself.
+        try:
+            loop = asyncio.get_running_loop()
+        except RuntimeError:
+            return  # no event loop (a script, a test): built on first use
+
+        def build() -> None:
+            if not getattr(self, "_closed", False):
+                self.gallery  # noqa: B018 - builds the palette
+
+        loop.call_soon(self.sink.guard("rendering the expression thumbnails")(build))
+
+    @property
+    def paint(self) -> PaintPanel:
+        """The Paint tab's :class:`PaintPanel` (built on first use)."""
+        if self._paint is None:
+            self._paint = PaintPanel(
+                self.model,
+                self.gallery,
+                viewport=self.viewport,
+                errors=self.errors,
+                before_edit=[self.panel.grouper.flush],
+            )
+            self._paint_slot.children = [self._paint]
+        return self._paint
+
+    # ------------------------------------------------------------ tabs <-> tool
+    def _on_tab(self, change: dict) -> None:
+        self._switching = True  # tool changes made here must not move the tab again
+        try:
+            self._switch_tab(change["old"], change["new"])
+        finally:
+            self._switching = False
+
+    def _switch_tab(self, old: int | None, new: int | None) -> None:
+        if old == _REGIONS and self._regions is not None:
+            # First: leaving drag mode gives the viewport its previous tool back.
+            self._regions.deactivate()
+        if old == _SCULPT:
+            # The wrinkle eraser's strokes belong to the Sculpt tab (the Paint tab paints).
+            self.wrinkles.stop_erasing()
+        if new is None or not 0 <= new < len(_TAB_TOOLS):
+            return
+        self.viewport.tool = _TAB_TOOLS[new]
+        if new == _REGIONS:
+            try:
+                self.regions.activate()
+            except Exception as exc:
+                self.sink.report("building the Regions panel", exc)
+        elif new == _PAINT:
+            try:
+                self.paint  # noqa: B018 - builds the panel
+            except Exception as exc:
+                self.sink.report("building the Paint panel", exc)
+
+    def _on_tool(self, change: dict) -> None:
+        # The tool changed from elsewhere (front end, code, Regions' drag mode):
+        # follow it with the tab, unless the current tab already explains it.
+        i = self.tabs.selected_index
+        if self._switching or i == _REGIONS or (i is not None and _TAB_TOOLS[i] == change["new"]):
+            return
+        if i == _SCULPT and change["new"] == "paint" and self.wrinkles.erasing:
+            return  # the wrinkle eraser brushes with the paint tool in the Sculpt tab
+        if change["new"] in _TAB_TOOLS:
+            self.tabs.selected_index = _TAB_TOOLS.index(change["new"])
+
+    # ------------------------------------------------------------ undo / redo
+    def _before_edit(self) -> None:
+        # model.undo refuses to run inside an interaction: end every open one (slider
+        # bursts of all panels, a handle drag or paint stroke, a region pin drag).
+        close_interactions(self.model)
+
+    def _on_undo(self, _b: Any = None) -> None:
+        self._before_edit()
+        if self.model.can_undo:
+            self.model.undo()
+
+    def _on_redo(self, _b: Any = None) -> None:
+        self._before_edit()
+        if self.model.can_redo:
+            self.model.redo()
+
+    # ------------------------------------------------------------ status line
+    def _on_history(self) -> None:
+        m = self.model
+        u, r = m.history.undo_labels, m.history.redo_labels
+        self.undo_button.disabled = not m.can_undo
+        self.redo_button.disabled = not m.can_redo
+        self.undo_button.tooltip = f"Undo {u[-1]}" if u else "Nothing to undo"
+        self.redo_button.tooltip = f"Redo {r[-1]}" if r else "Nothing to redo"
+        self.update_status()
+
+    def _on_drag(self, _stats: dict) -> None:
+        self.update_status()
+
+    def _on_autosave(self, _state: str) -> None:
+        self.update_status()
+
+    def autosave_text(self) -> str:
+        """ "saved 12:03:04", "pending", "error: ...", "not saved yet" or "off"."""
+        a = self.autosaver
+        if a is None:
+            return "off"
+        state = a.state
+        if state == "saved" and a.last_saved is not None:
+            return "saved " + time.strftime("%H:%M:%S", time.localtime(a.last_saved))
+        if state == "idle":
+            return "no edits yet"
+        return str(state)
+
+    def status_text(self) -> str:
+        """The status line as plain text (also what :attr:`status` shows)."""
+        parts = [f"{self.model.n_vertices} vertices"]
+        drag = getattr(self.viewport, "last_drag", None) or {}
+        if drag:
+            ms, ups = drag.get("last_ms", math.nan), drag.get("updates_per_s", math.nan)
+            fps = f" ({ups:.0f} updates/s)" if math.isfinite(ups) else ""
+            parts.append(f"last drag {ms:.1f} ms{fps}")
+        else:
+            parts.append("last drag –")
+        parts.append(f"undo depth {len(self.model.history.undo_labels)}")
+        parts.append(f"autosave: {self.autosave_text()}")
+        return " · ".join(parts)
+
+    def update_status(self) -> None:
+        """Recompute :attr:`status` (called on history, drag and autosave events)."""
+        text = self.status_text()
+        colour = "#b00" if "error" in text else "#555"
+        self.status.value = f"<span style='color:{colour};font-size:12px'>{text}</span>"
+
+    # ------------------------------------------------------------ closing
+    def close(self, *, discard_autosave: bool = False) -> None:
+        """Disconnect everything and close the widgets.
+
+        The autosaver is stopped after a last save of pending edits, and its
+        recovery file is kept unless ``discard_autosave`` (the user saved the
+        model properly).
+        """
+        if getattr(self, "_closed", False):
+            return
+        self._closed = True
+        a = self.autosaver
+        if a is not None:
+            a.changed.disconnect(self._cb_autosave)
+            if a.state == "pending" and not discard_autosave:
+                a.save_now()
+            a.close(discard=discard_autosave)
+        self.model.events.history.disconnect(self._cb_history)
+        self._wireframe_link.unlink()
+        if self._cb_drag in self.viewport.drag_listeners:
+            self.viewport.drag_listeners.remove(self._cb_drag)
+        if self._regions is not None:
+            self._regions.deactivate()
+            self._regions.close()
+        if self._paint is not None:
+            self._paint.close()
+        self.wrinkles.close()
+        self.sculpt.close()
+        self.export.close()
+        self.timeline.close()
+        if self._gallery is not None:
+            self._gallery.close()
+        self.viewport.close()
+        self.panel.close()
+        self.errors.close()
+        super().close()
+
+
+def show_workbench(model: Any, **kwargs: Any) -> Workbench:
+    """Display a :class:`Workbench` for ``model`` and return it.
+
+    Assign the result (``wb = show_workbench(m)``): as the last bare expression
+    of a cell it would be displayed a second time.
+    """
+    from IPython.display import display
+
+    wb = Workbench(model, **kwargs)
+    display(wb)
+    return wb
