@@ -447,7 +447,7 @@ def wrinkles(s: Session, out: Path) -> None:
     s.page.wait_for_function(
         "() => document.querySelectorAll('.fwb-wrinkle-card').length >= 6", timeout=600_000
     )
-    s.wait_py("bool(wb.wrinkles.layer is not None and wb.wrinkles.layer.fitted)", bool, "fit")
+    s.wait_py("bool(model.wrinkles.fitted)", bool, "fit")
     n = s.py("len(model.handles)")
     s.page.wait_for_function(
         "(n) => JSON.parse(document.querySelector('.fwb-viewport')"
@@ -461,7 +461,7 @@ def wrinkles(s: Session, out: Path) -> None:
     # raise the whole brow (middle, inner, outer marker; the mirror side follows)
     for name, dy in (("brows_L_2", -30.0), ("brows_L_1", -22.0), ("brows_L_3", -18.0)):
         s.drag_handle(name, 0.0, dy)
-    detail = s.py("float(abs(wb.wrinkles.layer.details()).max())")
+    detail = s.py("float(abs(model.wrinkles.details()).max())")
     assert detail > 1e-3, f"no wrinkle detail after the brow raise ({detail})"
     assert s.py("wb.viewport.feature_graph") is True
     s.shot(out / "ui_sculpt_wrinkles.png")

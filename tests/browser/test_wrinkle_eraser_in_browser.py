@@ -9,7 +9,7 @@ stroke across the furrows with the mouse (press, moves, release) and checks
 * the UI: the viewport switched to its paint tool (brush cursor) while the
   Sculpt tab stays open, and the stroke's mask is drawn as the magenta
   overlay while painting (and gone after the release);
-* the kernel: exactly one undo step "Erase wrinkles brow_raise", no paint
+* the kernel: exactly one undo step "Erase wrinkles of brow_raise", no paint
   layer, the detail under the stroke is gone and the detail the brush did not
   reach is kept;
 * the pixels: the forehead changed; Undo in the top bar brings the furrows
@@ -47,7 +47,7 @@ wb
 # runs across them from the subject's right to left, through one vertex per x-bin
 # (the one nearest to their median height).
 _FIND = """
-_d = np.linalg.norm(wb.wrinkles.layer.details(), axis=1)
+_d = np.linalg.norm(model.wrinkles.details(), axis=1)
 _top = np.argsort(-_d)[:300]
 _V = np.asarray(model.vertices)
 _ym = np.median(_V[_top, 1])
@@ -61,8 +61,7 @@ print(json.dumps({"furrows": [int(i) for i in _top], "path": _path}))
 """
 
 _STATE = """
-_l = wb.wrinkles.layer
-_d = _l.details(model)
+_d = model.wrinkles.details()
 _n = np.zeros(model.n_vertices) if _d is None else np.linalg.norm(_d, axis=1)
 _e = wb.wrinkles.eraser
 _m = None if _e is None or _e.last_mask is None else np.asarray(_e.last_mask)
@@ -157,7 +156,7 @@ def test_erase_the_brow_raise_furrows_with_the_brush_then_undo(open_notebook) ->
     page.wait_for_timeout(600)
 
     st = _state(nb)
-    assert st["undo"] == [*before["undo"], "Erase wrinkles brow_raise"], st["undo"]
+    assert st["undo"] == [*before["undo"], "Erase wrinkles of brow_raise"], st["undo"]
     assert st["errors"] == [] and st["wrinkle_errors"] == "", st["errors"]
     assert st["painted"] == 0 and not st["interacting"]
     assert st["erasing"] == "brow_raise" and st["tab"] == 1  # still erasing, same tab
@@ -194,12 +193,12 @@ def test_erase_the_brow_raise_furrows_with_the_brush_then_undo(open_notebook) ->
     # The reference: the same pose with wrinkles switched off (checkbox; an undo step).
     box = page.locator(".fwb-wrinkles-on input")
     box.click()
-    _wait(nb, "not wb.wrinkles.layer.enabled")
+    _wait(nb, "not model.wrinkles.enabled")
     page.wait_for_timeout(600)
     band_off = nb.screenshot("band-wrinkles-off", clip=band_clip)
     frame2 = nb.frame(0)
     page.locator(".fwb-wb-undo").click()  # undoes "Wrinkles off"
-    _wait(nb, "wb.wrinkles.layer.enabled")
+    _wait(nb, "model.wrinkles.enabled")
     nb.wait_frame_after(0, frame2)
     page.wait_for_timeout(600)
     # furrow shading is a few grey levels: count pixels changed by more than 6 of 255

@@ -35,6 +35,8 @@ import numpy as np
 from harness import NotebookPage, clip_around, pixel_change
 
 RESOLUTION = "25k"
+#: the undo steps of pressing "Fit wrinkles from examples" on a model without handles
+FIT = ["Default handles", "Fit wrinkles (6 examples)"]
 
 CELLS = [
     f"""
@@ -57,7 +59,7 @@ _skin = model.component_labels == model.component_names.index("skin")
 _p = _V[_h.vertices[_k]]
 _fh = np.flatnonzero(_skin & (np.abs(_V[:, 0]) < abs(_p[0]) + 0.2) & (_V[:, 1] > _p[1] + 0.05)
                      & (_V[:, 1] < _p[1] + 0.4) & (_V[:, 2] > _p[2] - 0.2))
-_E = np.asarray(wb.wrinkles.layer.graph.edges)
+_E = np.asarray(model.wrinkles.graph.edges)
 _inc = [int(e) for e in np.flatnonzero((_E[:, 0] == _k) | (_E[:, 1] == _k))]
 print(json.dumps({"index": _k, "vertex": int(_h.vertices[_k]), "name": _h.names[_k],
                   "forehead": [int(i) for i in _fh], "incident": _inc}))
@@ -65,19 +67,18 @@ print(json.dumps({"index": _k, "vertex": int(_h.vertices[_k]), "name": _h.names[
 
 _STATE = """
 import json, numpy as np
-_l = wb.wrinkles.layer
-_d = _l.details(model) if _l is not None else None
-_f = wb.wrinkles.current_strain()
+_w = model.wrinkles
+_d = _w.details()
+_f = _w.strain()
 _fh = np.asarray(FOREHEAD)
 print(json.dumps({
-    "fitted": bool(_l is not None and _l.fitted),
+    "fitted": bool(_w.fitted),
     "undo": model.history.undo_labels,
     "interacting": model.interacting, "dragging": wb.viewport.dragging,
     "offsets": np.asarray(model.handles.offsets, float).tolist(),
-    "enabled": None if _l is None else bool(_l.enabled),
+    "enabled": bool(_w.enabled),
     "strain": None if _f is None else [float(x) for x in _f],
-    "last_strain_max": None if _l is None or _l.last_strain is None
-                       else float(np.abs(_l.last_strain).max()),
+    "last_strain_max": None if _w.last_strain is None else float(np.abs(_w.last_strain).max()),
     "forehead_detail": 0.0 if _d is None else float(np.linalg.norm(_d[_fh], axis=1).max()),
     "detail_max": 0.0 if _d is None else float(np.abs(_d).max()),
     "errors": [o.get("text", "") for o in wb.errors.outputs],
@@ -214,7 +215,7 @@ def test_brow_drag_wrinkles_the_forehead_then_undo(open_notebook) -> None:
     page.wait_for_timeout(400)
     rest = _state(nb)
     assert rest["fitted"] and rest["errors"] == [], rest
-    assert rest["undo"] == ["Default handles"], rest["undo"]
+    assert rest["undo"] == FIT, rest["undo"]
     assert rest["detail_max"] == 0.0  # the rest pose has no detail
     graph0 = nb.viewport(0).evaluate("e => e.fwbFeatureGraph()")
     assert graph0["visible"] and graph0["count"] == len(rest["strain"])
@@ -229,7 +230,7 @@ def test_brow_drag_wrinkles_the_forehead_then_undo(open_notebook) -> None:
     st = _drag(nb, k, dy)
     lat_on = _latencies(nb, stats0)
     kernel_on = nb.kernel_eval(_LAST_DRAG)
-    assert st["undo"] == ["Default handles", f"Drag handle {info['name']}"], st["undo"]
+    assert st["undo"] == [*FIT, f"Drag handle {info['name']}"], st["undo"]
     off = np.array(st["offsets"])[k]
     assert off[1] > 0.02, off  # up by a few mm (dm units)
     strain = np.array(st["strain"])
@@ -255,7 +256,7 @@ def test_brow_drag_wrinkles_the_forehead_then_undo(open_notebook) -> None:
     fh_on = nb.screenshot("forehead-wrinkles-on", clip=forehead_clip)
     _click_undo(nb)
     fh_rest = nb.screenshot("forehead-rest", clip=forehead_clip)
-    _set_checkbox(nb, ".fwb-wrinkles-on", False, "wb.wrinkles.layer.enabled")
+    _set_checkbox(nb, ".fwb-wrinkles-on", False, "model.wrinkles.enabled")
     assert _state(nb)["undo"][-1] == "Wrinkles off"
     stats1 = len(nb.viewport(0).evaluate("e => e.fwbDragStats"))
     st = _drag(nb, k, dy)
@@ -276,7 +277,7 @@ def test_brow_drag_wrinkles_the_forehead_then_undo(open_notebook) -> None:
     _click_undo(nb)
     _click_undo(nb, geometry=False)  # "Wrinkles off" at the rest pose: nothing to redraw
     st = _state(nb)
-    assert st["enabled"] is True and st["undo"] == ["Default handles"], st
+    assert st["enabled"] is True and st["undo"] == FIT, st
     _drag(nb, k, dy)
     peak = _state(nb)["forehead_detail"]
     st = _drag(nb, k, -dy)
@@ -285,7 +286,7 @@ def test_brow_drag_wrinkles_the_forehead_then_undo(open_notebook) -> None:
     _click_undo(nb)
     _click_undo(nb)
     st = _state(nb)
-    assert st["undo"] == ["Default handles"]
+    assert st["undo"] == FIT
     assert np.abs(np.array(st["offsets"])).max() == 0.0
     assert st["detail_max"] == 0.0 and np.abs(np.array(st["strain"])).max() < 1e-4
     fh_back = nb.screenshot("forehead-undone", clip=forehead_clip)

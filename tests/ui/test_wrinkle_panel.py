@@ -1,7 +1,7 @@
-"""WrinklePanel (widgets/wrinkle_panel.py) and the viewport's feature-graph overlay, without a browser.
+"""WrinklePanel (widgets/wrinkles/) and the viewport's feature-graph overlay, without a browser.
 
 Buttons are clicked and widgets set from Python; the checks are on the model
-(weights, undo history, evaluated mesh), the wrinkle layer (strength, on/off,
+(weights, undo history, evaluated mesh), ``model.wrinkles`` (strength, on/off,
 fitted examples, details) and the viewport's binary traits. Runs on the 5k
 sample head (fit ~1 s).
 """
@@ -15,9 +15,10 @@ pytest.importorskip("anywidget")
 
 import ipywidgets as W
 
-from widgets import Viewport, Workbench, WrinklePanel
-from widgets.wrinkle_panel import example_detailed, set_wrinkle_strength
+from widgets import Viewport, Workbench
+from widgets.wrinkles import WrinklePanel
 from workbench import load_sample
+from workbench.core.shapes import ModelError
 from workbench.methods.wrinkles.examples import EXAMPLE_POSES
 from workbench.model import HandleSet
 
@@ -63,21 +64,21 @@ def _near(a, b, ref, rel: float = 0.25) -> bool:
 
 
 def _detail(model, panel) -> np.ndarray:
-    d = panel.layer.details()
+    d = model.wrinkles.details()
     return np.zeros((model.n_vertices, 3), np.float32) if d is None else d
 
 
 def test_fit_button_sets_handles_fits_and_draws_the_feature_graph(setup) -> None:
     model, vp, panel, errors = setup
-    assert panel.layer is None and len(model.handles) == 0
+    assert not model.wrinkles.fitted and len(model.handles) == 0
     assert panel.controls.layout.display == "none"  # nothing to control before the fit
     assert "not fitted" in panel.status.value
     panel.fit_button.click()
     assert _errors(errors) == "" and panel.error_line.value == ""
-    layer = panel.layer
-    assert layer is not None and layer.fitted and panel.fresh
+    layer = model.wrinkles
+    assert layer.fitted and panel.fresh
     assert layer.example_names == list(EXAMPLE_POSES)
-    assert model.history.undo_labels == ["Default handles"]  # the fit itself is not an undo step
+    assert model.history.undo_labels == ["Default handles", "Fit wrinkles (6 examples)"]
     assert panel.progress.layout.visibility == "hidden" and panel.progress.value == 1.0
     assert panel.controls.layout.display == ""
     assert panel.fit_button.description == "Refit from examples"
@@ -99,15 +100,15 @@ def test_dragging_sends_the_strain_only_when_it_changes(fitted) -> None:
     with model.interaction("Drag"):
         _lift_brows(model, 0.02)
         _lift_brows(model, 0.05)
-    layer = panel.layer
+    layer = model.wrinkles
     assert layer.last_strain is not None and np.abs(layer.last_strain).max() > 0.05
+    np.testing.assert_array_equal(layer.strain(), layer.last_strain)
     np.testing.assert_allclose(vp.feature_strain, layer.last_strain, atol=1e-6)
     assert vp.feature_updates_sent > sent
     assert "strain" in panel.status.value
     # the same state again: nothing new to send
     sent = vp.feature_updates_sent
-    model.register_layer("wrinkles", layer)  # invalidates the cache; same strain
-    model.events.deformed.emit(True)
+    model.register_layer(layer.layer)  # invalidates the cache, emits deformed; same strain
     assert vp.feature_updates_sent == sent
     # hidden: kept, not sent; shown again: sent at once
     panel.show_graph.value = False
@@ -126,26 +127,31 @@ def test_wrinkles_toggle_and_strength_are_undoable(fitted) -> None:
     shell = np.asarray(model.blended()) + model.handles.displacement()
     np.testing.assert_allclose(model.evaluate(), shell + d1, atol=1e-5)
 
+    w = model.wrinkles
     panel.enabled.value = False
-    assert panel.layer.enabled is False and model.history.undo_labels[-1] == "Wrinkles off"
+    assert w.enabled is False and model.history.undo_labels[-1] == "Wrinkles off"
     np.testing.assert_allclose(model.evaluate(), shell, atol=1e-6)
     model.undo()
-    assert panel.layer.enabled is True and panel.enabled.value is True
+    assert w.enabled is True and panel.enabled.value is True
     np.testing.assert_allclose(model.evaluate(), shell + d1, atol=1e-5)
 
     panel.strength.value = 0.5
-    assert panel.layer.strength == 0.5 and model.history.undo_labels[-1] == "Wrinkle strength 0.5"
+    assert w.strength == 0.5 and model.history.undo_labels[-1] == "Wrinkle strength 0.5"
     np.testing.assert_allclose(_detail(model, panel), 0.5 * d1, atol=1e-6)
     model.undo()
-    assert panel.layer.strength == 1.0 and panel.strength.value == 1.0
+    assert w.strength == 1.0 and panel.strength.value == 1.0
     model.redo()
-    assert panel.layer.strength == 0.5 and panel.strength.value == 0.5
-    # from code: the same command, and the slider follows
-    assert set_wrinkle_strength(model, panel.layer, 1.5)
-    assert panel.strength.value == 1.5
-    assert not set_wrinkle_strength(model, panel.layer, 1.5)  # no change, no step
-    with pytest.raises(ValueError, match=">= 0"):
-        set_wrinkle_strength(model, panel.layer, -1)
+    assert w.strength == 0.5 and panel.strength.value == 0.5
+    # from code: the same edit, and the slider follows
+    depth = len(model.history.undo_labels)
+    w.set_strength(1.5)
+    assert panel.strength.value == 1.5 and len(model.history.undo_labels) == depth + 1
+    w.set_strength(1.5)  # no change, no step
+    assert len(model.history.undo_labels) == depth + 1
+    with pytest.raises(ModelError, match=">= 0"):
+        w.set_strength(-1)
+    w.set_enabled(False)
+    assert panel.enabled.value is False
 
 
 def test_view_and_scale_an_example_propagates(fitted) -> None:
@@ -156,7 +162,7 @@ def test_view_and_scale_an_example_propagates(fitted) -> None:
     assert w == EXAMPLE_POSES["brow_raise"]
     d0 = _detail(model, panel)
     # at the example pose the fit reproduces the example's detail
-    X, D = example_detailed(model, panel.layer, "brow_raise")
+    X, D = model.wrinkles.example_detailed("brow_raise")
     assert _near(model.evaluate(), D, D - X)
     assert np.abs(d0).max() > 0.002
     # another example is interpolated exactly: the edit must not leak into it ...
@@ -183,19 +189,20 @@ def test_view_and_scale_an_example_propagates(fitted) -> None:
     assert abs(ratio - 0.5) < 0.1, ratio
     # the smile is far from the brow raise in strain space: still its own wrinkles
     panel.view_example("smile")
-    X, D = example_detailed(model, panel.layer, "smile")
+    X, D = model.wrinkles.example_detailed("smile")
     assert _near(_detail(model, panel), D - X, D - X)
 
 
 def test_add_current_pose_as_example_keeps_edits(fitted) -> None:
     model, _, panel, _ = fitted
-    panel.layer.edit_example("smile", scale=2.0)
-    smile_before = example_detailed(model, panel.layer, "smile")[1]
+    model.wrinkles.edit_example("smile", scale=2.0)
+    smile_before = model.wrinkles.example_detailed("smile")[1]
     model.set_weights({"mouthSmileLeft": 0.8, "jawOpen": 0.3})
     panel.new_name.value = "half_smile"
     panel.add_button.click()
     assert panel.error_line.value == ""
-    layer = panel.layer
+    layer = model.wrinkles
+    assert model.history.undo_labels[-1] == "Add wrinkle example half_smile"
     assert layer.example_names[-1] == "half_smile" and len(panel.cards.children) == 7
     assert layer.example_weights[-1] == {"mouthSmileLeft": 0.8, "jawOpen": 0.3}
     assert panel.new_name.value == "half_smile_1"
@@ -203,7 +210,13 @@ def test_add_current_pose_as_example_keeps_edits(fitted) -> None:
     want = panel.sculptor().detailed({"mouthSmileLeft": 0.8, "jawOpen": 0.3})
     assert _near(model.evaluate(), want, want - np.asarray(model.blended()))
     # the earlier edit survived the refit
-    np.testing.assert_allclose(example_detailed(model, layer, "smile")[1], smile_before, atol=2e-5)
+    np.testing.assert_allclose(layer.example_detailed("smile")[1], smile_before, atol=2e-5)
+    # undo removes the example again: the earlier fit, exactly, and its cards
+    before = layer.pose_space
+    model.undo()
+    assert layer.example_names == list(EXAMPLE_POSES) and len(panel.cards.children) == 6
+    model.redo()
+    assert layer.pose_space is before and len(panel.cards.children) == 7
 
 
 def test_errors_are_reported_in_the_panel(setup) -> None:
@@ -231,27 +244,55 @@ def test_errors_are_reported_in_the_panel(setup) -> None:
 
 def test_a_failing_fit_shows_the_error_and_leaves_the_panel_usable() -> None:
     model = load_sample("head")
-    model.remove_shape("browInnerUp")  # the brow-raise example needs it
+    for name in list(model.shape_names):
+        if not name.startswith("eye"):
+            model.remove_shape(name)  # no example pose can be built from eye shapes alone
     errors = W.Output()
     panel = WrinklePanel(model, errors=errors, thumbnails=False)
     try:
         panel.fit_button.click()
-        assert "browInnerUp" in panel.error_line.value and "browInnerUp" in _errors(errors)
+        assert "example poses can be built" in panel.error_line.value
+        assert "example poses can be built" in _errors(errors)
         assert panel.progress.bar_style == "danger" and "failed" in panel.progress_label.value
         assert panel.fit_button.disabled is False
-        assert panel.layer is None
+        assert not model.wrinkles.fitted and panel.controls.layout.display == "none"
     finally:
         panel.close()
 
 
+def test_a_rig_missing_a_shape_fits_the_others_and_says_so() -> None:
+    model = load_sample("head")
+    model.remove_shape("browInnerUp")  # the brow-raise example is built without it
+    panel = WrinklePanel(model, thumbnails=False)
+    try:
+        panel.fit()
+        assert model.wrinkles.fitted and "browInnerUp" in panel.status.value
+        assert panel.error_line.value == ""
+    finally:
+        panel.close()
+
+
+def test_undo_and_redo_of_the_fit(fitted) -> None:
+    model, vp, panel, _ = fitted
+    fit = model.wrinkles.pose_space
+    model.undo()  # "Fit wrinkles (6 examples)"
+    assert not model.wrinkles.fitted and panel.cards.children == ()
+    assert panel.controls.layout.display == "none" and vp.feature_edges.shape == (0, 2)
+    assert "not fitted" in panel.status.value
+    model.redo()
+    assert model.wrinkles.pose_space is fit and len(panel.cards.children) == 6
+    assert vp.feature_edges.shape == (len(model.wrinkles.graph), 2)
+
+
 def test_changed_handles_make_the_fit_stale(fitted) -> None:
     model, vp, panel, _ = fitted
-    n = len(panel.layer.graph)
+    n = len(model.wrinkles.graph)
     model.handles.add(int(np.flatnonzero(model.component_labels == 0)[0]))
     assert not panel.fresh
     assert vp.feature_edges.shape == (0, 2)
     assert "handles changed" in panel.status.value
-    assert panel.layer.details() is None  # the core ignores a stale fit
+    assert model.wrinkles.details() is None  # the core ignores a stale fit
+    assert model.wrinkles.strain() is None and model.wrinkles.fitted
     model.undo()
     assert panel.fresh and vp.feature_edges.shape == (n, 2)
     model.handles.set(HandleSet(), label="Clear")
@@ -304,7 +345,7 @@ def test_workbench_shows_the_wrinkle_panel_in_the_sculpt_tab() -> None:
         _lift_brows(wb.model)
         wb.wrinkles.enabled.value = False
         wb._on_undo()  # the top bar's Undo
-        assert wb.wrinkles.layer.enabled is True and wb.wrinkles.enabled.value is True
+        assert wb.model.wrinkles.enabled is True and wb.wrinkles.enabled.value is True
     finally:
         wb.close()
 
@@ -345,7 +386,7 @@ def test_erase_toggle_turns_brush_strokes_into_a_paint_out_mask(fitted) -> None:
     assert ov is not None and ov[v] == pytest.approx(1.0) and 0 < np.count_nonzero(ov) < 2000
     assert eraser.end() is True
     assert _errors(errors) == "" and panel.error_line.value == ""
-    assert model.history.undo_labels[-1] == "Erase wrinkles brow_raise"
+    assert model.history.undo_labels[-1] == "Erase wrinkles of brow_raise"
     assert len(model.history.undo_labels) == depth + 1  # one undo step per stroke
     mask = eraser.last_mask
     d1 = _detail(model, panel)
@@ -396,13 +437,13 @@ def test_eraser_strokes_from_the_viewport_messages(fitted) -> None:
     assert _errors(errors) == ""
     assert vp.paint_updates_sent != sent
     assert len(model.paint) == 0 and not model.interacting
-    assert model.history.undo_labels[-1] == "Erase wrinkles brow_raise"
+    assert model.history.undo_labels[-1] == "Erase wrinkles of brow_raise"
     assert len(model.history.undo_labels) == depth + 1
     assert vp._paint_weights == b""  # the overlay goes with the stroke
     assert np.linalg.norm(_detail(model, panel)[v]) < 1e-4
     # a bad message cancels the stroke and reports; no half edit
     vp._on_frontend_msg(vp, {**msg, "phase": "start", "vertices": [model.n_vertices], "seq": 4}, [])
-    assert "out of range" in _errors(errors) and len(model.history.undo_labels) == depth + 1
+    assert "vertex ids must be in" in _errors(errors) and len(model.history.undo_labels) == depth + 1
     panel.stop_erasing()
     assert vp.stroke_handler is None
 
@@ -416,9 +457,11 @@ def test_erase_from_code_and_scale_are_undoable_and_a_refit_ends_erasing(fitted)
     assert not panel.erase_wrinkles("brow_raise", np.zeros(model.n_vertices))  # no step
     panel.scale_example("brow_raise", 2.0)
     assert model.history.undo_labels[-2:] == [
-        "Erase wrinkles brow_raise",
-        "Scale wrinkles brow_raise ×2",
+        "Erase wrinkles of brow_raise",
+        "Scale wrinkles of brow_raise ×2",
     ]
+    edited = model.wrinkles.pose_space
+    d2 = _detail(model, panel)
     model.undo()
     model.undo()
     np.testing.assert_array_equal(_detail(model, panel), d0)
@@ -426,10 +469,17 @@ def test_erase_from_code_and_scale_are_undoable_and_a_refit_ends_erasing(fitted)
         panel.start_erasing("nope")
     panel.start_erasing("brow_raise")
     assert vp.tool == "paint"
-    panel.fit()  # a refit: the old fit's edits' undo steps no longer apply
+    model.redo()
+    model.redo()
+    assert model.wrinkles.pose_space is edited  # the same fit back: no refit
+    np.testing.assert_array_equal(_detail(model, panel), d2)
+    panel.fit()  # a refit is an undo step too; the edits' steps stay behind it
+    assert model.history.undo_labels[-1] == "Fit wrinkles (6 examples)"
     assert panel.erasing == "brow_raise"  # same examples: still erasing
-    model.redo()  # the erase of the previous fit: nothing happens
     np.testing.assert_allclose(_detail(model, panel), d0, atol=1e-6)
+    model.undo()  # the edited fit back, exactly
+    assert model.wrinkles.pose_space is edited
+    np.testing.assert_array_equal(_detail(model, panel), d2)
     vp.tool = "orbit"  # another tool (a cell, another tab) ends erasing
     assert panel.eraser is None and vp.stroke_handler is None
 

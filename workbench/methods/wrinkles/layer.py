@@ -33,13 +33,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from workbench.methods.wrinkles.features import (
-    FeatureGraph,
-    edge_weights,
-    extract_details,
-    local_frames,
-    tangent_neighbours,
-)
+from workbench.methods.wrinkles.editing import example_training
+from workbench.methods.wrinkles.features import FeatureGraph, edge_weights, tangent_neighbours
 from workbench.methods.wrinkles.hybrid_deformer import DetailEvaluator
 from workbench.methods.wrinkles.pose_space import FitMode, PoseSpace, fit_pose_space, greedy_fit
 
@@ -87,14 +82,17 @@ class WrinkleState:
     def replace(self, **changes: Any) -> WrinkleState:
         return dataclasses.replace(self, **changes)
 
-    def active_for(self, handles: NDArray[np.int32]) -> bool:
-        """Fitted, shown, and made for exactly these handle vertices."""
+    def made_for(self, handles: NDArray[np.int32]) -> bool:
+        """Fitted for exactly these handle vertices (a fit for other handles adds nothing)."""
         h = self.handles
         return (
-            self.enabled and self.strength != 0.0 and self.pose_space is not None
-            and self.graph is not None and h is not None
+            self.pose_space is not None and self.graph is not None and h is not None
             and h.shape == handles.shape and bool(np.all(h == handles))
         )
+
+    def active_for(self, handles: NDArray[np.int32]) -> bool:
+        """Fitted, shown, and made for exactly these handle vertices."""
+        return self.enabled and self.strength != 0.0 and self.made_for(handles)
 
 
 def blend_weights(model: FaceState | StateView, weights: Mapping[str, float]) -> NDArray[np.float64]:
@@ -159,6 +157,14 @@ class WrinkleLayer:
         return self.details(view, below)
 
 
+def skin_mask(model: FaceState) -> NDArray[np.bool_]:
+    """(n,) bool: the vertices that carry wrinkles by default (the skin; every vertex without one)."""
+    names = model.component_names
+    if "skin" not in names:
+        return np.ones(model.n_vertices, bool)
+    return np.asarray(model.component_labels) == names.index("skin")
+
+
 def fit_wrinkles(
     model: FaceState,
     examples: Mapping[str, tuple[Mapping[str, float], ArrayLike]],
@@ -186,19 +192,12 @@ def fit_wrinkles(
     V = np.asarray(model.vertices, np.float64)
     n = V.shape[0]
     g = graph or FeatureGraph.from_handles(V[h], neighbours)
-    if active is None:
-        names = model.component_names
-        act = np.asarray(model.component_labels) == names.index("skin") if "skin" in names else np.ones(n, bool)
-    else:
-        act = np.asarray(active, bool).reshape(n)
+    act = skin_mask(model) if active is None else np.asarray(active, bool).reshape(n)
     nb = tangent_neighbours(model.faces, n)
     feats, dets = [], []
     for _, (w, detailed) in examples.items():
-        X = blend_weights(model, w)
-        D = np.asarray(detailed, np.float64).reshape(n, 3)
-        d = extract_details(D, X, local_frames(X, model.faces, nb))
-        d[~act] = 0.0
-        feats.append(g.strain(X[h]))
+        f, d = example_training(g, h, blend_weights(model, w), detailed, model.faces, nb, act)
+        feats.append(f)
         dets.append(d)
     Ft, Dt = np.array(feats), np.array(dets, np.float32)
     alpha = edge_weights(V, V[h], g, beta=beta) if weighted else None
