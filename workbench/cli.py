@@ -71,6 +71,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     p_exp.add_argument("--fps", type=float, default=None, help="frame rate for baked/per-frame formats (default: the timeline's)")
     p_exp.add_argument("--bake", action="store_true", help="write per-frame points instead of blend shapes + weights")
     p_exp.add_argument("--format", default=None, help="override the format chosen from the suffix")
+    p_exp.add_argument(
+        "--style",
+        choices=("plain", "livelink"),
+        default=None,
+        help="CSV layout: plain (time + one column per shape, the default) or livelink (Epic's Live Link "
+        "Face CSV for Unreal/MetaHuman: the 52 ARKit columns + head rotation; a whole fps, 30 or 60 for Unreal)",
+    )
     p_app = sub.add_parser("app", help="serve the workbench as an app without code cells (Voila, 127.0.0.1)")
     p_app.add_argument("--port", type=int, default=8866, help="port on 127.0.0.1 (default 8866; the next free one is used)")
     p_app.add_argument(
@@ -103,7 +110,18 @@ def main(argv: Sequence[str] | None = None) -> int:
                     "with its current weights and no animation",
                     file=sys.stderr,
                 )
-            written = export(model, model.tracks, args.out, fps=args.fps, bake=args.bake, format=args.format)
+            options = {}
+            if args.style is not None:
+                from workbench.export import format_for_path
+
+                if format_for_path(args.out, args.format).name != "csv":
+                    raise ExportError(f"--style {args.style} is a CSV layout; {args.out} is not a .csv")
+                options["style"] = args.style
+            written = export(
+                model, model.tracks, args.out, fps=args.fps, bake=args.bake, format=args.format, **options
+            )
+            for note in getattr(written, "notes", ()):
+                print(f"workbench export: note: {note}", file=sys.stderr)
         except (OSError, ValueError, ExportError, TrackError) as exc:
             print(f"workbench export: {exc}", file=sys.stderr)
             return 2

@@ -2,12 +2,23 @@
 
 Supported inputs
 ----------------
-* **Live Link Face CSV** (Epic's iPhone app): header
-  ``Timecode,BlendShapeCount,EyeBlinkLeft,...`` (52 ARKit columns, then
-  ``HeadYaw``, ``HeadPitch``, ``HeadRoll``, ``LeftEyeYaw``... which are not
-  shapes and are skipped). ``Timecode`` is SMPTE-like ``HH:MM:SS:FF.fff``
-  (frame number plus a fraction of a frame) at the recording rate (``fps``,
-  60 by default); times are made relative to the first row.
+* **Live Link Face CSV** (Epic's iPhone app; also what
+  :mod:`workbench.export.csv` writes with ``style="livelink"``): header
+  ``Timecode,BlendShapeCount,EyeBlinkLeft,...,TongueOut`` (the 52 ARKit
+  columns, :data:`LIVELINK_SHAPE_COLUMNS`), then ``HeadYaw,HeadPitch,HeadRoll``
+  and six eye angles (:data:`LIVELINK_HEADER`). ``Timecode`` is
+  ``HH:MM:SS:FF.mmm``: frame number ``FF`` plus thousandths of a frame, as
+  Epic's ``LiveLinkFaceImporter`` reads it; times are made relative to the
+  first row. The recording rate is ``fps`` if given, else inferred from the
+  frame numbers (:func:`livelink_fps`, after Epic's importer, which reads 60
+  when a frame number exceeds 30 and 30 otherwise): 60 when a frame number
+  reaches 30, 30 when the take crosses a second boundary without one, else 60
+  (the app's default; a take within one second cannot tell 30 from 60 — pass
+  ``fps``). The head columns become
+  the ``head_pose`` track (see :func:`livelink_head_rotation`; one linear key
+  per row, translation 0; no track when the file has no head column or they
+  are all 0); the eye angles are skipped (the eyes are the ``eyeLook*``
+  shapes).
 * **Plain weight CSV** (what :mod:`workbench.export.csv` writes; also the common
   "time + one column per shape" layout): a first column named ``time``,
   ``Time``, ``seconds`` (seconds) or ``time_ms``/``timestamp_ms`` (milliseconds),
@@ -22,8 +33,17 @@ Supported inputs
 
 Column names are matched to the model's shapes exactly first, then by ARKit
 meaning (:func:`workbench.arkit.canonical_arkit_name`, so ``EyeBlinkLeft``,
-``eyeBlink_L`` and ``eyeBlinkLeft`` agree). Every problem raises
-:class:`AnimationImportError` naming the file, the row/line and the column.
+``eyeBlink_L`` and ``eyeBlinkLeft`` agree). Live Link Face and plain CSV
+columns reach any rig
+(:func:`map_columns_to_rig`, :func:`workbench.arkit.rig_weights`): an ARKit
+column drives the rig's shape of that meaning in any spelling, *both* halves
+of a split shape (``BrowInnerUp`` → ``browInnerUp_L`` and ``browInnerUp_R``)
+and, for a rig with one shape for a left/right pair (``mouthSmile``), the
+mean of the pair. An ARKit column the rig has no shape for is skipped when it
+is 0 in every row (nothing is lost) and is an error otherwise, like a column
+that means nothing to the rig (``on_unknown="ignore"`` skips both). Every
+problem raises :class:`AnimationImportError` naming the file, the row/line
+and the column.
 
 CSV rows become one linear key per frame; ``tolerance`` > 0 removes keys that
 linear interpolation of the kept ones reproduces within ``tolerance``
@@ -47,12 +67,30 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from workbench.animation.curves import Interpolation, Key, Track, TrackError, weight_track_name
+from workbench.animation.curves import (
+    HEAD_POSE,
+    Interpolation,
+    Key,
+    Track,
+    TrackError,
+    head_euler_from_rotation,
+    head_rotation_from_euler,
+    weight_track_name,
+)
 from workbench.animation.tracks import Timeline
-from workbench.arkit import canonical_arkit_name
+from workbench.arkit import canonical_arkit_name, rig_weights
 
 __all__ = [
+    "LIVELINK_ANGLE_UNIT",
+    "LIVELINK_EYE_COLUMNS",
+    "LIVELINK_HEADER",
+    "LIVELINK_HEAD_COLUMNS",
+    "LIVELINK_SHAPE_COLUMNS",
     "AnimationImportError",
+    "livelink_fps",
+    "livelink_head_angles",
+    "livelink_head_rotation",
+    "map_columns_to_rig",
     "map_shape_names",
     "read_animation",
     "read_gltf_animation",
@@ -60,18 +98,42 @@ __all__ = [
     "reduce_keys",
 ]
 
-#: Live Link Face columns that are not blendshapes (head and eye rotations)
-_LLF_NON_SHAPES = {
-    "headyaw",
-    "headpitch",
-    "headroll",
-    "lefteyeyaw",
-    "lefteyepitch",
-    "lefteyeroll",
-    "righteyeyaw",
-    "righteyepitch",
-    "righteyeroll",
-}
+#: The 52 blendshape columns of a Live Link Face CSV, in the app's order and spelling.
+#: The order is that of a recorded take's header (e.g. the header pinned byte for byte
+#: in public Live Link Face tools): Unreal's ``EARFaceBlendShape`` order except that
+#: ``JawRight`` comes before ``JawLeft`` and ``MouthRight`` before ``MouthLeft``.
+LIVELINK_SHAPE_COLUMNS: tuple[str, ...] = (
+    "EyeBlinkLeft", "EyeLookDownLeft", "EyeLookInLeft", "EyeLookOutLeft", "EyeLookUpLeft",
+    "EyeSquintLeft", "EyeWideLeft",
+    "EyeBlinkRight", "EyeLookDownRight", "EyeLookInRight", "EyeLookOutRight", "EyeLookUpRight",
+    "EyeSquintRight", "EyeWideRight",
+    "JawForward", "JawRight", "JawLeft", "JawOpen",
+    "MouthClose", "MouthFunnel", "MouthPucker", "MouthRight", "MouthLeft",
+    "MouthSmileLeft", "MouthSmileRight", "MouthFrownLeft", "MouthFrownRight",
+    "MouthDimpleLeft", "MouthDimpleRight", "MouthStretchLeft", "MouthStretchRight",
+    "MouthRollLower", "MouthRollUpper", "MouthShrugLower", "MouthShrugUpper",
+    "MouthPressLeft", "MouthPressRight", "MouthLowerDownLeft", "MouthLowerDownRight",
+    "MouthUpperUpLeft", "MouthUpperUpRight",
+    "BrowDownLeft", "BrowDownRight", "BrowInnerUp", "BrowOuterUpLeft", "BrowOuterUpRight",
+    "CheekPuff", "CheekSquintLeft", "CheekSquintRight", "NoseSneerLeft", "NoseSneerRight",
+    "TongueOut",
+)
+#: Head rotation columns (normalised angles, see :data:`LIVELINK_ANGLE_UNIT`)
+LIVELINK_HEAD_COLUMNS: tuple[str, ...] = ("HeadYaw", "HeadPitch", "HeadRoll")
+#: Eye rotation columns (not read: the eyes are the ``eyeLook*`` shapes)
+LIVELINK_EYE_COLUMNS: tuple[str, ...] = (
+    "LeftEyeYaw", "LeftEyePitch", "LeftEyeRoll", "RightEyeYaw", "RightEyePitch", "RightEyeRoll",
+)
+#: The whole header row: 2 + 52 + 3 + 6 = 63 columns, ``BlendShapeCount`` = 61
+LIVELINK_HEADER: tuple[str, ...] = (
+    "Timecode", "BlendShapeCount", *LIVELINK_SHAPE_COLUMNS, *LIVELINK_HEAD_COLUMNS, *LIVELINK_EYE_COLUMNS,
+)
+#: Degrees per unit of the head/eye angle columns: Unreal's ARKit face support maps
+#: the -180..180 degree range onto -1..1 (``ToBlendShapeMap``: ``HeadYaw = Yaw / 180``).
+LIVELINK_ANGLE_UNIT = 180.0
+
+_LLF_HEAD = tuple(c.lower() for c in LIVELINK_HEAD_COLUMNS)
+_LLF_EYES = tuple(c.lower() for c in LIVELINK_EYE_COLUMNS)
 _TIME_SECONDS = ("time", "seconds", "time_s", "t")
 _TIME_MS = ("time_ms", "timestamp_ms", "timestamp", "milliseconds")
 _TIMECODE = re.compile(r"^(\d+):(\d\d):(\d\d)[:;](\d+)(?:\.(\d+))?$")
@@ -124,6 +186,108 @@ def map_shape_names(
             used[target] = col
         out[col] = target
     return out
+
+
+def map_columns_to_rig(
+    columns: Sequence[str], shape_names: Sequence[str], source: str | Path = "<columns>"
+) -> tuple[list[tuple[int, str, float]], list[int], list[int]]:
+    """How file columns drive the shapes of any rig (see the module docstring).
+
+    A column named exactly like a shape drives it; any other column with an
+    ARKit meaning is put on the rig by :func:`workbench.arkit.rig_weights`
+    (other spellings, split halves, one shape for a left/right pair).
+
+    Parameters
+    ----------
+    columns : sequence of str
+        Column names (empty names are skipped).
+    shape_names : sequence of str
+        The rig's shapes.
+
+    Returns
+    -------
+    drives : list of (int, str, float)
+        ``(column index, shape, coefficient)``: the shape's weight is the sum
+        of coefficient x column over its entries (1 per column, except 0.5 for
+        each side of a left/right pair driving one unsided shape).
+    missing : list of int
+        Columns with an ARKit meaning the rig has no shape for.
+    unknown : list of int
+        Columns with no shape of that name and no ARKit meaning.
+
+    Raises
+    ------
+    AnimationImportError
+        Two columns with the same ARKit meaning, or a column aimed at a shape
+        another column names exactly.
+    """
+    exact = set(shape_names)
+    drives: list[tuple[int, str, float]] = []
+    missing: list[int] = []
+    unknown: list[int] = []
+    by_exact: dict[str, str] = {}
+    by_meaning: dict[str, str] = {}
+    arkit_cols: list[tuple[int, str]] = []
+    for i, col in enumerate(columns):
+        if not col.strip():
+            continue
+        if col in exact:
+            by_exact[col] = col
+            drives.append((i, col, 1.0))
+            continue
+        c = canonical_arkit_name(col)
+        if c is None:
+            unknown.append(i)
+            continue
+        if c in by_meaning:
+            raise AnimationImportError(
+                source, f"columns {by_meaning[c]!r} and {col!r} both mean ARKit shape {c!r}"
+            )
+        by_meaning[c] = col
+        arkit_cols.append((i, c))
+    for i, c in arkit_cols:
+        on_rig, _ = rig_weights({c: 1.0}, shape_names)
+        if not on_rig:
+            missing.append(i)
+            continue
+        for shape, coef in on_rig.items():
+            if shape in by_exact:
+                raise AnimationImportError(
+                    source, f"columns {by_exact[shape]!r} and {columns[i]!r} both map to shape {shape!r}"
+                )
+            drives.append((i, shape, float(coef)))
+    return drives, missing, unknown
+
+
+# ------------------------------------------------------------- Live Link head angles
+def livelink_head_rotation(
+    yaw: float, pitch: float, roll: float, *, up_axis: str = "+y", front_axis: str = "+z"
+) -> NDArray[np.float64]:
+    """Unit quaternion ``(x, y, z, w)`` of Live Link Face ``HeadYaw/HeadPitch/HeadRoll`` values.
+
+    The values are angles divided by :data:`LIVELINK_ANGLE_UNIT` (180 degrees,
+    so -1..1; Unreal's ARKit face support writes ``Yaw / 180``). Signs and
+    order are those of :func:`workbench.animation.curves.head_rotation_from_euler`
+    about the model's own axes: positive yaw turns the face toward the
+    subject's left, positive pitch nods it down, positive roll tilts the top of
+    the head toward the subject's right. (That is what Unreal's conversion
+    gives for ARKit's face frame — x the subject's left, y up, z out of the
+    face — in its unmirrored mode, derived from the code rather than checked
+    against a recording; the phone's orientation can flip signs in the app.)
+    """
+    u = LIVELINK_ANGLE_UNIT
+    return head_rotation_from_euler(
+        float(yaw) * u, float(pitch) * u, float(roll) * u, up_axis=up_axis, front_axis=front_axis
+    )
+
+
+def livelink_head_angles(
+    rotation: ArrayLike, *, up_axis: str = "+y", front_axis: str = "+z"
+) -> tuple[float, float, float]:
+    """Inverse of :func:`livelink_head_rotation`: ``(HeadYaw, HeadPitch, HeadRoll)`` in -1..1."""
+    yaw, pitch, roll = head_euler_from_rotation(rotation, up_axis=up_axis, front_axis=front_axis)
+    u = LIVELINK_ANGLE_UNIT
+    return yaw / u, pitch / u, roll / u
 
 
 # -------------------------------------------------------------------- key reduction
@@ -221,15 +385,32 @@ def _parse_float(text: str, src: str, row_label: str, col: str) -> float:
     return x
 
 
-def _parse_timecode(text: str, fps: float, src: str, row_label: str) -> float:
+def _parse_timecode(text: str, src: str, row_label: str) -> tuple[int, float]:
+    """``(whole seconds, frame number with its fraction)`` of ``HH:MM:SS:FF(.mmm)``."""
     m = _TIMECODE.match(text.strip())
     if not m:
         raise AnimationImportError(
             src, f"{row_label}, column 'Timecode': {text!r:.30} is not HH:MM:SS:FF(.fff)"
         )
-    h, mi, s, ff = (int(g) for g in m.groups()[:4])
+    h, mi, sec, ff = (int(g) for g in m.groups()[:4])
     frac = float("0." + m.group(5)) if m.group(5) else 0.0
-    return h * 3600.0 + mi * 60.0 + s + (ff + frac) / fps
+    return h * 3600 + mi * 60 + sec, ff + frac
+
+
+def livelink_fps(seconds: ArrayLike, frames: ArrayLike) -> float:
+    """The recording rate of Live Link Face timecodes, inferred as Epic's importer does.
+
+    60 when a frame number reaches 30 (Epic's ``InferFrameRate``: above 30),
+    30 when the rows cross a second boundary without one, else 60 (the app's
+    default: rows within one second cannot tell 30 from 60).
+    """
+    f = np.asarray(frames, np.float64)
+    s = np.asarray(seconds)
+    if f.size and float(f.max()) >= 30.0:
+        return 60.0
+    if s.size and int(np.max(s)) != int(np.min(s)):
+        return 30.0
+    return 60.0
 
 
 def _check_times(times: NDArray[np.float64], labels: Sequence[str], src: str) -> None:
@@ -282,6 +463,8 @@ def read_weights_csv(
     fps: float | None = None,
     tolerance: float = 0.0,
     on_unknown: str = "error",
+    up_axis: str = "+y",
+    front_axis: str = "+z",
 ) -> Timeline:
     """Read a Live Link Face / plain / Face Cap weight CSV into a timeline of linear keys.
 
@@ -290,21 +473,27 @@ def read_weights_csv(
     path : str or Path
     shape_names : sequence of str
         The model's shape names (``model.shape_names``); columns are mapped to
-        them (exact, else ARKit meaning).
+        them (exact, else ARKit meaning on any rig: :func:`map_columns_to_rig`).
     fps : float, optional
-        Frame rate of Live Link Face timecodes (default 60) and of the returned
-        timeline (default: 60 for Live Link Face, else estimated from the median
-        sample spacing, else 30).
+        Frame rate of Live Link Face timecodes and of the returned timeline
+        (default: inferred from the timecodes, :func:`livelink_fps`, for Live
+        Link Face; else estimated from the median sample spacing, else 30).
     tolerance : float
-        Key reduction (see :func:`reduce_keys`); 0 keeps one key per row.
+        Key reduction of the weight curves (see :func:`reduce_keys`); 0 keeps
+        one key per row. The head pose keeps one key per row.
     on_unknown : {"error", "ignore"}
-        What to do with columns that match no shape.
+        What to do with columns that match no shape (and ARKit columns with
+        non-zero weights the rig has no shape for).
+    up_axis, front_axis : str
+        The model's axes (``model.metadata``), for the Live Link Face head
+        rotation columns.
 
     Returns
     -------
     Timeline
-        Tracks ``"weights/<shape>"``; range = first..last time (first row at 0
-        for Live Link Face timecodes and Face Cap milliseconds).
+        Tracks ``"weights/<shape>"`` (and ``"head_pose"`` from Live Link Face
+        head columns); range = first..last time (first row at 0 for Live Link
+        Face timecodes and Face Cap milliseconds).
 
     Raises
     ------
@@ -326,28 +515,44 @@ def read_weights_csv(
         return _read_facecap(rows, shape_names, src, fps, tolerance, on_unknown)
     header = first
     lower = [h.lower() for h in header]
+    head_cols: dict[int, int] = {}  # column index -> 0 yaw, 1 pitch, 2 roll
     if "timecode" in lower:
-        rate = 60.0 if fps is None else float(fps)
         tcol = lower.index("timecode")
-        skip = ["timecode", "blendshapecount", *_LLF_NON_SHAPES]
+        skip = {"timecode", "blendshapecount", *_LLF_EYES}
+        head_cols = {i: _LLF_HEAD.index(h) for i, h in enumerate(lower) if h in _LLF_HEAD}
         kind = "timecode"
     elif lower[0] in _TIME_SECONDS or lower[0] in _TIME_MS:
         tcol = 0
-        skip = [header[0]]
+        skip = {lower[0]}
         kind = "ms" if lower[0] in _TIME_MS else "s"
-        rate = 0.0
     else:
         raise AnimationImportError(
             src,
             f"line {rows[0][0]}: header must start with a time column ('time' in seconds, "
             f"'time_ms') or contain 'Timecode' (Live Link Face), got {header[:3]}",
         )
-    cols = _resolve_columns(header, shape_names, src, on_unknown, skip)
+    candidates = [
+        h if (h.lower() not in skip and i != tcol and i not in head_cols) else "" for i, h in enumerate(header)
+    ]
+    drives, missing, unknown = map_columns_to_rig(candidates, shape_names, src)
+    if unknown and on_unknown != "ignore":
+        names = [header[i] for i in unknown]
+        raise AnimationImportError(
+            src,
+            f"unknown shape names in columns {names[:10]}{'...' if len(names) > 10 else ''} "
+            f"(the model has no shape of that name or ARKit meaning; pass on_unknown='ignore' "
+            f"to skip them)",
+        )
+    if not drives:
+        raise AnimationImportError(src, "no column matches a shape of the model")
     n = len(rows) - 1
     if n < 1:
         raise AnimationImportError(src, "header but no data rows")
+    value_cols = sorted({ci for ci, _, _ in drives} | set(missing) | set(head_cols))
+    col_pos = {ci: j for j, ci in enumerate(value_cols)}
+    seconds = np.zeros(n, np.int64)
     times = np.empty(n)
-    W = np.empty((n, len(cols)))
+    V = np.empty((n, len(value_cols)))
     labels = []
     for r, (lineno, row) in enumerate(rows[1:]):
         label = f"line {lineno}"
@@ -357,21 +562,44 @@ def read_weights_csv(
                 src, f"{label}: has {len(row)} fields, the header has {len(header)}"
             )
         if kind == "timecode":
-            times[r] = _parse_timecode(row[tcol], rate, src, label)
+            seconds[r], times[r] = _parse_timecode(row[tcol], src, label)
         else:
             times[r] = _parse_float(row[tcol], src, label, header[tcol])
-        for j, (ci, _) in enumerate(cols):
-            W[r, j] = _parse_float(row[ci], src, label, header[ci])
-    if kind == "ms":
-        times = times / 1000.0
+        for j, ci in enumerate(value_cols):
+            V[r, j] = _parse_float(row[ci], src, label, header[ci])
+    lost = [header[ci] for ci in missing if np.any(V[:, col_pos[ci]] != 0.0)]
+    if lost and on_unknown != "ignore":
+        raise AnimationImportError(
+            src,
+            f"columns {lost[:10]}{'...' if len(lost) > 10 else ''} have non-zero weights but the "
+            f"model has no shape of that ARKit meaning (no spelling, split half or left/right pair "
+            f"of it); pass on_unknown='ignore' to skip them",
+        )
     if kind == "timecode":
-        times = times - times[0]
+        rate = float(fps) if fps is not None else livelink_fps(seconds, times)
+        times = (seconds - seconds[0]) + (times - times[0]) / rate
+        fps = rate
+    elif kind == "ms":
+        times = times / 1000.0
     _check_times(times, labels, src)
     if fps is None:
-        fps = rate if kind == "timecode" else _estimate_fps(times)
-    return timeline_from_samples(
-        times, W, [s for _, s in cols], fps=float(fps), tolerance=tolerance
-    )
+        fps = _estimate_fps(times)
+    shapes = list(dict.fromkeys(shape for _, shape, _ in drives))
+    W = np.zeros((n, len(shapes)))
+    for ci, shape, coef in drives:
+        W[:, shapes.index(shape)] += coef * V[:, col_pos[ci]]
+    tl = timeline_from_samples(times, W, shapes, fps=float(fps), tolerance=tolerance)
+    if head_cols:
+        angles = np.zeros((n, 3))
+        for ci, axis in head_cols.items():
+            angles[:, axis] = V[:, col_pos[ci]]
+        if np.any(angles != 0.0):
+            keys = []
+            for t, (yaw, pitch, roll) in zip(times, angles, strict=True):
+                q = livelink_head_rotation(yaw, pitch, roll, up_axis=up_axis, front_axis=front_axis)
+                keys.append(Key(float(t), np.concatenate([np.zeros(3), q]), "linear"))
+            tl = tl.with_track(Track(HEAD_POSE, tuple(keys)))
+    return tl
 
 
 def _estimate_fps(times: NDArray[np.float64]) -> float:
@@ -579,9 +807,20 @@ def _gltf_timeline(
     return tl.fit_range()
 
 
-def read_animation(path: str | Path, shape_names: Sequence[str], **kw: Any) -> Timeline:
-    """Dispatch by suffix: .glb/.gltf → :func:`read_gltf_animation`, else :func:`read_weights_csv`."""
+def read_animation(
+    path: str | Path,
+    shape_names: Sequence[str],
+    *,
+    up_axis: str = "+y",
+    front_axis: str = "+z",
+    **kw: Any,
+) -> Timeline:
+    """Dispatch by suffix: .glb/.gltf → :func:`read_gltf_animation`, else :func:`read_weights_csv`.
+
+    ``up_axis``/``front_axis`` (the model's, for Live Link Face head columns)
+    only matter to CSVs.
+    """
     p = Path(path)
     if p.suffix.lower() in (".glb", ".gltf"):
         return read_gltf_animation(p, shape_names, **kw)
-    return read_weights_csv(p, shape_names, **kw)
+    return read_weights_csv(p, shape_names, up_axis=up_axis, front_axis=front_axis, **kw)
