@@ -6,12 +6,22 @@
 the previous state object bit-exactly. Per-region blend weights follow an
 edit's ``origins``: a merged region keeps the weights of the larger region,
 both halves of a split inherit the split region's, painting keeps everyone's.
+
+The edits: ``segment``, ``set_level``, ``set_weights`` / ``set_region`` /
+``reset_region`` (per-region weights; ``effective_weights`` is what the blend
+uses), ``merge``, ``split``, ``rename``, ``paint`` / ``brush`` (one dab of the
+round region brush). Gestures spanning several messages open an interaction
+and are one undo step on release, none when cancelled: ``begin_drag``
+(:class:`~workbench.methods.regions.drag.RegionDrag`) and ``begin_paint``
+(:class:`~workbench.methods.regions.drag.RegionStroke`).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
 from numpy.typing import ArrayLike
 
 from workbench.core.shapes import ModelError
@@ -20,7 +30,7 @@ from workbench.methods.regions.hierarchy import Regions
 
 if TYPE_CHECKING:
     from workbench.core.state import FaceState
-    from workbench.methods.regions.drag import RegionDrag
+    from workbench.methods.regions.drag import RegionDrag, RegionStroke
     from workbench.methods.regions.topology import RegionTopology
 
 
@@ -69,7 +79,21 @@ class RegionsFacet:
 
     @property
     def weights(self) -> RegionWeights | None:
+        """The stored per-region weights (None: every region follows the global weights)."""
         return self.require("weights").weights
+
+    @property
+    def effective_weights(self) -> RegionWeights:
+        """The per-region weights in effect on the shown level.
+
+        The stored :attr:`weights`, or, when there are none, the model's global
+        weights repeated for every region of the shown level (what the blend
+        shows then). Raises ModelError without regions.
+        """
+        st = self.require("effective_weights")
+        if st.weights is not None:
+            return st.weights
+        return RegionWeights.from_global(self._model, st.regions, st.level)
 
     def __repr__(self) -> str:
         st = self.state
@@ -88,12 +112,29 @@ class RegionsFacet:
 
     # -------------------------------------------------------------------- drags
     def begin_drag(self, vertex: int, *, pins: ArrayLike = (), damping: bool = True,
-                   hold_others: bool = False, regularization: float = 1e-3) -> RegionDrag:
-        """Press on ``vertex`` to sculpt with the regions under it; see :class:`RegionDrag`."""
+                   hold_others: bool = False, regularization: float = 1e-3,
+                   on_close: Callable[[], None] | None = None) -> RegionDrag:
+        """Press on ``vertex`` to sculpt with the regions under it; see :class:`RegionDrag`.
+
+        Opens an interaction: the drag's ``end()`` is one undo step, ``cancel()`` none.
+        """
         from workbench.methods.regions.drag import RegionDrag
 
-        return RegionDrag(self._model, vertex, pins=pins, damping=damping, hold_others=hold_others,
-                          regularization=regularization)
+        with self._model.lock:
+            return RegionDrag(self._model, vertex, pins=pins, damping=damping, hold_others=hold_others,
+                              regularization=regularization, on_close=on_close)
+
+    def begin_paint(self, level: int, region: int | str, *, radius: float, erase: bool = False,
+                    on_close: Callable[[], None] | None = None) -> RegionStroke:
+        """Start a region-brush stroke (one undo step); see :class:`RegionStroke`.
+
+        Dab with ``stroke.dab(vertex)`` / ``stroke.move(point)``, then ``end()``
+        or ``cancel()``.
+        """
+        from workbench.methods.regions.drag import RegionStroke
+
+        with self._model.lock:
+            return RegionStroke(self._model, level, region, radius=radius, erase=erase, on_close=on_close)
 
     # -------------------------------------------------------------------- edits
     def set(self, state: RegionState | None, label: str = "Regions") -> None:
@@ -130,6 +171,45 @@ class RegionsFacet:
             if weights is not None and tuple(weights.shape_names) != tuple(m.shape_names):
                 raise ModelError("set_region_weights: weights were made for other shapes")
             self.set(RegionState(st.regions, st.level, weights), label)
+
+    def set_region(self, region: int | str, values: Mapping[str, float], label: str | None = None) -> RegionWeights:
+        """Some shape weights of one region of the shown level (the others keep theirs); undoable.
+
+        Parameters
+        ----------
+        region : int or str
+            Index or name on the shown level.
+        values : mapping {shape name: weight}
+        label : str, optional
+            Undo label (default ``"Region <name>: <shapes>"``).
+
+        Returns
+        -------
+        RegionWeights
+            The new weights (every other region keeps :attr:`effective_weights`).
+        """
+        with self._model.lock:
+            rw = self.effective_weights
+            r = rw.region_index(region)
+            new = rw.with_region(r, values)
+            name = rw.region_names[r]
+            self.set_weights(new, label if label is not None else f"Region {name}: {', '.join(values)}")
+            return new
+
+    def reset_region(self, region: int | str) -> RegionWeights | None:
+        """Put one region of the shown level back on the global weights; undoable.
+
+        Returns the new weights (None and no undo step when there were no
+        per-region weights: every region follows the global ones already).
+        """
+        m = self._model
+        with m.lock:
+            st = self.require("reset_region")
+            if st.weights is None:
+                return None
+            r = st.weights.region_index(region)
+            g = {nm: float(m.weights[nm]) for nm in m.shape_names}
+            return self.set_region(r, g, f"Reset region {st.weights.region_names[r]}")
 
     def _apply_edit(self, edit: Any, label: str) -> RegionState:
         st = self.require(label)
@@ -188,3 +268,40 @@ class RegionsFacet:
             lv = R.check_level(level)
             verb = "Paint region" if add else "Erase from region"
             return self._apply_edit(edit, f"{verb} {R.names[lv][R.region_index(lv, region)]}")
+
+    def brush(self, level: int, region: int | str, center: int, radius: float, *, erase: bool = False) -> int:
+        """One dab of the round region brush: :meth:`paint` the skin around ``center`` (undoable).
+
+        Parameters
+        ----------
+        level : int
+        region : int or str
+        center : int
+            Vertex under the brush.
+        radius : float
+            Model units; the brush covers :func:`~workbench.methods.regions.drag.brush_vertices`.
+        erase : bool
+            Return the covered vertices to the background instead.
+
+        Returns
+        -------
+        int
+            How many of the covered vertices changed label (0: nothing to do, no undo step).
+
+        Raises
+        ------
+        RegionError
+            ``center`` is not on the segmented skin, or the edit is refused (see :meth:`paint`).
+        """
+        from workbench.methods.regions.drag import brush_vertices
+        from workbench.methods.regions.hierarchy import RegionError
+
+        with self._model.lock:
+            R = self.require("brush_region").regions
+            lv = R.check_level(level)
+            verts = brush_vertices(self._model, center, radius)
+            if verts.size == 0:
+                raise RegionError(f"vertex {int(center)} is not on the segmented skin")
+            before = R.labels[lv]
+            after = self.paint(lv, region, verts, add=not erase).regions.labels[lv]
+            return int(np.count_nonzero(after[verts] != before[verts]))
