@@ -70,8 +70,58 @@ def _open(open_notebook) -> tuple[NotebookPage, Any, list[int]]:
         " return e && JSON.parse(e.getAttribute('data-keys') || '[]').length >= 12; }"
     )
     nb.viewport(0).evaluate("e => e.scrollIntoView({block: 'start'})")
-    nb.page.wait_for_timeout(400)  # layout settles after the sidebar collapsed
+    _wait_layout_settled(nb)  # the sidebar collapsed: the timeline grew
     return nb, root, ids
+
+
+def _frames(nb: NotebookPage, n: int = 2) -> None:
+    """Wait ``n`` animation frames: what the page was asked to draw is drawn."""
+    nb.page.evaluate(
+        "n => new Promise(done => { const f = k => k ? requestAnimationFrame(() => f(k - 1)) : done();"
+        " f(n); })",
+        n,
+    )
+
+
+def _wait_layout_settled(nb: NotebookPage, frames: int = 10) -> None:
+    """Wait until the timeline's box kept its size and place for ``frames`` animation frames."""
+    nb.page.wait_for_function(
+        """(n) => { const e = document.querySelector('.fwb-timeline');
+             const r = e.getBoundingClientRect();
+             const key = [r.left, r.top, r.width, r.height].join();
+             const s = (window.__fwbLayout = window.__fwbLayout || { key: '', same: 0 });
+             s.same = key === s.key ? s.same + 1 : 0;
+             s.key = key;
+             return s.same >= n; }""",
+        arg=frames,
+        polling="raf",
+    )
+    _frames(nb)  # the resize observer's redraw
+
+
+def _wait_hooks(
+    nb: NotebookPage, root: Any, pred, what: str, timeout: float = 15.0
+) -> dict[str, Any]:
+    """Poll the timeline's hooks until ``pred(hooks)``, then let it draw; return the hooks."""
+    deadline = time.monotonic() + timeout
+    h = _hooks(root)
+    while not pred(h):
+        if time.monotonic() > deadline:
+            raise AssertionError(f"the timeline never showed {what}; hooks {h}")
+        _frames(nb, 1)
+        h = _hooks(root)
+    _frames(nb)
+    return h
+
+
+def _wait_viewport_current(nb: NotebookPage) -> None:
+    """Wait until the viewport drew the geometry of the model's current version."""
+    version = _py(nb, "vp._version")
+    nb.page.wait_for_function(
+        "v => Number(document.querySelector('.fwb-viewport').getAttribute('data-version')) >= v",
+        arg=version,
+    )
+    _frames(nb)
 
 
 def _hooks(root: Any) -> dict[str, Any]:
@@ -137,13 +187,13 @@ def test_scrub_drag_key_and_play(open_notebook):
     nb.wait_frame_after(0, frame0)
     w = _py(nb, "dict(model.weights)")
     assert w["jawOpen"] == 0.0 and w["mouthSmileLeft"] == 1.0
-    nb.page.wait_for_timeout(300)
+    _wait_viewport_current(nb)
     after = nb.screenshot("mouth-t1", clip=clip)
     nb.screenshot("page-scrubbed")
     changed = pixel_change(before, after)
     assert changed > 0.03, f"only {changed:.1%} of the mouth region changed"
-    h = _hooks(root)
-    assert h["time"] == 1.0 and abs(h["playhead_x"] - _x_of(h, 1.0)) < 1.0
+    h = _wait_hooks(nb, root, lambda h: h["time"] == 1.0, "the playhead at 1 s")
+    assert abs(h["playhead_x"] - _x_of(h, 1.0)) < 1.0
 
     # --- drag the browInnerUp key at 2 s to 1.5 s: one undo step
     undo0 = _py(nb, "model.history.undo_labels")
@@ -157,11 +207,16 @@ def test_scrub_drag_key_and_play(open_notebook):
     assert times == [0.0, 1.0, 1.5]
     undo1 = _py(nb, "model.history.undo_labels")
     assert undo1 == [*undo0, "Move key of weights/browInnerUp"]
-    nb.page.wait_for_timeout(300)
+    _wait_hooks(
+        nb,
+        root,
+        lambda h: (
+            abs(_key(h, "weights/browInnerUp", 2)[0] - _x_of(h, 1.5)) < 1.0
+            and h["selected"] == [["weights/browInnerUp", 2]]
+        ),
+        "the moved key at 1.5 s, selected",
+    )
     nb.screenshot("key-dragged")
-    h = _hooks(root)
-    assert abs(_key(h, "weights/browInnerUp", 2)[0] - _x_of(h, 1.5)) < 1.0
-    assert h["selected"] == [["weights/browInnerUp", 2]]
     nb.kernel_eval("model.undo()")
     assert _py(nb, 'model.tracks.tracks["weights/browInnerUp"].times.tolist()') == [0.0, 1.0, 2.0]
     assert _py(nb, "model.history.undo_labels") == undo0
@@ -174,10 +229,14 @@ def test_scrub_drag_key_and_play(open_notebook):
     t_start = _py(nb, "model.time")
     root.locator(".fwb-tl-play").click()
     _wait_py(nb, "tl.playing", bool, timeout=10)
-    shown = set()  # the playhead follows playback in the front end
-    for _ in range(10):
-        shown.add(root.get_attribute("data-time"))
-        nb.page.wait_for_timeout(150)
+    # the playhead follows playback in the front end: it shows three different times
+    shown = nb.page.wait_for_function(
+        """() => { const e = document.querySelector('.fwb-timeline');
+             const s = (window.__fwbShown = window.__fwbShown || new Set());
+             s.add(e.getAttribute('data-time'));
+             return s.size >= 3 ? Array.from(s) : false; }""",
+        polling="raf",
+    ).json_value()
     nb.screenshot("playing")
     root.locator(".fwb-tl-pause").click()
     _wait_py(nb, "tl.playing", lambda v: not v, timeout=10)
@@ -189,9 +248,11 @@ def test_scrub_drag_key_and_play(open_notebook):
     assert renders >= frames
     assert _py(nb, "model.time") != t_start
     assert len(shown) >= 3, f"the playhead showed only the times {shown}"
-    nb.page.wait_for_timeout(300)
-    assert root.get_attribute("data-playing") == "0"
-    assert "played" in root.locator(".fwb-tl-status").inner_text()
+    nb.page.wait_for_function(
+        """() => { const e = document.querySelector('.fwb-timeline');
+             return e.getAttribute('data-playing') === '0'
+               && e.querySelector('.fwb-tl-status').textContent.includes('played'); }"""
+    )
     nb.screenshot("paused")
 
 
@@ -245,10 +306,13 @@ def test_drop_chip_tangent_and_delete(open_notebook):
         "() => JSON.parse(document.querySelector('.fwb-timeline').getAttribute('data-keys'))"
         ".length >= 16"
     )
-    nb.page.wait_for_timeout(300)
-    h = _hooks(root)
+    h = _wait_hooks(
+        nb,
+        root,
+        lambda h: abs(_key(h, "weights/mouthSmileLeft", 1)[0] - _x_of(h, 0.5)) < 1.0,
+        "the dropped key at 0.5 s",
+    )
     x, y = _key(h, "weights/mouthSmileLeft", 1)
-    assert abs(x - _x_of(h, 0.5)) < 1.0
     diamond = _box_pixels(nb, "dropped-key", {"x": x - 7, "y": y - 7, "width": 14, "height": 14})
     r, g, b = (diamond[..., i].astype(int) for i in range(3))
     key_orange = (r > 190) & (g > 130) & (g < 190) & (b < 90)  # COLORS.key #e0a526
@@ -261,10 +325,14 @@ def test_drop_chip_tangent_and_delete(open_notebook):
     nb.page.mouse.click(x, y)
     _wait_py(nb, "tl.selected_keys", lambda v: v == [["weights/jawOpen", 2]])
     assert _py(nb, "tl.selected_track") == "weights/jawOpen"
-    nb.page.wait_for_timeout(300)
 
     # --- drag the out-tangent handle of jawOpen's first key (1 at 0 s) downwards
-    h = _hooks(root)
+    h = _wait_hooks(
+        nb,
+        root,
+        lambda h: any(tn == "weights/jawOpen" for tn, *_rest in h["tangents"]),
+        "the curve view of jawOpen",
+    )
     handles = {(tn, i, side): (hx, hy) for tn, i, side, hx, hy in h["tangents"]}
     hx, hy = handles[("weights/jawOpen", 0, "out")]
     nb.screenshot("curve-before")
@@ -276,7 +344,15 @@ def test_drop_chip_tangent_and_delete(open_notebook):
         lambda v: v[0] == "user",
     )
     assert key0[1] < 0  # dragged down: the curve leaves the key falling
-    nb.page.wait_for_timeout(300)
+
+    def dragged_handle_y(h: dict[str, Any]) -> float:
+        return next(
+            y
+            for tn, i, side, _x, y in h["tangents"]
+            if (tn, i, side) == ("weights/jawOpen", 0, "out")
+        )
+
+    _wait_hooks(nb, root, lambda h: dragged_handle_y(h) > hy + 20, "the new tangent")
     nb.screenshot("curve-after")
 
     # --- Delete key: selected key 2 of jawOpen (t = 1 s) goes, one undo step
@@ -305,6 +381,11 @@ def test_drop_chip_tangent_and_delete(open_notebook):
         lambda v: 1.5 in v,
     )
     assert times == [0.0, 0.5, 1.0, 1.5, 2.0]
-    nb.page.wait_for_timeout(300)
+    _wait_hooks(
+        nb,
+        root,
+        lambda h: any(k[0] == "weights/mouthSmileLeft" and k[2] == 1.5 for k in h["keys"]),
+        "the key added at 1.5 s",
+    )
     nb.screenshot("final")
     assert root.get_attribute("data-error") == ""

@@ -1,4 +1,4 @@
-"""Timeline widget (widgets/timeline.py) without a browser: front-end messages -> model calls.
+"""Timeline widget (widgets/timeline/) without a browser: front-end messages -> model calls.
 
 Each test sends the JSON a click or drag in the front end sends
 (``TimelineWidget.handle_message``) and checks the model, its undo stack and
@@ -95,6 +95,43 @@ def test_scrub_sets_model_time_and_acks(keyed, monkeypatch):
     assert keyed.weights["up"] == 1.0
     assert sent == [{"type": "scrub_ack", "seq": 7}]
     assert keyed.history.undo_labels == labels  # changing the frame is not an undo step
+
+
+def test_scrub_gesture_phases_set_the_time_and_ack_each_message(keyed, monkeypatch):
+    """The playhead drag speaks the gesture protocol: start / move / end, each acked."""
+    w = TimelineWidget(keyed)
+    sent = []
+    monkeypatch.setattr(w, "send", lambda content, buffers=None: sent.append(content))
+    labels = list(keyed.history.undo_labels)
+    w.playing = True
+    send(w, type="scrub", phase="start", gesture="g1", seq=1, time=0.5)
+    assert not w.playing  # scrubbing takes the playhead from playback
+    assert keyed.time == 0.5
+    send(w, type="scrub", phase="move", gesture="g1", seq=2, time=1.0)
+    assert keyed.time == 1.0 and keyed.weights["up"] == 1.0
+    send(w, type="scrub", phase="end", gesture="g1", seq=3, time=1.5)
+    assert keyed.time == 1.5
+    send(w, type="scrub", phase="cancel", gesture="g1", seq=4)
+    assert keyed.time == 1.5  # a cancel keeps the time (nothing to put back)
+    assert sent == [{"type": "scrub_ack", "seq": s} for s in (1, 2, 3, 4)]
+    assert keyed.history.undo_labels == labels
+
+
+def test_scene_key_names_the_model_for_the_playback_registry(keyed):
+    from widgets.viewport.common import scene_key
+
+    w = TimelineWidget(keyed)
+    assert w._scene == scene_key(keyed) != ""
+    w.close()
+
+
+def test_missing_bundle_says_how_to_build_it(tmp_path):
+    from widgets.timeline import load_timeline_bundle
+
+    with pytest.raises(FileNotFoundError, match="npm --prefix widgets/js"):
+        load_timeline_bundle(tmp_path / "timeline.js")
+    (tmp_path / "timeline.js").write_text("export default {};")
+    assert load_timeline_bundle(tmp_path / "timeline.js") == "export default {};"
 
 
 def test_drag_key_is_one_undo_step(keyed):
@@ -392,7 +429,7 @@ def test_head_pose_sliders_follow_the_playhead(keyed):
 
 # ------------------------------------------------------------------ export panel
 def test_export_panel_writes_files_and_imports_csv_back(keyed, tmp_path):
-    from widgets.export_panel import ExportPanel
+    from widgets.panels.export import ExportPanel
 
     p = ExportPanel(keyed, path=str(tmp_path / "anim.glb"))
     written = p.do_export()
@@ -416,7 +453,7 @@ def test_export_panel_writes_files_and_imports_csv_back(keyed, tmp_path):
 
 
 def test_export_panel_obj_sequence_lists_files(keyed, tmp_path):
-    from widgets.export_panel import ExportPanel
+    from widgets.panels.export import ExportPanel
 
     p = ExportPanel(keyed, path=str(tmp_path / "seq.glb"))
     p.format.value = "OBJ sequence (one .obj per frame)"
@@ -427,7 +464,7 @@ def test_export_panel_obj_sequence_lists_files(keyed, tmp_path):
 
 
 def test_export_panel_shows_errors(keyed, tmp_path):
-    from widgets.export_panel import ExportPanel
+    from widgets.panels.export import ExportPanel
 
     p = ExportPanel(keyed)
     p.import_path.value = str(tmp_path / "missing.csv")
@@ -446,7 +483,7 @@ def test_export_panel_shows_errors(keyed, tmp_path):
 
 def test_panels_without_a_workbench_close_each_others_slider_steps(tiny_model):
     """A timeline and two slider panels of one model, composed by hand (no Workbench)."""
-    from widgets.expression_panel import ExpressionPanel
+    from widgets.panels.expressions import ExpressionPanel
 
     m = tiny_model
     a, b = ExpressionPanel(m, idle_s=30.0), ExpressionPanel(m, idle_s=30.0)
@@ -462,7 +499,7 @@ def test_panels_without_a_workbench_close_each_others_slider_steps(tiny_model):
 
 
 def test_export_panel_says_how_each_layer_was_written(keyed, tmp_path):
-    from widgets.export_panel import ExportPanel
+    from widgets.panels.export import ExportPanel
 
     def squared(m):  # not linear in the weights: the exporters must bake it
         d = np.zeros((9, 3), np.float32)
@@ -481,7 +518,7 @@ def test_export_panel_says_how_each_layer_was_written(keyed, tmp_path):
 
 
 def test_export_panel_fbx_without_blender_shows_the_reason(keyed, tmp_path, monkeypatch):
-    from widgets.export_panel import ExportPanel
+    from widgets.panels.export import ExportPanel
 
     monkeypatch.setenv("WORKBENCH_BPY_PYTHON", str(tmp_path / "missing-python"))
     p = ExportPanel(keyed, path=str(tmp_path / "anim.glb"))

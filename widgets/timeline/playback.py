@@ -1,0 +1,249 @@
+"""Kernel-side playback of a :class:`~widgets.timeline.TimelineWidget`, with frame flow control.
+
+Playback runs in the kernel, not the browser: every frame must evaluate the
+model (weights, handle layer) and the viewport ships the new vertices, which
+only Python can do. An asyncio task on the kernel's event loop computes the
+frame due from the wall clock, calls ``model.set_time`` for it and sleeps until
+the next frame; when a frame takes longer than ``1/fps`` the frames that fell
+due meanwhile are *dropped* (never queued), so playback keeps real time and the
+kernel stays responsive (Pause is a comm message handled between frames).
+
+Dropping in the kernel is not enough: a browser drawing with software WebGL can
+render fewer frames per second than the kernel sends, and the geometry messages
+would then pile up in the websocket (the view lags further and further behind,
+and Pause takes effect seconds late). So after each frame the kernel sends a
+small ``{"type": "frame", "seq"}`` message; the front end answers
+``frame_ack`` from its next animation frame (after the viewport drew the
+geometry that arrived before it), and playback sends a new frame only while
+fewer than :data:`FRAMES_IN_FLIGHT` frames are unanswered (waiting at most
+:data:`FRAME_ACK_TIMEOUT_S`). When no view answers at all (nothing displayed,
+a headless run), playback stops waiting after the first timeout. The achieved
+rate is shown in the status label and kept in the widget's ``playback_stats``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import concurrent.futures
+import math
+import threading
+import time
+from collections import deque
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from workbench.model import ModelError
+
+if TYPE_CHECKING:
+    from widgets.timeline.widget import TimelineWidget
+
+#: seconds between status-label updates during playback
+STATUS_PERIOD_S = 0.5
+
+#: playback waits at most this long for the browser to show an earlier frame
+FRAME_ACK_TIMEOUT_S = 0.5
+
+#: frames sent but not yet drawn by the browser: 2 lets the kernel prepare the next
+#: frame while the browser draws the current one, and still bounds the backlog
+FRAMES_IN_FLIGHT = 2
+
+
+class Playback:
+    """The playback task of one timeline widget and its frame acknowledgements.
+
+    It drives the widget's traits (``playing``, ``loop``, ``status``) and
+    counters (``frames_shown``, ``frames_dropped``, ``playback_stats``, the
+    ``frame_ack_timeout`` setting) and calls ``model.set_time`` for each frame.
+    """
+
+    def __init__(self, widget: TimelineWidget) -> None:
+        self.widget = widget
+        self.frame_seq = 0  # the last "frame" message sent
+        self.ack_seq = 0  # the newest frame the front end answered
+        self._ack_event: asyncio.Event | None = None
+        self._ack_loop: asyncio.AbstractEventLoop | None = None
+        self.task: Any = None
+        self._lock = threading.RLock()
+        try:
+            # the kernel's loop, for playback started from a non-loop thread
+            self._loop: asyncio.AbstractEventLoop | None = asyncio.get_running_loop()
+        except RuntimeError:
+            self._loop = None
+
+    def start(self) -> Any:
+        """Start the task (or return the running one): see ``TimelineWidget.play``."""
+        w = self.widget
+        with self._lock:
+            if self.task is not None and not self.task.done():
+                return self.task
+            w.playing = True
+            try:
+                running = asyncio.get_running_loop()
+            except RuntimeError:
+                running = None
+            if running is not None:
+                self.task = running.create_task(self.run())
+            elif self._loop is not None and self._loop.is_running():
+                self.task = asyncio.run_coroutine_threadsafe(self.run(), self._loop)
+            else:
+                fut: concurrent.futures.Future[dict[str, Any]] = concurrent.futures.Future()
+
+                def runner() -> None:
+                    try:
+                        fut.set_result(asyncio.run(self.run()))
+                    except BaseException as exc:  # handed to the future
+                        fut.set_exception(exc)
+
+                threading.Thread(target=runner, name="timeline-playback", daemon=True).start()
+                self.task = fut
+            return self.task
+
+    def on_ack(self, seq: int) -> None:
+        """The front end drew frame ``seq`` (any thread)."""
+        self.ack_seq = max(self.ack_seq, seq)
+        loop, event = self._ack_loop, self._ack_event
+        if loop is None or event is None:
+            return
+        try:
+            same_thread = asyncio.get_running_loop() is loop
+        except RuntimeError:
+            same_thread = False
+        if same_thread:
+            event.set()
+        elif not loop.is_closed():
+            loop.call_soon_threadsafe(event.set)
+
+    async def run(self) -> dict[str, Any]:
+        w = self.widget
+        model = w.model
+        frames = dropped = 0
+        set_ms: deque[float] = deque(maxlen=600)
+        done_at: deque[float] = deque()
+        started = time.perf_counter()
+        last_status = started
+        self._ack_loop = asyncio.get_running_loop()
+        self._ack_event = asyncio.Event()
+        # None: no front end has acknowledged a frame of this run yet
+        acks_seen: bool | None = None
+        seq0 = self.frame_seq  # acks above this belong to this run
+        # frames of an earlier run that were never answered must not stall this one
+        self.ack_seq = max(self.ack_seq, seq0)
+        try:
+            tl = model.timeline.value
+            fps, start, end = tl.fps, tl.start, tl.end
+            if not end > start:
+                w.status = "nothing to play: key at two different times first"
+                return self.stats(0, 0, fps, set_ms, 0.0, done_at)
+            t_now = model.time
+            media0 = t_now if start <= t_now < end - 0.5 / fps else start
+            clock0 = time.perf_counter()
+            next_f = 0
+            while w.playing:
+                now = time.perf_counter()
+                tl = model.timeline.value
+                if tl.fps != fps or tl.start != start or tl.end != end:
+                    # fps/range edited while playing: continue from the current time
+                    fps, start, end = tl.fps, tl.start, tl.end
+                    media0 = min(max(model.time, start), end)
+                    clock0, next_f = now, 0
+                f = max(next_f, math.floor((now - clock0) * fps + 1e-6))
+                dropped += f - next_f  # frames that fell due while the last one ran
+                t_media = media0 + f / fps
+                if t_media > end + 1e-9:
+                    if not w.loop or not end > start:
+                        if model.time != end:
+                            model.set_time(end)
+                            frames += 1
+                        break
+                    media0, clock0, f, t_media = start, now, 0, start
+                t0 = time.perf_counter()
+                try:
+                    model.set_time(t_media)
+                except ModelError:  # a slider/handle drag is open: skip this frame
+                    dropped += 1
+                else:
+                    frames += 1
+                    self.frame_seq += 1
+                    w.send({"type": "frame", "seq": self.frame_seq})
+                t1 = time.perf_counter()
+                set_ms.append((t1 - t0) * 1e3)
+                if acks_seen is not False and w.frame_ack_timeout > 0:
+                    # Flow control: the next frame goes out once the browser has drawn
+                    # all but FRAMES_IN_FLIGHT - 1 of the frames sent, so geometry never
+                    # queues up in the websocket; frames that fall due meanwhile are
+                    # dropped by the wall-clock rule above.
+                    ok = await self._wait_ack(
+                        self.frame_seq - (FRAMES_IN_FLIGHT - 1), w.frame_ack_timeout
+                    )
+                    if ok:
+                        if self.ack_seq > seq0:
+                            acks_seen = True
+                    elif acks_seen is None:
+                        acks_seen = False  # nobody draws this widget (e.g. headless run)
+                    t1 = time.perf_counter()
+                done_at.append(t1)
+                while done_at and t1 - done_at[0] > 1.0:
+                    done_at.popleft()
+                next_f = f + 1
+                w.frames_shown, w.frames_dropped = frames, dropped
+                if t1 - last_status >= STATUS_PERIOD_S:
+                    last_status = t1
+                    st = self.stats(frames, dropped, fps, set_ms, t1 - started, done_at)
+                    w.playback_stats = st
+                    w.status = f"playing {st['fps']:.1f}/{fps:g} fps, {dropped} dropped"
+                # always yield to the loop, so Pause and other comm messages get in
+                await asyncio.sleep(max(clock0 + next_f / fps - time.perf_counter(), 0.0))
+            st = self.stats(frames, dropped, fps, set_ms, time.perf_counter() - started, done_at)
+            w.playback_stats = st
+            w.status = (
+                f"played {frames} frames at {st['mean_fps']:.1f}/{fps:g} fps, {dropped} dropped"
+            )
+            return st
+        except Exception as exc:
+            w.errors.report("timeline playback", exc)
+            raise
+        finally:
+            w.playing = False
+
+    async def _wait_ack(self, seq: int, timeout: float) -> bool:
+        """Wait until the front end acknowledged frame ``seq`` (False on timeout or pause)."""
+        event = self._ack_event
+        assert event is not None
+        deadline = time.perf_counter() + timeout
+        while self.ack_seq < seq:
+            remaining = deadline - time.perf_counter()
+            if remaining <= 0 or not self.widget.playing:
+                return False
+            event.clear()
+            if self.ack_seq >= seq:
+                break
+            try:
+                await asyncio.wait_for(event.wait(), remaining)
+            except TimeoutError:
+                return False
+        return True
+
+    @staticmethod
+    def stats(
+        frames: int,
+        dropped: int,
+        fps: float,
+        set_ms: deque[float],
+        seconds: float,
+        done_at: deque[float],
+    ) -> dict[str, Any]:
+        recent = (
+            (len(done_at) - 1) / (done_at[-1] - done_at[0])
+            if len(done_at) > 1 and done_at[-1] > done_at[0]
+            else 0.0
+        )
+        return {
+            "frames": frames,
+            "dropped": dropped,
+            "target_fps": fps,
+            "fps": recent,  # over the last second
+            "mean_fps": frames / seconds if seconds > 0 else 0.0,
+            "seconds": seconds,
+            "set_time_ms": float(np.median(set_ms)) if set_ms else 0.0,
+        }
