@@ -29,13 +29,10 @@ this package.
 from __future__ import annotations
 
 from widgets.app import TAB_TITLES, Workbench, show_workbench
-from widgets.export_panel import ExportPanel
-from widgets.expression_panel import ExpressionPanel
 from widgets.gallery import ExpressionGallery
-from widgets.paint_panel import PaintPanel
+from widgets.panels import ExportPanel, ExpressionPanel, PaintPanel, SculptPanel
 from widgets.recovery import RecoveryPrompt, recovery_prompt
 from widgets.regions_panel import RegionsPanel
-from widgets.sculpt_panel import SculptPanel
 from widgets.timeline import TimelineWidget
 from widgets.viewport import Viewport
 from widgets.wrinkle_panel import WrinklePanel

@@ -15,12 +15,9 @@ import ipywidgets as W
 import traitlets
 
 from widgets._threading import ErrorSink, close_interactions
-from widgets.export_panel import ExportPanel
-from widgets.expression_panel import ExpressionPanel
 from widgets.gallery import ExpressionGallery
-from widgets.paint_panel import PaintPanel
+from widgets.panels import ExportPanel, ExpressionPanel, PaintPanel, SculptPanel, UndoRedoButtons
 from widgets.regions_panel import RegionsPanel
-from widgets.sculpt_panel import SculptPanel
 from widgets.timeline import TimelineWidget
 from widgets.viewport import Viewport
 from widgets.wrinkle_panel import WrinklePanel
@@ -150,14 +147,16 @@ class Workbench(W.VBox):
         self.tabs.add_class("fwb-tabs")
 
         g = self.sink.guard
-        self.undo_button = W.Button(description="Undo", icon="undo", layout=W.Layout(width="auto"))
-        self.redo_button = W.Button(
-            description="Redo", icon="repeat", layout=W.Layout(width="auto")
+        self.history_buttons = UndoRedoButtons(
+            model,
+            on_undo=self.undo,
+            on_redo=self.redo,
+            classes=("fwb-wb-undo", "fwb-wb-redo"),
+            width="auto",
+            errors=self.sink,
+            where="Workbench",
         )
-        self.undo_button.add_class("fwb-wb-undo")
-        self.redo_button.add_class("fwb-wb-redo")
-        self.undo_button.on_click(g("undo")(self._on_undo))
-        self.redo_button.on_click(g("redo")(self._on_redo))
+        self.undo_button, self.redo_button = self.history_buttons.buttons
         # View state, not a model edit (no undo step): linked to the viewport's trait.
         self.wireframe = W.Checkbox(
             value=bool(self.viewport.wireframe),
@@ -190,7 +189,7 @@ class Workbench(W.VBox):
 
         self.tabs.observe(g("switching tabs")(self._on_tab), "selected_index")
         self.viewport.observe(g("viewport tool")(self._on_tool), "tool")
-        self._cb_history = g("Workbench history")(self._on_history)
+        self._cb_history = g("Workbench history")(self.update_status)
         model.events.history.connect(self._cb_history)
         self._cb_drag = g("Workbench drag stats")(self._on_drag)
         self.viewport.drag_listeners.append(self._cb_drag)
@@ -201,7 +200,7 @@ class Workbench(W.VBox):
         row = W.HBox([left, self.tabs], layout=W.Layout(width="100%"))
         super().__init__([top, row, self.errors], layout=W.Layout(width="100%"))
         self.add_class("fwb-workbench")
-        self._on_history()
+        self.update_status()
         self._schedule_gallery()
 
     # ------------------------------------------------------------ lazy panels
@@ -302,31 +301,26 @@ class Workbench(W.VBox):
             self.tabs.selected_index = _TAB_TOOLS.index(change["new"])
 
     # ------------------------------------------------------------ undo / redo
-    def _before_edit(self) -> None:
-        # model.undo refuses to run inside an interaction: end every open one (slider
-        # bursts of all panels, a handle drag or paint stroke, a region pin drag).
+    def undo(self) -> str | None:
+        """Undo the model's last step (the top bar's Undo); its label, or None.
+
+        ``model.undo`` refuses to run inside an interaction: every open one ends
+        first (slider bursts of all panels, a handle drag or paint stroke, a
+        region pin drag).
+        """
         close_interactions(self.model)
+        return self.model.undo() if self.model.can_undo else None
 
-    def _on_undo(self, _b: Any = None) -> None:
-        self._before_edit()
-        if self.model.can_undo:
-            self.model.undo()
+    def redo(self) -> str | None:
+        """Redo the model's last undone step (the top bar's Redo); its label, or None."""
+        close_interactions(self.model)
+        return self.model.redo() if self.model.can_redo else None
 
-    def _on_redo(self, _b: Any = None) -> None:
-        self._before_edit()
-        if self.model.can_redo:
-            self.model.redo()
+    # kept for callers of the former click handlers
+    _on_undo = undo
+    _on_redo = redo
 
     # ------------------------------------------------------------ status line
-    def _on_history(self) -> None:
-        m = self.model
-        u, r = m.history.undo_labels, m.history.redo_labels
-        self.undo_button.disabled = not m.can_undo
-        self.redo_button.disabled = not m.can_redo
-        self.undo_button.tooltip = f"Undo {u[-1]}" if u else "Nothing to undo"
-        self.redo_button.tooltip = f"Redo {r[-1]}" if r else "Nothing to redo"
-        self.update_status()
-
     def _on_drag(self, _stats: dict) -> None:
         self.update_status()
 
@@ -383,6 +377,7 @@ class Workbench(W.VBox):
                 a.save_now()
             a.close(discard=discard_autosave)
         self.model.events.history.disconnect(self._cb_history)
+        self.history_buttons.close()
         self._wireframe_link.unlink()
         if self._cb_drag in self.viewport.drag_listeners:
             self.viewport.drag_listeners.remove(self._cb_drag)

@@ -17,7 +17,7 @@ pytest.importorskip("anywidget")
 pytest.importorskip("ipywidgets")
 
 import widgets
-from widgets.expression_panel import layout_rows
+from widgets.panels.expressions import layout_rows
 from widgets.viewport import BUNDLE
 from workbench.core.polygons import Polygons
 from workbench.model import BlendShape, FaceModel
@@ -146,7 +146,7 @@ def test_slider_burst_is_one_undo_step_and_model_edits_move_sliders():
     assert m.history.undo_labels == ["Drag jawOpen"]
     assert not panel.undo_button.disabled and panel.redo_button.disabled
 
-    panel._on_undo()
+    panel.undo()
     assert m.weights["jawOpen"] == 0.0 and panel.sliders["jawOpen"].value == 0.0
     assert panel.undo_button.disabled and not panel.redo_button.disabled
 
@@ -378,7 +378,7 @@ def test_sculpt_panel_buttons_and_workbench_tabs():
     sp._on_bake()
     assert m.shape_names[-1] == "bump" and sp.bake_name.value == "bump_1"
     assert np.abs(np.asarray(m.handles.offsets)).max() == 0.0
-    sp._on_undo()
+    sp.undo()
     assert "bump" not in m.shape_names and m.handles.offsets[0, 2] == pytest.approx(0.5)
     sp._on_reset()
     assert np.abs(np.asarray(m.handles.offsets)).max() == 0.0
@@ -386,9 +386,9 @@ def test_sculpt_panel_buttons_and_workbench_tabs():
     assert len(m.handles) == 0
     sp.k_s.value, sp.k_b.value = 0.1, 100.0
     assert m.handles.stiffness == (pytest.approx(0.1), pytest.approx(100.0))
-    sp._on_progress(0.4, "solving")
+    sp.progress_row(0.4, "solving")
     assert sp.progress.layout.visibility == "visible" and "solving" in sp.progress_label.value
-    sp._on_progress(1.0, "done")
+    sp.progress_row(1.0, "done")
     assert sp.progress.layout.visibility == "hidden"
     wb.close()
     m.handles.add(4)
@@ -524,6 +524,6 @@ def test_paint_panel_brush_links_blends_save_and_bake():
     p.bake_name.value = "openBaked"
     p._on_bake()
     assert "openBaked" in m.shape_names and len(m.paint) == 0
-    p._on_undo()
+    p.undo()
     assert "openBaked" not in m.shape_names and len(m.paint) == 1
     wb.close()

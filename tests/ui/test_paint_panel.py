@@ -1,4 +1,4 @@
-"""PaintPanel (widgets/paint_panel.py) regional blend on the automatic regions, without a browser.
+"""PaintPanel (widgets/panels/paint.py) regional blend on the automatic regions, without a browser.
 
 The "automatic regions" preset is offered once ``model.regions`` exists; its
 memberships are the soft region weights of the level the Regions tab shows.

@@ -1,4 +1,4 @@
-"""SculptPanel (widgets/sculpt_panel.py) stiffness sliders follow the model, without a browser."""
+"""SculptPanel (widgets/panels/sculpt.py) stiffness sliders follow the model, without a browser."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ pytest.importorskip("anywidget")
 
 import ipywidgets as W
 
-from widgets.sculpt_panel import SculptPanel
+from widgets.panels.sculpt import SculptPanel
 
 pytestmark = pytest.mark.ui
 

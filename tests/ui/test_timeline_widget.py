@@ -429,7 +429,7 @@ def test_head_pose_sliders_follow_the_playhead(keyed):
 
 # ------------------------------------------------------------------ export panel
 def test_export_panel_writes_files_and_imports_csv_back(keyed, tmp_path):
-    from widgets.export_panel import ExportPanel
+    from widgets.panels.export import ExportPanel
 
     p = ExportPanel(keyed, path=str(tmp_path / "anim.glb"))
     written = p.do_export()
@@ -453,7 +453,7 @@ def test_export_panel_writes_files_and_imports_csv_back(keyed, tmp_path):
 
 
 def test_export_panel_obj_sequence_lists_files(keyed, tmp_path):
-    from widgets.export_panel import ExportPanel
+    from widgets.panels.export import ExportPanel
 
     p = ExportPanel(keyed, path=str(tmp_path / "seq.glb"))
     p.format.value = "OBJ sequence (one .obj per frame)"
@@ -464,7 +464,7 @@ def test_export_panel_obj_sequence_lists_files(keyed, tmp_path):
 
 
 def test_export_panel_shows_errors(keyed, tmp_path):
-    from widgets.export_panel import ExportPanel
+    from widgets.panels.export import ExportPanel
 
     p = ExportPanel(keyed)
     p.import_path.value = str(tmp_path / "missing.csv")
@@ -483,7 +483,7 @@ def test_export_panel_shows_errors(keyed, tmp_path):
 
 def test_panels_without_a_workbench_close_each_others_slider_steps(tiny_model):
     """A timeline and two slider panels of one model, composed by hand (no Workbench)."""
-    from widgets.expression_panel import ExpressionPanel
+    from widgets.panels.expressions import ExpressionPanel
 
     m = tiny_model
     a, b = ExpressionPanel(m, idle_s=30.0), ExpressionPanel(m, idle_s=30.0)
@@ -499,7 +499,7 @@ def test_panels_without_a_workbench_close_each_others_slider_steps(tiny_model):
 
 
 def test_export_panel_says_how_each_layer_was_written(keyed, tmp_path):
-    from widgets.export_panel import ExportPanel
+    from widgets.panels.export import ExportPanel
 
     def squared(m):  # not linear in the weights: the exporters must bake it
         d = np.zeros((9, 3), np.float32)
@@ -518,7 +518,7 @@ def test_export_panel_says_how_each_layer_was_written(keyed, tmp_path):
 
 
 def test_export_panel_fbx_without_blender_shows_the_reason(keyed, tmp_path, monkeypatch):
-    from widgets.export_panel import ExportPanel
+    from widgets.panels.export import ExportPanel
 
     monkeypatch.setenv("WORKBENCH_BPY_PYTHON", str(tmp_path / "missing-python"))
     p = ExportPanel(keyed, path=str(tmp_path / "anim.glb"))

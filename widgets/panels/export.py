@@ -25,7 +25,7 @@ from typing import Any
 
 import ipywidgets as W
 
-from widgets._threading import ErrorSink, close_interactions
+from widgets.panels.base import ModelPanel
 
 __all__ = ["FORMAT_CHOICES", "ExportPanel"]
 
@@ -99,7 +99,7 @@ def _error_html(text: str) -> str:
     return f"<div class='fwb-export-error' style='color:#b42318'>{html.escape(text)}</div>"
 
 
-class ExportPanel(W.VBox):
+class ExportPanel(ModelPanel):
     """Export / import panel for ``model.tracks``.
 
     Parameters
@@ -129,9 +129,7 @@ class ExportPanel(W.VBox):
         errors: W.Output | None = None,
         before_edit: Iterable[Callable[[], Any]] = (),
     ) -> None:
-        self.model = model
-        self._before_edit = list(before_edit)
-        self.errors = ErrorSink(errors)
+        super().__init__(model, errors=errors, before_edit=before_edit)
         self.last_written: list[Path] = []
         self.format = W.Dropdown(
             options=list(FORMAT_CHOICES), value="glTF binary (.glb)", description="Format"
@@ -174,27 +172,18 @@ class ExportPanel(W.VBox):
         self.format.observe(g("export format")(self._on_format), "value")
         self.export_button.on_click(g("export")(lambda _b: self.do_export()))
         self.import_button.on_click(g("import animation")(lambda _b: self.do_import()))
-        self._on_tracks = g("export panel fps")(self._sync_fps)
-        model.events.tracks.connect(self._on_tracks)
-        super().__init__(
-            [
-                W.HTML("<b>Export animation</b>"),
-                # wraps: the tab is narrower than format + fps + the Bake label
-                W.HBox([self.format, self.fps, self.bake], layout=W.Layout(flex_flow="row wrap")),
-                W.HBox([self.path, self.export_button]),
-                self.result,
-                W.HTML(
-                    "<b>Import animation</b> (CSV of per-frame weights, glTF weights animation)"
-                ),
-                W.HBox([self.import_path, self.import_button]),
-                self.import_result,
-            ]
-        )
+        self.listen(model.events.tracks, self._sync_fps, "export panel fps")
+        self.children = [
+            W.HTML("<b>Export animation</b>"),
+            # wraps: the tab is narrower than format + fps + the Bake label
+            W.HBox([self.format, self.fps, self.bake], layout=W.Layout(flex_flow="row wrap")),
+            W.HBox([self.path, self.export_button]),
+            self.result,
+            W.HTML("<b>Import animation</b> (CSV of per-frame weights, glTF weights animation)"),
+            W.HBox([self.import_path, self.import_button]),
+            self.import_result,
+        ]
         self.add_class("fwb-export-panel")
-
-    def close(self) -> None:
-        self.model.events.tracks.disconnect(self._on_tracks)
-        super().close()
 
     # ----------------------------------------------------------------- actions
     @property
@@ -205,11 +194,6 @@ class ExportPanel(W.VBox):
         p = Path(self.path.value or "animation")
         stem = p.with_suffix("") if p.suffix.lower() in _SUFFIXES else p
         self.path.value = str(stem) + self.suffix
-
-    def _flush(self) -> None:
-        close_interactions(self.model)
-        for fn in self._before_edit:
-            fn()
 
     def _sync_fps(self, *_args: Any) -> None:
         # follow the timeline's fps until the user typed another one
@@ -223,7 +207,7 @@ class ExportPanel(W.VBox):
         path = Path(self.path.value.strip() or f"animation{self.suffix}").expanduser()
         if path.suffix.lower() != self.suffix:
             path = path.with_suffix(self.suffix)
-        self._flush()
+        self.flush()
         self.result.value = f"Exporting {html.escape(str(path))} …"
         try:
             written = export(
@@ -234,7 +218,9 @@ class ExportPanel(W.VBox):
             self.last_written = []
             return []
         self.last_written = [Path(p).resolve() for p in written]
-        self.result.value = files_html(self.last_written) + layers_html(getattr(written, "layers", ()))
+        self.result.value = files_html(self.last_written) + layers_html(
+            getattr(written, "layers", ())
+        )
         return self.last_written
 
     def do_import(self) -> bool:
@@ -247,7 +233,7 @@ class ExportPanel(W.VBox):
             self.import_result.value = _error_html("Type the path of a .csv, .glb or .gltf file.")
             return False
         path = Path(text).expanduser()
-        self._flush()
+        self.flush()
         try:
             tl = read_animation(path, self.model.shape_names)
             self.model.timeline.set(tl, f"Import animation {path.name}")

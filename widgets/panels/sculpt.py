@@ -29,7 +29,9 @@ from typing import Any
 import ipywidgets as W
 import traitlets as t
 
-from widgets._threading import ErrorSink, close_interactions
+from widgets.panels.base import ModelPanel, button
+from widgets.panels.names import next_free_name
+from widgets.panels.progress import ProgressRow
 
 _HELP = (
     "<div style='line-height:1.35'>"
@@ -42,21 +44,7 @@ _HELP = (
 _LOG_RANGE = (-3.0, 3.0)
 
 
-def _next_free(name: str, taken: Iterable[str]) -> str:
-    """``sculpt_1`` -> first of ``sculpt_1, sculpt_2, ...`` that is not taken."""
-    used = set(taken)
-    stem, _, num = name.rpartition("_")
-    if not stem or not num.isdigit():
-        stem, num = name, "0"
-    k = max(int(num), 1)
-    cand = name if name not in used else f"{stem}_{k}"
-    while cand in used:
-        k += 1
-        cand = f"{stem}_{k}"
-    return cand
-
-
-class SculptPanel(W.VBox):
+class SculptPanel(ModelPanel):
     """Handle-editing controls for a FaceModel (drag happens in the viewport).
 
     Parameters
@@ -81,21 +69,18 @@ class SculptPanel(W.VBox):
         errors: W.Output | None = None,
         before_edit: Iterable[Callable[[], Any]] = (),
     ) -> None:
-        self._model = model
+        super().__init__(
+            model,
+            errors=errors,
+            before_edit=before_edit,
+            layout=W.Layout(width="100%", min_width="380px"),
+        )
         self.viewport = viewport
-        self.errors = ErrorSink(errors)
-        self._before_edit = list(before_edit)
         if viewport is not None:
             self._before_edit.append(viewport.end_drag)
-        self._links: list[Any] = []
         self._syncing = False  # True while model -> UI updates set the stiffness sliders
         self._status_lock = threading.Lock()
         self._last_status_t = 0.0
-
-        def button(desc: str, cls: str, tip: str, icon: str = "", width: str = "auto") -> W.Button:
-            b = W.Button(description=desc, tooltip=tip, icon=icon, layout=W.Layout(width=width))
-            b.add_class(cls)
-            return b
 
         self.default_button = button(
             "Default handles",
@@ -106,8 +91,8 @@ class SculptPanel(W.VBox):
         self.reset_button = button(
             "Reset offsets", "fwb-reset-offsets", "Put every handle back on the blend (undoable)"
         )
-        self.undo_button = button("Undo", "fwb-sculpt-undo", "", icon="undo", width="80px")
-        self.redo_button = button("Redo", "fwb-sculpt-redo", "", icon="repeat", width="80px")
+        self.history_buttons = self.undo_redo_buttons("fwb-sculpt-undo", "fwb-sculpt-redo")
+        self.undo_button, self.redo_button = self.history_buttons.buttons
         self.symmetric = W.ToggleButton(
             value=bool(getattr(viewport, "symmetric", False)),
             description="Symmetric",
@@ -143,7 +128,7 @@ class SculptPanel(W.VBox):
         self.k_s.add_class("fwb-ks")
         self.k_b.add_class("fwb-kb")
         self.bake_name = W.Text(
-            value=_next_free("sculpt_1", model.shape_names),
+            value=next_free_name("sculpt_1", model.shape_names),
             placeholder="new shape name",
             layout=W.Layout(width="180px"),
         )
@@ -151,16 +136,9 @@ class SculptPanel(W.VBox):
         self.bake_button = button(
             "Bake to shape", "fwb-bake", "Turn the handle edit into a blendshape at weight 1"
         )
-        self.progress = W.FloatProgress(
-            value=0.0,
-            min=0.0,
-            max=1.0,
-            description="",
-            bar_style="info",
-            layout=W.Layout(width="98%", visibility="hidden"),
-        )
-        self.progress.add_class("fwb-progress")
-        self.progress_label = W.HTML("")
+        #: the shell basis precompute's progress (``model.handles.set_progress``)
+        self.progress_row = ProgressRow("fwb-progress", template="<i>shell basis: {message}</i>")
+        self.progress, self.progress_label = self.progress_row.bar, self.progress_row.label
         self.status = W.HTML("")
         self.status.add_class("fwb-sculpt-status")
 
@@ -173,88 +151,62 @@ class SculptPanel(W.VBox):
             self.k_b,
             W.HBox([self.bake_name, self.bake_button]),
             W.HBox([self.undo_button, self.redo_button]),
-            self.progress,
-            self.progress_label,
+            self.progress_row,
             self.status,
         ]
-        super().__init__(rows, layout=W.Layout(width="100%", min_width="380px"))
+        self.children = rows
         self.add_class("fwb-sculpt-panel")
 
         g = self.errors.guard
         self.default_button.on_click(g("default handles")(self._on_default))
         self.clear_button.on_click(g("clear handles")(self._on_clear))
         self.reset_button.on_click(g("reset offsets")(self._on_reset))
-        self.undo_button.on_click(g("undo")(self._on_undo))
-        self.redo_button.on_click(g("redo")(self._on_redo))
         self.bake_button.on_click(g("bake to shape")(self._on_bake))
         self.k_s.observe(g("k_s")(self._on_stiffness), "value")
         self.k_b.observe(g("k_b")(self._on_stiffness), "value")
         if viewport is not None:
-            self._links = [
+            for link in (
                 t.link((self.symmetric, "value"), (viewport, "symmetric")),
                 t.link((self.add_on_click, "value"), (viewport, "add_on_click")),
-            ]
-            self._cb_drag = g("SculptPanel drag stats")(self._on_drag_end)
-            viewport.drag_listeners.append(self._cb_drag)
-        self._cb_handles = g("SculptPanel handles")(self._on_model_handles)
-        self._cb_handles_changing = g("SculptPanel handles")(self._on_handles_changing)
-        self._cb_history = g("SculptPanel history")(self._on_model_history)
-        self._cb_shapes = g("SculptPanel shapes")(self._on_model_shapes)
-        self._cb_stiffness = g("SculptPanel stiffness")(self._on_model_stiffness)
-        model.events.handles.connect(self._cb_handles)
-        model.events.shell_stiffness.connect(self._cb_stiffness)
-        model.events.handles_changing.connect(self._cb_handles_changing)
-        model.events.history.connect(self._cb_history)
-        model.events.shapes.connect(self._cb_shapes)
-        model.handles.set_progress(self._on_progress)
-        self._connected = True
-        self._on_model_history()
+            ):
+                self.on_close(link.unlink)
+            self.add_listener(viewport.drag_listeners, self._on_drag_end, "SculptPanel drag stats")
+        ev = model.events
+        self.listen(ev.handles, self._on_model_handles, "SculptPanel handles")
+        self.listen(ev.shell_stiffness, self._on_model_stiffness, "SculptPanel stiffness")
+        self.listen(ev.handles_changing, self._on_handles_changing, "SculptPanel handles")
+        self.listen(ev.shapes, self._on_model_shapes, "SculptPanel shapes")
+        model.handles.set_progress(self.progress_row)
+        self.on_close(model.handles.set_progress, None)
         self._update_status()
 
-    @property
-    def model(self) -> Any:
-        return self._model
-
     # ------------------------------------------------------- UI -> model
-    def _flush(self) -> None:
-        close_interactions(self._model)
-        for fn in self._before_edit:
-            fn()
-
     def _on_default(self, _b: Any = None) -> None:
         from workbench.methods.handles.presets import default_face_handles
 
-        self._flush()
+        self.flush()
         self._model.handles.set(default_face_handles(self._model), label="Default handles")
         self._model.handles.prepare()  # build the basis now, not on the first drag
 
     def _on_clear(self, _b: Any = None) -> None:
         from workbench.model import HandleSet
 
-        self._flush()
+        self.flush()
         if len(self._model.handles):
             self._model.handles.set(HandleSet(), label="Clear handles")
 
     def _on_reset(self, _b: Any = None) -> None:
-        self._flush()
+        self.flush()
         if len(self._model.handles):
             self._model.handles.reset_offsets()
-
-    def _on_undo(self, _b: Any = None) -> None:
-        self._flush()
-        self._model.undo()
-
-    def _on_redo(self, _b: Any = None) -> None:
-        self._flush()
-        self._model.redo()
 
     def _on_bake(self, _b: Any = None) -> None:
         name = self.bake_name.value.strip()
         if not name:
             raise ValueError("Bake to shape: type a name for the new shape first")
-        self._flush()
+        self.flush()
         self._model.handles.bake_to_shape(name)
-        self.bake_name.value = _next_free(name, self._model.shape_names)
+        self.bake_name.value = next_free_name(name, self._model.shape_names)
         self._update_status(f"baked <b>{name}</b>")
 
     def _on_stiffness(self, _change: Any = None) -> None:
@@ -263,16 +215,10 @@ class SculptPanel(W.VBox):
         k_s, k_b = float(self.k_s.value), float(self.k_b.value)
         if (k_s, k_b) == tuple(self._model.handles.stiffness):
             return
-        self._flush()
+        self.flush()
         self._model.handles.set_stiffness(k_s, k_b)
 
     # ------------------------------------------------------- model -> UI
-    def _on_progress(self, fraction: float, message: str) -> None:
-        done = fraction >= 1.0
-        self.progress.value = min(max(float(fraction), 0.0), 1.0)
-        self.progress.layout.visibility = "hidden" if done else "visible"
-        self.progress_label.value = "" if done else f"<i>shell basis: {message}</i>"
-
     def _on_model_handles(self) -> None:
         self._update_status()
 
@@ -299,15 +245,9 @@ class SculptPanel(W.VBox):
 
     def _on_model_shapes(self) -> None:
         if self.bake_name.value.strip() in self._model.shape_names:
-            self.bake_name.value = _next_free(self.bake_name.value.strip(), self._model.shape_names)
-
-    def _on_model_history(self) -> None:
-        model = self._model
-        self.undo_button.disabled = not model.can_undo
-        self.redo_button.disabled = not model.can_redo
-        u, r = model.history.undo_labels, model.history.redo_labels
-        self.undo_button.tooltip = f"Undo {u[-1]}" if u else "Nothing to undo"
-        self.redo_button.tooltip = f"Redo {r[-1]}" if r else "Nothing to redo"
+            self.bake_name.value = next_free_name(
+                self.bake_name.value.strip(), self._model.shape_names
+            )
 
     def _update_status(self, note: str = "") -> None:
         with self._status_lock:
@@ -330,22 +270,3 @@ class SculptPanel(W.VBox):
             if note:
                 parts.append(note)
             self.status.value = " · ".join(parts)
-
-    # ------------------------------------------------------------ closing
-    def close(self) -> None:
-        """Disconnect from the model and the viewport, then close the child widgets."""
-        if getattr(self, "_connected", False):
-            ev = self._model.events
-            ev.handles.disconnect(self._cb_handles)
-            ev.shell_stiffness.disconnect(self._cb_stiffness)
-            ev.handles_changing.disconnect(self._cb_handles_changing)
-            ev.history.disconnect(self._cb_history)
-            ev.shapes.disconnect(self._cb_shapes)
-            self._model.handles.set_progress(None)
-            if self.viewport is not None:
-                for link in self._links:
-                    link.unlink()
-                if self._cb_drag in self.viewport.drag_listeners:
-                    self.viewport.drag_listeners.remove(self._cb_drag)
-            self._connected = False
-        super().close()

@@ -32,7 +32,8 @@ from typing import Any
 
 import ipywidgets as W
 
-from widgets._threading import ErrorSink, InteractionGrouper, close_interactions
+from widgets._threading import InteractionGrouper, close_interactions
+from widgets.panels.base import ModelPanel
 
 GROUPS = ("brows", "eyes", "cheeks", "nose", "mouth", "jaw", "tongue", "other")
 _LEFT_TOKENS = {"l", "left", "lf", "lft"}
@@ -86,7 +87,7 @@ def layout_rows(names: list[str]) -> dict[str, list[tuple[str, ...]]]:
     return {g: rows for g, rows in groups.items() if rows}
 
 
-class ExpressionPanel(W.VBox):
+class ExpressionPanel(ModelPanel):
     """Blendshape sliders for a FaceModel, with search, mute, reset, undo/redo.
 
     Parameters
@@ -108,8 +109,7 @@ class ExpressionPanel(W.VBox):
         idle_s: float = 0.5,
         max_height: str = "440px",
     ) -> None:
-        self._model = model
-        self.errors = ErrorSink(errors)
+        super().__init__(model, errors=errors, layout=W.Layout(width="620px", min_width="420px"))
         self.grouper = InteractionGrouper(model, idle_s=idle_s, errors=self.errors)
         self.sliders: dict[str, W.FloatSlider] = {}
         self.mutes: dict[str, W.Checkbox] = {}
@@ -123,42 +123,25 @@ class ExpressionPanel(W.VBox):
         self.reset_button = W.Button(
             description="Reset", tooltip="Set every weight to 0", layout=W.Layout(width="70px")
         )
-        self.undo_button = W.Button(description="Undo", icon="undo", layout=W.Layout(width="80px"))
-        self.redo_button = W.Button(
-            description="Redo", icon="repeat", layout=W.Layout(width="80px")
-        )
-        for b, cls in (
-            (self.reset_button, "fwb-reset"),
-            (self.undo_button, "fwb-undo"),
-            (self.redo_button, "fwb-redo"),
-        ):
-            b.add_class(cls)
+        self.reset_button.add_class("fwb-reset")
+        self.history_buttons = self.undo_redo_buttons("fwb-undo", "fwb-redo")
+        self.undo_button, self.redo_button = self.history_buttons.buttons
         self.body = W.VBox(
             layout=W.Layout(max_height=max_height, overflow="auto", padding="0 4px 0 0")
         )
         toolbar = W.HBox([self.search, self.reset_button, self.undo_button, self.redo_button])
-        super().__init__([toolbar, self.body], layout=W.Layout(width="620px", min_width="420px"))
+        self.children = [toolbar, self.body]
         self.add_class("fwb-expression-panel")
 
         g = self.errors.guard
         self.search.observe(g("search")(self._on_search), "value")
         self.reset_button.on_click(g("reset")(self._on_reset))
-        self.undo_button.on_click(g("undo")(self._on_undo))
-        self.redo_button.on_click(g("redo")(self._on_redo))
-        self._cb_weights = g("ExpressionPanel weights")(self._on_model_weights)
-        self._cb_shapes = g("ExpressionPanel shapes")(self._on_model_shapes)
-        self._cb_history = g("ExpressionPanel history")(self._on_model_history)
-        model.events.weights.connect(self._cb_weights)
-        model.events.weights_changing.connect(self._cb_weights)
-        model.events.shapes.connect(self._cb_shapes)
-        model.events.history.connect(self._cb_history)
-        self._connected = True
+        ev = model.events
+        self.listen(ev.weights, self._on_model_weights, "ExpressionPanel weights")
+        self.listen(ev.weights_changing, self._on_model_weights, "ExpressionPanel weights")
+        self.listen(ev.shapes, self._on_model_shapes, "ExpressionPanel shapes")
+        self.on_close(self.grouper.flush)  # first: an open drag becomes its undo step
         self._build()
-        self._on_model_history()
-
-    @property
-    def model(self) -> Any:
-        return self._model
 
     # ------------------------------------------------------------- building
     def _build(self) -> None:
@@ -244,14 +227,6 @@ class ExpressionPanel(W.VBox):
         close_interactions(self._model)
         self._model.reset_weights()
 
-    def _on_undo(self, _button: Any = None) -> None:
-        close_interactions(self._model)
-        self._model.undo()
-
-    def _on_redo(self, _button: Any = None) -> None:
-        close_interactions(self._model)
-        self._model.redo()
-
     def _on_search(self, _change: Any = None) -> None:
         q = self.search.value.strip().lower()
         visible_rows = set()
@@ -290,28 +265,11 @@ class ExpressionPanel(W.VBox):
             if sl.value != weights[name]:
                 sl.value = weights[name]
 
-    def _on_model_history(self) -> None:
-        model = self._model
-        self.undo_button.disabled = not model.can_undo
-        self.redo_button.disabled = not model.can_redo
-        undo_labels = model.history.undo_labels
-        redo_labels = model.history.redo_labels
-        self.undo_button.tooltip = f"Undo {undo_labels[-1]}" if undo_labels else "Nothing to undo"
-        self.redo_button.tooltip = f"Redo {redo_labels[-1]}" if redo_labels else "Nothing to redo"
-
     # ------------------------------------------------------------ closing
     def close(self) -> None:
         """End an open drag, disconnect from the model, close the child widgets."""
-        if getattr(self, "_connected", False):
-            try:
-                self.grouper.flush()
-            finally:
-                ev = self._model.events
-                ev.weights.disconnect(self._cb_weights)
-                ev.weights_changing.disconnect(self._cb_weights)
-                ev.shapes.disconnect(self._cb_shapes)
-                ev.history.disconnect(self._cb_history)
-                self._connected = False
-        for w in [*self.sliders.values(), *self.mutes.values()]:
-            w.close()
-        super().close()
+        try:
+            super().close()
+        finally:
+            for w in [*self.sliders.values(), *self.mutes.values()]:
+                w.close()
