@@ -419,3 +419,14 @@ def test_a_stroke_never_paints_beyond_the_brush_opacity(head: FaceModel) -> None
     for _ in range(2):  # outside a stroke, dabs compound
         head.paint.dab("eyeBlinkLeft", c, brush)
     assert head.paint["eyeBlinkLeft"][c] == pytest.approx(0.75)
+
+
+def test_facet_total_is_the_sum_of_the_painted_maps(head: FaceModel) -> None:
+    assert not head.paint.total().any()
+    c = _mouth_corner(head)
+    head.paint.dab("mouthSmileLeft", c, Brush(radius=0.3, opacity=0.5))
+    head.paint.dab("jawOpen", c, Brush(radius=0.3, opacity=0.5))
+    expected = head.paint["mouthSmileLeft"] + head.paint["jawOpen"]
+    np.testing.assert_array_equal(head.paint.total(), expected)
+    assert head.paint.total().shape == (head.n_vertices,)
+    assert float(head.paint.total().max()) <= 1.0 + 1e-6

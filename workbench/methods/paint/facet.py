@@ -126,6 +126,13 @@ class PaintFacet(Mapping[str, NDArray[np.float32]]):
     def __len__(self) -> int:
         return len(self.mix)
 
+    def total(self, n: int | None = None) -> NDArray[np.float32]:
+        """(n,) float32: the painted weights summed over expressions (<= 1 after normalize).
+
+        ``n`` defaults to the model's vertex count.
+        """
+        return self.mix.total(self._model.n_vertices if n is None else int(n))
+
     def __repr__(self) -> str:
         return f"<paint: {list(self.mix)}>"
 
