@@ -26,7 +26,7 @@ the mouth and brows), ticks *Loop*, presses **Play** with the mouse, waits
   on software WebGL, see ``softwareWebGL()`` in ``widgets/js/src/viewport.js``).
 
 Playback sends a frame only while fewer than ``FRAMES_IN_FLIGHT`` frames are
-not yet drawn by the browser (see ``widgets/timeline.py``), so ``kernel fps``
+not yet drawn by the browser (see ``widgets/timeline/``), so ``kernel fps``
 equals ``viewport fps`` when the browser is the bottleneck.
 
 Then presses **Pause**. Prints one row per resolution and target fps.

@@ -35,7 +35,7 @@ from widgets.recovery import RecoveryPrompt, recovery_prompt
 from widgets.regions_panel import RegionsPanel
 from widgets.timeline import TimelineWidget
 from widgets.viewport import Viewport
-from widgets.wrinkle_panel import WrinklePanel
+from widgets.wrinkles import WrinklePanel
 
 __all__ = [
     "TAB_TITLES",

@@ -20,7 +20,7 @@ from widgets.panels import ExportPanel, ExpressionPanel, PaintPanel, SculptPanel
 from widgets.regions_panel import RegionsPanel
 from widgets.timeline import TimelineWidget
 from widgets.viewport import Viewport
-from widgets.wrinkle_panel import WrinklePanel
+from widgets.wrinkles import WrinklePanel
 
 __all__ = ["PALETTE_COLUMNS", "PALETTE_THUMB_SIZE", "TAB_TITLES", "Workbench", "show_workbench"]
 
@@ -76,9 +76,6 @@ class Workbench(W.VBox):
         Default: the recovery folder (``$WORKBENCH_RECOVERY_DIR``).
     height : int
         Viewport height in pixels.
-    wrinkle_layer : workbench.methods.wrinkles.layer.WrinkleLayer, optional
-        An already fitted wrinkle layer of ``model`` for the Sculpt tab's
-        :class:`WrinklePanel` (default: none until its *Fit* button).
 
     Attributes
     ----------
@@ -100,7 +97,6 @@ class Workbench(W.VBox):
         autosave_delay: float = 2.0,
         autosave_folder: Any = None,
         height: int = 520,
-        wrinkle_layer: Any = None,
     ) -> None:
         self.model = model
         self.errors = W.Output(layout=W.Layout(max_height="160px", overflow="auto"))
@@ -119,7 +115,6 @@ class Workbench(W.VBox):
         self.wrinkles = WrinklePanel(
             model,
             self.viewport,
-            layer=wrinkle_layer,
             errors=self.errors,
             before_edit=[self.panel.grouper.flush],
         )
@@ -315,10 +310,6 @@ class Workbench(W.VBox):
         """Redo the model's last undone step (the top bar's Redo); its label, or None."""
         close_interactions(self.model)
         return self.model.redo() if self.model.can_redo else None
-
-    # kept for callers of the former click handlers
-    _on_undo = undo
-    _on_redo = redo
 
     # ------------------------------------------------------------ status line
     def _on_drag(self, _stats: dict) -> None:

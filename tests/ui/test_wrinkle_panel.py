@@ -344,7 +344,7 @@ def test_workbench_shows_the_wrinkle_panel_in_the_sculpt_tab() -> None:
         wb.wrinkles.fit()
         _lift_brows(wb.model)
         wb.wrinkles.enabled.value = False
-        wb._on_undo()  # the top bar's Undo
+        wb.undo()  # the top bar's Undo
         assert wb.model.wrinkles.enabled is True and wb.wrinkles.enabled.value is True
     finally:
         wb.close()
