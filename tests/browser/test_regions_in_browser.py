@@ -22,7 +22,7 @@ CELLS = [
 import ipywidgets as W
 from workbench import load_sample
 from widgets.viewport import Viewport
-from widgets.regions_panel import RegionsPanel
+from widgets.regions import RegionsPanel
 model = load_sample("head")
 vp = Viewport(model, height=560)
 vp.layout = W.Layout(flex="1 1 auto", min_width="320px")
@@ -80,7 +80,7 @@ print(json.dumps({"undo": model.history.undo_labels, "interacting": model.intera
 
 _FRONT_MARKERS = """
 import json, numpy as np
-_n = model.to_trimesh().vertex_normals[panel._edit_markers]
+_n = model.to_trimesh().vertex_normals[panel.edits.markers]
 print(json.dumps((_n[:, 2] > 0.6).tolist()))
 """
 
@@ -88,20 +88,43 @@ _SPLIT_STATE = """
 import json
 _st = model.regions.state
 print(json.dumps({"undo": model.history.undo_labels, "n_regions": _st.regions.n_regions(_st.level),
-                  "selected": panel.region.label, "split_mode": panel.split_mode.value,
+                  "selected": panel.region.label, "split_mode": panel.edits.split_mode.value,
                   "tool": vp.tool, "errors": panel.errors.count + vp.errors.count,
-                  "edit": panel.edit_message}))
+                  "edit": panel.edits.message}))
 """
 
 
 def _wait(nb: NotebookPage, code: str, ok: Any, timeout: float = 30.0) -> Any:
+    """Poll a kernel expression until ``ok(value)``."""
     deadline = time.monotonic() + timeout
     val = nb.kernel_eval(code)
     while not ok(val) and time.monotonic() < deadline:
-        time.sleep(0.2)
         val = nb.kernel_eval(code)
     assert ok(val), f"timed out waiting: {code!r} -> {val!r}"
     return val
+
+
+def _drawn(nb: NotebookPage) -> None:
+    """Wait until the view drew the kernel's newest geometry, then two more animation frames.
+
+    (Call it after moving the pointer off the face: the render that drops the
+    marker's hover highlight is requested by then, and drawn within them.)
+    """
+    version = nb.kernel_eval("import json; print(json.dumps(vp._version))")
+    nb.page.wait_for_function(
+        "(v) => Number(document.querySelector('.fwb-viewport').getAttribute('data-version')) >= v",
+        arg=version,
+    )
+    nb.page.evaluate("() => new Promise(r => requestAnimationFrame(() => requestAnimationFrame(r)))")
+
+
+def _canvas_changes(nb: NotebookPage, before: Any, name: str, least: float, timeout: float = 30.0) -> Any:
+    """Canvas screenshots until more than ``least`` of the pixels differ from ``before``."""
+    deadline = time.monotonic() + timeout
+    shot = nb.canvas_shot(name)
+    while pixel_change(before, shot) <= least and time.monotonic() < deadline:
+        shot = nb.canvas_shot(name)
+    return shot
 
 
 def test_drag_mouth_corner_in_region_mode_moves_only_its_region(open_notebook):
@@ -121,8 +144,7 @@ def test_drag_mouth_corner_in_region_mode_moves_only_its_region(open_notebook):
     page.wait_for_function(
         "() => document.querySelector('.fwb-region-status').innerText.includes('segmentation')"
     )
-    page.wait_for_timeout(800)
-    face1 = nb.canvas_shot("face-regions")
+    face1 = _canvas_changes(nb, face0, "face-regions", 0.05)
     assert pixel_change(face0, face1) > 0.05, "the region colours did not show"
 
     # Drag mode: the viewport switches to its sculpt tool with one marker per pin
@@ -138,7 +160,7 @@ def test_drag_mouth_corner_in_region_mode_moves_only_its_region(open_notebook):
         arg=info["n_pins"],
     )
     page.mouse.move(5, 5)
-    page.wait_for_timeout(300)
+    _drawn(nb)
     mouth_clip = clip_around(nb.project([*info["mouth"], info["vertex"]]), pad=60)
     forehead_clip = clip_around(nb.project(info["forehead"]), pad=10)
     mouth0 = nb.screenshot("mouth-before", clip=mouth_clip)
@@ -156,7 +178,8 @@ def test_drag_mouth_corner_in_region_mode_moves_only_its_region(open_notebook):
     page.mouse.up()
     nb.wait_frame_after(0, frame0)
     st = _wait(nb, _AFTER, lambda s: not s["interacting"] and not s["dragging"])
-    page.wait_for_timeout(500)
+    page.mouse.move(5, 5)
+    _drawn(nb)
 
     # Python side: region weights of the touched regions changed, nothing outside moved
     assert st["errors"] == 0, st
@@ -173,8 +196,6 @@ def test_drag_mouth_corner_in_region_mode_moves_only_its_region(open_notebook):
     # Pixels: the mouth changed, the forehead did not
     mouth1 = nb.screenshot("mouth-after", clip=mouth_clip)
     forehead1 = nb.screenshot("forehead-after", clip=forehead_clip)
-    page.mouse.move(5, 5)
-    page.wait_for_timeout(200)
     nb.screenshot("page-after")
     changed = pixel_change(mouth0, mouth1)
     assert changed > 0.03, f"only {changed:.1%} of the mouth region changed"
@@ -187,12 +208,12 @@ def test_drag_mouth_corner_in_region_mode_moves_only_its_region(open_notebook):
     page.wait_for_function(
         "(n) => JSON.parse(document.querySelector('.fwb-viewport').getAttribute('data-handles')"
         " || '[]').length === n",
-        arg=nb.kernel_eval("import json; print(json.dumps(len(panel._edit_markers)))"),
+        arg=nb.kernel_eval("import json; print(json.dumps(len(panel.edits.markers)))"),
     )
     # (clicking the button may have scrolled the page: bring the face back into view)
     page.locator(".fwb-viewport").evaluate("e => e.scrollIntoView({block: 'start'})")
     page.mouse.move(5, 5)
-    page.wait_for_timeout(300)
+    _drawn(nb)
     pts = np.array(page.locator(".fwb-viewport").evaluate("e => e.fwbHandles()"), float)
     pts = pts.reshape(-1, 3)
     height = page.viewport_size["height"] if page.viewport_size else 10**6
@@ -202,9 +223,9 @@ def test_drag_mouth_corner_in_region_mode_moves_only_its_region(open_notebook):
     assert vis.size >= 2, "fewer than two split markers are visible"
     d = np.linalg.norm(pts[vis, None, :2] - pts[None, vis, :2], axis=2)
     i, j = np.unravel_index(np.argmax(d), d.shape)
-    for k in (vis[i], vis[j]):
-        page.mouse.click(pts[k, 0], pts[k, 1])
-        page.wait_for_timeout(300)
+    page.mouse.click(pts[vis[i], 0], pts[vis[i], 1])
+    _wait(nb, _SPLIT_STATE, lambda s: "second marker" in s["edit"])
+    page.mouse.click(pts[vis[j], 0], pts[vis[j], 1])
     after = _wait(nb, _SPLIT_STATE, lambda s: s["undo"][-1].startswith("Split region"))
     assert after["undo"][-1] == f"Split region {before['selected']}", after
     assert after["n_regions"] == before["n_regions"] + 1, after

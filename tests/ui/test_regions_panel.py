@@ -1,4 +1,4 @@
-"""RegionsPanel (widgets/regions_panel.py) without a browser: widget events -> model calls.
+"""RegionsPanel (widgets/regions/) without a browser: widget events -> model calls.
 
 Buttons are clicked and sliders set from Python; region drags are the JSON
 messages the viewport's front end sends for a marker drag, fed to
@@ -14,7 +14,7 @@ import pytest
 
 pytest.importorskip("anywidget")
 
-from widgets.regions_panel import BACKGROUND_GREY, RegionsPanel, region_colors, region_palette
+from widgets.regions import BACKGROUND_GREY, RegionsPanel, region_colors, region_palette
 from widgets.viewport import Viewport
 from workbench import load_sample
 
@@ -104,7 +104,7 @@ def test_threshold_release_resegments_and_undo_moves_the_slider_back(setup):
     assert st.regions.threshold == pytest.approx(0.6)
     assert model.history.undo_labels[-1] == "Segment regions (t=0.6)"
     assert st.regions.n_regions(0) < n_fine  # higher t: fewer, smaller regions
-    assert "t = 0.60" in panel.progress_label.value and "ms" in panel.progress_label.value
+    assert "t = 0.60" in panel.progress_row.label.value and "ms" in panel.progress_row.label.value
     panel.undo_button.click()
     assert model.regions.regions.threshold == pytest.approx(0.25)
     assert panel.threshold.value == pytest.approx(0.25)
@@ -119,11 +119,11 @@ def test_weight_slider_drag_is_one_undo_step_on_that_region_only(setup):
     r = R.names[lv].index("mouth_L_2") if "mouth_L_2" in R.names[lv] else 0
     panel.region.value = r
     shape = R.drivers[lv][r][0]
-    assert list(panel.weight_sliders)[: len(R.drivers[lv][r])] == list(R.drivers[lv][r])
+    assert list(panel.sliders.weight_sliders)[: len(R.drivers[lv][r])] == list(R.drivers[lv][r])
     n_undo = len(model.history.undo_labels)
     X0 = np.array(model.evaluate())
     for v in (0.1, 0.3, 0.5, 0.7):  # one drag of the slider
-        panel.weight_sliders[shape].value = v
+        panel.sliders.weight_sliders[shape].value = v
     assert panel.grouper.active
     panel.grouper.flush()
     labels = model.history.undo_labels
@@ -135,13 +135,13 @@ def test_weight_slider_drag_is_one_undo_step_on_that_region_only(setup):
     moved = np.flatnonzero(np.abs(np.array(model.evaluate()) - X0).max(axis=1) > 0)
     assert moved.size and np.isin(moved, R.members(lv, r)).all()
     # reset region to global: back to the neutral face, one more undo step
-    panel.reset_region_button.click()
+    panel.sliders.reset_region_button.click()
     assert model.regions.weights.region(r)[shape] == 0.0
     np.testing.assert_allclose(model.evaluate(), X0, atol=1e-6)
     assert model.history.undo_labels[-1] == f"Reset region {R.names[lv][r]}"
-    assert panel.weight_sliders[shape].value == 0.0
+    assert panel.sliders.weight_sliders[shape].value == 0.0
     model.undo()
-    assert panel.weight_sliders[shape].value == pytest.approx(0.7)
+    assert panel.sliders.weight_sliders[shape].value == pytest.approx(0.7)
 
 
 def test_drag_handler_solves_and_moves_the_dragged_point_toward_the_target(setup):
@@ -183,13 +183,13 @@ def test_drag_handler_solves_and_moves_the_dragged_point_toward_the_target(setup
     assert panel.region.label == panel.drag_handler.last_drag["name"]
     # the weight sliders show the solved weights of the selected region
     r = int(panel.region.value)
-    for nm, s in panel.weight_sliders.items():
+    for nm, s in panel.sliders.weight_sliders.items():
         assert s.value == pytest.approx(rw.region(r)[nm], abs=0.005 + 1e-6)
     # the browser snaps them to the slider step and sends that back: not an edit
     n_undo = len(model.history.undo_labels)
     assert any(abs(v - round(v, 2)) > 1e-4 for v in rw.region(r).values())
-    for nm in panel.weight_sliders:
-        panel._on_weight_slider(nm, round(rw.region(r)[nm], 2))
+    for nm in panel.sliders.weight_sliders:
+        panel.sliders.on_slider(nm, round(rw.region(r)[nm], 2))
     assert not panel.grouper.active and len(model.history.undo_labels) == n_undo
     # one undo puts the face back
     panel.undo_button.click()
@@ -249,33 +249,33 @@ def test_rename_and_merge_controls_are_one_undo_step_each(setup):
     model, vp, panel, _ = setup
     panel.find_button.click()
     r = select(panel, "mouth_L_2")
-    assert panel.rename_text.placeholder == "mouth_L_2"
+    assert panel.edits.rename_text.placeholder == "mouth_L_2"
     n = len(model.history.undo_labels)
     colors0 = np.array(vp.vertex_colors)
-    panel.rename_text.value = "lip_corner_L"
-    panel.rename_button.click()
+    panel.edits.rename_text.value = "lip_corner_L"
+    panel.edits.rename_button.click()
     R = model.regions.regions
     assert R.names[0][r] == "lip_corner_L" and panel.region.label == "lip_corner_L"
     np.testing.assert_array_equal(vp.vertex_colors, colors0)  # a rename keeps the colours
     assert model.history.undo_labels[-1] == "Rename region mouth_L_2 to lip_corner_L"
     # a taken name: the reason in the edit status, no undo step, no traceback
-    panel.rename_text.value = "mouth_L_1"
-    panel.rename_button.click()
-    assert "already used" in panel.edit_status.value and "b00020" in panel.edit_status.value
+    panel.edits.rename_text.value = "mouth_L_1"
+    panel.edits.rename_button.click()
+    assert "already used" in panel.edits.status.value and "b00020" in panel.edits.status.value
     assert len(model.history.undo_labels) == n + 1 and panel.errors.count == 0
     # merge: the dropdown lists the touching regions only
     from workbench.methods.regions.topology import adjacent_regions, region_topology
 
     nb = adjacent_regions(R, region_topology(model), 0, r)
-    assert [idx for _label, idx in panel.merge_with.options] == nb
+    assert [idx for _label, idx in panel.edits.merge_with.options] == nb
     b = nb[0]
-    panel.merge_with.value = b
+    panel.edits.merge_with.value = b
     n_regions = R.n_regions(0)
-    panel.merge_button.click()
+    panel.edits.merge_button.click()
     R2 = model.regions.regions
     assert R2.n_regions(0) == n_regions - 1 and int(panel.region.value) == min(r, b)
     assert model.history.undo_labels[-1].startswith("Merge regions lip_corner_L + ")
-    assert "merged" in panel.edit_status.value
+    assert "merged" in panel.edits.status.value
     # the overlay: regions away from the merge keep their colours (no palette shift)
     far = R.core(0, "brow_eye_R")
     np.testing.assert_array_equal(np.asarray(vp.vertex_colors)[far], colors0[far])
@@ -292,16 +292,16 @@ def test_split_mode_splits_between_two_clicked_markers(setup):
     r = select(panel, "cheek_mouth_L")
     R = model.regions.regions
     panel.drag_mode.value = True
-    panel.split_mode.value = True
+    panel.edits.split_mode.value = True
     assert not panel.drag_mode.value  # one pointer mode at a time
-    assert vp.tool == "sculpt" and vp.drag_handler is panel.seed_picker
+    assert vp.tool == "sculpt" and vp.drag_handler is panel.edits.seed_picker
     markers = np.asarray(vp.handles)
     assert markers.size >= 2 and (R.labels[0][markers] == r).all()
     V = np.asarray(model.vertices)[markers]
     ka, kb = int(np.argmin(V[:, 1])), int(np.argmax(V[:, 1]))
     n = len(model.history.undo_labels)
     click_marker(vp, ka, int(markers[ka]), 10)
-    assert "click a second marker" in panel.edit_status.value
+    assert "click a second marker" in panel.edits.status.value
     assert len(model.history.undo_labels) == n
     click_marker(vp, kb, int(markers[kb]), 12)
     R2 = model.regions.regions
@@ -311,7 +311,7 @@ def test_split_mode_splits_between_two_clicked_markers(setup):
     assert len(model.history.undo_labels) == n + 1
     assert not model.interacting and panel.errors.count + vp.errors.count == 0
     # the split ends split mode and gives the viewport back
-    assert not panel.split_mode.value and vp.drag_handler is None and vp.tool == "orbit"
+    assert not panel.edits.split_mode.value and vp.drag_handler is None and vp.tool == "orbit"
     assert [c["seq"] for c in sent if c.get("type") == "handle_ack"] == [10, 11, 12, 13]
     panel.undo_button.click()
     assert model.regions.regions is R
@@ -324,9 +324,9 @@ def test_paint_mode_brush_stroke_grows_the_region_in_one_undo_step(setup):
     panel.find_button.click()
     r = select(panel, "mouth_L_2")
     R = model.regions.regions
-    panel.paint_mode.value = True
-    assert vp.drag_handler is panel.brush_handler and vp.tool == "sculpt"
-    panel.paint_radius.value = panel.paint_radius.max / 2  # the markers follow the radius
+    panel.edits.paint_mode.value = True
+    assert vp.drag_handler is panel.edits.brush_handler and vp.tool == "sculpt"
+    panel.edits.paint_radius.value = panel.edits.paint_radius.max / 2  # the markers follow the radius
     markers = np.asarray(vp.handles)
     topo = region_topology(model)
     outside = [i for i, v in enumerate(markers) if R.labels[0][v] != r]
@@ -342,34 +342,92 @@ def test_paint_mode_brush_stroke_grows_the_region_in_one_undo_step(setup):
     path = [X[v] + f * (toward - Vn[v]) for f in (0.5, 1.0)]  # drag from the marker into the region
     n = len(model.history.undo_labels)
     drag(vp, k, v, path)
-    assert panel.brush_handler.last_stroke["error"] == "", panel.edit_status.value
-    assert not model.interacting and not panel.brush_handler.dragging
+    assert panel.edits.brush_handler.last_stroke["error"] == "", panel.edits.status.value
+    assert not model.interacting and not panel.edits.brush_handler.dragging
     R2 = model.regions.regions
     assert R2.labels[0][v] == r
     grown = np.flatnonzero((R2.labels[0] == r) & ~(R.labels[0] == r) & topo.skin)
     assert grown.size > 1
     assert model.history.undo_labels[-1] == "Paint region mouth_L_2"
     assert len(model.history.undo_labels) == n + 1
-    assert "painted into mouth_L_2" in panel.edit_status.value
+    assert "painted into mouth_L_2" in panel.edits.status.value
     from scipy.sparse.csgraph import connected_components
 
     c2 = np.flatnonzero((R2.labels[0] == r) & topo.skin)
     assert connected_components(topo.adjacency[c2][:, c2], directed=False)[0] == 1
     # erase with a click-sized dab (paint_at), its own undo step
-    panel.paint_erase.value = True
-    panel.paint_radius.value = panel.paint_radius.min
-    assert panel.paint_at(v) > 0, panel.edit_status.value
+    panel.edits.paint_erase.value = True
+    panel.edits.paint_radius.value = panel.edits.paint_radius.min
+    assert panel.edits.paint_at(v) > 0, panel.edits.status.value
     assert model.regions.regions.labels[0][v] == -1
     assert model.history.undo_labels[-1] == "Erase from region mouth_L_2"
     panel.undo_button.click()
     panel.undo_button.click()
     assert model.regions.regions is R
     # a dab far from the region is refused with the reason, no undo step
-    panel.paint_erase.value = False
+    panel.edits.paint_erase.value = False
     far = int(R.core(0, "brow_eye_R")[0])
     n = len(model.history.undo_labels)
-    assert panel.paint_at(far) == 0
-    assert "do not touch region 'mouth_L_2'" in panel.edit_status.value
+    assert panel.edits.paint_at(far) == 0
+    assert "do not touch region 'mouth_L_2'" in panel.edits.status.value
     assert len(model.history.undo_labels) == n
-    panel.paint_mode.value = False
+    panel.edits.paint_mode.value = False
     assert vp.drag_handler is None and vp.tool == "orbit"
+
+
+def test_escape_cancels_a_pin_drag_and_a_brush_stroke_bit_exactly(setup):
+    model, vp, panel, sent = setup
+    panel.find_button.click()
+    panel.drag_mode.value = True
+    k, v = mouth_corner_pin(model, panel)
+    st0 = model.regions.state
+    X0 = np.array(model.evaluate())
+    n_undo = len(model.history.undo_labels)
+    msg = {"type": "handle", "index": k, "vertex": v, "gesture": 7}
+    vp._on_frontend_msg(vp, {**msg, "phase": "start", "seq": 1}, [])
+    vp._on_frontend_msg(vp, {**msg, "phase": "move", "position": list(X0[v] + [0.05, 0.04, 0]), "seq": 2}, [])
+    assert panel.drag_handler.dragging and model.regions.state is not st0
+    vp._on_frontend_msg(vp, {**msg, "phase": "cancel", "seq": 3}, [])
+    assert not panel.drag_handler.dragging and not model.interacting
+    assert model.regions.state is st0 and len(model.history.undo_labels) == n_undo
+    np.testing.assert_array_equal(model.evaluate(), X0)
+    assert [c["seq"] for c in sent if c.get("type") == "handle_ack"] == [1, 2, 3]
+    # the same for a brush stroke
+    select(panel, "mouth_L_2")
+    panel.edits.paint_mode.value = True
+    markers = np.asarray(vp.handles)
+    R = model.regions.regions
+    kb = next(i for i, m in enumerate(markers) if R.labels[0][m] != R.region_index(0, "mouth_L_2"))
+    msg = {"type": "handle", "index": kb, "vertex": int(markers[kb]), "gesture": 8}
+    vp._on_frontend_msg(vp, {**msg, "phase": "start", "seq": 4}, [])
+    vp._on_frontend_msg(vp, {**msg, "phase": "cancel", "seq": 5}, [])
+    assert not panel.edits.brush_handler.dragging and not model.interacting
+    assert model.regions.state is st0 and len(model.history.undo_labels) == n_undo
+    assert panel.errors.count + vp.errors.count == 0
+
+
+def test_another_widgets_edit_mid_drag_keeps_the_drag_as_one_step(setup):
+    from widgets._threading import close_interactions
+
+    model, vp, panel, _sent = setup
+    panel.find_button.click()
+    panel.drag_mode.value = True
+    k, v = mouth_corner_pin(model, panel)
+    X0 = np.array(model.evaluate())
+    n_undo = len(model.history.undo_labels)
+    msg = {"type": "handle", "index": k, "vertex": v}
+    vp._on_frontend_msg(vp, {**msg, "phase": "start", "seq": 1}, [])
+    vp._on_frontend_msg(vp, {**msg, "phase": "move", "position": list(X0[v] + [0.05, 0.04, 0]), "seq": 2}, [])
+    st1 = model.regions.state
+    close_interactions(model)  # e.g. the timeline's Key button
+    assert not model.interacting and not panel.drag_handler.dragging
+    assert model.history.undo_labels[-1].startswith("Region drag ")
+    assert len(model.history.undo_labels) == n_undo + 1
+    assert panel.drag_handler.last_drag["moves"] == 1 and "last drag" in panel.status.value
+    # the front end's late messages change nothing
+    vp._on_frontend_msg(vp, {**msg, "phase": "move", "position": list(X0[v] + [0.1, 0.1, 0]), "seq": 3}, [])
+    vp._on_frontend_msg(vp, {**msg, "phase": "end", "seq": 4}, [])
+    assert model.regions.state is st1 and len(model.history.undo_labels) == n_undo + 1
+    assert panel.errors.count + vp.errors.count == 0
+    panel.undo_button.click()
+    np.testing.assert_array_equal(model.evaluate(), X0)
