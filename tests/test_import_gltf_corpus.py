@@ -23,6 +23,8 @@ from typing import Any
 import numpy as np
 import pytest
 from ci_env import in_ci
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 import workbench
 from workbench.geometry.mesh_checks import MeshFormatError
@@ -689,3 +691,58 @@ def test_corrupted_compressed_bytes_never_crash(tmp_path: Path) -> None:
                 continue
             assert np.isfinite(face.vertices).all()
             assert face.polygons.indices.max() < face.n_vertices
+
+
+def _leaves(obj: Any, path: tuple[Any, ...] = ()) -> list[tuple[Any, ...]]:
+    if isinstance(obj, dict):
+        return [p for k, v in obj.items() for p in _leaves(v, (*path, k))] or [path]
+    if isinstance(obj, list):
+        return [p for i, v in enumerate(obj) for p in _leaves(v, (*path, i))] or [path]
+    return [path]
+
+
+JSON_VALUES = st.one_of(
+    st.integers(-3, 70_000),
+    st.sampled_from([0, 1, 2, 3, 4, 8, 2**31, 2**32 - 1, 10**30, -1]),
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.sampled_from(["ATTRIBUTES", "TRIANGLES", "INDICES", "EXPONENTIAL", "OCTAHEDRAL", "NONE", ""]),
+    st.none(),
+    st.booleans(),
+    st.lists(st.integers(-2, 10), max_size=4),
+    st.dictionaries(st.sampled_from(["POSITION", "bufferView", "count"]), st.integers(-1, 30), max_size=2),
+)
+
+
+@pytest.mark.parametrize("base", ["gltfpack", "draco", "quantize"])
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(data=st.data())
+def test_fuzz_json_of_real_files(base: str, tmp_path: Path, data: st.DataObject) -> None:
+    """Any JSON field of a real writer's file set to a random value: a result or a MeshFormatError."""
+    try:
+        g = Glb(base)
+    except ToolMissing:
+        pytest.skip("writers not available")
+    leaves = _leaves(g.doc)
+    for _ in range(data.draw(st.integers(1, 3))):
+        path = data.draw(st.sampled_from(leaves))
+        if not path:
+            break
+        target: Any = g.doc
+        for k in path[:-1]:
+            target = target[k]
+        if data.draw(st.booleans()):
+            target[path[-1]] = data.draw(JSON_VALUES)
+        else:
+            del target[path[-1]]
+            leaves = _leaves(g.doc)
+    p = tmp_path / f"fuzz-{base}.glb"
+    p.write_bytes(g.bytes())
+    try:
+        face = read_gltf(p)
+    except MeshFormatError as exc:
+        assert exc.source == str(p)
+        return
+    assert np.isfinite(face.vertices).all()
+    assert face.polygons.indices.max() < face.n_vertices
+    for _, d in face.shapes:
+        assert d.shape == face.vertices.shape and np.isfinite(d).all()

@@ -33,6 +33,7 @@ WRITERS: dict[str, tuple[str, list[str]]] = {
     "gltfpack-khr": ("gltfpack", ["-cc", "-ce", "khr", "-kn"]),
     "gltfpack-normalized": ("gltfpack", ["-c", "-vpn", "-kn"]),
     "gltfpack-float": ("gltfpack", ["-cc", "-vpf", "-kn"]),
+    "gltfpack-13bit": ("gltfpack", ["-c", "-vp", "13", "-kn"]),  # coarse: a few triangles go flat
     "draco": ("gltf-transform", ["draco"]),
     "sparse": ("gltf-transform", ["sparse"]),
     "quantize": ("gltf-transform", ["quantize"]),

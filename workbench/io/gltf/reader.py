@@ -33,11 +33,12 @@ from workbench.io.gltf.compression import (
     DRACO,
     GEOMETRY_EXTENSIONS,
     MAX_DRACO_ELEMENTS,
+    MESHOPT_EXTENSIONS,
     decode_draco,
     is_skippable,
 )
 from workbench.io.gltf.container import read_container
-from workbench.io.gltf.document import NORMALIZE, Gltf
+from workbench.io.gltf.document import FLOAT, NORMALIZE, Gltf
 from workbench.io.gltf.scene import Instance, instances, mesh_name
 
 __all__ = ["read_gltf"]
@@ -166,6 +167,7 @@ def _read_instance(g: Gltf, inst: Instance) -> _Part:
         )
     verts: list[NDArray[np.float64]] = []
     tris: list[NDArray[np.int64]] = []
+    lossy: list[bool] = []
     deltas: list[list[NDArray[np.float64]]] = []
     n_targets: int | None = None
     group_names: list[str] = []
@@ -184,7 +186,8 @@ def _read_instance(g: Gltf, inst: Instance) -> _Part:
         if not isinstance(attrs, dict) or "POSITION" not in attrs:
             g.fail(f"{pfield}.attributes", "POSITION is missing")
         pos_field = f"{pfield}.attributes.POSITION"
-        if DRACO in g.obj(prim, "extensions", pfield):
+        draco = DRACO in g.obj(prim, "extensions", pfield)
+        if draco:
             V, idx = _draco(g, prim, pfield, attrs)
             ifield = f"{pfield}.extensions.{DRACO}"
         else:
@@ -198,6 +201,7 @@ def _read_instance(g: Gltf, inst: Instance) -> _Part:
                 idx = np.arange(V.shape[0], dtype=np.int64)
                 ifield = f"{pfield} (non-indexed)"
         V = check_vertices(V, src, pos_field)
+        lossy.append(draco or _quantized(g, attrs["POSITION"]))
         n = V.shape[0]
         if idx.size % 3:
             g.fail(ifield, f"{idx.size} indices is not a multiple of 3")
@@ -240,14 +244,27 @@ def _read_instance(g: Gltf, inst: Instance) -> _Part:
     F = np.concatenate(tris)
     if det < 0:  # a mirroring transform: keep the triangles facing outward
         F = F[:, [0, 2, 1]]
+    if not np.isfinite(V_all).all():
+        g.fail(inst.field, "the node transform makes positions overflow to infinity")
+    prim_of_tri = np.repeat(np.arange(len(prims)), [len(x) for x in tris])
+    if any(lossy):
+        # quantization (gltfpack, Draco, glTF-Transform) can snap a tiny triangle flat: it
+        # covers no area, so it is dropped; in float data a flat triangle stays an error
+        drop = _zero_area(V_all, F) & np.asarray(lossy)[prim_of_tri]
+        if drop.any():
+            logger.warning(
+                "%s: %s: dropped %d of %d triangles that quantization made zero-area",
+                Path(src).name,
+                mfield,
+                int(drop.sum()),
+                len(F),
+            )
+            F, prim_of_tri = F[~drop], prim_of_tri[~drop]
     if F.shape[0] == 0:
         g.fail(mfield, "has no triangles")
     check_faces(
         Polygons.from_triangles(F), V_all.shape[0], src, vertices=V_all, field=f"{mfield} triangles"
     )
-    if not np.isfinite(V_all).all():
-        g.fail(inst.field, "the node transform makes positions overflow to infinity")
-    prim_of_tri = np.repeat(np.arange(len(prims)), [len(x) for x in tris])
     part = _Part(inst.name, V_all, F, prim_of_tri, group_names)
     names = _target_names(g, m, mfield, n_targets or 0)
     part.named = names is not None
@@ -258,6 +275,25 @@ def _read_instance(g: Gltf, inst: Instance) -> _Part:
     for ti, name in enumerate(names):
         part.targets.append((name, np.concatenate(deltas[ti])))
     return part
+
+
+def _quantized(g: Gltf, ai: Any) -> bool:
+    """True if POSITION accessor ``ai`` (already checked) holds integers or meshopt data."""
+    acc = g.item("accessors", ai, "POSITION")
+    if acc.get("componentType") != FLOAT:
+        return True
+    if "bufferView" not in acc:
+        return False
+    exts = g.item("bufferViews", acc["bufferView"], "bufferView").get("extensions")
+    return isinstance(exts, dict) and any(e in exts for e in MESHOPT_EXTENSIONS)
+
+
+def _zero_area(V: NDArray[np.float64], F: NDArray[np.int64]) -> NDArray[np.bool_]:
+    """Triangles with no area, by the criterion of :func:`check_faces` (scale-invariant)."""
+    a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
+    area2 = np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    longest = np.max([((b - a) ** 2).sum(1), ((c - b) ** 2).sum(1), ((a - c) ** 2).sum(1)], axis=0)
+    return np.asarray(area2 <= 1e-12 * longest)
 
 
 def _target_names(g: Gltf, m: dict[str, Any], mfield: str, n_t: int) -> list[str] | None:
