@@ -229,9 +229,10 @@ def test_button_helper() -> None:
 
 
 # ------------------------------------------------------------------ the real panels
-@pytest.mark.parametrize("make", ["sculpt", "paint", "expressions", "export"])
+@pytest.mark.parametrize("make", ["sculpt", "paint", "expressions", "export", "wrinkles"])
 def test_every_panel_leaves_no_connection_behind(tiny_model, make) -> None:
     from widgets.gallery import ExpressionGallery
+    from widgets.wrinkles import WrinklePanel
 
     m = tiny_model
     gallery = ExpressionGallery(m, size=(8, 8), names=["up"])  # the palette is the caller's
@@ -243,8 +244,10 @@ def test_every_panel_leaves_no_connection_behind(tiny_model, make) -> None:
         p = PaintPanel(m, gallery, errors=out)
     elif make == "expressions":
         p = ExpressionPanel(m, errors=out)
-    else:
+    elif make == "export":
         p = ExportPanel(m, errors=out)
+    else:
+        p = WrinklePanel(m, errors=out, thumbnails=False)
     assert _counts(m) != before
     m.set_weight("up", 0.4)
     p.close()
@@ -255,6 +258,35 @@ def test_every_panel_leaves_no_connection_behind(tiny_model, make) -> None:
         assert m.handles.layer.progress is None  # the progress callback went too
     gallery.close()
     assert _errors(out) == ""
+
+
+def test_wrinkle_panel_lets_go_of_the_viewport_exactly_once(tiny_model) -> None:
+    from widgets import Viewport
+    from widgets.wrinkles import WrinklePanel
+
+    m = tiny_model
+    out = W.Output()
+    vp = Viewport(m, errors=out)
+    try:
+        before = _counts(m)
+        listeners = list(vp.drag_listeners)
+        tool_observers = len(vp._trait_notifiers.get("tool", {}).get("change", []))
+        p = WrinklePanel(m, vp, errors=out, thumbnails=False)
+        assert _counts(m) != before and len(vp.drag_listeners) == len(listeners) + 1
+        p.show_graph.value = not vp.feature_graph  # linked while open
+        assert p.show_graph.value == vp.feature_graph
+        p.close()
+        assert _counts(m) == before and vp.drag_listeners == listeners
+        assert len(vp._trait_notifiers["tool"]["change"]) == tool_observers
+        p.close()
+        assert _counts(m) == before and vp.drag_listeners == listeners
+        shown = vp.feature_graph
+        p.show_graph.value = not shown  # unlinked
+        assert vp.feature_graph == shown
+        vp.tool = "paint"  # the panel no longer follows the tool
+        assert _errors(out) == ""
+    finally:
+        vp.close()
 
 
 def test_panels_keep_their_undo_classes(tiny_model) -> None:

@@ -46,7 +46,9 @@ import numpy as np
 import traitlets as t
 from numpy.typing import NDArray
 
-from widgets._threading import ErrorSink, close_interactions
+from widgets.panels.base import ModelPanel, button
+from widgets.panels.names import next_free_name
+from widgets.panels.progress import ProgressRow
 from widgets.wrinkles.cards import ExampleCards
 from widgets.wrinkles.eraser import EraseControls, WrinkleEraser
 
@@ -84,13 +86,7 @@ def _sculptor_class() -> type:
     return ProgressSculptor
 
 
-def _button(desc: str, cls: str, tip: str, icon: str = "") -> W.Button:
-    b = W.Button(description=desc, tooltip=tip, icon=icon, layout=W.Layout(width="auto"))
-    b.add_class(cls)
-    return b
-
-
-class WrinklePanel(W.VBox):
+class WrinklePanel(ModelPanel):
     """Controls of the pose-space wrinkles of a FaceModel (``model.wrinkles``; Sculpt tab).
 
     Parameters
@@ -106,8 +102,6 @@ class WrinklePanel(W.VBox):
         Called before model edits (e.g. to close another panel's slider interaction).
     thumbnails : bool
         Render a small picture per example (~0.1 s each with one plotter).
-    layer : None
-        Not used (the fit is the model's ``model.wrinkles``); only None is accepted.
 
     Attributes
     ----------
@@ -127,14 +121,15 @@ class WrinklePanel(W.VBox):
         errors: W.Output | None = None,
         before_edit: Iterable[Callable[[], Any]] = (),
         thumbnails: bool = True,
-        layer: None = None,
     ) -> None:
-        if layer is not None:
-            raise TypeError("WrinklePanel: the fit is model.wrinkles; pass no layer")
-        self._model = model
+        super().__init__(
+            model,
+            errors=errors,
+            before_edit=before_edit,
+            on_error=self._show_error,
+            layout=W.Layout(width="100%", min_width="380px"),
+        )
         self.viewport = viewport
-        self.errors = ErrorSink(errors, on_error=self._show_error)
-        self._before_edit = list(before_edit)
         if viewport is not None:
             self._before_edit.append(viewport.end_drag)
         self._lock = threading.RLock()
@@ -144,18 +139,15 @@ class WrinklePanel(W.VBox):
         self._graph_sent: tuple[Any, bytes] | None = None
         self._last_status_t = 0.0
         self.last_fit_s = math.nan
-        self._links: list[Any] = []
 
-        self.fit_button = _button(
+        self.fit_button = button(
             "Fit wrinkles from examples", "fwb-wrinkle-fit",
             "Default handles if none, six procedural detailed expressions, WPSD fit (a few seconds)",
             icon="magic",
         )
-        self.progress = W.FloatProgress(value=0.0, min=0.0, max=1.0, bar_style="info",
-                                        layout=W.Layout(width="98%", visibility="hidden"))
-        self.progress.add_class("fwb-wrinkle-progress")
-        self.progress_label = W.HTML("")
-        self.progress_label.add_class("fwb-wrinkle-progress-label")
+        #: the fit's progress (also a ``progress(fraction, message)`` callback)
+        self.progress_row = ProgressRow("fwb-wrinkle-progress", "fwb-wrinkle-progress-label")
+        self.progress, self.progress_label = self.progress_row.bar, self.progress_row.label
         self.enabled = W.Checkbox(value=True, description="Wrinkles", indent=False,
                                   layout=W.Layout(width="110px"))
         self.enabled.add_class("fwb-wrinkles-on")
@@ -175,9 +167,9 @@ class WrinklePanel(W.VBox):
                                    readout_format=".2f", style={"description_width": "20px"},
                                    layout=W.Layout(width="220px"))
         self.scale.add_class("fwb-wrinkle-scale")
-        self.scale_button = _button("Scale wrinkles", "fwb-wrinkle-scale-apply",
+        self.scale_button = button("Scale wrinkles", "fwb-wrinkle-scale-apply",
                                     "Multiply this example's details and refit", icon="arrows-v")
-        self.rest_button = _button("Rest pose", "fwb-wrinkle-rest", "Set every weight to 0 (undoable)")
+        self.rest_button = button("Rest pose", "fwb-wrinkle-rest", "Set every weight to 0 (undoable)")
         self._erase = EraseControls(self, viewport)
         self._cards = ExampleCards(model, self._erase, self.view_example, self.errors.guard, thumbnails)
         self.cards = self._cards.box
@@ -185,7 +177,7 @@ class WrinklePanel(W.VBox):
         self.erase_note, self.erase_box = self._erase.note, self._erase.box
         self.new_name = W.Text(value="pose_1", placeholder="example name", layout=W.Layout(width="140px"))
         self.new_name.add_class("fwb-wrinkle-new-name")
-        self.add_button = _button(
+        self.add_button = button(
             "Add current pose as example", "fwb-wrinkle-add",
             "The current blend weights + their procedurally sculpted wrinkles become an example; refit",
             icon="plus",
@@ -207,9 +199,9 @@ class WrinklePanel(W.VBox):
             W.HBox([self.example, self.scale, self.scale_button], layout=row()),
             W.HBox([self.new_name, self.add_button, self.rest_button], layout=row()),
         ])
-        rows = [W.HTML(_HELP), self.fit_button, self.progress, self.progress_label, self.controls,
+        rows = [W.HTML(_HELP), self.fit_button, self.progress_row, self.controls,
                 self.status, self.error_line]
-        super().__init__(rows, layout=W.Layout(width="100%", min_width="380px"))
+        self.children = rows
         self.add_class("fwb-wrinkle-panel")
 
         g = self.errors.guard
@@ -221,27 +213,22 @@ class WrinklePanel(W.VBox):
         self.rest_button.on_click(g("rest pose")(self._on_rest))
         self.enabled.observe(g("wrinkles on/off")(self._on_enabled), "value")
         self.strength.observe(g("wrinkle strength")(self._on_strength), "value")
-        self._cb_wrinkles = g("WrinklePanel wrinkles")(self._on_wrinkles)
-        self._cb_deformed = g("WrinklePanel update")(self._on_deformed)
-        self._cb_handles = g("WrinklePanel handles")(self._sync_graph)
-        self._cb_drag = g("WrinklePanel drag stats")(self._on_drag_end)
-        self._cb_tool = g("WrinklePanel tool")(self._erase.on_tool)
         if viewport is not None:
-            self._links = [
+            for link in (
                 t.link((self.show_graph, "value"), (viewport, "feature_graph")),
                 t.link((self.erase_radius, "value"), (viewport, "brush_radius")),
-            ]
-            viewport.observe(self._cb_tool, "tool")
-            viewport.drag_listeners.append(self._cb_drag)
-        model.events.wrinkles.connect(self._cb_wrinkles)
-        model.events.deformed.connect(self._cb_deformed)
-        model.events.handles.connect(self._cb_handles)
-        self._connected = True
+            ):
+                self.on_close(link.unlink)
+            cb_tool = g("WrinklePanel tool")(self._erase.on_tool)
+            viewport.observe(cb_tool, "tool")
+            self.on_close(viewport.unobserve, cb_tool, "tool")
+            self.add_listener(viewport.drag_listeners, self._on_drag_end, "WrinklePanel drag stats")
+        ev = model.events
+        self.listen(ev.wrinkles, self._on_wrinkles, "WrinklePanel wrinkles")
+        self.listen(ev.deformed, self._on_deformed, "WrinklePanel update")
+        self.listen(ev.handles, self._sync_graph, "WrinklePanel handles")
+        self.on_close(self.stop_erasing)  # registered last: runs first on close
         self._refresh()
-
-    @property
-    def model(self) -> Any:
-        return self._model
 
     @property
     def fresh(self) -> bool:
@@ -262,11 +249,6 @@ class WrinklePanel(W.VBox):
             return self._sculptor
 
     # ------------------------------------------------------- actions (UI -> model)
-    def _flush(self) -> None:
-        close_interactions(self._model)
-        for fn in self._before_edit:
-            fn()
-
     def _require_fit(self, what: str) -> Any:
         w = self._model.wrinkles
         if not w.fitted:
@@ -283,7 +265,7 @@ class WrinklePanel(W.VBox):
         from workbench.methods.wrinkles.examples import example_poses_for
         from workbench.methods.wrinkles.family import fit_sample_wrinkles
 
-        self._flush()
+        self.flush()
         self.error_line.value = ""
         model = self._model
         poses, skipped = example_poses_for(model.shape_names)
@@ -291,32 +273,31 @@ class WrinklePanel(W.VBox):
         t0 = time.perf_counter()
         self.fit_button.disabled = True
         try:
-            self._progress(0.02, "preparing the procedural sculptor (operators of the mesh) ...")
+            self.progress_row(0.02, "preparing the procedural sculptor (operators of the mesh) ...")
             sculptor = self.sculptor()
 
             def on_detailed() -> None:
                 done[0] += 1
                 if done[0] < total:
-                    self._progress(0.1 + 0.6 * done[0] / total,
+                    self.progress_row(0.1 + 0.6 * done[0] / total,
                                    f"sculpting example pose {done[0] + 1} of {total} ...")
                 else:
-                    self._progress(0.72, "fitting WPSD (details in local frames, per-vertex RBF weights) ...")
+                    self.progress_row(0.72, "fitting WPSD (details in local frames, per-vertex RBF weights) ...")
 
             sculptor.on_detailed = on_detailed
             try:
-                self._progress(0.1, f"sculpting example pose 1 of {total} ...")
+                self.progress_row(0.1, f"sculpting example pose 1 of {total} ...")
                 wrinkles = fit_sample_wrinkles(model, sculptor=sculptor)
             finally:
                 sculptor.on_detailed = None
             self.last_fit_s = time.perf_counter() - t0
-            self._progress(0.8, "preparing the first drag (shell basis, detail kernels) ...")
+            self.progress_row(0.8, "preparing the first drag (shell basis, detail kernels) ...")
             wrinkles.prepare()
-            self._progress(0.85, "rendering the example thumbnails ...")
+            self.progress_row(0.85, "rendering the example thumbnails ...")
             self._refresh()
-            self._progress(1.0, "")
+            self.progress_row(1.0, "")
         except BaseException:
-            self.progress.bar_style = "danger"
-            self.progress_label.value = "<span style='color:#b00'>fit failed (see the error below)</span>"
+            self.progress_row.fail("fit failed (see the error below)")
             raise
         finally:
             self.fit_button.disabled = False
@@ -331,7 +312,7 @@ class WrinklePanel(W.VBox):
         w = self._require_fit("view example")
         if name not in w.example_names:
             raise KeyError(f"view example: no example {name!r}; have {w.example_names}")
-        self._flush()
+        self.flush()
         weights = dict.fromkeys(self._model.shape_names, 0.0)
         weights.update(w.example_weights[w.example_names.index(name)])
         self._model.set_weights(weights, label=f"View example {name}")
@@ -349,7 +330,7 @@ class WrinklePanel(W.VBox):
         s = float(scale)
         if not (math.isfinite(s) and s >= 0):
             raise ValueError(f"scale wrinkles: the factor must be a finite number >= 0, got {scale!r}")
-        self._flush()
+        self.flush()
         w.edit_example(name, scale=s)
         self._update_status(f"<b>{name}</b> wrinkles ×{s:g}")
 
@@ -374,16 +355,16 @@ class WrinklePanel(W.VBox):
         weights = {k: float(v) for k, v in model.weights.items() if v != 0.0}
         if not weights:
             raise ValueError("add example pose: all weights are 0 (the rest pose); set an expression first")
-        self._flush()
+        self.flush()
         t0 = time.perf_counter()
-        self._progress(0.1, f"sculpting {name} ...")
+        self.progress_row(0.1, f"sculpting {name} ...")
         try:
             detailed = self.sculptor().detailed(weights)
-            self._progress(0.5, f"refitting with {len(w.example_names) + 1} examples ...")
+            self.progress_row(0.5, f"refitting with {len(w.example_names) + 1} examples ...")
             w.add_example(name, weights, detailed)
         finally:
-            self._progress(1.0, "")
-        self.new_name.value = _next_name(name, w.example_names)
+            self.progress_row(1.0, "")
+        self.new_name.value = next_free_name(name, w.example_names)
         self._update_status(f"added <b>{name}</b>, refitted in {time.perf_counter() - t0:.1f} s")
 
     # ---- erasing wrinkles with the brush (the controls: .eraser.EraseControls)
@@ -426,7 +407,7 @@ class WrinklePanel(W.VBox):
         if name not in w.example_names:
             raise KeyError(f"erase wrinkles: no example {name!r}; have {w.example_names}")
         if self.erasing != name:
-            self._flush()
+            self.flush()
         return self._erase.start(name)
 
     def stop_erasing(self) -> None:
@@ -445,7 +426,7 @@ class WrinklePanel(W.VBox):
         m = np.clip(np.asarray(mask, np.float64).reshape(n), 0.0, 1.0)
         if not np.any(m > 0):
             return False
-        self._flush()
+        self.flush()
         before = w.pose_space
         if w.edit_example(name, mask=m) is before:
             return False
@@ -453,29 +434,22 @@ class WrinklePanel(W.VBox):
         return True
 
     def _on_rest(self, _b: Any = None) -> None:
-        self._flush()
+        self.flush()
         self._model.reset_weights()
 
     def _on_enabled(self, change: dict) -> None:
         w = self._model.wrinkles
         if not w.fitted or bool(change["new"]) == w.enabled:
             return  # the model's own value coming back (or nothing to switch yet)
-        self._flush()
+        self.flush()
         w.set_enabled(change["new"])
 
     def _on_strength(self, change: dict) -> None:
         w = self._model.wrinkles
         if not w.fitted or float(change["new"]) == w.strength:
             return
-        self._flush()
+        self.flush()
         w.set_strength(change["new"])
-
-    def _progress(self, fraction: float, message: str) -> None:
-        done = fraction >= 1.0
-        self.progress.bar_style = "info"
-        self.progress.value = min(max(float(fraction), 0.0), 1.0)
-        self.progress.layout.visibility = "hidden" if done else "visible"
-        self.progress_label.value = "" if done else f"<i>{message}</i>"
 
     def _show_error(self, text: str) -> None:
         self.error_line.value = f"<span style='color:#b00'>⚠ {html.escape(text)}</span>"
@@ -552,7 +526,7 @@ class WrinklePanel(W.VBox):
         self.example.options = names
         self.example.value = current if current in names else names[0] if names else None
         if names and (self.new_name.value.strip() in names or not self.new_name.value.strip()):
-            self.new_name.value = _next_name("pose_1", names)
+            self.new_name.value = next_free_name("pose_1", names)
         self._sync_graph()
         self._update_status(detail=False)
 
@@ -582,36 +556,3 @@ class WrinklePanel(W.VBox):
         if note:
             parts.append(note)
         self.status.value = " · ".join(parts)
-
-    # ------------------------------------------------------------ closing
-    def close(self) -> None:
-        """Disconnect from the model and the viewport, then close the child widgets."""
-        if getattr(self, "_connected", False):
-            self.stop_erasing()
-            ev = self._model.events
-            ev.wrinkles.disconnect(self._cb_wrinkles)
-            ev.deformed.disconnect(self._cb_deformed)
-            ev.handles.disconnect(self._cb_handles)
-            for link in self._links:
-                link.unlink()
-            vp = self.viewport
-            if vp is not None:
-                vp.unobserve(self._cb_tool, "tool")
-                if self._cb_drag in vp.drag_listeners:
-                    vp.drag_listeners.remove(self._cb_drag)
-            self._connected = False
-        super().close()
-
-
-def _next_name(name: str, taken: Iterable[str]) -> str:
-    """``pose_1`` -> the first of ``pose_1, pose_2, ...`` not in ``taken``."""
-    used = set(taken)
-    stem, _, num = name.rpartition("_")
-    if not stem or not num.isdigit():
-        stem, num = name, "1"
-    k = max(int(num), 1)
-    cand = f"{stem}_{k}"
-    while cand in used:
-        k += 1
-        cand = f"{stem}_{k}"
-    return cand
