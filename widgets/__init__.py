@@ -32,7 +32,7 @@ from widgets.app import TAB_TITLES, Workbench, show_workbench
 from widgets.gallery import ExpressionGallery
 from widgets.panels import ExportPanel, ExpressionPanel, PaintPanel, SculptPanel
 from widgets.recovery import RecoveryPrompt, recovery_prompt
-from widgets.regions_panel import RegionsPanel
+from widgets.regions import RegionsPanel
 from widgets.timeline import TimelineWidget
 from widgets.viewport import Viewport
 from widgets.wrinkles import WrinklePanel

@@ -24,11 +24,6 @@ tells its owner through ``on_close``. Without it such an edit made within the
 idle time of a slider drag would join the drag's interaction and share its undo
 step ("Drag jawOpen" swallowing "Key 1 weights"), and ``set_time`` / ``undo``,
 which refuse to run inside an interaction, would fail.
-
-Objects that still hold a ``with model.interaction()`` open across messages
-(the region pin drag and region brush of ``widgets.regions_panel``) register
-their closer with :func:`register_interaction_closer`; :func:`close_interactions`
-calls those too. Once they hold tokens, the registry can go.
 """
 
 from __future__ import annotations
@@ -97,44 +92,7 @@ class ErrorSink:
         return deco
 
 
-# model -> [(weak reference to a bound method ending an interaction held open on it,
-#            True for a slider burst)]
-_closers: weakref.WeakKeyDictionary[Any, list[tuple[weakref.WeakMethod[Any], bool]]] = (
-    weakref.WeakKeyDictionary()
-)
-_closers_lock = threading.Lock()
-
-
-def register_interaction_closer(
-    model: Any, closer: Callable[[], Any], *, burst: bool = False
-) -> None:
-    """Have :func:`close_interactions` call ``closer`` (a bound method, held weakly).
-
-    ``closer`` ends an interaction its widget may keep open on ``model`` between
-    messages (and is a no-op when none is open), e.g. ``grouper.flush`` or
-    ``viewport.end_drag``. ``burst``: it closes a slider burst (an
-    :class:`InteractionGrouper`), not a pointer drag. It is dropped when its
-    object is garbage collected, or by :func:`unregister_interaction_closer`.
-    """
-    ref = weakref.WeakMethod(closer)
-    with _closers_lock:
-        refs = _closers.setdefault(model, [])
-        refs[:] = [(r, b) for r, b in refs if r() is not None and r != ref]
-        refs.append((ref, bool(burst)))
-
-
-def unregister_interaction_closer(model: Any, closer: Callable[[], Any]) -> None:
-    """Forget ``closer`` (a widget being closed); no-op if it was not registered."""
-    ref = weakref.WeakMethod(closer)
-    with _closers_lock:
-        refs = _closers.get(model)
-        if refs is not None:
-            refs[:] = [(r, b) for r, b in refs if r() is not None and r != ref]
-
-
-def close_interactions(
-    model: Any, *, skip: Callable[[], Any] | None = None, bursts_only: bool = False
-) -> None:
+def close_interactions(model: Any, *, bursts_only: bool = False) -> None:
     """End every interaction the widgets hold open on ``model`` (each becomes its undo step).
 
     Call before a discrete edit (a key, an import, undo, the start of a drag),
@@ -142,29 +100,11 @@ def close_interactions(
     whose idle timer has not fired yet. The open token interaction is closed
     with ``model.close_interaction()`` (its owner is told through ``on_close``).
     ``bursts_only``: only a slider burst (an :class:`InteractionGrouper`'s);
-    pointer drags stay open. ``skip``: a legacy closer not to call. Every
-    closer runs; the first exception is raised after.
+    pointer drags stay open.
     """
-    first: BaseException | None = None
     token = getattr(model, "interaction_token", None)
     if token is not None and (not bursts_only or token in _burst_tokens):
-        try:
-            model.close_interaction()
-        except Exception as exc:
-            first = exc
-    with _closers_lock:
-        refs = list(_closers.get(model, ()))
-    for ref, burst in refs:
-        fn = ref()
-        if fn is None or (bursts_only and not burst) or (skip is not None and fn == skip):
-            continue
-        try:
-            fn()
-        except Exception as exc:
-            if first is None:
-                first = exc
-    if first is not None:
-        raise first
+        model.close_interaction()
 
 
 #: tokens of the open slider bursts (``close_interactions(bursts_only=True)`` closes only these)

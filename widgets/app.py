@@ -17,7 +17,7 @@ import traitlets
 from widgets._threading import ErrorSink, close_interactions
 from widgets.gallery import ExpressionGallery
 from widgets.panels import ExportPanel, ExpressionPanel, PaintPanel, SculptPanel, UndoRedoButtons
-from widgets.regions_panel import RegionsPanel
+from widgets.regions import RegionsPanel
 from widgets.timeline import TimelineWidget
 from widgets.viewport import Viewport
 from widgets.wrinkles import WrinklePanel

@@ -8,7 +8,7 @@ Each is a :class:`~widgets.viewport.gestures.Gesture` run by the viewport's
 * :class:`PaintStroke` (``tool="paint"``, Pighin et al. 1998 §4.2): brush dabs
   on the selected expression's paint layer; ``"Paint <expression>"``.
 * :class:`HookedDrag`: marker drags go to ``viewport.drag_handler`` (region pin
-  drag, region brush, split-seed pick in :mod:`widgets.regions_panel`) with
+  drag, region brush, split-seed pick in :mod:`widgets.regions.tools`) with
   ``begin(index, vertex)``, ``move(index, position) -> ms``, ``end()`` and
   optionally ``cancel()``; the handler owns its model interaction.
 * :func:`add_handle` / :func:`remove_handle`: Shift-click / Alt-click (single
