@@ -10,6 +10,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from workbench.geometry.mesh_checks import MeshFormatError
+from workbench.io import obj as obj_module
+from workbench.io import obj_folder as folder_module
 from workbench.io.obj import parse_obj_text, read_obj
 from workbench.io.obj_folder import read_obj_folder
 from workbench.io.registry import read_any, supported_inputs
@@ -360,3 +362,201 @@ def test_registry_custom_reader_wins_by_name(tmp_path: Path) -> None:
         assert "myfmt: a .myfmt file" in supported_inputs()
     finally:
         registry._READERS[:] = saved
+
+
+# ---- the fast (vectorised) parser reads exactly what the line parser reads ---------------
+
+def blender_obj(V: np.ndarray, quads: list[list[int]], fmt: str = "{:.6f}", eol: str = "\n") -> str:
+    """An OBJ as Blender writes it: o, v, vt, vn, s, usemtl, f v/vt/vn."""
+    lines = ["# Blender v4.2 OBJ File", "mtllib face.mtl", "o Head"]
+    lines += ["v " + " ".join(fmt.format(c) for c in row) for row in V.tolist()]
+    lines += [f"vt {i / len(V):.6f} 0.500000" for i in range(len(V))]
+    lines += ["vn 0.0000 0.0000 1.0000"]
+    lines += ["s 0", "usemtl skin"]
+    lines += ["f " + " ".join(f"{k + 1}/{k + 1}/1" for k in q) for q in quads]
+    return eol.join(lines) + eol
+
+
+def grid(n: int = 6, seed: int = 0) -> tuple[np.ndarray, list[list[int]]]:
+    rng = np.random.default_rng(seed)
+    jj, ii = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    V = np.stack([ii.ravel(), jj.ravel(), rng.normal(size=n * n) * 0.1], axis=1) * 1.5 - 3.0
+    quads = [
+        [j * n + i, j * n + i + 1, (j + 1) * n + i + 1, (j + 1) * n + i]
+        for j in range(n - 1)
+        for i in range(n - 1)
+    ]
+    return V, quads
+
+
+def assert_same_face(a, b) -> None:
+    np.testing.assert_array_equal(a.vertices, b.vertices)
+    assert np.array_equal(np.signbit(a.vertices), np.signbit(b.vertices))
+    assert a.polygons.equals(b.polygons)
+    assert a.group_names == b.group_names
+    if a.face_groups is None:
+        assert b.face_groups is None
+    else:
+        np.testing.assert_array_equal(a.face_groups, b.face_groups)
+
+
+def line_parser(data: bytes, source: str = "x.obj"):
+    return obj_module._parse_lines(obj_module._decode(data), source)
+
+
+V6, Q6 = grid()
+FAST_CASES = {
+    "blender": blender_obj(V6, Q6),
+    "repr floats with exponents": blender_obj(V6 * 1e-5, Q6, fmt="{!r}"),
+    "mixed decimals": obj_text(np.round(V6, 3), Q6),
+    "crlf": blender_obj(V6, Q6, eol="\r\n"),
+    "signs, .5 and 5.": "v +1.5 .5 -0.0\nv 2. -.25 +0\nv 0 1 0.\nf 1 2 3\n",
+    "tabs and trailing blanks": "v\t0 0 0 \t\nv 1\t0\t0\nv 0 1 0   \nf\t1 2\t3  \n",
+    "w and colours": "v 0 0 0 1\nv 1 0 0 0.5 0.5 0.5\nv 0 1 0 1 0.2 0.2 0.2\nf 1 2 3\n",
+    "v//vn and v/vt": "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nvn 0 0 1\nf 1//1 2//1 4//1\nf 1/1 4/1 3/1\n",
+    "relative indices, groups again, comments": (
+        "# a\n\nv 0 0 0\nv 1 0 0\nv 0 1 0\ng a b\nf -3 -2 -1\no eye\n#x\nv 0 0 1\nv 1 0 1\n"
+        "v 0 1 1\nf -3 -2 -1\ng a b\nf 1 2 6\ng\nf 4 5 3"
+    ),
+    "utf-8 group name": "v 0 0 0\nv 1 0 0\nv 0 1 0\ng Zähne\nf 1 2 3\n",
+    "vt at the end of a file": "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nvt",
+}
+
+
+@pytest.mark.parametrize("name", list(FAST_CASES))
+def test_fast_parser_agrees_with_the_line_parser(name: str) -> None:
+    data = FAST_CASES[name].encode()
+    fast, template = obj_module._parse(data, "x.obj")
+    assert template is not None, "expected the vectorised parser to read this file"
+    assert_same_face(fast, line_parser(data))
+
+
+@pytest.mark.parametrize(
+    "text",
+    [
+        "  v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n",  # an indented statement
+        "v 0 0 0\rv 1 0 0\rv 0 1 0\rf 1 2 3\r",  # old Mac line ends
+        "v 0 0 0\nv 1 0 0\nv 0 1 0\x0cf 1 2 3\n",  # a form feed ends a line for str.splitlines
+        "v 0 0 0\nv 1 0 0\nv 0 1 0\ng caf\xe9\nf 1 2 3\n",  # Latin-1
+    ],
+)
+def test_unusual_files_are_read_by_the_line_parser(text: str) -> None:
+    data = text.encode("latin-1")
+    face, template = obj_module._parse(data, "x.obj")
+    assert_same_face(face, line_parser(data))
+    if "\xe9" not in text:
+        assert template is None
+
+
+ALPHABET = b"0123456789.-+/ \t\r\nvftne#g"
+
+
+@settings(max_examples=300, deadline=None)
+@given(data=st.data())
+def test_fuzz_fast_parser_gives_the_line_parsers_result_or_error(data: st.DataObject) -> None:
+    base = FAST_CASES[data.draw(st.sampled_from(list(FAST_CASES)))].encode()
+    raw = bytearray(base)
+    for _ in range(data.draw(st.integers(1, 4))):
+        pos = data.draw(st.integers(0, max(len(raw) - 1, 0)))
+        op = data.draw(st.sampled_from(["set", "insert", "delete"]))
+        byte = data.draw(st.sampled_from(list(ALPHABET)))
+        if op == "set" and raw:
+            raw[pos] = byte
+        elif op == "insert":
+            raw[pos:pos] = bytes([byte])
+        elif op == "delete" and raw:
+            del raw[pos : pos + data.draw(st.integers(1, 4))]
+    blob = bytes(raw)
+    try:
+        expected = line_parser(blob)
+    except MeshFormatError as exc:
+        with pytest.raises(MeshFormatError) as got:
+            obj_module.parse_obj_bytes(blob, "x.obj")
+        assert (str(got.value), got.value.field) == (str(exc), exc.field)
+        return
+    assert_same_face(obj_module.parse_obj_bytes(blob, "x.obj"), expected)
+
+
+# ---- folder: faces parsed once, v lines that did not move not converted again ------------
+
+
+def blender_folder(root: Path, n_shapes: int = 4, n: int = 8) -> tuple[Path, np.ndarray, dict]:
+    """neutral.obj + shapes moving a patch (other v lines written as in the neutral)."""
+    root.mkdir()
+    V, Q = grid(n, seed=1)
+    (root / "neutral.obj").write_text(blender_obj(V, Q))
+    rng = np.random.default_rng(2)
+    shapes = {}
+    for k in range(n_shapes):
+        S = V.copy()
+        moved = rng.choice(len(V), size=len(V) // (k + 2), replace=False)
+        S[moved, 2] += rng.normal(size=moved.size) * 0.05
+        # a same-length rewrite: -0.5 -> -0.4 keeps the line length
+        S[0, 0] = V[0, 0] + (0.1 if k == 1 else 0.0)
+        shapes[f"shape{k}"] = S
+        (root / f"shape{k}.obj").write_text(blender_obj(S, Q))
+    return root, V, shapes
+
+
+def reference_folder(folder: Path) -> dict[str, np.ndarray]:
+    """Deltas as the line parser reads each file (the reader's meaning, file by file)."""
+    base = line_parser((folder / "neutral.obj").read_bytes()).vertices
+    return {
+        p.stem: (line_parser(p.read_bytes()).vertices - base).astype(np.float32)
+        for p in sorted(folder.glob("*.obj"))
+        if p.stem != "neutral"
+    }
+
+
+def test_folder_fast_path_matches_the_line_parser(tmp_path: Path, monkeypatch) -> None:
+    folder, _, _ = blender_folder(tmp_path / "f")
+    calls: list[Path] = []
+    full = folder_module._read_full
+    monkeypatch.setattr(folder_module, "_read_full", lambda p, *a: calls.append(p) or full(p, *a))
+    ref = reference_folder(folder)
+    for workers in (1, 3):
+        face = read_obj_folder(folder, workers=workers)
+        assert calls == []  # every shape file took the fast path
+        assert face.shape_names == list(ref)
+        for name, delta in face.shapes:
+            np.testing.assert_array_equal(delta, ref[name])
+
+
+def test_folder_shapes_written_differently_are_parsed_in_full(tmp_path: Path) -> None:
+    folder, V, _ = blender_folder(tmp_path / "f", n_shapes=1)
+    _, Q = grid(8, seed=1)
+    S = V + 0.25
+    (folder / "other_writer.obj").write_text(obj_text(S, Q))  # f a b c d, no vt/vn, repr floats
+    face = read_obj_folder(folder)
+    np.testing.assert_array_equal(dict(face.shapes)["other_writer"], reference_folder(folder)["other_writer"])
+    np.testing.assert_allclose(dict(face.shapes)["other_writer"], 0.25, atol=1e-6)
+
+
+def test_folder_same_face_lines_but_other_relative_indices_differ(tmp_path: Path) -> None:
+    folder = tmp_path / "f"
+    folder.mkdir()
+    write(folder / "neutral.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf -3 -2 -1\nv 2 0 0\nv 3 0 0\nv 2 1 0\nf -3 -2 -1\n")
+    write(folder / "jawOpen.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 2 0 0\nv 3 0 0\nv 2 1 0\nf -3 -2 -1\nf -3 -2 -1\n")
+    with pytest.raises(MeshFormatError, match=r"jawOpen.obj: line 8: face 1 \[3, 4, 5\] duplicates face 0"):
+        read_obj_folder(folder)
+
+
+def test_folder_collapsed_face_in_a_shape_is_an_error(tmp_path: Path) -> None:
+    folder, V, _ = blender_folder(tmp_path / "f", n_shapes=1)
+    _, Q = grid(8, seed=1)
+    S = V.copy()
+    S[Q[3][1]] = S[Q[3][0]]  # two corners of quad 3 on top of each other ...
+    S[Q[3][2]] = S[Q[3][0]]  # ... and a third: zero area
+    (folder / "blink.obj").write_text(blender_obj(S, Q))
+    with pytest.raises(MeshFormatError, match=r"^blink.obj: line \d+: face 3 .* has zero area"):
+        read_obj_folder(folder)
+
+
+@pytest.mark.parametrize("workers", [1, 4])
+def test_folder_reports_the_first_bad_file_by_name(tmp_path: Path, workers: int) -> None:
+    folder = blender_folder(tmp_path / "f", n_shapes=6)[0]
+    for name in ("shape4.obj", "shape2.obj"):
+        text = (folder / name).read_text().replace("v ", "v nan ", 1)
+        (folder / name).write_text(text)
+    with pytest.raises(MeshFormatError, match=r"^shape2.obj: line 4: row 0 is not finite"):
+        read_obj_folder(folder, workers=workers)

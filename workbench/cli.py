@@ -34,8 +34,16 @@ def format_info(model: FaceModel, path: str) -> str:
         f"(sizes: {', '.join(f'{int(k)}-gon x{int(c)}' for k, c in zip(*np.unique(model.polygons.sizes, return_counts=True), strict=True))})",
         f"  units       {md.units} ({md.metres_per_unit:g} m per unit), up {md.up_axis}, front {md.front_axis}",
     ]
+    # how the unit was decided on import (workbench.io.units): given, stated by the format, inferred
+    units_entry = next((p for p in md.provenance if p.get("operation") == "units"), None)
+    if units_entry is not None:
+        lines.append(f"  units from  {units_entry.get('how', '?')}: {units_entry.get('detail', '')}")
     bb = model.vertices.max(0) - model.vertices.min(0)
-    lines.append(f"  size        {bb[0]:.4g} x {bb[1]:.4g} x {bb[2]:.4g} {md.units}")
+    size = f"  size        {bb[0]:.4g} x {bb[1]:.4g} x {bb[2]:.4g} {md.units}"
+    if md.units != "m":
+        m = bb * md.metres_per_unit
+        size += f" ({m[0]:.3g} x {m[1]:.3g} x {m[2]:.3g} m)"
+    lines.append(size)
     counts = np.bincount(model.component_labels, minlength=len(model.component_names))
     lines.append(f"  components  {len(model.component_names)}")
     for name, c in zip(model.component_names, counts, strict=True):
@@ -53,6 +61,8 @@ def format_info(model: FaceModel, path: str) -> str:
             f"moves {moved} vertices{extra}{tag}"
         )
     for p in md.provenance:
+        if p is units_entry:
+            continue  # shown under units
         lines.append("  provenance  " + ", ".join(f"{k}={v}" for k, v in p.items()))
     return "\n".join(lines)
 

@@ -119,7 +119,7 @@ def detached_shape(shape: BlendShape) -> BlendShape:
 class ModelMetadata:
     """Where the model came from and how to read its coordinates.
 
-    ``units`` is a length unit name ("m", "cm", "dm", "mm"); ``up_axis`` and
+    ``units`` is a length unit name ("m", "cm", "dm", "mm", "in"); ``up_axis`` and
     ``front_axis`` are signed axis names ("+y", "+z"): the face looks toward
     ``front_axis``. "Left" in shape names always means the subject's left.
     """
@@ -158,5 +158,5 @@ class ModelMetadata:
         }
 
 
-UNIT_TO_METRES = {"m": 1.0, "dm": 0.1, "cm": 0.01, "mm": 0.001}
+UNIT_TO_METRES = {"m": 1.0, "dm": 0.1, "cm": 0.01, "mm": 0.001, "in": 0.0254}
 AXES = ("+x", "-x", "+y", "-y", "+z", "-z")

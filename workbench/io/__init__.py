@@ -19,26 +19,10 @@ from workbench.fileformat import SUFFIX, load_model
 from workbench.geometry.mesh_checks import label_components
 from workbench.io.base import ImportedFace
 from workbench.io.registry import read_any
+from workbench.io.units import decide_units
 from workbench.model import BlendShape, FaceModel, ModelMetadata
 
 __all__ = ["ImportedFace", "load", "model_from_imported"]
-
-_UNIT_NAMES = {
-    "m": "m",
-    "meter": "m",
-    "metre": "m",
-    "meters": "m",
-    "metres": "m",
-    "dm": "dm",
-    "decimeter": "dm",
-    "decimetre": "dm",
-    "cm": "cm",
-    "centimeter": "cm",
-    "centimetre": "cm",
-    "mm": "mm",
-    "millimeter": "mm",
-    "millimetre": "mm",
-}
 
 
 def _is_workbench_file(path: Path) -> bool:
@@ -55,7 +39,9 @@ def model_from_imported(
 ) -> FaceModel:
     """Build a :class:`FaceModel` from a reader's output (triangulate, label components).
 
-    ``units`` overrides the file's unit; files without one (OBJ) default to metres.
+    ``units`` overrides the file's unit; for files without one (OBJ) the unit is
+    inferred from the head's size (:func:`workbench.io.units.decide_units`, logged
+    and recorded in ``metadata.provenance``).
     """
     faces, tri_poly = imported.polygons.triangulate()
     group_of_face = (
@@ -64,16 +50,21 @@ def model_from_imported(
     labels, names = label_components(
         faces, len(imported.vertices), group_of_face, list(imported.group_names or [])
     )
-    given = units or imported.units or "m"
-    if given.lower() not in _UNIT_NAMES:
-        raise ValueError(f"units: expected one of {sorted(set(_UNIT_NAMES.values()))}, got {given!r}")
-    units = _UNIT_NAMES[given.lower()]
+    decision = decide_units(
+        imported.vertices,
+        stated=imported.units,
+        given=units or None,
+        source=str(imported.source_files[0]) if imported.source_files else name,
+    )
     metadata = ModelMetadata(
         name=name,
-        units=units,
+        units=decision.unit,
         up_axis=imported.up_axis or "+y",
         front_axis="+z",
-        provenance=tuple({"source": str(f)} for f in imported.source_files),
+        provenance=(
+            *({"source": str(f)} for f in imported.source_files),
+            decision.provenance(),
+        ),
     )
     shapes = [BlendShape(n, d) for n, d in imported.shapes]
     return FaceModel(
@@ -97,9 +88,10 @@ def load(path: str | os.PathLike[str], *, units: str | None = None) -> FaceModel
         ``mesh.extras.targetNames``); a folder of same-topology ``.obj`` files (a
         neutral plus one per expression); or an ``.obj`` with MakeHuman ``.target``
         files in a ``targets/`` folder beside it (pass the folder).
-    units : {"m", "dm", "cm", "mm"}, optional
-        Length unit of an imported mesh that does not state one (OBJ); default metres.
-        Ignored for workbench files, which store their unit.
+    units : {"m", "dm", "cm", "mm", "in"}, optional
+        Length unit of an imported mesh. Default: the one the format states (glTF:
+        metres), else (OBJ) inferred from the head's size, see
+        :mod:`workbench.io.units`. Ignored for workbench files, which store their unit.
     """
     p = Path(path)
     if not p.exists():
