@@ -22,6 +22,7 @@ Median of ``--repeat`` runs after one warm-up, one process, 2 shared cores.
 from __future__ import annotations
 
 import argparse
+import logging
 import statistics
 import sys
 import tempfile
@@ -57,6 +58,8 @@ def main() -> None:
     args = ap.parse_args()
     import pygltflib
 
+    # the reader's notes (skipped texture extensions, triangles flattened by quantization) once per file, not per run
+    logging.getLogger("workbench.io.gltf").setLevel(logging.ERROR)
     tools = node_bin()
     rows = []
     with tempfile.TemporaryDirectory() as tmp:

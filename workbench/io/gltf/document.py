@@ -362,7 +362,8 @@ class Gltf:
 
         if as_index:
             return raw.reshape(-1).astype(np.int64)
-        out = raw.astype(np.float64)
+        with np.errstate(invalid="ignore"):  # a signalling NaN in the file; check_vertices reports it
+            out = raw.astype(np.float64)
         if normalized:
             div, lo = NORMALIZE[ctype]
             out = np.maximum(out / div, lo)
