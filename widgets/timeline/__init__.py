@@ -18,15 +18,17 @@ front end                      model call
 =============================  ==========================================================
 drag the playhead / ruler      ``set_time(t)``: a "scrub" gesture (one message in flight)
 drag a key diamond, release    ``timeline.move_key(track, i, t)`` — one undo step per drag
-Delete / Backspace / button    ``timeline.delete_key`` (several keys: one ``timeline.set``)
-double-click a row             ``timeline.key_weights(t, [shape])`` / ``key_handles(t)``
+Delete / Backspace / button    ``timeline.delete_keys([(track, i), ...])`` — one undo step
+double-click a row             ``timeline.key_weights(t, [shape])`` / ``key_handles(t)`` /
+                               ``add_key(track, t, value at the playhead)``
 "Key" / "Key handles"          ``timeline.key_weights(time)`` / ``key_handles(time)``
 yaw/pitch/roll, "Key head pose" ``timeline.key_head_pose(time, rotation)`` (translation kept)
-interpolation selector         ``timeline.set(tl.set_interpolation(...))``
-drag a tangent handle          ``timeline.set(tl.set_tangents(...))`` (user tangents)
+interpolation selector         ``timeline.set_interpolations([(track, i), ...], kind)``
+drag a tangent handle          ``timeline.set_tangents(track, i, in_tangent=, out_tangent=)``
+double-click a tangent handle  ``timeline.set_tangents(track, i, mode="auto_clamped")``
 drop an expression chip        ``timeline.key_expression(t, name)`` (HTML5 drag and drop)
 "Key selected expression"      ``timeline.key_expression(time, gallery.selected)``
-fps field                      ``timeline.set(tl.replace(fps=...))``
+fps field                      ``timeline.set_fps(fps)``
 Play / Pause / Loop            kernel-side asyncio task calling ``set_time``
 =============================  ==========================================================
 

@@ -4,8 +4,10 @@ One function per message ``{"type": kind, ...}`` in :data:`HANDLERS`, called
 by :meth:`TimelineWidget.handle_message
 <widgets.timeline.widget.TimelineWidget.handle_message>` after it ended the
 interactions other widgets hold open (except for :data:`NOT_EDITS`). Every
-edit goes through the ``model.timeline`` facet (one undo step each) or
-``model.set_time``; the widget never touches the history.
+edit is one named method of the ``model.timeline`` facet (one undo step each:
+``move_key``, ``delete_keys``, ``add_key`` / ``key_weights`` / ``key_handles``,
+``set_interpolations``, ``set_tangents``, ``set_fps``, ...) or
+``model.set_time``; the widget never builds timelines nor touches the history.
 
 The playhead drag is a "scrub" gesture of the project's gesture protocol
 (``widgets/js/src/viewport/gestures.js``: ``phase`` "start" / "move" / "end" /
@@ -100,17 +102,9 @@ def delete_keys(w: TimelineWidget, c: dict[str, Any]) -> None:
     keys = _keys(c)
     if not keys:
         return
-    facet = w.model.timeline
-    if len(keys) == 1:
-        facet.delete_key(*keys[0])
-    else:
-        tl = facet.value
-        # highest index first, so earlier deletions do not shift later ones
-        for tn, i in sorted(set(keys), key=lambda k: (k[0], -k[1])):
-            tl = tl.delete_key(tn, i)
-        facet.set(tl, f"Delete {len(keys)} keys")
+    n = w.model.timeline.delete_keys(keys)
     w.selected_keys = []
-    w.status = f"deleted {len(keys)} key{'s' if len(keys) > 1 else ''}"
+    w.status = f"deleted {n} key{'s' if n > 1 else ''}"
 
 
 @handles("add_key")
@@ -121,10 +115,11 @@ def add_key(w: TimelineWidget, c: dict[str, Any]) -> None:
         m.timeline.key_weights(when, [track[len(WEIGHTS_PREFIX) :]])
     elif track == HANDLES:
         m.timeline.key_handles(when)
-    else:
-        tl = m.timeline.value
-        value = tl.tracks[track].evaluate(m.time)
-        m.timeline.set(tl.add_key(track, when, value), f"Key {track_label(track)} at {when:g}s")
+    else:  # a region or the head pose: the value it has at the playhead
+        tracks = m.timeline.value.tracks
+        if track not in tracks:
+            raise ValueError(f"add_key: track {track!r} has no keys to take a value from")
+        m.timeline.add_key(track, when, tracks[track].evaluate(m.time))
     _select(w, track, when)
     w.status = f"keyed {track_label(track)} at {when:.2f} s"
 
@@ -179,10 +174,7 @@ def set_interpolation(w: TimelineWidget, c: dict[str, Any]) -> None:
     keys = _keys(c)
     if not keys:
         return
-    tl = w.model.timeline.value
-    for tn, i in keys:
-        tl = tl.set_interpolation(tn, i, interp)
-    w.model.timeline.set(tl, f"Set interpolation {interp}")
+    w.model.timeline.set_interpolations(keys, interp)
     w.status = f"{len(keys)} key{'s' if len(keys) > 1 else ''} → {interp}"
 
 
@@ -195,34 +187,21 @@ def set_tangent(w: TimelineWidget, c: dict[str, Any]) -> None:
     if side not in ("in", "out"):
         raise ValueError(f"tangent side must be 'in' or 'out', got {side!r}")
     aligned = bool(c.get("aligned", True))
-    facet = w.model.timeline
     in_t = slope if (aligned or side == "in") else None
     out_t = slope if (aligned or side == "out") else None
-    facet.set(
-        facet.value.set_tangents(track, index, in_tangent=in_t, out_tangent=out_t),
-        f"Edit tangent of {track_label(track)}",
-    )
+    w.model.timeline.set_tangents(track, index, in_tangent=in_t, out_tangent=out_t)
     w.status = f"tangent of {track_label(track)} key {index}: {slope:.3g}/s"
 
 
 @handles("auto_tangent")
 def auto_tangent(w: TimelineWidget, c: dict[str, Any]) -> None:
     track, index = str(c["track"]), int(c["index"])
-    facet = w.model.timeline
-    facet.set(
-        facet.value.set_tangents(track, index, mode="auto_clamped"),
-        f"Auto tangent of {track_label(track)}",
-    )
+    w.model.timeline.set_tangents(track, index, mode="auto_clamped")
     w.status = f"{track_label(track)} key {index}: auto-clamped tangents"
 
 
 @handles("set_fps")
 def set_fps(w: TimelineWidget, c: dict[str, Any]) -> None:
     fps = float(c["fps"])
-    if not (math.isfinite(fps) and fps > 0):
-        raise ValueError(f"fps must be a positive number, got {c['fps']!r}")
-    facet = w.model.timeline
-    tl = facet.value
-    if fps != tl.fps:
-        facet.set(tl.replace(fps=fps), f"Set fps {fps:g}")
+    w.model.timeline.set_fps(fps)
     w.status = f"{fps:g} fps"

@@ -6,6 +6,14 @@ baked once into a ``<name>_baked`` shape otherwise; a marker fit is keyed
 frame by frame. The timeline itself is an immutable
 :class:`~workbench.animation.tracks.Timeline`; sampling it (``set_time``,
 ``evaluate_at``) is the state's, through the hooks in :mod:`.family`.
+
+Every edit a view makes has a named method here, each one undo step:
+``key_weights`` / ``key_handles`` / ``key_head_pose`` / ``key_expression`` /
+``key_marker_fit`` and ``add_key`` (any track, a given value) add keys;
+``move_key``, ``delete_key`` / ``delete_keys``, ``set_interpolation`` /
+``set_interpolations``, ``set_tangents`` and ``set_fps`` edit them. Arguments
+are checked before anything changes, and errors (:class:`ModelError`) name the
+method and the argument.
 """
 
 from __future__ import annotations
@@ -14,15 +22,22 @@ import dataclasses
 import itertools
 import math
 from collections.abc import Iterable
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from workbench.animation.curves import (
+    HANDLES,
     HEAD_POSE,
     IDENTITY_POSE,
+    INTERPOLATIONS,
+    TANGENT_MODES,
+    WEIGHTS_PREFIX,
     Interpolation,
+    TangentMode,
+    Track,
+    parse_region_track,
     region_track_name,
     weight_track_name,
 )
@@ -58,6 +73,32 @@ def as_quaternion(rotation: ArrayLike, what: str) -> NDArray[np.float64]:
 
 def _grow(tl: Timeline, time: float) -> Timeline:
     return tl.replace(start=min(tl.start, time), end=max(tl.end, time))
+
+
+def track_title(track: str) -> str:
+    """A short name of ``track`` for undo labels ("jawOpen", "region lip (L0)", "head pose")."""
+    if track.startswith(WEIGHTS_PREFIX):
+        return track[len(WEIGHTS_PREFIX) :]
+    region = parse_region_track(track)
+    if region is not None:
+        return f"region {region[1]} (L{region[0]})"
+    return {HEAD_POSE: "head pose"}.get(track, track)
+
+
+def _finite(x: Any, what: str, name: str) -> float:
+    try:
+        v = float(x)
+    except (TypeError, ValueError):
+        raise ModelError(f"{what}: {name} must be a number, got {x!r}") from None
+    if not math.isfinite(v):
+        raise ModelError(f"{what}: {name} must be finite, got {x!r}")
+    return v
+
+
+def _interpolation(kind: Any, what: str, name: str = "interpolation") -> Interpolation:
+    if kind not in INTERPOLATIONS:
+        raise ModelError(f"{what}: {name} must be one of {list(INTERPOLATIONS)}, got {kind!r}")
+    return cast("Interpolation", kind)
 
 
 class TimelineFacet:
@@ -144,15 +185,215 @@ class TimelineFacet:
             tl = tl.add_key(HEAD_POSE, t, np.concatenate([tr, q]), interpolation=interpolation)
             self.set(_grow(tl, t), f"Key head pose at {t:g}s")
 
+    def add_key(self, track: str, time: float, value: ArrayLike,
+                interpolation: Interpolation = "bezier") -> None:
+        """Key ``value`` on ``track`` at ``time`` (one undo step); extends the range to ``time``.
+
+        For any track, with the value given: ``"weights/<shape>"`` a number,
+        ``"head_pose"`` (7,) translation + quaternion (x, y, z, w),
+        ``"regions/<level>/<region>"`` (k,) shape weights, ``"handles"`` (h, 3)
+        offsets. A key already at ``time`` is replaced. (``key_weights``,
+        ``key_handles`` and ``key_head_pose`` key the model's current values.)
+        """
+        what = "add_key"
+        t = _finite(time, what, "time")
+        kind = _interpolation(interpolation, what)
+        m = self._model
+        with m.lock:
+            try:
+                v = np.asarray(value, np.float64)
+            except (TypeError, ValueError):
+                raise ModelError(f"{what}: value must be numbers, got {value!r}") from None
+            want = self._value_shape(what, track)
+            if v.shape != want:
+                raise ModelError(
+                    f"{what}: value for track {track!r} must have shape {want}, got {v.shape}"
+                )
+            if not np.isfinite(v).all():
+                raise ModelError(f"{what}: value for track {track!r} must be finite, got NaN/inf")
+            if track == HEAD_POSE and np.linalg.norm(v[3:]) < 1e-12:
+                raise ModelError(f"{what}: value for 'head_pose' has a zero quaternion (x, y, z, w)")
+            tl = self.value.add_key(track, t, v, interpolation=kind)
+            self.set(_grow(tl, t), f"Key {track_title(track)} at {t:g}s")
+
     def delete_key(self, track: str, index: int) -> None:
         """Delete key ``index`` of ``track`` (undoable)."""
-        self.set(self.value.delete_key(track, index), f"Delete key {index} of {track}")
+        with self._model.lock:
+            tr = self._track("delete_key", track)
+            i = self._index("delete_key", tr, index)
+            self.set(self.value.delete_key(track, i), f"Delete key {index} of {track}")
+
+    def delete_keys(self, keys: Iterable[tuple[str, int]]) -> int:
+        """Delete several keys ``[(track, index), ...]`` in one undo step; returns how many.
+
+        Every key is checked before any is deleted; a key named twice (also as
+        ``-1`` and its positive index) is deleted once; no keys: no step.
+        """
+        what = "delete_keys"
+        with self._model.lock:
+            tl = self.value
+            chosen: set[tuple[str, int]] = set()
+            for item in keys:
+                try:
+                    track, index = item
+                except (TypeError, ValueError):
+                    raise ModelError(
+                        f"{what}: keys must be (track, index) pairs, got {item!r}"
+                    ) from None
+                tr = self._track(what, track)
+                chosen.add((track, self._index(what, tr, index)))
+            if not chosen:
+                return 0
+            if len(chosen) == 1:
+                track, i = next(iter(chosen))
+                self.set(tl.delete_key(track, i), f"Delete key {i} of {track}")
+                return 1
+            # highest index first, so earlier deletions do not shift later ones
+            for track, i in sorted(chosen, key=lambda k: (k[0], -k[1])):
+                tl = tl.delete_key(track, i)
+            self.set(tl, f"Delete {len(chosen)} keys")
+            return len(chosen)
 
     def move_key(self, track: str, index: int, time: float, value: ArrayLike | None = None) -> None:
         """Move key ``index`` of ``track`` to ``time`` (and ``value``), undoable."""
         with self._model.lock:
             tl = self.value.move_key(track, index, time, value)
             self.set(_grow(tl, time), f"Move key of {track}")
+
+    def set_interpolation(self, track: str, index: int | None, interpolation: Interpolation) -> None:
+        """Interpolation of key ``index`` of ``track`` (None: every key of it); one undo step.
+
+        ``interpolation`` shapes the segment that starts at the key: "step",
+        "linear" or "bezier". No change: no step.
+        """
+        what = "set_interpolation"
+        kind = _interpolation(interpolation, what)
+        with self._model.lock:
+            tr = self._track(what, track)
+            i = None if index is None else self._index(what, tr, index)
+            self._set_interpolations(
+                [(track, i)], kind, f"Set interpolation {kind} ({track_title(track)})"
+            )
+
+    def set_interpolations(self, keys: Iterable[tuple[str, int]], interpolation: Interpolation) -> int:
+        """Interpolation of several keys ``[(track, index), ...]`` in one undo step; returns how many."""
+        what = "set_interpolations"
+        kind = _interpolation(interpolation, what)
+        with self._model.lock:
+            chosen: list[tuple[str, int | None]] = []
+            for item in keys:
+                try:
+                    track, index = item
+                except (TypeError, ValueError):
+                    raise ModelError(
+                        f"{what}: keys must be (track, index) pairs, got {item!r}"
+                    ) from None
+                chosen.append((track, self._index(what, self._track(what, track), index)))
+            if chosen:
+                self._set_interpolations(chosen, kind, f"Set interpolation {kind}")
+            return len(set(chosen))
+
+    def _set_interpolations(self, keys: list[tuple[str, int | None]], kind: Interpolation,
+                            label: str) -> None:
+        old = tl = self.value
+        for track, i in keys:
+            tr = tl.tracks[track]
+            idx = range(len(tr)) if i is None else [i]
+            if any(tr.keys[j].interpolation != kind for j in idx):
+                tl = tl.set_interpolation(track, i, kind)
+        if tl is not old:
+            self.set(tl, label)
+
+    def set_tangents(self, track: str, index: int, in_tangent: ArrayLike | None = None,
+                     out_tangent: ArrayLike | None = None, mode: TangentMode = "user") -> None:
+        """Bézier slopes (value units per second) of key ``index`` of ``track``; one undo step.
+
+        ``mode="user"``: the given slopes are kept (a side not given keeps its
+        current slope); ``mode="auto_clamped"``: the key's slopes are computed
+        again from its neighbours (no slope may be given then).
+        """
+        what = "set_tangents"
+        if mode not in TANGENT_MODES:
+            raise ModelError(f"{what}: mode must be one of {list(TANGENT_MODES)}, got {mode!r}")
+        if mode == "auto_clamped" and (in_tangent is not None or out_tangent is not None):
+            raise ModelError(f"{what}: mode 'auto_clamped' computes the slopes; give no in/out_tangent")
+        with self._model.lock:
+            tr = self._track(what, track)
+            i = self._index(what, tr, index)
+            shape = tr.value_shape
+            slopes: list[NDArray[np.float64] | None] = []
+            for name, tan in (("in_tangent", in_tangent), ("out_tangent", out_tangent)):
+                if tan is None:
+                    slopes.append(None)
+                    continue
+                a = np.asarray(tan, np.float64)
+                if a.shape not in ((), shape):
+                    raise ModelError(
+                        f"{what}: {name} for track {track!r} must be a number or shape {shape}, "
+                        f"got {a.shape}"
+                    )
+                if not np.isfinite(a).all():
+                    raise ModelError(f"{what}: {name} must be finite, got {tan!r}")
+                slopes.append(np.broadcast_to(a, shape))
+            label = (f"Auto tangent of {track_title(track)}" if mode == "auto_clamped"
+                     else f"Edit tangent of {track_title(track)}")
+            self.set(self.value.set_tangents(track, i, slopes[0], slopes[1], mode), label)
+
+    def set_fps(self, fps: float) -> None:
+        """Frames per second of playback and baking (> 0); one undo step (none if unchanged)."""
+        what = "set_fps"
+        f = _finite(fps, what, "fps")
+        if f <= 0:
+            raise ModelError(f"{what}: fps must be a positive number, got {fps!r}")
+        with self._model.lock:
+            tl = self.value
+            if f != tl.fps:
+                self.set(tl.replace(fps=f), f"Set fps {f:g}")
+
+    # ------------------------------------------------------------- checks
+    def _track(self, what: str, track: Any) -> Track:
+        tracks = self.value.tracks
+        if not isinstance(track, str) or track not in tracks:
+            names = list(tracks)
+            have = f"{names[:8]}{'...' if len(names) > 8 else ''}" if names else "none"
+            raise ModelError(f"{what}: track {track!r} has no keys; the keyed tracks are {have}")
+        return tracks[track]
+
+    @staticmethod
+    def _index(what: str, tr: Track, index: Any) -> int:
+        if isinstance(index, bool) or not isinstance(index, int | np.integer):
+            raise ModelError(f"{what}: index must be an int, got {index!r}")
+        n = len(tr)
+        if not -n <= int(index) < n:
+            raise ModelError(
+                f"{what}: index {int(index)} is out of range for track {tr.name!r} ({n} keys)"
+            )
+        return int(index) % n
+
+    def _value_shape(self, what: str, track: Any) -> tuple[int, ...]:
+        """The value shape a key of ``track`` has on this model (raises for an unknown track)."""
+        m = self._model
+        if isinstance(track, str) and track.startswith(WEIGHTS_PREFIX):
+            shape = track[len(WEIGHTS_PREFIX) :]
+            if shape not in m.shape_names:
+                raise ModelError(
+                    f"{what}: track {track!r} names no shape of the model; its shapes are "
+                    f"{m.shape_names[:8]}{'...' if len(m.shape_names) > 8 else ''}"
+                )
+            return ()
+        if track == HEAD_POSE:
+            return (7,)
+        if track == HANDLES:
+            n = len(m.slot("handles"))
+            if not n:
+                raise ModelError(f"{what}: track 'handles': the model has no handles")
+            return (n, 3)
+        if isinstance(track, str) and parse_region_track(track) is not None:
+            return (len(m.shape_names),)
+        raise ModelError(
+            f"{what}: track must be 'weights/<shape>', 'head_pose', 'handles' or "
+            f"'regions/<level>/<region>', got {track!r}"
+        )
 
     # ------------------------------------------------------------- expressions
     def key_expression(self, time: float, expression: str, interpolation: Interpolation = "bezier") -> None:
