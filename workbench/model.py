@@ -10,6 +10,7 @@ method family registers its slots, layer, file part and facet
     model.expressions.save("smile")
     model.wrinkles.set_strength(2.0)          # workbench.methods.wrinkles
     model.timeline.key_expression(1.0, "jawOpen")   # workbench.animation
+    model.shape_tools.split("browInnerUp")    # workbench.methods.shapes
 
 The annotations below only tell type checkers what the registered facets
 are; adding a family does not require touching this module. A few one-line
@@ -43,6 +44,7 @@ if TYPE_CHECKING:
     from workbench.methods.paint.painting import Brush
     from workbench.methods.regions.blend import RegionState
     from workbench.methods.regions.facet import RegionsFacet
+    from workbench.methods.shapes.facet import ShapeToolsFacet
     from workbench.methods.wrinkles.facet import WrinklesFacet
 
 __all__ = [
@@ -72,6 +74,7 @@ class FaceModel(FaceState):
     expressions: ExpressionsFacet
     wrinkles: WrinklesFacet
     timeline: TimelineFacet
+    shape_tools: ShapeToolsFacet
 
     def __init__(self, vertices: ArrayLike, faces: ArrayLike | None, shapes: Iterable[BlendShape] = (),
                  *, handles: HandleSet | None = None, **kwargs: Any) -> None:

@@ -13,7 +13,13 @@ rigging, capture, enhancement) lives in its own folder and registers one
   with ``order`` placing it among the others;
 * ``file_part`` — its part of the saved ``.fwb`` file (:class:`FilePart`);
 * ``animate`` — how a timeline sample sets its slots (see
-  :meth:`FaceState.evaluate_at`).
+  :meth:`FaceState.evaluate_at`);
+* ``weight_products`` — shapes whose weight is not set or keyed but derived:
+  the product of other shapes' weights (combination / corrective shapes,
+  :class:`WeightProducts`). :func:`derive_weights` applies every family's
+  rules; the state view (:class:`~workbench.core.pipeline.StateView`), so the
+  blend, every layer and every exporter, and ``model.weights`` go through it,
+  and the blend's cache key includes the rules' slots (:func:`weight_product_reads`).
 
 The state module never imports a family; families import the state (for
 types only). Adding a family is a new folder plus one ``register_family``
@@ -22,13 +28,16 @@ call, never an edit of :mod:`workbench.core.state`.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Protocol
+
+import numpy as np
 
 if TYPE_CHECKING:
     from workbench.core.manifest import Checker, Spec
     from workbench.core.pipeline import StateView
+    from workbench.core.shapes import BlendShape
     from workbench.core.state import FaceState
 
 
@@ -84,6 +93,22 @@ class FilePart(Protocol):
 
 
 @dataclass(frozen=True)
+class WeightProducts:
+    """Shape weights a family derives: each the product of other shapes' weights.
+
+    ``rules(slots) -> {shape: (driver, ...)}`` reads only the slots named in
+    ``reads`` (the blend is cached on their versions). A derived shape plays
+    ``clamp(prod_d w_d)`` into its own slider range, with ``w_d`` each driver's
+    weight as played (clamped; 0 when the driver is muted or missing); its own
+    stored or keyed weight is ignored. Drivers must not be derived themselves
+    (the family checks that), so the order of the rules does not matter.
+    """
+
+    reads: tuple[str, ...]
+    rules: Callable[[Mapping[str, Any]], Mapping[str, tuple[str, ...]]]
+
+
+@dataclass(frozen=True)
 class Family:
     """What one method family registers (see the module docstring)."""
 
@@ -96,16 +121,21 @@ class Family:
     #: ``animate(view, sample) -> {slot: value}``: its slots' values at a timeline sample
     #: (``view`` has the sampled weights; ``sample`` is what the ``"sampler"`` hook returned)
     animate: Callable[[StateView, Any], Mapping[str, Any]] | None = None
+    #: optional: shapes whose weight is the product of other weights (see :class:`WeightProducts`)
+    weight_products: WeightProducts | None = None
     extra: Mapping[str, Any] = field(default_factory=dict)
 
 
 _FAMILIES: dict[str, Family] = {}
 _HOOKS: dict[str, Any] = {}
+_PRODUCTS: tuple[WeightProducts, ...] = ()
 
 
 def register_family(family: Family) -> Family:
     """Register (or replace, on module reload) a family; returns it."""
+    global _PRODUCTS
     _FAMILIES[family.name] = family
+    _PRODUCTS = tuple(f.weight_products for f in families() if f.weight_products is not None)
     return family
 
 
@@ -133,3 +163,49 @@ def hook(name: str) -> Any:
         raise LookupError(
             f"nothing registered as {name!r}: import workbench (it registers every family)"
         ) from None
+
+
+# ------------------------------------------------------------------ derived weights
+def weight_product_reads() -> tuple[str, ...]:
+    """Slots the registered weight-product rules read (part of the blend's cache key)."""
+    return tuple(r for p in _PRODUCTS for r in p.reads)
+
+
+def weight_products(slots: Mapping[str, Any]) -> dict[str, tuple[str, ...]]:
+    """Every registered rule for the given slot values: ``{derived shape: (driver, ...)}``."""
+    out: dict[str, tuple[str, ...]] = {}
+    for p in _PRODUCTS:
+        if all(r in slots for r in p.reads):
+            out.update(p.rules(slots))
+    return out
+
+
+def derive_weights(
+    shapes: Iterable[BlendShape], weights: Mapping[str, Any], slots: Mapping[str, Any]
+) -> dict[str, Any]:
+    """``weights`` with every derived shape's weight replaced by the product of its drivers'.
+
+    ``weights`` are clamped weights by shape name: floats (one state) or (F,)
+    float64 arrays (F frames, :class:`workbench.export.encoding.MeshEncoding`);
+    both go through the same operations in the same order, so a frame of an
+    export and :meth:`FaceState.evaluate_at` agree bit for bit. A muted driver
+    counts as 0 (it plays nothing, so neither does its combination).
+    """
+    out = dict(weights)
+    rules = weight_products(slots) if _PRODUCTS else {}
+    if not rules:
+        return out
+    by_name = {s.name: s for s in shapes}
+    for name, drivers in rules.items():
+        s = by_name.get(name)
+        if s is None or name not in out:
+            continue
+        w: Any = 1.0
+        for d in drivers:
+            ds = by_name.get(d)
+            w = w * (0.0 if ds is None or ds.mute else weights.get(d, 0.0))
+        if isinstance(w, np.ndarray):
+            out[name] = np.clip(w, s.slider_min, s.slider_max)
+        else:
+            out[name] = min(max(float(w), s.slider_min), s.slider_max)
+    return out

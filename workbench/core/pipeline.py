@@ -12,6 +12,11 @@ object itself, so a layer cannot pull anything it did not declare. Each stage's
 output is cached under a key built from the versions of what it reads (the
 blend: shapes and weights; a layer: its ``reads`` slots, plus the key of the
 stage below), so an edit recomputes only the stages at and after it.
+
+Derived weights (combination / corrective shapes, whose weight is the product
+of other shapes' weights: :class:`workbench.core.families.WeightProducts`) are
+applied once, when a view is made, so the blend, every layer and everything
+that samples views (``evaluate_at``, the exporters) see the same weights.
 """
 
 from __future__ import annotations
@@ -24,6 +29,7 @@ from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import NDArray
 
+from workbench.core import families as _families
 from workbench.core.shapes import BlendShape, ModelMetadata, readonly
 
 if TYPE_CHECKING:
@@ -39,7 +45,8 @@ class StateView:
     state : FaceState
         Gives the mesh and shapes (they do not change over time).
     weights : mapping of str to float
-        Clamped weight of every shape.
+        Clamped weight of every shape; derived weights (products of other
+        weights, :func:`workbench.core.families.derive_weights`) are computed here.
     slots : mapping of str to object
         Every slot's value.
     versions : mapping of str to int
@@ -63,8 +70,8 @@ class StateView:
         interacting: bool = False,
     ) -> None:
         self._state = state
-        self._weights = dict(weights)
         self.slots = MappingProxyType(dict(slots))
+        self._weights = _families.derive_weights(state.shapes, weights, self.slots)
         self._versions = dict(versions)
         self.time = float(time)
         self.interacting = bool(interacting)
@@ -272,7 +279,8 @@ class Pipeline:
         ``cache`` (the live state only) reuses stages whose inputs' versions
         are unchanged. Returned arrays are read-only.
         """
-        key: Any = ("blend", view.version("shapes"), view.version("weights"))
+        key: Any = ("blend", view.version("shapes"), view.version("weights"),
+                    *(view.version(r) for r in _families.weight_product_reads()))
         hit = self._cache.get(-1) if cache else None
         if hit is not None and hit[0] == key:
             mesh = hit[1]

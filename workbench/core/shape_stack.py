@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from workbench.core import families as _families
 from workbench.core.history import Command, payload_nbytes
 from workbench.core.shapes import BlendShape, ModelError, detached_shape, detached_value, readonly
 
@@ -33,6 +34,7 @@ class ShapeStack:
     _lock: threading.RLock
     _interaction: Any
     _version: dict[str, int]
+    _slots: dict[str, Any]
     events: SignalGroup
     history: History
 
@@ -85,12 +87,24 @@ class ShapeStack:
 
     @property
     def weights(self) -> Mapping[str, float]:
-        """Read-only mapping shape name → current weight."""
-        return MappingProxyType(dict(self._weights))
+        """Read-only mapping shape name → current weight, as played.
+
+        A derived shape (a combination / corrective shape,
+        :class:`workbench.core.families.WeightProducts`) shows the product of
+        its drivers' weights, whatever was set for it.
+        """
+        return MappingProxyType(self._played_weights())
 
     def weight_vector(self) -> NDArray[np.float32]:
-        """(k,) float32 weights in shape order, muted shapes as 0."""
-        return np.array([0.0 if s.mute else self._weights[s.name] for s in self._shapes], np.float32)
+        """(k,) float32 weights in shape order (as played), muted shapes as 0."""
+        w = self._played_weights()
+        return np.array([0.0 if s.mute else w[s.name] for s in self._shapes], np.float32)
+
+    def _played_weights(self) -> dict[str, float]:
+        slots = getattr(self, "_slots", None)  # None while the state is being built
+        if slots is None:
+            return dict(self._weights)
+        return _families.derive_weights(self._shapes, self._weights, slots)
 
     def _shape_index(self, name: str) -> int:
         try:
@@ -197,8 +211,12 @@ class ShapeStack:
         mute: bool = False,
         vertex_mask: ArrayLike | None = None,
         weight: float = 0.0,
+        index: int | None = None,
     ) -> BlendShape:
-        """Add a blendshape (undoable). ``delta`` is a displacement, not an absolute shape."""
+        """Add a blendshape (undoable). ``delta`` is a displacement, not an absolute shape.
+
+        ``index``: its place in the shape list (default: the end).
+        """
         shape = BlendShape(
             name, np.asarray(delta), slider_min, slider_max, mute,
             None if vertex_mask is None else np.asarray(vertex_mask),
@@ -209,7 +227,11 @@ class ShapeStack:
             if name in self._index:
                 raise ModelError(f"a blendshape named {name!r} already exists")
             w = min(max(float(weight), shape.slider_min), shape.slider_max)
-            index = len(self._shapes)
+            if index is None:
+                index = len(self._shapes)
+            elif not (isinstance(index, int | np.integer) and 0 <= int(index) <= len(self._shapes)):
+                raise ModelError(f"add_shape: index must be an int in 0..{len(self._shapes)}, got {index!r}")
+            index = int(index)
             kept = detached_shape(shape)
             self._insert_shape(index, kept, w)
             self.push(Command(label, lambda: self._delete_shape(name),
@@ -249,6 +271,25 @@ class ShapeStack:
                     payload_nbytes([before, after]) + 64,
                 )
             )
+
+    def _replace_shape(self, index: int, shape: BlendShape) -> None:
+        with self._lock:
+            self._apply_shapes((*self._shapes[:index], shape, *self._shapes[index + 1 :]), self._weights)
+
+    def set_shape_delta(self, name: str, delta: ArrayLike, label: str | None = None) -> None:
+        """Replace the delta of shape ``name`` (undoable); its place, weight, range, mute and mask stay."""
+        label = label or f"Edit {name}"
+        with self._lock:
+            self._refuse_in_interaction(label)
+            i = self._shape_index(name)
+            old = self._shapes[i]
+            new = old.replace(delta=np.asarray(delta))  # validates before anything changes
+            if new.delta.shape != old.delta.shape:
+                raise ModelError(f"set_shape_delta: {name!r} needs a ({self.n_vertices}, 3) delta, got {new.delta.shape}")
+            before, after = detached_shape(old), detached_shape(new)
+            self._replace_shape(i, after)
+            self.push(Command(label, lambda: self._replace_shape(i, before),
+                              lambda: self._replace_shape(i, after), payload_nbytes([before, after])))
 
     def rename_shape(self, name: str, new_name: str) -> None:
         self._edit_shape_props(name, f"Rename {name} to {new_name}", name=new_name)

@@ -53,6 +53,16 @@ layer. That is what :class:`MeshEncoding` holds:
     ``Σ_r W_r Σ_k (w_rk(t) − g_k(t)) Δ_k`` is baked per frame, times ``1 − P``
     (the shape targets are then not scaled by ``1 − S_R``). Its report says so.
 
+**Corrective (combination) shapes** (:mod:`workbench.methods.shapes.correctives`)
+are ordinary shape targets whose weight is not keyed but derived: the product
+of their drivers' played weights, clamped to their own range
+(:func:`workbench.core.families.derive_weights`, the function the model's
+views use). :attr:`MeshEncoding.weight_products` names them and their drivers,
+and :meth:`MeshEncoding.weights` gives the derived weight at every time, so
+per-frame writers (USD, CSV) are exact at every frame; the glTF writer, whose
+sampler interpolates keys, writes the product as its own curve with knots
+at every frame (:mod:`workbench.export.gltf`).
+
 The head pose is applied after all layers (a rigid transform, as in
 :meth:`FaceModel.evaluate_at`); formats write it on the node / root prim.
 Units are model units here; writers scale by ``metadata.metres_per_unit``.
@@ -65,6 +75,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from workbench.core.families import derive_weights, weight_products
 from workbench.export import ExportError, LayerReport
 
 if TYPE_CHECKING:
@@ -175,6 +186,9 @@ class MeshEncoding:
     handle_track : Track or None
     baked_layers : tuple of str
         Layers baked per frame (see :meth:`baked`); empty when all are linear.
+    weight_products : dict of str to tuple of str
+        Corrective shapes and their drivers: the shape's weight is the product
+        of the drivers' (see the module docstring); empty without correctives.
     layers : list of LayerReport
         One per registered layer: ``"linear"``, ``"baked"`` or ``"inactive"``.
     """
@@ -197,6 +211,12 @@ class MeshEncoding:
             self.muted = np.array([s.mute for s in shapes], bool)
             self.slider_range = np.array([[s.slider_min, s.slider_max] for s in shapes]).reshape(-1, 2)
             self.static_weights = np.array([model.weights[nm] for nm in self.shape_names], np.float64)
+            self._shapes = shapes
+            self._slots = dict(model.view().slots)
+            names = set(self.shape_names)
+            self.weight_products = {
+                nm: drivers for nm, drivers in weight_products(self._slots).items() if nm in names
+            }
             eff = (
                 np.stack([s.effective_delta() for s in shapes])
                 if shapes
@@ -382,10 +402,16 @@ class MeshEncoding:
         return W
 
     def weights(self, times: ArrayLike) -> NDArray[np.float64]:
-        """(F, k) weights the model plays: clamped to each slider range, muted shapes 0."""
+        """(F, k) weights the model plays: clamped to each slider range, correctives derived, muted shapes 0."""
         W = self.raw_weights(times)
         if W.size:
             W = np.clip(W, self.slider_range[:, 0], self.slider_range[:, 1])
+        if self.weight_products and W.size:
+            derived = derive_weights(self._shapes, {nm: W[:, k] for k, nm in enumerate(self.shape_names)},
+                                     self._slots)
+            for k, nm in enumerate(self.shape_names):
+                if nm in self.weight_products:
+                    W[:, k] = derived[nm]
         W[:, self.muted] = 0.0
         return W
 
@@ -394,7 +420,7 @@ class MeshEncoding:
         W = self.raw_weights(times)
         out = []
         for k, nm in enumerate(self.shape_names):
-            if self.muted[k] or nm not in self.timeline.weight_tracks:
+            if self.muted[k] or nm not in self.timeline.weight_tracks or nm in self.weight_products:
                 continue
             lo, hi = self.slider_range[k]
             if np.any(W[:, k] < lo) or np.any(W[:, k] > hi):

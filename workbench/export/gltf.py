@@ -16,6 +16,16 @@ registered layers) within float32 round-off:
   :mod:`.encoding`): exactly the delta where nothing is painted and no
   region weights are set. Stored as a sparse accessor when fewer than half
   the vertices move.
+* A corrective (combination) shape (:mod:`workbench.methods.shapes.correctives`)
+  is an ordinary target whose weight is the product of its drivers' clamped
+  weights, clamped to its own range — not a keyed curve, so it is written as
+  its own column of the sampler with knots at every frame of the timeline
+  (added to the merged key times; splitting the other curves there changes
+  nothing): the value at each knot is the product itself (exact at every
+  frame) and, for ``CUBICSPLINE``, the tangents are the product rule's, so
+  between frames a cubic Hermite follows the product (a polynomial of higher
+  degree) closely. In a ``STEP`` sampler a product of steps is a step: exact
+  at every time, no knots added.
 * ``layer:static`` (weight 1, constant) when the layers add a constant: the
   region constant ``(1 − P) C_R``, the painted expressions ``Σ_e W_e D_e``, and the
   handle layer when its offsets are not keyed — one target instead of one per
@@ -100,7 +110,8 @@ class Curve:
     ``value(t) = scale * track.sample(t)[:, component] + offset``, or with
     ``coeffs`` ``scale * track.sample(t) @ coeffs + offset``; without a track
     ``scale * constant``. ``clamp`` = ``(lo, hi)`` clips the written values
-    (used only where values are resampled at frames).
+    (used only where values are resampled at frames). With ``factors`` the
+    curve is their product (a corrective shape's weight), then clamped.
     """
 
     track: Track | None
@@ -110,6 +121,11 @@ class Curve:
     coeffs: NDArray[np.float64] | None = None
     offset: float = 0.0
     clamp: tuple[float, float] | None = None
+    factors: tuple[Curve, ...] = ()
+
+    def leaves(self) -> list[Curve]:
+        """The curves this one is made of (itself, or its factors')."""
+        return [leaf for f in self.factors for leaf in f.leaves()] if self.factors else [self]
 
     def _combine(self, arr: NDArray[np.float64]) -> NDArray[np.float64]:
         col = arr @ self.coeffs if self.coeffs is not None else arr[:, self.component]
@@ -118,6 +134,12 @@ class Curve:
     def sample(self, times: NDArray[np.float64]) -> NDArray[np.float64]:
         """Values at ``times`` (clamped if ``clamp``)."""
         ts = np.asarray(times, np.float64).reshape(-1)
+        if self.factors:
+            # the same operations, in the same order, as workbench.core.families.derive_weights
+            w: NDArray[np.float64] = np.ones(ts.size)
+            for f in self.factors:
+                w = w * f.sample(ts)
+            return w if self.clamp is None else np.clip(w, *self.clamp)
         if self.track is None:
             return np.full(ts.size, self.scale * self.constant)
         v = self._combine(self.track.sample(ts)) + self.offset
@@ -160,6 +182,7 @@ def merge_curves(
     *,
     bake_times: NDArray[np.float64] | None = None,
     rotation_track: Track | None = None,
+    knots: NDArray[np.float64] | None = None,
 ) -> SamplerData | None:
     """Merge scalar curves onto one glTF sampler (see module docstring).
 
@@ -169,6 +192,9 @@ def merge_curves(
         The sampler's output columns.
     bake_times : (F,) float, optional
         Resample at these times with LINEAR instead of merging keys.
+    knots : (F,) float, optional
+        Extra key times (the frames) when a product curve (``factors``) is
+        animated and the sampler is not STEP: the product is exact there.
     rotation_track : Track, optional
         If given, ``curves`` are its quaternion components: interpolation is
         STEP or LINEAR (glTF slerps rotations, like :class:`Track`).
@@ -178,9 +204,11 @@ def merge_curves(
     SamplerData or None
         None when no curve is animated.
     """
-    tracks: dict[int, Track] = {id(c.track): c.track for c in curves if c.track is not None}
+    leaves = [leaf for c in curves for leaf in c.leaves()]
+    tracks: dict[int, Track] = {id(c.track): c.track for c in leaves if c.track is not None}
     if not tracks:
         return None
+    animated_products = any(c.factors and any(leaf.track is not None for leaf in c.leaves()) for c in curves)
     if bake_times is not None:
         times = np.asarray(bake_times, np.float64)
         mode = "LINEAR"
@@ -196,8 +224,14 @@ def merge_curves(
         else:
             mode = "LINEAR"
         times = np.unique(np.concatenate([t.times for t in tracks.values()]))
+        if mode != "STEP" and animated_products and knots is not None and knots.size:
+            lo, hi = times[0], times[-1]
+            fr = np.asarray(knots, np.float64)
+            # frames inside the keyed range (outside it every track holds its end value)
+            times = np.unique(np.concatenate([times, fr[(fr > lo) & (fr < hi)]]))
+            times = _drop_close(times, np.unique(np.concatenate([t.times for t in tracks.values()])))
         if mode != "STEP":
-            times = _add_crossings(times, curves)
+            times = _add_crossings(times, leaves)
         if mode != "STEP" and "step" in orig:
             # hold-then-ramp knots just before the end of every step segment
             gaps = np.diff(times)
@@ -217,26 +251,58 @@ def merge_curves(
     B = np.zeros((K, m))
     cache: dict[int, tuple[NDArray[np.float64], ...]] = {}
     for j, c in enumerate(curves):
-        if c.track is None:
-            V[:, j] = c.scale * c.constant
-            continue
-        key = id(c.track)
-        if key not in cache:
-            tr = c.track
-            vals = tr.sample(times)
-            if mode == "CUBICSPLINE":
-                left, right = tr.derivatives(times, "left"), tr.derivatives(times, "right")
-                left, right = _step_ramps(tr, times, vals, left, right)
-            else:
-                left = right = np.zeros_like(vals)
-            cache[key] = (vals, left, right)
-        vals, left, right = cache[key]
-        V[:, j] = c._combine(vals) + c.offset
-        A[:, j] = c._combine(left)
-        B[:, j] = c._combine(right)
-        if c.clamp is not None:
-            _clamp_column(V[:, j], A[:, j], B[:, j], *c.clamp)
+        V[:, j], A[:, j], B[:, j] = _column(c, times, mode, cache)
     return SamplerData(times, mode, V, A, B)
+
+
+def _column(
+    c: Curve, times: NDArray[np.float64], mode: str, cache: dict[int, tuple[NDArray[np.float64], ...]]
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Values, in-slopes and out-slopes of one curve at ``times`` (clamped where it clamps)."""
+    K = times.size
+    if c.factors:
+        # product rule, factor by factor: (v f)' = v' f + v f'; values as derive_weights multiplies
+        v, a, b = np.ones(K), np.zeros(K), np.zeros(K)
+        for f in c.factors:
+            fv, fa, fb = _column(f, times, mode, cache)
+            a, b, v = a * fv + v * fa, b * fv + v * fb, v * fv
+        if c.clamp is not None:
+            _clamp_column(v, a, b, *c.clamp)
+        return v, a, b
+    if c.track is None:
+        return np.full(K, c.scale * c.constant), np.zeros(K), np.zeros(K)
+    key = id(c.track)
+    if key not in cache:
+        tr = c.track
+        vals = tr.sample(times)
+        if mode == "CUBICSPLINE":
+            left, right = tr.derivatives(times, "left"), tr.derivatives(times, "right")
+            left, right = _step_ramps(tr, times, vals, left, right)
+        else:
+            left = right = np.zeros_like(vals)
+        cache[key] = (vals, left, right)
+    vals, left, right = cache[key]
+    v = c._combine(vals) + c.offset
+    a = c._combine(left)
+    b = c._combine(right)
+    if c.clamp is not None:
+        _clamp_column(v, a, b, *c.clamp)
+    return v, a, b
+
+
+def _drop_close(times: NDArray[np.float64], keys: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``times`` without the added knots that float32 cannot tell from the previous knot (keys win)."""
+    f32 = times.astype(np.float32)
+    orig = np.isin(times, keys)
+    kept: list[int] = []
+    for i in range(times.size):
+        if kept and f32[i] <= f32[kept[-1]]:
+            if not orig[i]:
+                continue
+            if not orig[kept[-1]]:
+                kept.pop()
+        kept.append(i)
+    return times[kept]
 
 
 def _add_crossings(times: NDArray[np.float64], curves: list[Curve]) -> NDArray[np.float64]:
@@ -448,14 +514,24 @@ def _build(
         curves.append(curve)
 
     weight_tracks = timeline.weight_tracks
-    for k, s in enumerate(model.shapes):
+    shape_index = {s.name: k for k, s in enumerate(model.shapes)}
+
+    def weight_curve(k: int) -> Curve:
+        s = model.shapes[k]
         if s.mute:
-            curve = Curve(None, constant=0.0)
-        elif s.name in weight_tracks:
-            curve = Curve(weight_tracks[s.name], clamp=(s.slider_min, s.slider_max))
-        else:
-            curve = Curve(None, constant=float(enc.static_weights[k]))
-        add_target(enc.shape_targets[k], s.name, curve)
+            return Curve(None, constant=0.0)
+        drivers = enc.weight_products.get(s.name)
+        if drivers is not None:  # a corrective: the product of its drivers' played weights
+            factors = tuple(
+                weight_curve(shape_index[d]) if d in shape_index else Curve(None, constant=0.0) for d in drivers
+            )
+            return Curve(None, factors=factors, clamp=(s.slider_min, s.slider_max))
+        if s.name in weight_tracks:
+            return Curve(weight_tracks[s.name], clamp=(s.slider_min, s.slider_max))
+        return Curve(None, constant=float(enc.static_weights[k]))
+
+    for k, s in enumerate(model.shapes):
+        add_target(enc.shape_targets[k], s.name, weight_curve(k))
 
     if enc.static is not None:
         add_target(enc.static, "layer:static", Curve(None, constant=1.0))
@@ -514,7 +590,7 @@ def _build(
         )
 
     if names:
-        add_channel(merge_curves(curves, bake_times=bake_times), "weights", pygltflib.SCALAR, 1)
+        add_channel(merge_curves(curves, bake_times=bake_times, knots=frames), "weights", pygltflib.SCALAR, 1)
 
     hp = timeline.tracks.get(HEAD_POSE)
     if hp is not None:

@@ -18,7 +18,8 @@ through the decomposition of :class:`workbench.export.encoding.MeshEncoding`:
 * one blend shape per model shape (its masked delta scaled per vertex by
   ``(1 − P)(1 − S_R)``, painted weight and region coverage; the plain delta where
   nothing is painted), weight = the shape's weight (clamped to its slider
-  range, muted shapes 0);
+  range, muted shapes 0; a corrective shape's weight is the product of its
+  drivers' weights, :meth:`MeshEncoding.weights`, exact at every frame);
 * ``layer_static`` (weight 1 at every frame) when the layers add a constant:
   region constant, painted expressions, unkeyed handle offsets;
 * ``handle_basis<i>`` when the handle offsets are keyed: the shell

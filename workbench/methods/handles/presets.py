@@ -22,9 +22,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial import cKDTree
 
 from workbench.arkit import canonical_arkit_name, shape_group
+from workbench.methods.shapes.symmetry import nearest_reflected
 
 if TYPE_CHECKING:
     from workbench.core.state import FaceState as FaceModel
@@ -33,9 +33,7 @@ if TYPE_CHECKING:
 
 def mirror_vertices(V: NDArray[np.float64], ids: NDArray[np.int64], candidates: NDArray[np.int64]) -> NDArray[np.int64]:
     """For each vertex in ``ids``, the candidate vertex nearest to its reflection x -> -x."""
-    tree = cKDTree(V[candidates])
-    _, j = tree.query(V[ids] * np.array([-1.0, 1.0, 1.0]))
-    return candidates[np.asarray(j)]
+    return nearest_reflected(V, ids, candidates, axis=0, mid=0.0)[0]
 
 
 def default_face_handles(model: FaceModel, per_side: int = 40, min_fraction: float = 0.15) -> HandleSet:

@@ -65,7 +65,8 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 from scipy.sparse.csgraph import dijkstra
-from scipy.spatial import cKDTree
+
+from workbench.methods.shapes.symmetry import nearest_reflected
 
 Falloff = Literal["smooth", "linear", "constant", "sphere"]
 Mode = Literal["add", "subtract", "smooth"]
@@ -187,10 +188,8 @@ def mirror_map(
         raise ValueError(
             f"mirror_map: mid must be finite and tolerance finite and >= 0, got mid={mid}, tolerance={tolerance}"
         )
-    refl = V.copy()
-    refl[:, 0] = 2.0 * m - refl[:, 0]
-    d, j = cKDTree(V).query(refl)
-    return np.where(d <= tol, np.asarray(j, dtype=np.int64), np.arange(V.shape[0])).astype(np.int64)
+    j, d = nearest_reflected(V, axis=0, mid=m)
+    return np.where(d <= tol, j, np.arange(V.shape[0])).astype(np.int64)
 
 
 class PaintSurface:
