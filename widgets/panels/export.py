@@ -1,10 +1,14 @@
 """``ExportPanel``: write the model's animation to glTF/USD/point caches/CSV, or import one.
 
 A thin form over :func:`workbench.export.export` (Export) and
-:func:`workbench.animation.importers.read_animation` + ``model.set_timeline`` (Import):
+:func:`workbench.animation.importers.read_animation` + ``model.timeline.set`` (Import):
 format, fps, bake and path fields, a button, and a result area listing the
-files written (with sizes) or the error message. Nothing here knows a file
-format; the panel only picks the suffix the export registry dispatches on.
+files written (with sizes), how each editing layer went in, the writer's notes
+(e.g. the Live Link layout's missing or left-out shapes), or the error message.
+Nothing here knows a file format; the panel only picks the suffix the export
+registry dispatches on, and for a .csv the layout (``style``: plain columns or
+Epic's Live Link Face take for Unreal). Imports read head-pose columns about
+the model's own up/front axes (``model.metadata``).
 
 Exports run synchronously in the comm handler (the kernel is busy meanwhile):
 they take well under a few seconds for the sample head, the files are complete
@@ -27,7 +31,7 @@ import ipywidgets as W
 
 from widgets.panels.base import ModelPanel
 
-__all__ = ["FORMAT_CHOICES", "ExportPanel"]
+__all__ = ["CSV_LAYOUTS", "FORMAT_CHOICES", "ExportPanel"]
 
 #: dropdown label -> (format key, file suffix)
 FORMAT_CHOICES: dict[str, tuple[str, str]] = {
@@ -42,6 +46,8 @@ FORMAT_CHOICES: dict[str, tuple[str, str]] = {
     "Alembic point cache (.abc, through Blender)": ("abc", ".abc"),
 }
 _SUFFIXES = {suffix for _, suffix in FORMAT_CHOICES.values()} | {".gltf", ".usd"}
+#: CSV layout dropdown: label -> ``style`` of :func:`workbench.export.csv.write`
+CSV_LAYOUTS: dict[str, str] = {"plain": "plain", "Live Link Face (Unreal)": "livelink"}
 _MAX_LISTED = 6
 
 
@@ -91,6 +97,17 @@ def layers_html(layers: Any) -> str:
     colour = "#b54708" if warn else "inherit"
     return (
         f"<div class='fwb-export-layers' style='color:{colour}'>Editing layers:"
+        f"<ul style='margin:2px 0'>{''.join(items)}</ul></div>"
+    )
+
+
+def notes_html(notes: Iterable[str]) -> str:
+    """HTML list of the writer's notes (what a layout left out or changed); "" without notes."""
+    items = [f"<li>{html.escape(n)}</li>" for n in notes]
+    if not items:
+        return ""
+    return (
+        "<div class='fwb-export-notes' style='color:#b54708'>Notes:"
         f"<ul style='margin:2px 0'>{''.join(items)}</ul></div>"
     )
 
@@ -145,6 +162,15 @@ class ExportPanel(ModelPanel):
             layout=W.Layout(width="auto"),
             style={"description_width": "initial"},  # the whole label, not a cut default width
         )
+        self.csv_layout = W.Dropdown(
+            options=list(CSV_LAYOUTS.items()),
+            value="plain",
+            description="CSV layout",
+            tooltip="Live Link Face: the iPhone app's take layout (52 ARKit columns + head and "
+            "eye angles) that Unreal's Live Link Face importer reads",
+            style={"description_width": "initial"},
+            layout=W.Layout(width="300px"),
+        )
         self.path = W.Text(value=path, description="Path", layout=W.Layout(width="420px"))
         self.export_button = W.Button(description="Export", button_style="primary", icon="download")
         self.result = W.HTML("")
@@ -160,6 +186,7 @@ class ExportPanel(ModelPanel):
             (self.format, "fwb-export-format"),
             (self.fps, "fwb-export-fps"),
             (self.bake, "fwb-export-bake"),
+            (self.csv_layout, "fwb-export-csv-layout"),
             (self.path, "fwb-export-path"),
             (self.export_button, "fwb-export-button"),
             (self.result, "fwb-export-result"),
@@ -177,23 +204,37 @@ class ExportPanel(ModelPanel):
             W.HTML("<b>Export animation</b>"),
             # wraps: the tab is narrower than format + fps + the Bake label
             W.HBox([self.format, self.fps, self.bake], layout=W.Layout(flex_flow="row wrap")),
+            self.csv_layout,
             W.HBox([self.path, self.export_button]),
             self.result,
-            W.HTML("<b>Import animation</b> (CSV of per-frame weights, glTF weights animation)"),
+            W.HTML(
+                "<b>Import animation</b> (CSV of per-frame weights or a Live Link Face take, "
+                "glTF weights animation)"
+            ),
             W.HBox([self.import_path, self.import_button]),
             self.import_result,
         ]
         self.add_class("fwb-export-panel")
+        self._show_csv_layout()
 
     # ----------------------------------------------------------------- actions
     @property
     def suffix(self) -> str:
         return FORMAT_CHOICES[self.format.value][1]
 
+    @property
+    def csv_style(self) -> str:
+        """The ``style`` a .csv export is written in ("plain" or "livelink")."""
+        return str(self.csv_layout.value)
+
     def _on_format(self, change: Any) -> None:
         p = Path(self.path.value or "animation")
         stem = p.with_suffix("") if p.suffix.lower() in _SUFFIXES else p
         self.path.value = str(stem) + self.suffix
+        self._show_csv_layout()
+
+    def _show_csv_layout(self) -> None:
+        self.csv_layout.layout.display = "" if self.suffix == ".csv" else "none"
 
     def _sync_fps(self, *_args: Any) -> None:
         # follow the timeline's fps until the user typed another one
@@ -209,22 +250,34 @@ class ExportPanel(ModelPanel):
             path = path.with_suffix(self.suffix)
         self.flush()
         self.result.value = f"Exporting {html.escape(str(path))} …"
+        options: dict[str, Any] = {"style": self.csv_style} if self.suffix == ".csv" else {}
         try:
             written = export(
-                self.model, self.model.tracks, path, fps=float(self.fps.value), bake=self.bake.value
+                self.model,
+                self.model.tracks,
+                path,
+                fps=float(self.fps.value),
+                bake=self.bake.value,
+                **options,
             )
         except (ExportError, TrackError, OSError, ValueError) as exc:
             self.result.value = _error_html(f"Export failed: {exc}")
             self.last_written = []
             return []
         self.last_written = [Path(p).resolve() for p in written]
-        self.result.value = files_html(self.last_written) + layers_html(
-            getattr(written, "layers", ())
+        self.result.value = (
+            files_html(self.last_written)
+            + layers_html(getattr(written, "layers", ()))
+            + notes_html(getattr(written, "notes", ()))
         )
         return self.last_written
 
     def do_import(self) -> bool:
-        """Read the animation file and make it the model's timeline (one undo step)."""
+        """Read the animation file and make it the model's timeline (one undo step).
+
+        Head-pose columns (a Live Link Face take) are read about the model's own
+        up and front axes (``model.metadata``), as the export wrote them.
+        """
         from workbench.animation.curves import TrackError
         from workbench.animation.importers import AnimationImportError, read_animation
 
@@ -235,14 +288,18 @@ class ExportPanel(ModelPanel):
         path = Path(text).expanduser()
         self.flush()
         try:
-            tl = read_animation(path, self.model.shape_names)
+            md = self.model.metadata
+            tl = read_animation(
+                path, self.model.shape_names, up_axis=md.up_axis, front_axis=md.front_axis
+            )
             self.model.timeline.set(tl, f"Import animation {path.name}")
         except (AnimationImportError, TrackError, OSError, ValueError) as exc:
             self.import_result.value = _error_html(f"Import failed: {exc}")
             return False
         n_keys = sum(len(tr) for tr in tl.tracks.values())
+        head = " (with the head pose)" if tl.head_pose is not None else ""
         self.import_result.value = (
-            f"Imported {len(tl.tracks)} tracks, {n_keys} keys, {tl.start:g}–{tl.end:g} s "
+            f"Imported {len(tl.tracks)} tracks{head}, {n_keys} keys, {tl.start:g}–{tl.end:g} s "
             f"at {tl.fps:g} fps from <code>{html.escape(str(path))}</code> (undo restores the old keys)"
         )
         return True
