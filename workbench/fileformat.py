@@ -23,6 +23,8 @@ Layout (a plain zip, members stored uncompressed so large arrays load fast)::
       "regions": null | {"level", "threshold", "threshold_value", "overlap_rings",
                   "n_levels", "names", "kinds", "drivers",
                   "weights": null | {"level", "region_names", "shape_names"}},  (schema >= 2)
+      "wrinkles": null | {the fit's inputs; refitted on load},      (optional)
+      "correctives": [{"name", "drivers": [...]}, ...],             (optional)
       "arrays": {"neutral": {"file", "dtype", "shape", "sha256"}, ...}
     }
 
@@ -45,8 +47,11 @@ arrays belong to a method family's file part
 (:class:`workbench.core.families.FilePart`): ``handles`` to
 :mod:`workbench.methods.handles.family`, ``expressions`` and ``paint`` to
 :mod:`workbench.methods.paint.family`, ``regions`` to
-:mod:`workbench.methods.regions.family`, ``tracks`` to
-:mod:`workbench.animation.family`. A new family adds its keys there, not here.
+:mod:`workbench.methods.regions.family`, ``wrinkles`` to
+:mod:`workbench.methods.wrinkles.family`, ``correctives`` to
+:mod:`workbench.methods.shapes.family`, ``tracks`` to
+:mod:`workbench.animation.family`. A new family adds its keys there, not here;
+a file without a family's keys loads with that family's defaults.
 
 Guarantees: saving writes a temporary file ``.<name>.<pid>.<random>.tmp``
 beside the target, fsyncs it and renames it over the target, so a crash
