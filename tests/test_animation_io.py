@@ -241,3 +241,75 @@ def test_failed_export_leaves_no_file(arkit_model, tmp_path):
     with pytest.raises(ExportError):
         export(arkit_model, Timeline().add_key("weights/jawOpen", -1.0, 1.0).add_key("weights/jawOpen", 1.0, 0.0), tmp_path / "n.glb")
     assert list(tmp_path.iterdir()) == []
+
+
+# ------------------------------------------------------- several meshes, unnamed targets
+def _two_animated_nodes(arkit_model, *, differ: bool, named: bool = True) -> tuple[object, bytes]:
+    """The exported file with a second node drawing the same mesh, animated by its own channel."""
+    import copy
+
+    gltf, data = build_gltf(arkit_model, _keyed().set_interpolation("weights/jawOpen", None, "linear"))
+    buf = bytearray(data)
+    ch = next(c for c in gltf.animations[0].channels if c.target.path == "weights")
+    node = copy.deepcopy(gltf.nodes[ch.target.node])
+    gltf.nodes.append(node)
+    gltf.scenes[0].nodes.append(len(gltf.nodes) - 1)
+    sampler = copy.deepcopy(gltf.animations[0].samplers[ch.sampler])
+    if differ:  # a copy of the output accessor with its first value changed
+        acc = copy.deepcopy(gltf.accessors[sampler.output])
+        bv = copy.deepcopy(gltf.bufferViews[acc.bufferView])
+        start = bv.byteOffset
+        chunk = bytearray(buf[start : start + bv.byteLength])
+        chunk[0:4] = struct.pack("<f", 0.123)
+        while len(buf) % 4:
+            buf.append(0)
+        bv.byteOffset = len(buf)
+        buf += chunk
+        gltf.buffers[0].byteLength = len(buf)
+        gltf.bufferViews.append(bv)
+        acc.bufferView = len(gltf.bufferViews) - 1
+        acc.byteOffset = 0
+        gltf.accessors.append(acc)
+        sampler.output = len(gltf.accessors) - 1
+    gltf.animations[0].samplers.append(sampler)
+    new = copy.deepcopy(ch)
+    new.target.node = len(gltf.nodes) - 1
+    new.sampler = len(gltf.animations[0].samplers) - 1
+    gltf.animations[0].channels.append(new)
+    if not named:
+        for m in gltf.meshes:
+            m.extras = {}
+    return gltf, bytes(buf)
+
+
+def test_gltf_meshes_that_share_a_shape_and_key_it_alike_load(arkit_model, tmp_path):
+    gltf, data = _two_animated_nodes(arkit_model, differ=False)
+    p = tmp_path / "two.glb"
+    p.write_bytes(_glb_bytes(gltf, data))
+    tl = read_gltf_animation(p, SHAPES)
+    t = np.linspace(0, 1, 11)
+    ref = _keyed().set_interpolation("weights/jawOpen", None, "linear")
+    assert tl.weight_matrix(SHAPES, t) == pytest.approx(ref.weight_matrix(SHAPES, t), abs=1e-6)
+
+
+def test_gltf_meshes_that_key_a_shared_shape_differently_are_refused(arkit_model, tmp_path):
+    gltf, data = _two_animated_nodes(arkit_model, differ=True)
+    p = tmp_path / "two.glb"
+    p.write_bytes(_glb_bytes(gltf, data))
+    with pytest.raises(AnimationImportError, match=r"channels\[\d+\]: animates '\w+' differently"):
+        read_gltf_animation(p, SHAPES)
+
+
+def test_gltf_animation_without_target_names_uses_the_readers_names(arkit_model, tmp_path):
+    gltf, data = build_gltf(arkit_model, _keyed().set_interpolation("weights/jawOpen", None, "linear"))
+    for m in gltf.meshes:
+        m.extras = {}
+    p = tmp_path / "unnamed.glb"
+    p.write_bytes(_glb_bytes(gltf, data))
+    names = [f"target_{i}" for i in range(len(gltf.meshes[0].primitives[0].targets))]
+    tl = read_gltf_animation(p, names, on_unknown="ignore")
+    jaw = SHAPES.index("jawOpen")
+    ref = _keyed().set_interpolation("weights/jawOpen", None, "linear")
+    t = np.linspace(0, 1, 5)
+    got = tl.weight_matrix(names, t)[:, jaw]
+    assert got == pytest.approx(ref.weight_matrix(SHAPES, t)[:, jaw], abs=1e-6)

@@ -686,20 +686,45 @@ def read_gltf_animation(
         non-increasing times, output counts that do not match.
     """
     from workbench.geometry.mesh_checks import MeshFormatError
-    from workbench.io.gltf import _GLB_MAGIC, _Gltf, _parse_json, _split_glb
+    from workbench.io.gltf.container import read_container
+    from workbench.io.gltf.document import Gltf
 
     p = Path(path)
     src = str(p)
     try:
-        data = p.read_bytes()
-        if p.suffix.lower() == ".glb" or data[:4] == _GLB_MAGIC:
-            json_raw, bin_chunk = _split_glb(data, src)
-        else:
-            json_raw, bin_chunk = data, None
-        g = _Gltf(_parse_json(json_raw, src), src, bin_chunk, p.parent)
+        doc, bin_chunk = read_container(p)
+        g = Gltf(doc, src, bin_chunk, p.parent)
         return _gltf_timeline(g, src, shape_names, animation, fps, on_unknown)
     except MeshFormatError as exc:
         raise AnimationImportError(src, exc.detail) from None
+
+
+def _same_keys(a: Track, b: Track) -> bool:
+    """Keys equal in time, value, interpolation and tangents."""
+    return len(a.keys) == len(b.keys) and all(
+        ka.time == kb.time
+        and ka.interpolation == kb.interpolation
+        and np.array_equal(ka.value, kb.value)
+        and np.array_equal(ka.in_tangent, kb.in_tangent)
+        and np.array_equal(ka.out_tangent, kb.out_tangent)
+        for ka, kb in zip(a.keys, b.keys, strict=True)
+    )
+
+
+def _fallback_target_names(mesh: Any, mesh_index: Any, shape_names: Sequence[str]) -> list[str]:
+    """Names the glTF reader gives targets without ``extras.targetNames``.
+
+    ``target_<i>``, or ``<mesh>_target_<i>`` when several meshes had unnamed
+    targets (:mod:`workbench.io.gltf.reader`); the one the model has wins.
+    """
+    targets = (mesh.get("primitives") or [{}])[0].get("targets") or []
+    label = mesh.get("name") if isinstance(mesh.get("name"), str) else f"mesh_{mesh_index}"
+    known = set(shape_names)
+    out = []
+    for i in range(len(targets)):
+        plain, prefixed = f"target_{i}", f"{label}_target_{i}"
+        out.append(prefixed if prefixed in known and plain not in known else plain)
+    return out
 
 
 def _gltf_timeline(
@@ -741,12 +766,15 @@ def _gltf_timeline(
             continue
         found = True
         node = g.item("nodes", target.get("node"), f"{cfield}.target.node")
-        mesh = g.item("meshes", node.get("mesh"), f"{cfield} node.mesh")
+        mesh_index = node.get("mesh")
+        mesh = g.item("meshes", mesh_index, f"{cfield} node.mesh")
         extras = mesh.get("extras")
         tnames = extras.get("targetNames") if isinstance(extras, dict) else None
+        if tnames is None:
+            tnames = _fallback_target_names(mesh, mesh_index, shape_names)
         if not isinstance(tnames, list) or not all(isinstance(s, str) for s in tnames):
             raise AnimationImportError(
-                src, f"{cfield}: the animated mesh has no extras.targetNames; cannot name its targets"
+                src, f"{cfield}: the animated mesh's extras.targetNames is not a list of names"
             )
         si = ch.get("sampler")
         if not isinstance(si, int) or not 0 <= si < len(samplers):
@@ -798,9 +826,17 @@ def _gltf_timeline(
                 keys = tuple(Key(float(T[k]), float(out[k, 0, t_idx]), mode) for k in range(nk))
             name = weight_track_name(shape)
             try:
-                tracks[name] = Track(name, keys)
+                track = Track(name, keys)
             except TrackError as exc:
                 raise AnimationImportError(src, f"{sfield}: {exc}") from None
+            # head, teeth and eyes as separate meshes animate a shared shape once each
+            if name in tracks and not _same_keys(tracks[name], track):
+                raise AnimationImportError(
+                    src,
+                    f"{cfield}: animates {shape!r} differently from an earlier channel; "
+                    "meshes that share a shape must key it alike",
+                )
+            tracks[name] = track
     if not found:
         raise AnimationImportError(src, f"{afield} has no 'weights' channel")
     tl = Timeline(fps=fps, tracks=tracks)
