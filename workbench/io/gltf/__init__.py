@@ -23,7 +23,7 @@ meshoptimizer's decoder (PyPI ``meshopt``) and Google's Draco decoder (PyPI
 
 The weights animation of such a file is read by
 :func:`workbench.animation.importers.read_gltf_animation`, which uses the same
-checked accessors (:class:`_Gltf`), so compressed keyframes decode the same way.
+checked accessors (:class:`.document.Gltf`), so compressed keyframes decode the same way.
 """
 
 from __future__ import annotations
@@ -31,16 +31,9 @@ from __future__ import annotations
 from pathlib import Path
 
 from workbench.io.base import ImportedFace
-from workbench.io.gltf.container import GLB_MAGIC as _GLB_MAGIC
-from workbench.io.gltf.container import parse_json as _parse_json
-from workbench.io.gltf.container import split_glb as _split_glb
-from workbench.io.gltf.document import Gltf as _Gltf
 from workbench.io.gltf.reader import read_gltf
 
 __all__ = ["DESCRIPTION", "detect", "read", "read_gltf"]
-
-# used by workbench.animation.importers (glTF weight animations)
-_PRIVATE_API = (_GLB_MAGIC, _Gltf, _parse_json, _split_glb)
 
 DESCRIPTION = (
     "a .glb or .gltf file (every mesh of the scene under its node transform; morph targets "
