@@ -97,6 +97,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.command == "app":
         return serve_app(args.port, token=not args.no_token, notebook=args.notebook)
+    if args.command == "info" and Path(args.path).suffix.lower() == ".c3d":
+        return _markers_info(args.path)  # markers, not a face
     if args.command == "info":
         from workbench.io import load
 
@@ -139,6 +141,24 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(p)
         return 0
     return 1  # pragma: no cover - argparse rejects unknown commands
+
+
+def _markers_info(path: str) -> int:
+    """``workbench info`` for a C3D marker file (:func:`workbench.io.c3d.read_markers`)."""
+    from workbench.io.c3d import read_markers
+
+    try:
+        m = read_markers(path)
+    except (OSError, ValueError) as exc:
+        print(f"workbench info: {exc}", file=sys.stderr)
+        return 2
+    gaps = m.gaps
+    print(f"{path}\n  markers     {m.n_markers} (C3D, units {m.units}, read as metres)\n"
+          f"  frames      {m.n_frames} at {m.fps:g} fps from frame {m.first_frame} ({m.n_frames / m.fps:.3g} s)\n"
+          f"  gaps        {int(gaps.sum())} marker-frames missing")
+    for j, name in enumerate(m.names):
+        print(f"    {name:<20} missing in {int(gaps[:, j].sum())} frames")
+    return 0
 
 
 def app_command(port: int, *, token: bool = True, notebook: str | Path | None = None) -> list[str]:

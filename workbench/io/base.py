@@ -19,7 +19,31 @@ from workbench.arkit import canonical_arkit_name
 from workbench.core.polygons import Polygons
 from workbench.geometry.mesh_checks import MeshFormatError, label_components
 
-__all__ = ["ImportedFace", "check_shape_names"]
+__all__ = ["FrameSequence", "ImportedFace", "check_shape_names"]
+
+
+@dataclass
+class FrameSequence:
+    """Per-frame vertex positions of a point cache (an Alembic mesh sequence).
+
+    Attributes
+    ----------
+    times : (F,) float64
+        Seconds of each frame, strictly increasing.
+    positions : (F, n, 3) float32
+        Every vertex at every frame, in the face's coordinates and unit
+        (frame 0 is :attr:`ImportedFace.vertices`).
+    fps : float
+        Frames per second of the cache (1 / the sampling interval).
+    """
+
+    times: NDArray[np.float64]
+    positions: NDArray[np.float32]
+    fps: float
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.positions.shape[0])
 
 
 @dataclass
@@ -46,6 +70,11 @@ class ImportedFace:
         MakeHuman); None when unknown (OBJ).
     up_axis : str or None
         "+y" etc. if the format defines it; None when unknown.
+    frames : FrameSequence or None
+        Only for point caches (Alembic): every frame's positions, for the
+        capture step; None for blendshape rigs. The reader also gives each
+        frame after the first as a shape (``frame_0001``...) so the face can
+        be played and edited like any rig.
     """
 
     vertices: NDArray[np.float64]
@@ -56,6 +85,7 @@ class ImportedFace:
     source_files: list[str] = field(default_factory=list)
     units: str | None = None
     up_axis: str | None = None
+    frames: FrameSequence | None = None
 
     @property
     def n_vertices(self) -> int:

@@ -46,6 +46,9 @@ BUILTIN_READERS: tuple[tuple[str, str], ...] = (
     ("obj_folder", "workbench.io.obj_folder"),
     ("obj", "workbench.io.obj"),
     ("gltf", "workbench.io.gltf"),
+    ("fbx", "workbench.io.fbx"),
+    ("usd", "workbench.io.usd"),
+    ("alembic", "workbench.io.alembic"),
 )
 
 _READERS: list[_Reader] = []
