@@ -17,6 +17,7 @@ import traitlets
 from widgets._threading import ErrorSink, close_interactions
 from widgets.gallery import ExpressionGallery
 from widgets.panels import ExportPanel, ExpressionPanel, PaintPanel, SculptPanel, UndoRedoButtons
+from widgets.panels.shape_tools import ShapeToolsPanel
 from widgets.regions import RegionsPanel
 from widgets.timeline import TimelineWidget
 from widgets.viewport import Viewport
@@ -41,6 +42,11 @@ class Workbench(W.VBox):
     beside a tab of panels ("Shapes", "Sculpt", "Regions", "Paint", "Export"),
     the :class:`TimelineWidget` under the viewport, and the shared error
     Output at the bottom (every panel reports callback errors there).
+
+    The Shapes tab holds the :class:`ExpressionPanel` (blendshape sliders) and,
+    under it, the :class:`~widgets.panels.shape_tools.ShapeToolsPanel` (split
+    L/R with a preview on the viewport, mirror, corrective shapes), whose shape
+    follows the last slider touched; leaving the tab ends the split preview.
 
     Selecting "Sculpt" switches the viewport to its sculpt tool (drag handle
     markers), "Paint" to its paint tool (brush strokes); the other tabs orbit.
@@ -79,6 +85,8 @@ class Workbench(W.VBox):
 
     Attributes
     ----------
+    panel : ExpressionPanel
+    shape_tools : ShapeToolsPanel
     wrinkles : WrinklePanel
     gallery : ExpressionGallery
         The expression palette (built on first use, see above).
@@ -107,8 +115,18 @@ class Workbench(W.VBox):
         # between the canvas and the timeline
         self.viewport.layout = W.Layout(flex="0 0 auto", min_width="320px")
         self.panel = ExpressionPanel(
-            model, errors=self.errors, max_height=f"{max(height - 40, 200)}px"
+            model, errors=self.errors, max_height=f"{max(height - 200, 240)}px"
         )
+        # under the sliders: split / mirror / correctives, following the last slider touched
+        self.shape_tools = ShapeToolsPanel(
+            model,
+            self.viewport,
+            sliders=self.panel,
+            errors=self.errors,
+            before_edit=[self.panel.grouper.flush],
+        )
+        self._shapes_tab = W.VBox([self.panel, self.shape_tools], layout=W.Layout(width="100%"))
+        self._shapes_tab.add_class("fwb-shapes-tab")
         self.sculpt = SculptPanel(
             model, self.viewport, errors=self.errors, before_edit=[self.panel.grouper.flush]
         )
@@ -130,7 +148,7 @@ class Workbench(W.VBox):
         self._paint_slot = W.VBox([W.HTML("<i>building the expression palette ...</i>")])
         self.tabs = W.Tab(
             children=[
-                self.panel,
+                self._shapes_tab,
                 self._sculpt_tab,
                 self._regions_slot,
                 self._paint_slot,
@@ -264,6 +282,8 @@ class Workbench(W.VBox):
             self._switching = False
 
     def _switch_tab(self, old: int | None, new: int | None) -> None:
+        if old == _SHAPES:
+            self.shape_tools.end_preview()  # the split preview's colours belong to the Shapes tab
         if old == _REGIONS and self._regions is not None:
             # First: leaving drag mode gives the viewport its previous tool back.
             self._regions.deactivate()
@@ -380,6 +400,7 @@ class Workbench(W.VBox):
         self.wrinkles.close()
         self.sculpt.close()
         self.export.close()
+        self.shape_tools.close()
         self.timeline.close()
         if self._gallery is not None:
             self._gallery.close()

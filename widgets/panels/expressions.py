@@ -22,6 +22,13 @@ The panel never keeps weights of its own: slider values follow
 from another panel move the sliders. An update from the model sets a slider to
 the model's value, and the slider handler ignores values equal to the model's,
 which breaks the feedback loop without a (thread-unsafe) "updating" flag.
+
+Corrective (combination) shapes (``model.shape_tools.correctives``) play the
+product of their drivers' weights: their sliders are disabled, carry a
+"= A × B" badge and show ``model.weights[name]``, refreshed on every
+``weights`` / ``weights_changing`` event (a driver's change names only the
+driver) and on ``correctives``. :attr:`ExpressionPanel.selected` is the last
+slider the user moved (the Shape tools' selection follows it).
 """
 
 from __future__ import annotations
@@ -31,6 +38,7 @@ from collections.abc import Mapping
 from typing import Any
 
 import ipywidgets as W
+import traitlets
 
 from widgets._threading import InteractionGrouper, close_interactions
 from widgets.panels.base import ModelPanel
@@ -99,7 +107,16 @@ class ExpressionPanel(ModelPanel):
         Idle time that ends a slider drag's undo step (see module docstring).
     max_height : str
         CSS max height of the scrolling slider area.
+
+    Attributes
+    ----------
+    selected : str
+        Name of the last slider the user moved ("" before any).
+    badges : dict[str, ipywidgets.HTML]
+        The "= A × B" badge of each corrective's slider.
     """
+
+    selected = traitlets.Unicode("")
 
     def __init__(
         self,
@@ -113,6 +130,9 @@ class ExpressionPanel(ModelPanel):
         self.grouper = InteractionGrouper(model, idle_s=idle_s, errors=self.errors)
         self.sliders: dict[str, W.FloatSlider] = {}
         self.mutes: dict[str, W.Checkbox] = {}
+        self.badges: dict[str, W.HTML] = {}
+        self._badge_columns: dict[str, W.VBox] = {}  # slider over badge, in a corrective's cell
+        self._cells: dict[str, W.HBox] = {}
         self._rows: list[tuple[tuple[str, ...], W.Widget]] = []
         self._headers: dict[str, tuple[W.HTML, list[W.Widget]]] = {}
 
@@ -140,6 +160,7 @@ class ExpressionPanel(ModelPanel):
         self.listen(ev.weights, self._on_model_weights, "ExpressionPanel weights")
         self.listen(ev.weights_changing, self._on_model_weights, "ExpressionPanel weights")
         self.listen(ev.shapes, self._on_model_shapes, "ExpressionPanel shapes")
+        self.listen(ev.correctives, self._on_correctives, "ExpressionPanel correctives")
         self.on_close(self.grouper.flush)  # first: an open drag becomes its undo step
         self._build()
 
@@ -151,9 +172,10 @@ class ExpressionPanel(ModelPanel):
             weights = dict(model.weights)
         for s in self.sliders.values():
             s.close()
-        for c in self.mutes.values():
-            c.close()
+        for w in [*self.mutes.values(), *self.badges.values(), *self._badge_columns.values()]:
+            w.close()
         self.sliders, self.mutes, self._rows, self._headers = {}, {}, [], {}
+        self.badges, self._badge_columns, self._cells = {}, {}, {}
         children: list[W.Widget] = []
         for group, rows in layout_rows(list(shapes)).items():
             # flex "0 0 auto": inside the scrolling column, rows must keep their height
@@ -170,6 +192,7 @@ class ExpressionPanel(ModelPanel):
             children.append(header)
             children.extend(row_widgets)
         self.body.children = children
+        self._on_correctives()
         self._on_search()
 
     def _make_cell(self, shape: Any, value: float) -> W.Widget:
@@ -205,7 +228,9 @@ class ExpressionPanel(ModelPanel):
         mute.observe(g(f"mute {name}")(lambda ch, nm=name: self._on_mute(nm, ch["new"])), "value")
         self.sliders[name] = slider
         self.mutes[name] = mute
-        return W.HBox([mute, slider], layout=W.Layout(width="50%", min_width="0"))
+        cell = W.HBox([mute, slider], layout=W.Layout(width="50%", min_width="0"))
+        self._cells[name] = cell
+        return cell
 
     # ------------------------------------------------------- UI -> model
     def _on_slider(self, name: str, value: float) -> None:
@@ -213,6 +238,7 @@ class ExpressionPanel(ModelPanel):
         with model.lock:
             if name not in model.weights or abs(model.weights[name] - value) < 1e-9:
                 return  # an echo of a model update, or a shape that went away
+        self.selected = name
         self.grouper.touch(f"Drag {name}")
         model.set_weight(name, value)
 
@@ -245,6 +271,52 @@ class ExpressionPanel(ModelPanel):
             s = self.sliders.get(name)
             if s is not None and s.value != v:
                 s.value = v
+        if self.badges:  # correctives: a driver's change names only the driver
+            self._show_derived()
+
+    def _show_derived(self) -> None:
+        played = self._model.weights
+        for name in self.badges:
+            s = self.sliders.get(name)
+            if s is not None and name in played and s.value != played[name]:
+                s.value = played[name]
+
+    def _on_correctives(self) -> None:
+        """Disable the correctives' sliders and badge them "= A × B" (under the slider); enable the others."""
+        import html
+
+        rules = dict(self._model.shape_tools.correctives)
+        for name, slider in self.sliders.items():
+            drivers = rules.get(name)
+            slider.disabled = drivers is not None
+            cell, mute = self._cells.get(name), self.mutes[name]
+            badge = self.badges.get(name)
+            if drivers is None:
+                if badge is not None:  # no longer a corrective: the plain cell again
+                    del self.badges[name]
+                    column = self._badge_columns.pop(name)
+                    if cell is not None:
+                        cell.children = (mute, slider)
+                    column.close()
+                    badge.close()
+                continue
+            text = html.escape("= " + " × ".join(drivers))
+            value = (
+                f"<div title='corrective: weight {text}' style='color:#06c;font-size:11px;"
+                f"line-height:14px;margin-left:108px;white-space:nowrap;overflow:hidden;"
+                f"text-overflow:ellipsis'>{text}</div>"
+            )
+            if badge is None:
+                badge = W.HTML(value, layout=W.Layout(width="100%", min_width="0"))
+                badge.add_class("fwb-corrective-badge")
+                badge.add_class(f"fwb-corrective-badge-{css_safe(name)}")
+                column = W.VBox([slider, badge], layout=W.Layout(width="100%", min_width="0"))
+                self.badges[name], self._badge_columns[name] = badge, column
+                if cell is not None:
+                    cell.children = (mute, column)
+            elif badge.value != value:
+                badge.value = value
+        self._show_derived()
 
     def _on_model_shapes(self) -> None:
         model = self._model
@@ -271,5 +343,10 @@ class ExpressionPanel(ModelPanel):
         try:
             super().close()
         finally:
-            for w in [*self.sliders.values(), *self.mutes.values()]:
+            for w in [
+                *self.sliders.values(),
+                *self.mutes.values(),
+                *self.badges.values(),
+                *self._badge_columns.values(),
+            ]:
                 w.close()

@@ -42,6 +42,7 @@ from workbench.animation.curves import (
     weight_track_name,
 )
 from workbench.animation.tracks import Timeline, add_keys
+from workbench.core.families import weight_product_reads, weight_products
 from workbench.core.pipeline import StateView
 from workbench.core.shapes import ModelError
 
@@ -131,15 +132,16 @@ class TimelineFacet:
                     interpolation: Interpolation = "bezier") -> None:
         """Key the current weights at ``time`` (one undo step).
 
-        ``names`` default: every shape with a non-zero weight or already keyed.
+        ``names`` default: every shape with a non-zero weight or already keyed,
+        but no corrective (its weight is derived from its drivers' keys).
         """
         m = self._model
         with m.lock:
             tl = self.value
             w = m.weights
             if names is None:
-                keyed = set(tl.weight_tracks)
-                names = [n for n in m.shape_names if w[n] != 0.0 or n in keyed]
+                keyed, derived = set(tl.weight_tracks), self._derived_shapes()
+                names = [n for n in m.shape_names if (w[n] != 0.0 or n in keyed) and n not in derived]
             names = list(names)
             for n in names:
                 m.shape(n)
@@ -438,7 +440,7 @@ class TimelineFacet:
                 tl = self.value
                 keyed = set(tl.weight_tracks)
                 earlier = sorted({float(t) for tr in tl.weight_tracks.values() for t in tr.times})
-                for n in keyed | {k for k, v in values.items() if v != 0.0}:
+                for n in (keyed | {k for k, v in values.items() if v != 0.0}) - self._derived_shapes():
                     if n not in keyed:  # a newly keyed shape was 0 in the expressions keyed before
                         for t in earlier:
                             tl = tl.add_key(weight_track_name(n), t, 0.0, interpolation=interpolation)
@@ -446,6 +448,11 @@ class TimelineFacet:
                 if handle_key is not None:
                     tl = tl.add_key("handles", time, handle_key, interpolation=interpolation)
                 self.set(_grow(tl, time), label)
+
+    def _derived_shapes(self) -> frozenset[str]:
+        """Shapes whose weight is derived (correctives: the product of their drivers'); never keyed."""
+        m = self._model
+        return frozenset(weight_products({r: m.slot(r) for r in weight_product_reads()}))
 
     def _recipe_plays_back(self, expr: Expression) -> bool:
         """True if keying ``expr``'s weights and handle offsets reproduces its displacement.
