@@ -245,8 +245,10 @@ class _Check:
                 pf = int(pf) & 0xFFFF
             if n_frames and pf > n_frames and n_frames < 65535:
                 self.fail("POINT:FRAMES", f"{int(pf)} frames, but the header (words 4-5) has frames {first}-{last}")
-            if pf > n_frames:
+            if pf > n_frames and (n_frames or pf >= 65535):
                 n_frames = int(pf)
+        if last < first and n_frames < 65535:  # a header can only hold frame numbers < 65536
+            self.fail("header words 4-5", f"last frame {last} is before first frame {first}: no frames")
         if n_frames <= 0:
             self.fail("header words 4-5", f"last frame {last} is before first frame {first}: no frames")
         labels: list[str] = []

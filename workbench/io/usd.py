@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import logging
 import math
+import re
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, NoReturn
@@ -86,7 +87,12 @@ def _open(p: Path) -> Any:
 
 
 def _tf_message(exc: Exception) -> str:
+    """The parser's own words: ``file:line:col: parse error ... in </Prim.attr>``, C++ names trimmed."""
     text = " ".join(str(exc).split())
+    m = re.search(r" : '(.*)'\s*$", text)
+    if m:
+        text = m.group(1).strip()
+    text = re.sub(r"pxrInternal_v\w+?__pxrReserved__::(\w+::)*", "", text)
     return text[:600]
 
 
