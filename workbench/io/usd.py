@@ -70,6 +70,7 @@ def _open(p: Path) -> Any:
     src = str(p)
     if not p.is_file():
         raise FileNotFoundError(f"{p}: no such file")
+    stale = Sdf.Layer.Find(str(p))  # held open elsewhere in this process: re-read from disk
     try:
         layer = Sdf.Layer.FindOrOpen(str(p))
     except Tf.ErrorException as exc:
@@ -77,7 +78,8 @@ def _open(p: Path) -> Any:
     if layer is None:
         raise MeshFormatError(src, "layer", "the file does not parse as USD")
     try:
-        layer.Reload()  # a file changed since it was last opened in this process
+        if stale is not None:
+            layer.Reload()
         stage = Usd.Stage.Open(layer, Usd.Stage.LoadAll)
     except Tf.ErrorException as exc:
         raise MeshFormatError(src, "layer", f"the stage cannot be opened: {_tf_message(exc)}") from None
