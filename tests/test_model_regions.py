@@ -98,7 +98,8 @@ def test_region_edits_are_undoable_and_restore_the_regions_bit_exactly() -> None
     A = topo.adjacency
     c = np.zeros(m.n_vertices, bool)
     c[R.core(0, "mouth_L_2")] = True
-    ring = np.flatnonzero((A @ c.astype(np.int32) > 0) & ~c & topo.skin)[:10]
+    # on its side: the mid-plane column belongs to the -x regions
+    ring = np.flatnonzero((A @ c.astype(np.int32) > 0) & ~c & topo.skin & (topo.vertices[:, 0] > 0))[:10]
     st = m.regions.paint(0, "mouth_L_2", ring)
     assert (st.regions.labels[0][ring] == R.region_index(0, "mouth_L_2")).all()
     assert m.history.undo_labels[-1] == "Paint region mouth_L_2"
@@ -119,20 +120,20 @@ def test_region_edit_errors_leave_no_undo_step() -> None:
     m.segment_regions(0.25)
     n = len(m.history.undo_labels)
     with pytest.raises(RegionError, match="b: region 'jaw_R_1' does not touch"):
-        m.regions.merge(0, "brow_eye_L", "jaw_R_1")
+        m.regions.merge(0, "brow_nose_L", "jaw_R_1")
     with pytest.raises(RegionError, match="seeds_a"):
-        m.regions.split(0, "brow_eye_L", 0, 1)
+        m.regions.split(0, "brow_nose_L", 0, 1)
     with pytest.raises(RegionError, match="new_name"):
-        m.regions.rename(0, "brow_eye_L", "brow_eye_R")
+        m.regions.rename(0, "brow_nose_L", "brow_nose_R")
     with pytest.raises(RegionError, match="level"):
-        m.regions.paint(9, "brow_eye_L", [0])
+        m.regions.paint(9, "brow_nose_L", [0])
     assert len(m.history.undo_labels) == n
 
 
 def test_edited_regions_save_and_load(tmp_path) -> None:
     m = workbench.load_sample("head")
     m.segment_regions(0.25)
-    m.regions.set_weights(RegionWeights.from_global(m, m.regions.regions, 0).with_region("brow_eye_L", {"browInnerUp": 0.5}))
+    m.regions.set_weights(RegionWeights.from_global(m, m.regions.regions, 0).with_region("brow_nose_L", {"browInnerUp": 0.5}))
     m.regions.merge(0, "mouth_L_2", "mouth_L_1", name="mouth_corner_L")
     m.regions.rename(1, "jaw", "chin")
     st = m.regions.state
@@ -143,4 +144,4 @@ def test_edited_regions_save_and_load(tmp_path) -> None:
         np.testing.assert_array_equal(g.regions.regions.weight_vals[lv], st.regions.weight_vals[lv])
         assert g.regions.regions.names[lv] == st.regions.names[lv]
     np.testing.assert_array_equal(g.regions.weights.values, st.weights.values)
-    assert g.regions.weights.region("brow_eye_L")["browInnerUp"] == pytest.approx(0.5)
+    assert g.regions.weights.region("brow_nose_L")["browInnerUp"] == pytest.approx(0.5)

@@ -90,7 +90,7 @@ def test_partition_of_unity_blend_is_the_weighted_mix(head: FaceModel, regions: 
 
 
 def test_to_level_finer_inherits_and_round_trips(head: FaceModel, regions: Regions) -> None:
-    rw2 = RegionWeights.from_global(head, regions, 2).with_region("mouth", {"mouthFunnel": 0.7})
+    rw2 = RegionWeights.from_global(head, regions, 2).with_region("mouth_jaw", {"mouthFunnel": 0.7})
     rw0 = rw2.to_level(regions, 0)
     k = head.shape_names.index("mouthFunnel")
     for r in range(regions.n_regions(0)):
@@ -128,7 +128,7 @@ def test_drag_with_a_held_point_keeps_it(head: FaceModel, regions: Regions) -> N
     lv = 2
     rw = RegionWeights.from_global(head, regions, lv)
     v = _corner(head)
-    r = regions.region_index(lv, "mouth")
+    r = regions.region_index(lv, "mouth_jaw")
     held = int(regions.core(lv, r)[len(regions.core(lv, r)) // 2])
     X = region_blend_positions(head, regions, rw, lv, vertices=[v, held])
     new = solve_region_drag(head, regions, lv, rw, {v: X[0] + [0.0, 0.04, 0.0], held: X[1]})

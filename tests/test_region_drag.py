@@ -112,9 +112,10 @@ def _grow_path(m: workbench.FaceModel, region: str) -> tuple[int, list[np.ndarra
     R, topo = st.regions, m.regions.topology
     r = R.region_index(0, region)
     core = np.flatnonzero((R.labels[0] == r) & topo.skin)
-    ring = np.flatnonzero((topo.adjacency @ np.isin(np.arange(m.n_vertices), core).astype(np.int32) > 0)
-                          & topo.skin & (R.labels[0] != r))
     V = topo.vertices
+    side = np.sign(np.median(V[core, 0]))  # the mid-plane column belongs to the -x regions
+    ring = np.flatnonzero((topo.adjacency @ np.isin(np.arange(m.n_vertices), core).astype(np.int32) > 0)
+                          & topo.skin & (R.labels[0] != r) & (V[:, 0] * side > 0))
     start = int(ring[0])
     toward = V[core][np.argmin(np.linalg.norm(V[core] - V[start], axis=1))]
     return start, [V[start] + f * (toward - V[start]) for f in (0.5, 1.0)]
@@ -166,7 +167,7 @@ def test_a_cancelled_stroke_restores_the_regions_bit_exactly(fresh: workbench.Fa
 def test_a_refused_dab_is_skipped_and_the_stroke_goes_on(fresh: workbench.FaceModel) -> None:
     m = fresh
     R = m.regions.regions
-    far = int(R.core(0, "brow_eye_R")[0])
+    far = int(R.core(0, "brow_nose_R")[0])
     stroke = m.regions.begin_paint(0, "mouth_L_2", radius=0.01, erase=False)
     assert stroke.dab(far) == 0 and "do not touch region 'mouth_L_2'" in stroke.last_error
     start, _ = _grow_path(m, "mouth_L_2")
@@ -229,10 +230,10 @@ def test_region_markers_lie_on_the_region_or_its_band(fresh: workbench.FaceModel
 
     m = fresh
     R, topo = m.regions.regions, m.regions.topology
-    r = R.region_index(0, "cheek_mouth_L")
+    r = R.region_index(0, "cheek_eye_L")
     on = region_markers(m, 0, r, 24)
     assert 2 <= on.size <= 24 and (R.labels[0][on] == r).all() and topo.skin[on].all()
-    band = region_markers(m, 0, "cheek_mouth_L", 40, band=0.1)
+    band = region_markers(m, 0, "cheek_eye_L", 40, band=0.1)
     assert band.size <= 40 and topo.skin[band].all() and (R.labels[0][band] != r).any()
     V, core = topo.vertices, R.core(0, r)
     d = np.linalg.norm(V[band][:, None] - V[core][None], axis=2).min(axis=1)

@@ -402,12 +402,12 @@ def test_merge_across_coarse_parents_merges_the_parents_too(regions: Regions, to
 
 
 def test_merge_errors_name_the_argument(regions: Regions, topo: RegionTopology) -> None:
-    a = regions.region_index(0, "brow_eye_L")
+    a = regions.region_index(0, "brow_nose_L")
     far = regions.region_index(0, "jaw_R_1")
-    with pytest.raises(RegionError, match="b: region 'jaw_R_1' does not touch 'brow_eye_L'"):
+    with pytest.raises(RegionError, match="b: region 'jaw_R_1' does not touch 'brow_nose_L'"):
         merge_regions(regions, topo, 0, a, far)
     with pytest.raises(RegionError, match="b: cannot merge"):
-        merge_regions(regions, topo, 0, a, "brow_eye_L")
+        merge_regions(regions, topo, 0, a, "brow_nose_L")
     with pytest.raises(RegionError, match=r"a: .*rigid"):
         merge_regions(regions, topo, 0, "eyeball_L", a)
     with pytest.raises(RegionError, match="b: region 'nope'"):
@@ -422,11 +422,11 @@ def test_merge_errors_name_the_argument(regions: Regions, topo: RegionTopology) 
 
 
 def test_split_then_merge_restores_the_partition_on_level_0(regions: Regions, topo: RegionTopology) -> None:
-    r = regions.region_index(0, "cheek_mouth_L")
-    sa, sb = _far_pair(regions, topo, 0, "cheek_mouth_L", 1)
+    r = regions.region_index(0, "cheek_eye_L")
+    sa, sb = _far_pair(regions, topo, 0, "cheek_eye_L", 1)
     e = split_region(regions, topo, 0, r, sa, sb)
     R = e.regions
-    assert R.names[0][r : r + 2] == ("cheek_mouth_L_a", "cheek_mouth_L_b")
+    assert R.names[0][r : r + 2] == ("cheek_eye_L_a", "cheek_eye_L_b")
     assert R.labels[0][sa] == r and R.labels[0][sb] == r + 1
     assert e.origins[0][r] == e.origins[0][r + 1] == r  # both halves inherit
     # geodesic Voronoi: the two halves partition the old core, both non-empty
@@ -435,22 +435,22 @@ def test_split_then_merge_restores_the_partition_on_level_0(regions: Regions, to
     assert R.n_regions(1) == regions.n_regions(1)  # coarser levels unchanged
     assert np.array_equal(R.labels[1], regions.labels[1])
     assert_invariants(R, topo)
-    back = merge_regions(R, topo, 0, r + 1, r, name="cheek_mouth_L").regions
+    back = merge_regions(R, topo, 0, r + 1, r, name="cheek_eye_L").regions
     assert_same_regions(back, regions)
 
 
 def test_split_on_a_coarse_level_groups_children_and_merge_undoes_it(
     regions: Regions, topo: RegionTopology
 ) -> None:
-    r = regions.region_index(2, "mouth")
-    sa, sb = _far_pair(regions, topo, 2, "mouth", 0)
-    e = split_region(regions, topo, 2, r, sa, sb, names=("mouth_right", "mouth_left"))
+    r = regions.region_index(2, "mouth_jaw")
+    sa, sb = _far_pair(regions, topo, 2, "mouth_jaw", 1)  # the chin and the upper lip: two children
+    e = split_region(regions, topo, 2, r, sa, sb, names=("jaw", "mouth"))
     R = e.regions
-    assert R.names[2][r : r + 2] == ("mouth_right", "mouth_left")
+    assert R.names[2][r : r + 2] == ("jaw", "mouth")
     for lv in (0, 1):  # whole children: finer levels unchanged
         assert np.array_equal(R.labels[lv], regions.labels[lv])
     assert_invariants(R, topo)
-    back = merge_regions(R, topo, 2, r, r + 1, name="mouth").regions
+    back = merge_regions(R, topo, 2, r, r + 1, name="mouth_jaw").regions
     assert_same_regions(back, regions)
 
 
@@ -469,27 +469,27 @@ def test_split_with_both_seeds_in_one_child_splits_the_child_first(
 
 
 def test_split_errors_name_the_argument(regions: Regions, topo: RegionTopology) -> None:
-    sa, sb = _far_pair(regions, topo, 0, "cheek_mouth_L", 1)
-    other = int(regions.core(0, "brow_eye_R")[0])
-    with pytest.raises(RegionError, match=r"seeds_b: vertices .* not in the core of region 'cheek_mouth_L'"):
-        split_region(regions, topo, 0, "cheek_mouth_L", sa, other)
+    sa, sb = _far_pair(regions, topo, 0, "brow_nose_L", 1)
+    other = int(regions.core(0, "brow_nose_R")[0])
+    with pytest.raises(RegionError, match=r"seeds_b: vertices .* not in the core of region 'brow_nose_L'"):
+        split_region(regions, topo, 0, "brow_nose_L", sa, other)
     with pytest.raises(RegionError, match=r"seeds_b: vertices .* also in seeds_a"):
-        split_region(regions, topo, 0, "cheek_mouth_L", [sa, sb], sb)
+        split_region(regions, topo, 0, "brow_nose_L", [sa, sb], sb)
     with pytest.raises(RegionError, match="seeds_a must hold at least one vertex"):
-        split_region(regions, topo, 0, "cheek_mouth_L", [], sb)
+        split_region(regions, topo, 0, "brow_nose_L", [], sb)
     with pytest.raises(RegionError, match="seeds_a: vertex ids must be in"):
-        split_region(regions, topo, 0, "cheek_mouth_L", -3, sb)
+        split_region(regions, topo, 0, "brow_nose_L", -3, sb)
     with pytest.raises(RegionError, match="region: 'eyeball_L' is a rigid part"):
         split_region(regions, topo, 0, "eyeball_L", sa, sb)
-    with pytest.raises(RegionError, match=r"names\[1\] 'brow_eye_R' is already used"):
-        split_region(regions, topo, 0, "cheek_mouth_L", sa, sb, names=("x", "brow_eye_R"))
+    with pytest.raises(RegionError, match=r"names\[1\] 'brow_nose_R' is already used"):
+        split_region(regions, topo, 0, "brow_nose_L", sa, sb, names=("x", "brow_nose_R"))
     # seeds of one half on both sides of the other half's seed: that half is in two pieces
-    core = regions.core(0, "cheek_mouth_L")
+    core = regions.core(0, "brow_nose_L")
     core = core[topo.skin[core]]
     y = topo.vertices[core, 1]
     mid = int(core[np.argsort(y)[core.size // 2]])
     with pytest.raises(RegionError, match="seeds_a: the half around these seeds would be in 2 pieces"):
-        split_region(regions, topo, 0, "cheek_mouth_L", [sa, sb], mid)
+        split_region(regions, topo, 0, "brow_nose_L", [sa, sb], mid)
 
 
 def _ring(R: Regions, topo: RegionTopology, level: int, r: int) -> np.ndarray:
@@ -502,7 +502,7 @@ def _ring(R: Regions, topo: RegionTopology, level: int, r: int) -> np.ndarray:
 def test_paint_assigns_vertices_and_keeps_regions_connected(regions: Regions, topo: RegionTopology) -> None:
     r = regions.region_index(0, "mouth_L_2")
     ring = _ring(regions, topo, 0, r)
-    T = ring[:12]
+    T = ring[topo.vertices[ring, 0] > 0][:12]  # on its side: the mid-plane column belongs to -x regions
     e = paint_region(regions, topo, 0, r, T)
     R = e.regions
     assert (R.labels[0][T] == r).all()
@@ -513,7 +513,8 @@ def test_paint_assigns_vertices_and_keeps_regions_connected(regions: Regions, to
     assert_invariants(R, topo)
     # painting on a coarse level: the painted vertices join a child of the region on finer levels
     r2 = regions.region_index(1, "mouth_L")
-    T2 = _ring(regions, topo, 1, r2)[:12]
+    T2 = _ring(regions, topo, 1, r2)
+    T2 = T2[topo.vertices[T2, 0] > 0][:12]
     R2 = paint_region(regions, topo, 1, r2, T2).regions
     assert (R2.labels[1][T2] == r2).all()
     assert (R2.parents[0][R2.labels[0][T2]] == r2).all()
@@ -523,7 +524,7 @@ def test_paint_assigns_vertices_and_keeps_regions_connected(regions: Regions, to
 def test_paint_erase_returns_vertices_to_the_background_on_every_level(
     regions: Regions, topo: RegionTopology
 ) -> None:
-    r = regions.region_index(0, "cheek_mouth_L")
+    r = regions.region_index(0, "cheek_eye_L")
     core = regions.core(0, r)
     core = core[topo.skin[core]]
     border = np.intersect1d(core, _ring(regions, topo, 0, regions.region_index(0, "mouth_L_2")))[:4]
@@ -540,7 +541,7 @@ def test_paint_no_change_is_the_same_object_and_errors_name_vertices(
     core = regions.core(0, r)
     e = paint_region(regions, topo, 0, r, core[:5])
     assert e.regions is regions
-    far = regions.core(0, "brow_eye_R")[:3]
+    far = regions.core(0, "brow_nose_R")[:3]
     with pytest.raises(RegionError, match="vertices: 3 painted vertices do not touch region 'mouth_L_2'"):
         paint_region(regions, topo, 0, r, far)
     eye = regions.core(0, "eyeball_L")[:3]
@@ -551,10 +552,10 @@ def test_paint_no_change_is_the_same_object_and_errors_name_vertices(
     with pytest.raises(RegionError, match="vertices must be integer"):
         paint_region(regions, topo, 0, r, [0.5])
     # erasing a band across a region cuts it in two: refused
-    q = regions.region_index(0, "cheek_mouth_L")
+    q = regions.region_index(0, "cheek_eye_L")
     cq = regions.core(0, q)
     cq = cq[topo.skin[cq]]
     y = topo.vertices[cq, 1]
     band = cq[np.abs(y - np.median(y)) < 0.15 * np.ptp(y)]
-    with pytest.raises(RegionError, match="vertices: painting would cut region 'cheek_mouth_L'"):
+    with pytest.raises(RegionError, match="vertices: painting would cut region 'cheek_eye_L'"):
         paint_region(regions, topo, 0, q, band, add=False)

@@ -21,9 +21,10 @@ Why parts are hand-written instead of using pyvista's helpers:
   +z) and the extent of the points seen from that direction, because
   ``reset_camera`` frames a bounding sphere and leaves faces small and off
   centre in portrait-shaped heads.
-* Colours are per-vertex RGB chosen from the component names (skin, eyes,
-  teeth, ...); eyes get a procedural iris/pupil from their vertex directions,
-  since the sample has no textures.
+* Colours are per-vertex RGB chosen from the components' part roles (skin,
+  eyeballs, teeth, ...: ``model.part_roles``, from the names or else the
+  geometry); eyeballs get a procedural iris/pupil from their vertex
+  directions, since the sample has no textures.
 
 Rendering is CPU-only (Mesa llvmpipe through EGL, no display needed) and
 deterministic: a fresh plotter with fixed lights and camera gives the same
@@ -52,6 +53,7 @@ from PIL import Image
 from workbench import FaceModel, ModelMetadata
 from workbench.converters import register_mesh_converter
 from workbench.core.polygons import Polygons
+from workbench.geometry.parts import model_part_roles, part_material
 
 __all__ = [
     "CAMERAS",
@@ -72,7 +74,8 @@ __all__ = [
 #: (the face itself, without neck and skull), used for thumbnails.
 CAMERAS = ("front", "three_quarter", "side", "face")
 
-#: sRGB colours (0-255) by component name; unknown components use ``skin``.
+#: sRGB colours (0-255) by part material (:func:`workbench.geometry.parts.part_material`
+#: of the component's role); unrecognised parts use ``skin``.
 COMPONENT_COLORS: dict[str, tuple[int, int, int]] = {
     "skin": (226, 178, 152),
     "eye": (242, 240, 235),  # sclera; iris and pupil are added procedurally
@@ -248,24 +251,14 @@ def vertex_normals(points: ArrayLike, faces: ArrayLike) -> NDArray[np.float32]:
     return vn.astype(np.float32)
 
 
-def _color_key(component_name: str) -> str:
-    name = component_name.lower()
-    for key in ("eyelash", "eyebrow", "teeth", "tooth", "tongue", "gum", "eye"):
-        if key in name:
-            return {
-                "eyelash": "eyelashes",
-                "eyebrow": "eyebrows",
-                "tooth": "teeth",
-                "gum": "gums",
-            }.get(key, key)
-    return "skin"
-
-
 def vertex_colors(model: FaceModel, front: ArrayLike = (0.0, 0.0, 1.0)) -> NDArray[np.uint8]:
-    """Per-vertex RGB colours from component names.
+    """Per-vertex RGB colours from the components' part roles (``model.part_roles``).
 
-    Eye components get a sclera/iris/pupil pattern: a vertex's direction from
-    the eyeball centre is compared with the face direction ``front``.
+    The roles come from the names, else from the geometry
+    (:func:`workbench.geometry.parts.component_roles`), so an unnamed eyeball is
+    still drawn as an eye. Eyeballs get a sclera/iris/pupil pattern: a vertex's
+    direction from its eyeball's centre is compared with the face direction
+    ``front``.
 
     Returns
     -------
@@ -276,6 +269,7 @@ def vertex_colors(model: FaceModel, front: ArrayLike = (0.0, 0.0, 1.0)) -> NDArr
     out[:] = COMPONENT_COLORS["skin"]
     labels = np.asarray(model.component_labels)
     names = list(model.component_names)
+    roles = model_part_roles(model)
     v = np.asarray(model.vertices, dtype=np.float64)
     fwd = np.asarray(front, dtype=np.float64)
     fwd = fwd / np.linalg.norm(fwd)
@@ -283,20 +277,37 @@ def vertex_colors(model: FaceModel, front: ArrayLike = (0.0, 0.0, 1.0)) -> NDArr
         sel = labels == idx
         if not np.any(sel):
             continue
-        key = _color_key(cname)
+        key = part_material(roles[idx], cname)
         out[sel] = COMPONENT_COLORS[key]
         if key == "eye":
-            p = v[sel]
-            centre = p.mean(axis=0)
-            d = p - centre
-            d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)
-            cos = d @ fwd
-            rgb = np.empty((len(p), 3), dtype=np.uint8)
-            rgb[:] = COMPONENT_COLORS["eye"]
-            rgb[cos > math.cos(math.radians(36))] = COMPONENT_COLORS["iris"]
-            rgb[cos > math.cos(math.radians(17))] = COMPONENT_COLORS["pupil"]
-            out[sel] = rgb
+            ids = np.flatnonzero(sel)
+            for piece in _connected_pieces(model.faces, ids):  # both eyes may be one component
+                p = v[piece]
+                d = p - p.mean(axis=0)
+                d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)
+                cos = d @ fwd
+                rgb = np.empty((len(p), 3), dtype=np.uint8)
+                rgb[:] = COMPONENT_COLORS["eye"]
+                rgb[cos > math.cos(math.radians(36))] = COMPONENT_COLORS["iris"]
+                rgb[cos > math.cos(math.radians(17))] = COMPONENT_COLORS["pupil"]
+                out[piece] = rgb
     return out
+
+
+def _connected_pieces(faces: ArrayLike, ids: NDArray[np.intp]) -> list[NDArray[np.intp]]:
+    """The vertex ids ``ids`` split into the connected pieces of the faces among them."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    F = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    local = np.full(int(max(F.max(initial=0), ids.max(initial=0))) + 1, -1, np.int64)
+    local[ids] = np.arange(ids.size)
+    Fl = local[F]
+    Fl = Fl[(Fl >= 0).all(axis=1)]
+    m = ids.size
+    adj = coo_matrix((np.ones(Fl.size), (np.repeat(Fl[:, 0], 3), Fl.ravel())), shape=(m, m))
+    k, lab = connected_components(adj + adj.T, directed=False)
+    return [ids[lab == i] for i in range(k)]
 
 
 # --------------------------------------------------------------------------- camera

@@ -33,6 +33,7 @@ from workbench.core.families import set_hook
 from workbench.core.shapes import AXES, UNIT_TO_METRES, BlendShape, ModelError, ModelMetadata
 from workbench.core.state import FaceState, InteractionToken
 from workbench.fileformat import save_model
+from workbench.geometry.parts import model_part_roles
 from workbench.methods.handles.handle_set import HandleSet
 
 if TYPE_CHECKING:
@@ -79,6 +80,14 @@ class FaceModel(FaceState):
     def __init__(self, vertices: ArrayLike, faces: ArrayLike | None, shapes: Iterable[BlendShape] = (),
                  *, handles: HandleSet | None = None, **kwargs: Any) -> None:
         super().__init__(vertices, faces, shapes, handles=handles, **kwargs)
+
+    @property
+    def part_roles(self) -> tuple[str, ...]:
+        """Role of every component ("skin", "eyeball_left", "lashes", "teeth_upper", ...), computed once per mesh.
+
+        Names first, else recognised by geometry: :func:`workbench.geometry.parts.component_roles`.
+        """
+        return model_part_roles(self)
 
     # -- the README's short forms
     @property

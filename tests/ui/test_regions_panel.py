@@ -277,7 +277,7 @@ def test_rename_and_merge_controls_are_one_undo_step_each(setup):
     assert model.history.undo_labels[-1].startswith("Merge regions lip_corner_L + ")
     assert "merged" in panel.edits.status.value
     # the overlay: regions away from the merge keep their colours (no palette shift)
-    far = R.core(0, "brow_eye_R")
+    far = R.core(0, "eye_R")
     np.testing.assert_array_equal(np.asarray(vp.vertex_colors)[far], colors0[far])
     panel.undo_button.click()
     assert model.regions.regions is R
@@ -289,7 +289,7 @@ def test_rename_and_merge_controls_are_one_undo_step_each(setup):
 def test_split_mode_splits_between_two_clicked_markers(setup):
     model, vp, panel, sent = setup
     panel.find_button.click()
-    r = select(panel, "cheek_mouth_L")
+    r = select(panel, "cheek_eye_L")
     R = model.regions.regions
     panel.drag_mode.value = True
     panel.edits.split_mode.value = True
@@ -305,9 +305,9 @@ def test_split_mode_splits_between_two_clicked_markers(setup):
     assert len(model.history.undo_labels) == n
     click_marker(vp, kb, int(markers[kb]), 12)
     R2 = model.regions.regions
-    assert R2.names[0][r : r + 2] == ("cheek_mouth_L_a", "cheek_mouth_L_b")
+    assert R2.names[0][r : r + 2] == ("cheek_eye_L_a", "cheek_eye_L_b")
     assert R2.labels[0][markers[ka]] == r and R2.labels[0][markers[kb]] == r + 1
-    assert model.history.undo_labels[-1] == "Split region cheek_mouth_L"
+    assert model.history.undo_labels[-1] == "Split region cheek_eye_L"
     assert len(model.history.undo_labels) == n + 1
     assert not model.interacting and panel.errors.count + vp.errors.count == 0
     # the split ends split mode and gives the viewport back
@@ -366,7 +366,7 @@ def test_paint_mode_brush_stroke_grows_the_region_in_one_undo_step(setup):
     assert model.regions.regions is R
     # a dab far from the region is refused with the reason, no undo step
     panel.edits.paint_erase.value = False
-    far = int(R.core(0, "brow_eye_R")[0])
+    far = int(R.core(0, "brow_nose_R")[0])
     n = len(model.history.undo_labels)
     assert panel.edits.paint_at(far) == 0
     assert "do not touch region 'mouth_L_2'" in panel.edits.status.value

@@ -99,8 +99,9 @@ def face_height(model: Any) -> float:
         return 1.0
     names = list(getattr(model, "component_names", []) or [])
     labels = np.asarray(getattr(model, "component_labels", np.zeros(0)))
-    if "skin" in names and labels.size == V.shape[0]:
-        skin = V[labels == names.index("skin")]
+    roles = list(getattr(model, "part_roles", None) or names)  # the skin by role, else by name
+    if "skin" in roles and labels.size == V.shape[0]:
+        skin = V[np.isin(labels, [i for i, r in enumerate(roles) if r == "skin"])]
         V = skin if skin.size else V
     up = str(getattr(getattr(model, "metadata", None), "up_axis", "+y") or "+y")
     axis = {"x": 0, "y": 1, "z": 2}.get(up[-1:].lower(), 1)

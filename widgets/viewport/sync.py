@@ -49,6 +49,7 @@ from widgets.viewport.common import (
     neutral_bounds,
     u32_bytes,
 )
+from workbench.geometry.parts import model_part_roles, part_material
 
 
 class SceneSync:
@@ -191,6 +192,9 @@ class SceneSync:
                     raise ValueError("Viewport: more than 65535 components are not supported")
                 w._labels = labels.astype("<u2").tobytes()
                 w._component_names = list(model.component_names)
+                w._component_materials = [
+                    part_material(role, name) for role, name in zip(model_part_roles(model), model.component_names, strict=True)
+                ]
                 w._up_axis = str(getattr(model.metadata, "up_axis", "+y"))
                 w._neutral_bounds = neutral_bounds(model)
                 w._faces = u32_bytes(faces.reshape(-1))

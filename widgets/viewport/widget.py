@@ -154,6 +154,8 @@ class Viewport(anywidget.AnyWidget):
     _version = t.Int(0).tag(sync=True)
     _topology = t.Int(0).tag(sync=True)
     _component_names = t.List(t.Unicode()).tag(sync=True)
+    # per component, the look of its part role (workbench.geometry.parts.part_material): the colours
+    _component_materials = t.List(t.Unicode()).tag(sync=True)
     _up_axis = t.Unicode("+y").tag(sync=True)
     _neutral_bounds = t.Dict().tag(sync=True)
     _vertex_colors = t.Bytes(None, allow_none=True).tag(sync=True)

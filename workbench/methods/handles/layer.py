@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
+from workbench.geometry.parts import model_part_roles
 from workbench.methods.handles.shell import ShellDeformer
 
 if TYPE_CHECKING:
@@ -56,6 +57,7 @@ class HandleLayer:
                     view.vertices, view.faces, h.vertices, k_s, k_b,
                     component_labels=view.component_labels,
                     component_names=view.component_names,
+                    component_roles=model_part_roles(view),
                     progress=self.progress,
                 )
                 self._key = key

@@ -50,8 +50,11 @@ Set-up rules (documented choices, each pinned by a test):
   ``"follow"`` (each vertex copies the displacement of its nearest solved
   vertex: eyelashes ride on the lids), ``"rigid"`` (the component translates
   with the mean displacement of the 16 solved vertices nearest to it: lower
-  teeth and tongue go with the chin/lips). Defaults by component name in
-  :data:`DEFAULT_COMPONENT_POLICY`; anything unnamed is ``"rigid"``.
+  teeth and tongue go with the chin/lips). The default comes from the
+  component's *role* (:func:`workbench.geometry.parts.component_roles`: from
+  its name, else recognised by geometry, so an unnamed eyeball is still an
+  eyeball) through :data:`DEFAULT_ROLE_POLICY`; ``component_policy`` patterns
+  on the component *name* override it. Unrecognised parts are ``"rigid"``.
 * **Duplicate handles** (the same vertex listed twice) share one basis
   column; :meth:`ShellDeformer.deform` uses the mean of their target positions.
 * **Coincident handles** (*distinct* vertices at one position, e.g. the two
@@ -75,17 +78,25 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
 from workbench.geometry.operators import bilaplacian, cotangent_laplacian, mass_matrix
+from workbench.geometry.parts import component_roles
 from workbench.geometry.sparse_cholesky import Backend, SparseSPDSolver
 
 Policy = Literal["fixed", "follow", "rigid"]
 
-#: component-name pattern -> policy for components that hold no handle
-DEFAULT_COMPONENT_POLICY: dict[str, Policy] = {
-    "eye_*": "fixed",
+#: part role (:data:`workbench.geometry.parts.ROLES`) -> policy for components that hold no handle
+DEFAULT_ROLE_POLICY: dict[str, Policy] = {
+    "eyeball_left": "fixed",
+    "eyeball_right": "fixed",
+    "eyeball": "fixed",
     "teeth_upper": "fixed",
-    "eyelashes*": "follow",
     "teeth_lower": "rigid",
+    "teeth": "rigid",
     "tongue": "rigid",
+    "lashes": "follow",
+    "brows": "follow",
+    "hair": "follow",
+    "skin": "rigid",
+    "other": "rigid",
 }
 
 #: defaults that give smooth, skin-like results on the sample head (bending dominated,
@@ -99,12 +110,11 @@ REFERENCE_VERTEX_COUNT = 4328
 _RIGID_NEIGHBOURS = 16
 
 
-def _policy_for(name: str, overrides: Mapping[str, Policy]) -> Policy:
-    for table in (overrides, DEFAULT_COMPONENT_POLICY):
-        for pattern, policy in table.items():
-            if fnmatch.fnmatchcase(name, pattern):
-                return policy
-    return "rigid"
+def _policy_for(name: str, role: str, overrides: Mapping[str, Policy]) -> Policy:
+    for pattern, policy in overrides.items():
+        if fnmatch.fnmatchcase(name, pattern):
+            return policy
+    return DEFAULT_ROLE_POLICY.get(role, "rigid")
 
 
 def shell_system_matrix(
@@ -162,7 +172,11 @@ class ShellDeformer:
     component_labels : (n,) int, optional
         Connected component of each vertex (default: computed from ``faces``).
     component_names : sequence of str, optional
-        Names for the labels, used to pick the policy of handle-less components.
+        Names for the labels.
+    component_roles : sequence of str, optional
+        Role of every component (:func:`workbench.geometry.parts.component_roles`;
+        computed from the mesh and names when not given); picks the policy of
+        handle-less components through :data:`DEFAULT_ROLE_POLICY`.
     component_policy : mapping, optional
         ``{"name pattern": "fixed" | "follow" | "rigid"}`` overriding the defaults.
     backend : {"auto", "cholmod", "superlu"}
@@ -192,6 +206,7 @@ class ShellDeformer:
         fixed: ArrayLike | None = None,
         component_labels: ArrayLike | None = None,
         component_names: Sequence[str] | None = None,
+        component_roles: Sequence[str] | None = None,
         component_policy: Mapping[str, Policy] | None = None,
         backend: Backend = "auto",
         progress: Callable[[float, str], None] | None = None,
@@ -205,6 +220,7 @@ class ShellDeformer:
         self.fixed = None if fixed is None else np.asarray(fixed, dtype=np.int64).reshape(-1)
         self.component_labels = component_labels
         self.component_names = component_names
+        self.component_roles = component_roles
         self.component_policy = dict(component_policy or {})
         self.backend = backend
         self._progress = progress or (lambda f, m: None)
@@ -238,6 +254,14 @@ class ShellDeformer:
         names = list(self.component_names) if self.component_names is not None else []
         names += [f"component_{i}" for i in range(len(names), k)]
         return labels, names
+
+    def _roles(self, labels: NDArray[np.int64], names: list[str]) -> list[str]:
+        if self.component_roles is not None:
+            roles = list(self.component_roles)
+            if len(roles) < len(names):
+                raise ValueError(f"component_roles: expected {len(names)} roles, got {len(roles)}")
+            return roles
+        return component_roles(self.vertices, self.faces, labels, names)
 
     def _precompute(self) -> None:
         t0 = time.perf_counter()
@@ -314,10 +338,12 @@ class ShellDeformer:
             return
         tree = cKDTree(self.vertices[solved_ids])
         self.policies_: dict[str, Policy] = {}
-        for c in np.unique(labels[~active]):
+        passive = np.unique(labels[~active])
+        roles = self._roles(labels, names) if passive.size else []
+        for c in passive:
             ids = np.flatnonzero(labels == c)
             name = names[c] if c < len(names) else f"component_{c}"
-            policy = _policy_for(name, self.component_policy)
+            policy = _policy_for(name, roles[c], self.component_policy)
             self.policies_[name] = policy
             if policy == "fixed":
                 continue

@@ -41,6 +41,20 @@ test in ``tests/test_regions.py``):
    pieces are connected components of equal labels, a one-ring mode filter
    smooths their borders and pieces smaller than ``min_region_size`` are merged
    into the neighbour they share most edges with.
+   **Features stay whole** (``keep_features``). Labelling by the dominant shape
+   alone splits a feature wherever another shape dominates part of it: on the
+   sample head browDownLeft's strongly moving vertices fell 51 % / 28 % / 7 % into
+   three fine regions (the pieces where browDown, eyeSquint and noseSneer move
+   most) and 14 % into the background (where the brow moves as a block, its
+   Laplacian is small). Joshi's regions follow
+   features, so the fine-piece borders are then moved to the features
+   (:func:`_keep_features_whole`): every local, one-sided shape's strong support
+   (relative motion ≥ 0.5) joins one *home* piece — features lying mostly
+   inside a larger one (the outer brow inside the brow) share its home, and a
+   vertex two features claim goes to the more local one. Afterwards every such
+   feature (brow, lid, cheek, nose wrinkle, mouth corner, lips) sits ≥ 70 % in one
+   region at every level (``tests/test_region_quality.py``,
+   ``benchmarks/bench_region_quality.py``).
 5. **Hierarchy.** Adjacent pieces are merged greedily by the smallest Ward cost
    on the per-vertex *motion pattern* (the unit-normalised (3k,) displacement
    vector; ``w_A w_B / (w_A + w_B) |μ_A − μ_B|²`` with areas ``w``), i.e. the
@@ -54,12 +68,14 @@ test in ``tests/test_regions.py``):
    and the support of ``W_r`` is the core grown by exactly one ring (the paper's
    "extended by one vertex all around its boundary"). ``overlap_rings`` > 1
    repeats the averaging for wider seams on dense meshes.
-7. **Other components.** Only skin-like components are segmented. Eyeballs,
-   teeth and tongue (names containing ``eye``, ``teeth``/``tooth``, ``tongue``,
-   ``gum``) are rigid parts the paper animates separately: each becomes its own
-   region on every level (weight 1 on its vertices, no overlap). Surface
-   attachments (names containing ``lash``, ``eyebrow``, ``hair``, ``beard``) copy
-   the labels and weights of their nearest skin vertex, so lashes follow the lid.
+7. **Other components.** Only the skin is segmented. What each component is
+   comes from :func:`workbench.geometry.parts.component_roles` (its name, else
+   its geometry: an unnamed closed sphere in an orbit is an eyeball). Eyeballs,
+   teeth and tongue are rigid parts the paper animates separately: each becomes
+   its own region on every level (weight 1 on its vertices, no overlap), named
+   after its role. Surface attachments (lashes, brows, hair, unrecognised small
+   parts) copy the labels and weights of their nearest skin vertex, so lashes
+   follow the lid.
 
 The user edits of the result are in :mod:`workbench.methods.regions.edits`; the
 :class:`~workbench.methods.regions.hierarchy.Regions` value in
@@ -86,6 +102,7 @@ from scipy.spatial import cKDTree
 
 from workbench.arkit import canonical_arkit_name, shape_group
 from workbench.geometry.operators import cotangent_laplacian, mass_matrix
+from workbench.geometry.parts import ATTACHED_ROLES, RIGID_ROLES, model_part_roles, role_side
 from workbench.methods.regions.hierarchy import RegionError, Regions
 from workbench.methods.regions.mesh_graph import (
     absorb_small_pieces,
@@ -103,15 +120,12 @@ if TYPE_CHECKING:
 __all__ = [
     "component_roles",
     "deformation_map",
+    "feature_share",
     "segment_blend_regions",
 ]
 
 
 Progress = Callable[[float, str], None] | None
-
-
-_RIGID = re.compile(r"eye|teeth|tooth|tongue|gum", re.IGNORECASE)
-_ATTACHED = re.compile(r"lash|eyebrow|hair|beard", re.IGNORECASE)
 
 
 #: ARKit shape group -> region stem (eye *lids* on the skin; eyeballs are their own components)
@@ -137,16 +151,15 @@ def component_roles(model: FaceModel) -> NDArray[np.int8]:
     Returns
     -------
     roles : (n,) int8
-        From the component names (see the module docstring). A model without
-        skin-like components has everything segmented.
+        From the part roles of :func:`workbench.geometry.parts.component_roles`
+        (names first, else geometry): skin is segmented, eyeballs / teeth /
+        tongue are rigid, lashes, brows, hair and unrecognised parts are
+        attached. A model without skin has everything segmented.
     """
-    names = model.component_names
-    role_of = np.zeros(len(names), np.int8)
-    for i, nm in enumerate(names):
-        if _ATTACHED.search(nm):
-            role_of[i] = 2
-        elif _RIGID.search(nm):
-            role_of[i] = 1
+    parts = model_part_roles(model)
+    role_of = np.array(
+        [1 if r in RIGID_ROLES else 2 if r in ATTACHED_ROLES else 0 for r in parts], np.int8
+    ).reshape(-1)
     if not (role_of == 0).any():
         role_of[:] = 0
     return role_of[model.component_labels]
@@ -344,6 +357,7 @@ def segment_blend_regions(
     overlap_rings: int = 1,
     split_midline: bool = True,
     mass_normalized: bool = True,
+    keep_features: bool = True,
     progress: Progress = None,
 ) -> Regions:
     """Segment a blendshape model into overlapping blend regions with a hierarchy.
@@ -373,6 +387,10 @@ def segment_blend_regions(
         Keep fine regions on one side of the mid-plane (see step 4).
     mass_normalized : bool
         Use ``M⁻¹ L`` (default) or ``L`` for the deformation map.
+    keep_features : bool
+        Move the fine-piece borders so that every local one-sided feature lies
+        in one piece (default; see step 4). ``False`` keys the pieces by the
+        dominant shape alone (the previous behaviour).
     progress : callable, optional
         ``progress(fraction, message)``.
 
@@ -463,6 +481,8 @@ def segment_blend_regions(
     if split_midline:
         lab0 = label_pieces(A, np.where(lab0 >= 0, lab0 * 3 + side3, -1))
     lab0 = absorb_small_pieces(A, lab0, area, min_area, side3 if split_midline else None)
+    if keep_features:
+        lab0 = _keep_features_whole(A, lab0, rel, skin, side3, area, act_area, min_area)
     R0 = int(lab0.max()) + 1 if (lab0 >= 0).any() else 0
 
     report(0.7, "hierarchy")
@@ -488,6 +508,7 @@ def segment_blend_regions(
     report(0.85, "overlap weights and names")
     # rigid components: one region each, on every level
     rigid_comps = [c for c in np.unique(model.component_labels[roles == 1])]
+    part_roles = model_part_roles(model)
     deg = np.asarray(A1.sum(axis=1)).ravel().astype(np.float64)
     S = sp.diags(1.0 / np.maximum(deg, 1.0)) @ A1.astype(np.float64)
     S = sp.csr_matrix(S)
@@ -554,7 +575,7 @@ def segment_blend_regions(
             rows = np.concatenate([rows, vv])
             cols = np.concatenate([cols, np.full(vv.size, r)])
             vals = np.concatenate([vals, np.ones(vv.size)])
-            names.append(_rigid_name(model.component_names[ci]))
+            names.append(_rigid_name(model.component_names[ci], part_roles[ci]))
             kinds.append("rigid")
             energy = (mags[:, vv] ** 2).sum(axis=1)
             drivers.append(tuple(names_all[i] for i in np.argsort(-energy, kind="stable")[:3]))
@@ -597,6 +618,124 @@ def segment_blend_regions(
     )
 
 
+def _keep_features_whole(
+    A: sp.csr_matrix,
+    lab0: NDArray[np.int64],
+    rel: NDArray[np.float32] | NDArray[np.float64],
+    skin: NDArray[np.bool_],
+    side3: NDArray[np.int8],
+    area: NDArray[np.float64],
+    act_area: float,
+    min_area: float,
+    *,
+    strong: float = 0.5,
+    max_support: float = 0.1,
+    nested: float = 0.6,
+    rounds: int = 2,
+) -> NDArray[np.int64]:
+    """Move fine-piece borders so that every local one-sided feature lies in one piece.
+
+    A *feature* is a shape whose strong support ``S_k = {v on the skin: rel_k(v) >=
+    strong}`` covers at most ``max_support`` of the moving skin area, at least 80 %
+    of it on one side of the mid-plane. A feature whose support lies at least
+    ``nested`` inside a larger feature's support (the outer brow inside the brow)
+    belongs to that feature's family; the family's *home* is the piece of its side
+    holding most of the largest member's support. Every vertex of some ``S_k``
+    (background ones included, the mid-plane column excluded) moves to the home
+    of the most local feature that holds it (the smallest support: the inner
+    brow goes with the brow, whose support it is half of, not with the nose
+    wrinkler, whose support it is a quarter of). Two rounds, the homes
+    recomputed in between; pieces left disconnected split, and splinters below
+    ``min_area`` are absorbed as in step 4.
+
+    Returns
+    -------
+    (n,) int64
+        Connected pieces 0..R-1, -1 background.
+    """
+    sided = skin & (side3 != 1)
+    sup = (rel >= strong) & sided[None, :]
+    areas = sup.astype(np.float64) @ area
+    left = (sup & (side3 == 2)[None, :]).astype(np.float64) @ area
+    one_sided = np.maximum(left, areas - left) >= 0.8 * areas
+    feats = np.flatnonzero((areas > 0) & (areas <= max_support * act_area) & one_sided)
+    lab = lab0.copy()
+    if feats.size == 0 or not (lab >= 0).any():
+        return lab
+    S = sup[feats]
+    fa = areas[feats]
+    fside = np.where(left[feats] * 2 >= fa, 2, 0)
+    # families: each feature points to the larger feature containing most of it
+    inter = (S.astype(np.float64) * area[None, :]) @ S.T.astype(np.float64)
+    contain = inter / fa[:, None]  # share of row's support inside column's
+    np.fill_diagonal(contain, 0.0)
+    contain[fa[:, None] >= fa[None, :]] = 0.0  # only into larger features
+    parent = np.where(contain.max(axis=1) >= nested, np.argmax(contain, axis=1), np.arange(feats.size))
+    root = parent.copy()
+    for _ in range(feats.size):
+        root = parent[root]
+    order = np.argsort(fa, kind="stable")  # most local first
+    rank = np.empty(feats.size, np.int64)
+    rank[order] = np.arange(feats.size)
+    for _ in range(rounds):
+        R = int(lab.max()) + 1
+        pside = np.full(R, 1, np.int64)
+        fgv = np.flatnonzero((lab >= 0) & (side3 != 1))
+        for sd in (0, 2):
+            cnt = np.bincount(lab[fgv], weights=(side3[fgv] == sd).astype(np.float64), minlength=R)
+            pside[cnt > 0] = sd
+        home = np.full(feats.size, -1, np.int64)
+        for i in np.unique(root):
+            vv = np.flatnonzero(S[i] & (lab >= 0))
+            vv = vv[pside[lab[vv]] == fside[i]]
+            if vv.size:
+                home[i] = int(np.argmax(np.bincount(lab[vv], weights=area[vv], minlength=R)))
+        fhome = home[root]
+        claim = np.where(S & (fhome >= 0)[:, None] & (side3[None, :] == fside[:, None]), rank[:, None], np.iinfo(np.int64).max)
+        best = np.argmin(claim, axis=0)
+        cols = np.flatnonzero(claim[best, np.arange(claim.shape[1])] < np.iinfo(np.int64).max)
+        lab[cols] = fhome[best[cols]]
+        lab = label_pieces(A, lab)
+    # as in step 4: pieces keyed by side, the mid-plane column absorbed last
+    lab = label_pieces(A, np.where(lab >= 0, lab * 3 + side3, -1))
+    return absorb_small_pieces(A, lab, area, min_area, side3)
+
+
+def feature_share(
+    model: FaceModel, regions: Regions, shape: str, level: int, *, strong: float = 0.5
+) -> tuple[float, float]:
+    """How whole a shape's feature is on one level: the share of its strongly moving vertices in one region.
+
+    Parameters
+    ----------
+    model : FaceModel
+    regions : Regions
+    shape : str
+        A blendshape name.
+    level : int
+    strong : float
+        Vertices moved by at least ``strong`` times the shape's largest
+        displacement are its strongly moving ones.
+
+    Returns
+    -------
+    best : float
+        Fraction of them in the region holding most of them (Joshi's regions
+        follow features: a brow, a lid, a mouth corner should be ≥ 0.7).
+    background : float
+        Fraction of them in the background.
+    """
+    lv = regions.check_level(level)
+    mag = np.linalg.norm(model.shape(shape).delta, axis=1)
+    sel = np.flatnonzero(mag >= strong * float(mag.max())) if mag.max() > 0 else np.zeros(0, np.intp)
+    if sel.size == 0:
+        return 0.0, 0.0
+    lab = regions.labels[lv][sel]
+    inside = lab[lab >= 0]
+    best = int(np.bincount(inside).max()) if inside.size else 0
+    return best / sel.size, float((lab < 0).mean())
+
+
 def _region_stem(energy: NDArray[np.float64], groups: Sequence[str]) -> str:
     """Name stem from the ARKit groups with most motion energy ("mouth", "brow_eye").
 
@@ -612,13 +751,15 @@ def _region_stem(energy: NDArray[np.float64], groups: Sequence[str]) -> str:
     return "_".join(stems)
 
 
-def _rigid_name(component: str) -> str:
-    c = component.lower()
-    side = "_L" if re.search(r"left|(^|_)l($|_)", c) else "_R" if re.search(r"right|(^|_)r($|_)", c) else ""
-    if "eye" in c:
-        return "eyeball" + side
-    base = re.sub(r"[_\s-]*(left|right)$", "", component)
-    return base + side
+def _rigid_name(component: str, role: str) -> str:
+    """Region name of a rigid part: from its role ("eyeball_L", "teeth_upper", "tongue")."""
+    if role.startswith("eyeball"):
+        side = role_side(role)
+        if not side:  # both eyes in one component, or a side only the name tells
+            c = component.lower()
+            side = "_L" if re.search(r"left|(^|_)l($|_)", c) else "_R" if re.search(r"right|(^|_)r($|_)", c) else ""
+        return "eyeball" + (side or "s")
+    return role
 
 
 def _check_fraction(

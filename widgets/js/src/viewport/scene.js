@@ -321,7 +321,10 @@ export class View {
       for (let i = 0; i < n * 3; i++) C[i] = srgbToLinear(Math.min(1, Math.max(0, overlay[i])));
     } else {
       const names = this.model.get("_component_names") || [];
-      const table = names.map((nm) => colorForComponent(nm).map(srgbToLinear));
+      // the look of each component's part role (eyeball, teeth ...), recognised in the kernel
+      // even when the name says nothing; the name is the fallback
+      const materials = this.model.get("_component_materials") || [];
+      const table = names.map((nm, i) => colorForComponent(materials[i] || nm).map(srgbToLinear));
       const skin = SKIN.map(srgbToLinear);
       const L = s.labels;
       for (let i = 0; i < n; i++) {
