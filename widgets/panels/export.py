@@ -1,7 +1,7 @@
 """``ExportPanel``: write the model's animation to glTF/USD/point caches/CSV, or import one.
 
 A thin form over :func:`workbench.export.export` (Export) and
-:func:`workbench.animation.importers.read_animation` + ``model.timeline.set`` (Import):
+:func:`workbench.io.animation.read_file_animation` + ``model.timeline.set`` (Import):
 format, fps, bake and path fields, a button, and a result area listing the
 files written (with sizes), how each editing layer went in, the writer's notes
 (e.g. the Live Link layout's missing or left-out shapes), or the error message.
@@ -279,17 +279,20 @@ class ExportPanel(ModelPanel):
         up and front axes (``model.metadata``), as the export wrote them.
         """
         from workbench.animation.curves import TrackError
-        from workbench.animation.importers import AnimationImportError, read_animation
+        from workbench.animation.importers import AnimationImportError
+        from workbench.io.animation import read_file_animation
 
         text = self.import_path.value.strip()
         if not text:
-            self.import_result.value = _error_html("Type the path of a .csv, .glb or .gltf file.")
+            self.import_result.value = _error_html(
+                "Type the path of a .csv, .glb/.gltf, .fbx, .usd or .abc file."
+            )
             return False
         path = Path(text).expanduser()
         self.flush()
         try:
             md = self.model.metadata
-            tl = read_animation(
+            tl = read_file_animation(
                 path, self.model.shape_names, up_axis=md.up_axis, front_axis=md.front_axis
             )
             self.model.timeline.set(tl, f"Import animation {path.name}")

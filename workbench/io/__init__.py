@@ -9,6 +9,7 @@ file raises a clear error and nothing is half-loaded.
 
 from __future__ import annotations
 
+import logging
 import os
 import zipfile
 from pathlib import Path
@@ -17,12 +18,15 @@ import numpy as np
 
 from workbench.fileformat import SUFFIX, load_model
 from workbench.geometry.mesh_checks import label_components
+from workbench.io.animation import animation_of
 from workbench.io.base import ImportedFace
 from workbench.io.registry import read_any
 from workbench.io.units import decide_units
 from workbench.model import BlendShape, FaceModel, ModelMetadata
 
 __all__ = ["ImportedFace", "load", "model_from_imported"]
+
+logger = logging.getLogger("workbench.io")
 
 
 def _is_workbench_file(path: Path) -> bool:
@@ -87,7 +91,9 @@ def load(path: str | os.PathLike[str], *, units: str | None = None) -> FaceModel
         ``.fwb`` workbench file; ``.glb``/``.gltf`` with morph targets (names from
         ``mesh.extras.targetNames``); a folder of same-topology ``.obj`` files (a
         neutral plus one per expression); or an ``.obj`` with MakeHuman ``.target``
-        files in a ``targets/`` folder beside it (pass the folder).
+        files in a ``targets/`` folder beside it (pass the folder); ``.fbx``,
+        ``.usd*`` or ``.abc`` (:mod:`workbench.io.registry`). A file's own weights
+        animation is put on the model's timeline (not an undo step).
     units : {"m", "dm", "cm", "mm", "in"}, optional
         Length unit of an imported mesh. Default: the one the format states (glTF:
         metres), else (OBJ) inferred from the head's size, see
@@ -98,4 +104,11 @@ def load(path: str | os.PathLike[str], *, units: str | None = None) -> FaceModel
         raise FileNotFoundError(f"{p}: no such file or folder")
     if p.is_file() and _is_workbench_file(p):
         return load_model(p)
-    return model_from_imported(read_any(p), name=p.stem, units=units)
+    model = model_from_imported(read_any(p), name=p.stem, units=units)
+    # the file's own weights animation (glTF, FBX, USD, Alembic) starts on the timeline
+    timeline = animation_of(p, model.shape_names)
+    if timeline is not None:
+        model.restore_slots({"tracks": timeline})
+        logger.info("%s: its animation is on the timeline (%d tracks, %.3g-%.3g s)",
+                    p.name, len(timeline.tracks), timeline.start, timeline.end)
+    return model

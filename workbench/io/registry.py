@@ -2,8 +2,8 @@
 
 Readers register a ``detect(path) -> bool`` and a ``read(path) -> ImportedFace``;
 :func:`read_any` picks the first reader whose detector accepts the path. The
-built-in readers (OBJ + MakeHuman targets, folder of OBJs, OBJ, glTF/GLB) are
-one module each, listed by name in :data:`BUILTIN_READERS` and imported with
+built-in readers (OBJ + MakeHuman targets, folder of OBJs, OBJ, glTF/GLB, FBX
+and Alembic through Blender, USD through usd-core) are one module (or package) each, listed by name in :data:`BUILTIN_READERS` and imported with
 :mod:`importlib` on first use: importing this module stays cheap, and since
 the readers import only :mod:`workbench.io.base` (where :class:`ImportedFace`
 lives), nothing imports back into the registry. A dozen lines of dispatch did
