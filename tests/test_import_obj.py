@@ -327,11 +327,11 @@ def test_folder_bad_shape_file_names_that_file(tmp_path: Path) -> None:
 
 
 def test_read_any_unsupported_lists_inputs(tmp_path: Path) -> None:
-    p = write(tmp_path / "face.fbx", "nope")
+    p = write(tmp_path / "face.ply", "nope")
     with pytest.raises(MeshFormatError) as exc:
         read_any(p)
     msg = str(exc.value)
-    assert "face.fbx: not a supported face input" in msg
+    assert "face.ply: not a supported face input" in msg
     for line in supported_inputs():
         assert line in msg
     assert any(".glb" in s for s in supported_inputs()) and any(
