@@ -1,0 +1,48 @@
+"""Rig any face: give a mesh the template's blendshapes, then refine them from examples (issue 16).
+
+* :func:`transfer_rig` — correspondence (rigid + non-rigid fit of the template
+  skin onto the target) and deformation transfer of every shape onto the
+  target's own topology (:mod:`workbench.rigging.transfer`);
+  :func:`transfer_rig_report` also returns the per-shape quality report
+  (:class:`TransferReport`), and :class:`RigTransfer` splits the one-off set-up
+  from the transfer.
+* :func:`refine_rig` / :class:`RefineResult` — example-based refinement (Li et
+  al. 2010 §3, :mod:`workbench.rigging.refine`), imported on first use.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+from workbench.rigging.report import RigTransferError, ShapeQuality, TransferReport
+from workbench.rigging.transfer import (
+    RigTransfer,
+    TransferResult,
+    transfer_rig,
+    transfer_rig_report,
+)
+
+if TYPE_CHECKING:
+    from workbench.rigging.refine import RefineResult, refine_rig
+
+__all__ = [
+    "RefineResult",
+    "RigTransfer",
+    "RigTransferError",
+    "ShapeQuality",
+    "TransferReport",
+    "TransferResult",
+    "refine_rig",
+    "transfer_rig",
+    "transfer_rig_report",
+]
+
+_LAZY = {"refine_rig", "RefineResult"}
+
+
+def __getattr__(name: str) -> Any:
+    if name in _LAZY:
+        from workbench.rigging import refine
+
+        return getattr(refine, name)
+    raise AttributeError(f"module 'workbench.rigging' has no attribute {name!r}")
