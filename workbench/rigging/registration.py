@@ -17,8 +17,11 @@ distances), when the target normal there disagrees with the template's
 (> 60 deg), or when it lies on the target's border (a hole, or where the target
 surface ends). ``p_l`` are landmark positions. The stiffness ``alpha`` falls
 from smooth (a tenth of the head) to fine (a few millimetres) over the
-schedule, as in Amberg et al. 2007; each step refactors one sparse SPD
-matrix with CHOLMOD (:class:`workbench.geometry.sparse_cholesky.SparseSPDSolver`).
+schedule, as in Amberg et al. 2007. Each stiffness factors its sparse SPD
+matrix once with CHOLMOD (:class:`workbench.geometry.sparse_cholesky.SparseSPDSolver`)
+and keeps the factor while the accepted correspondences change by less than
+1 % (a dropped one then holds its vertex in place, a new one waits for the
+next factor); each step is then one back-substitution.
 Extra target surface (neck, bust, shoulders) attracts nothing: only template
 vertices look for a partner. Coordinates here are in head units (the template
 skin's bounding-box diagonal is 1).
@@ -69,8 +72,8 @@ def rigid_icp(
     query: SurfaceQuery,
     start: Similarity,
     *,
-    iterations: int = 40,
-    sample: int = 4000,
+    iterations: int = 30,
+    sample: int = 2000,
     scale: bool = True,
     landmarks: tuple[NDArray[np.int64], NDArray[np.float64]] | None = None,
     landmark_weight: float = 0.0,
@@ -125,8 +128,8 @@ def affine_icp(
     F: NDArray[np.int64],
     query: SurfaceQuery,
     *,
-    iterations: int = 30,
-    sample: int = 4000,
+    iterations: int = 20,
+    sample: int = 2000,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Trimmed ICP with a global affine map ``x -> x @ A.T + b`` (after the similarity): absorbs anisotropic scale.
 
@@ -170,12 +173,16 @@ class NonRigidResult:
     distance : (n,) float
         Distance of each fitted vertex to the target surface.
     iterations : int
+        ICP steps.
+    factorizations : int
+        Sparse Cholesky factorisations (one per stiffness, more when many correspondences changed).
     """
 
     positions: NDArray[np.float64]
     accepted: NDArray[np.bool_]
     distance: NDArray[np.float64]
     iterations: int
+    factorizations: int = 0
 
 
 def nonrigid_icp(
@@ -233,14 +240,22 @@ def nonrigid_icp(
     done = 0
     accepted = np.zeros(n, bool)
     dist = np.zeros(n)
+    refactors = 0
     for alpha, iters in schedule:
+        solver: SparseSPDSolver | None = None
+        held = np.zeros(n, bool)  # the correspondences the current factor holds
         for _ in range(iters):
             C, accepted, dist = _accept(query, X, vertex_normals(X, F), floor=0.005)
-            w = m * accepted
-            diag = w + eps * m + lm_w
-            A = (alpha * K + sp.diags(diag)).tocsc()
-            rhs = alpha * KX0 + w[:, None] * C + (eps * m)[:, None] * X + lm_rhs
-            Xn = SparseSPDSolver(A).solve(rhs)
+            # refactor at each stiffness and when the accepted set changed by more than 1 %; otherwise the
+            # factor's correspondences stay (a dropped one holds its vertex where it is, a new one waits)
+            if solver is None or int((accepted != held).sum()) > 0.01 * n:
+                held = accepted
+                diag = m * held + eps * m + lm_w
+                solver = SparseSPDSolver((alpha * K + sp.diags(diag)).tocsc())
+                refactors += 1
+            target = np.where((held & accepted)[:, None], C, X)
+            rhs = alpha * KX0 + (m * held)[:, None] * target + (eps * m)[:, None] * X + lm_rhs
+            Xn = solver.solve(rhs)
             step = float(np.percentile(np.linalg.norm(Xn - X, axis=1), 99))
             X = Xn
             done += 1
@@ -249,4 +264,4 @@ def nonrigid_icp(
             if step < tol:
                 break
     dist, *_ = query.closest(X)
-    return NonRigidResult(X, accepted, dist, done)
+    return NonRigidResult(X, accepted, dist, done, refactors)

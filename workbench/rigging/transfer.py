@@ -574,7 +574,8 @@ class RigTransfer:
         scale = float(diag[diag > 0].mean()) if (diag > 0).any() else 1.0
         w = 100.0 * np.where(diag > 0, diag, scale) * pin + 1e-8 * scale
         self._pin_share = float((pin > 0).mean())
-        self._system = SparseSPDSolver(sp.csc_matrix(Lc + sp.diags(w)))
+        self.matrix = sp.csc_matrix(Lc + sp.diags(w))  # the Poisson system (kept for peers and checks)
+        self._system = SparseSPDSolver(self.matrix)
         self._rhs_map = self._rhs_operator(Fg, g, area, nrm, n)
 
     def _rhs_operator(
@@ -623,6 +624,12 @@ class RigTransfer:
         R.sum_duplicates()
         return R
 
+    def right_hand_sides(self, deltas: NDArray[np.float64]) -> NDArray[np.float64]:
+        """(n_target_skin, 3 k) right-hand sides of :attr:`matrix` for (k, N, 3) template deltas (columns: component, shape)."""
+        k = deltas.shape[0]
+        rhs = self._rhs_map @ np.asarray(deltas, np.float64).transpose(1, 2, 0).reshape(-1, k)  # (3 n, k)
+        return np.asarray(rhs).reshape(-1, 3 * k)
+
     def run(self) -> TransferResult:
         """Transfer every template shape; returns the rigged target and the report."""
         t0 = time.perf_counter()
@@ -630,9 +637,9 @@ class RigTransfer:
         shapes = list(self.source.shapes)
         k = len(shapes)
         deltas = np.stack([s.delta for s in shapes]).astype(np.float64)  # (k, N, 3) template units
-        rhs = self._rhs_map @ deltas.transpose(1, 2, 0).reshape(-1, k)  # (3 n, k)
-        n = rhs.shape[0] // 3
-        sol = self._system.solve(rhs.reshape(n, 3 * k))  # columns (component, shape)
+        rhs = self.right_hand_sides(deltas)
+        n = rhs.shape[0]
+        sol = self._system.solve(rhs)  # columns (component, shape)
         work = sol.reshape(n, 3, k).transpose(2, 0, 1)  # (k, n_skin, 3) working frame
         out = np.zeros((k, self.target.n_vertices, 3))
         out[:, self.tgt.skin_ids] = work
@@ -697,8 +704,8 @@ class RigTransfer:
                 # the template part's motion at the closest point of its surface, plus its affine motion
                 # (least squares over the part) across the offset from there: exact on the template's own
                 # part, first-order right for a part of another shape moving rigidly
-                A = np.c_[Xs, np.ones(len(Xs))]
-                coef, *_ = np.linalg.lstsq(A, dpart.transpose(1, 0, 2).reshape(len(Xs), -1), rcond=None)
+                A = np.c_[Xs - Xs.mean(0), np.ones(len(Xs))]
+                coef = np.linalg.pinv(A) @ dpart.transpose(1, 0, 2).reshape(len(Xs), -1)
                 lin_k = coef[:3].reshape(3, -1, 3)  # [j, shape, comp]: d_comp = sum_j x_j lin_k[j]
                 sF = np.asarray(src.model.faces, np.int64)
                 lab = src.model.component_labels
