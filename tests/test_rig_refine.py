@@ -331,6 +331,8 @@ def test_bad_input_names_the_argument(rig: FaceModel) -> None:
         refine_rig(rig, good, exclusive=[("jawOpen", "smirk")])
     with pytest.raises(ValueError, match=r"beta must be finite and >= 0"):
         refine_rig(rig, good, beta=(0.5, -1.0))
+    with pytest.raises(ValueError, match=r"beta must be > 0"):
+        refine_rig(rig, good, beta=(0.5, 0.0))
     empty = FaceModel(rig.vertices, rig.faces)
     with pytest.raises(ValueError, match=r"rig has no blendshapes"):
         refine_rig(empty, good)

@@ -142,7 +142,8 @@ def refine_rig(
     ----------
     rig : FaceModel
         The rig to refine (the actor's neutral with the template's shapes).
-        Not modified.
+        Not modified. Vertices a shape does not move stay fixed in it; muted
+        and derived (corrective) shapes are kept as they are.
     examples : sequence of (n, 3) arrays
         Example poses in the rig's topology and units.
     weights : sequence of {shape: value}, optional
@@ -156,7 +157,8 @@ def refine_rig(
     exclusive : sequence of (name, name)
         Mutually exclusive pairs: in no example may both be non-zero.
     beta, gamma : (first, last)
-        Schedules of the shape regularisation β and the weight prior γ.
+        Schedules of the shape regularisation β (> 0) and the weight prior γ
+        (>= 0), geometric from first to last over the iterations.
     kappa, theta : float
         Regularisation weights ``w_i = ((1 + g) / (κ + g))^θ``.
     space : {"gradient", "vertex"}
@@ -181,7 +183,7 @@ def refine_rig(
         raise ValueError(f"iterations must be a positive integer, got {iterations!r}")
     if space not in ("gradient", "vertex"):
         raise ValueError(f"space must be 'gradient' or 'vertex', got {space!r}")
-    betas = _schedule("beta", beta, int(iterations))
+    betas = _schedule("beta", beta, int(iterations), positive=True)
     gammas = _schedule("gamma", gamma, int(iterations))
     for name, v in (("kappa", kappa), ("theta", theta)):
         if not (math.isfinite(float(v)) and float(v) > 0):
@@ -265,13 +267,18 @@ def refine_rig(
 # ---------------------------------------------------------------------- input checks and output
 
 
-def _schedule(name: str, value: tuple[float, float], iterations: int) -> NDArray[np.float64]:
+def _schedule(
+    name: str, value: tuple[float, float], iterations: int, *, positive: bool = False
+) -> NDArray[np.float64]:
+    """``iterations`` values from ``first`` to ``last``, geometric (linear when one is 0)."""
     try:
         first, last = (float(v) for v in value)
     except (TypeError, ValueError):
         raise ValueError(f"{name} must be a pair (first, last) of numbers, got {value!r}") from None
     if not (math.isfinite(first) and math.isfinite(last)) or min(first, last) < 0:
         raise ValueError(f"{name} must be finite and >= 0, got {value!r}")
+    if positive and min(first, last) <= 0:
+        raise ValueError(f"{name} must be > 0 (the shapes need their prior), got {value!r}")
     if iterations == 1 or first == last:
         return np.full(iterations, first)
     t = np.arange(iterations) / (iterations - 1)
