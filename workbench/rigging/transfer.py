@@ -745,9 +745,9 @@ class RigTransfer:
                 rows[:, :, 3:] = np.eye(3)
                 A = rows.reshape(-1, 6)
                 b = out[:, tgt.skin_ids[near]].transpose(1, 2, 0).reshape(-1, out.shape[0])
-                coef, *_ = np.linalg.lstsq(A, b, rcond=None)  # (6, k)
+                motion = np.linalg.pinv(A) @ b  # (6, k): rotation vector and translation per shape
                 ry = Y - c0
-                wv, tv = coef[:3].T, coef[3:].T  # (k, 3)
+                wv, tv = motion[:3].T, motion[3:].T  # (k, 3)
                 out[:, ids] = np.cross(wv[:, None, :], ry[None]) + tv[:, None, :]
 
     def _local_jacobian(self, P: NDArray[np.float64], k: int = 8) -> NDArray[np.float64]:
