@@ -122,7 +122,7 @@ def _skin(model: FaceModel, what: str) -> tuple[NDArray[np.int64], NDArray[np.in
     skin_comp = [i for i, r in enumerate(roles) if r == "skin"]
     F = np.asarray(model.faces, np.int64)
     if F.size == 0:
-        raise RigTransferError(f"{what} {model.metadata.name or ''!s}: the mesh has no triangles".replace("  ", " "))
+        raise RigTransferError(f"{what} {model.metadata.name or 'model'}: the mesh has no triangles")
     labels = model.component_labels
     if not skin_comp:
         raise RigTransferError(f"{what}: no skin found among its parts {list(model.component_names)}")
