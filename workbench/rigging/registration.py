@@ -195,6 +195,7 @@ def nonrigid_icp(
     schedule: Sequence[tuple[float, int]] | None = None,
     progress: Callable[[float, str], None] | None = None,
     tol: float = 2e-4,
+    refactor_share: float = 0.01,
 ) -> NonRigidResult:
     """Fit the template skin ``(X0, F)`` onto the target surface (see the module docstring).
 
@@ -212,6 +213,10 @@ def nonrigid_icp(
         ``(alpha, iterations)`` steps.
     tol
         A stiffness step ends early when 99 % of the vertices moved less than this (head units).
+    refactor_share
+        Refactor within a stiffness when more than this share of the accepted
+        correspondences changed (1 %: 17 factorisations for 27 steps on the sample;
+        3 % saves a third of the time and costs 15 % in the worst shape's error).
     progress
         ``progress(fraction, message)``.
     """
@@ -248,7 +253,7 @@ def nonrigid_icp(
             C, accepted, dist = _accept(query, X, vertex_normals(X, F), floor=0.005)
             # refactor at each stiffness and when the accepted set changed by more than 1 %; otherwise the
             # factor's correspondences stay (a dropped one holds its vertex where it is, a new one waits)
-            if solver is None or int((accepted != held).sum()) > 0.01 * n:
+            if solver is None or int((accepted != held).sum()) > refactor_share * n:
                 held = accepted
                 diag = m * held + eps * m + lm_w
                 solver = SparseSPDSolver((alpha * K + sp.diags(diag)).tocsc())
