@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
+from workbench.rigging.details import DetailMap, transfer_details
 from workbench.rigging.report import RigTransferError, ShapeQuality, TransferReport
 from workbench.rigging.transfer import (
     RigTransfer,
@@ -26,6 +27,7 @@ if TYPE_CHECKING:
     from workbench.rigging.refine import RefineResult, refine_rig
 
 __all__ = [
+    "DetailMap",
     "RefineResult",
     "RigTransfer",
     "RigTransferError",
@@ -33,6 +35,7 @@ __all__ = [
     "TransferReport",
     "TransferResult",
     "refine_rig",
+    "transfer_details",
     "transfer_rig",
     "transfer_rig_report",
 ]
