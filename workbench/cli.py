@@ -1,9 +1,11 @@
-"""Command line: ``workbench info PATH``, ``workbench export``, ``workbench app``.
+"""Command line: ``workbench info PATH``, ``workbench export``, ``workbench rig``, ``workbench app``.
 
 ``info`` prints what a new user wants to know before opening a face: vertex,
 triangle and polygon counts, the connected components (eyes, teeth...), the
 blendshapes with their ARKit-52 mapping, and units/axes. ``export`` writes the
-animation of a saved ``.fwb`` file. ``app`` serves the workbench notebook as an
+animation of a saved ``.fwb`` file. ``rig`` gives a face mesh the template's
+blendshapes (:mod:`workbench.rigging`: deformation transfer, optionally
+refined from example poses) and saves the rig. ``app`` serves the workbench notebook as an
 app without code cells (Voila, a separate process: the core never imports it),
 on 127.0.0.1 with a token in the printed URL.
 """
@@ -14,7 +16,7 @@ import argparse
 import importlib.util
 import os
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -88,6 +90,25 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="CSV layout: plain (time + one column per shape, the default) or livelink (Epic's Live Link "
         "Face CSV for Unreal/MetaHuman: the 52 ARKit columns + head rotation; a whole fps, 30 or 60 for Unreal)",
     )
+    p_rig = sub.add_parser(
+        "rig",
+        help="rig a face mesh: the template's blendshapes by deformation transfer, optionally refined from "
+        "example poses (Li et al. 2010), saved as a .fwb",
+    )
+    p_rig.add_argument("target", help="the face to rig (.obj, .glb/.gltf, .fbx, .usd, .fwb...)")
+    p_rig.add_argument("--template", default="head",
+                       help="the template rig: a bundled sample name (default: head) or a path")
+    p_rig.add_argument("--landmarks", default=None, metavar="PAIRS.CSV",
+                       help="CSV with a header and two integer columns template_vertex,target_vertex "
+                       "(three or more pairs fix the alignment)")
+    p_rig.add_argument("--examples", default=None, metavar="DIR",
+                       help="folder of example poses in the target's topology and units (.obj), with an optional "
+                       "weights.json {file: {shape: value}} of rough weights; refines the transferred shapes")
+    p_rig.add_argument("--iterations", type=int, default=10, help="refinement iterations (default 10)")
+    p_rig.add_argument("--units", default=None, help="length unit of the target (default: stated or inferred)")
+    p_rig.add_argument("--wrinkles", action="store_true",
+                       help="also carry the template's wrinkle examples to the rig and fit its wrinkles")
+    p_rig.add_argument("--out", required=True, help="the rig to write (.fwb)")
     p_app = sub.add_parser("app", help="serve the workbench as an app without code cells (Voila, 127.0.0.1)")
     p_app.add_argument("--port", type=int, default=8866, help="port on 127.0.0.1 (default 8866; the next free one is used)")
     p_app.add_argument(
@@ -97,6 +118,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.command == "app":
         return serve_app(args.port, token=not args.no_token, notebook=args.notebook)
+    if args.command == "rig":
+        return rig_command(args)
     if args.command == "info" and Path(args.path).suffix.lower() == ".c3d":
         return _markers_info(args.path)  # markers, not a face
     if args.command == "info":
@@ -141,6 +164,216 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(p)
         return 0
     return 1  # pragma: no cover - argparse rejects unknown commands
+
+
+class CommandError(Exception):
+    """A user error in a command's inputs (printed, exit code 2)."""
+
+
+def read_landmarks(path: str | Path, n_template: int, n_target: int) -> list[tuple[int, int]]:
+    """``template_vertex,target_vertex`` pairs from a CSV with a header row.
+
+    Raises CommandError naming the file and line: missing file, no header, a
+    row without two integers, a vertex id out of range.
+    """
+    import csv
+
+    p = Path(path)
+    if not p.is_file():
+        raise CommandError(f"--landmarks {p}: no such file")
+    pairs: list[tuple[int, int]] = []
+    with p.open(newline="", encoding="utf-8-sig") as fh:
+        rows = [(i + 1, r) for i, r in enumerate(csv.reader(fh)) if any(c.strip() for c in r)]
+    if not rows:
+        raise CommandError(f"--landmarks {p}: empty file (expected a header and template_vertex,target_vertex rows)")
+    head_line, header = rows[0]
+    if len(header) == 2 and all(_is_int(c) for c in header):
+        raise CommandError(f"--landmarks {p}: line {head_line}: expected a header row "
+                           "(e.g. template_vertex,target_vertex), got numbers")
+    for line, row in rows[1:]:
+        cells = [c.strip() for c in row]
+        if len(cells) != 2 or not all(_is_int(c) for c in cells):
+            raise CommandError(f"--landmarks {p}: line {line}: expected two integer vertex ids, got {','.join(row)!r}")
+        a, b = int(cells[0]), int(cells[1])
+        if not 0 <= a < n_template:
+            raise CommandError(f"--landmarks {p}: line {line}: template vertex {a} out of range "
+                               f"(the template has {n_template} vertices)")
+        if not 0 <= b < n_target:
+            raise CommandError(f"--landmarks {p}: line {line}: target vertex {b} out of range "
+                               f"(the target has {n_target} vertices)")
+        pairs.append((a, b))
+    if not pairs:
+        raise CommandError(f"--landmarks {p}: no pairs after the header")
+    return pairs
+
+
+def _is_int(text: str) -> bool:
+    try:
+        int(text.strip())
+    except ValueError:
+        return False
+    return True
+
+
+def read_examples(folder: str | Path, n_vertices: int) -> tuple[list[str], list[np.ndarray], list[dict[str, float]] | None]:
+    """Example poses (``*.obj``, sorted by name) and their rough weights (``weights.json``) from ``folder``.
+
+    Raises CommandError naming the file: no folder or no OBJ in it, a file that
+    is not a mesh of ``n_vertices`` vertices, a weights.json that is not
+    ``{file: {shape: number}}`` for exactly the example files.
+    """
+    import json
+
+    from workbench.geometry.mesh_checks import MeshFormatError
+    from workbench.io.obj import read_obj
+
+    d = Path(folder)
+    if not d.is_dir():
+        raise CommandError(f"--examples {d}: no such folder")
+    files = sorted(f for f in d.iterdir() if f.suffix.lower() == ".obj" and f.is_file())
+    if not files:
+        raise CommandError(f"--examples {d}: no .obj example poses in it")
+    poses = []
+    for f in files:
+        try:
+            v = np.asarray(read_obj(f).vertices, np.float64)
+        except (OSError, ValueError, MeshFormatError) as exc:
+            raise CommandError(f"--examples {f}: {exc}") from None
+        if v.shape != (n_vertices, 3):
+            raise CommandError(f"--examples {f}: {v.shape[0]} vertices, but the target has {n_vertices} "
+                               "(examples must be in the target's topology)")
+        poses.append(v)
+    wfile = d / "weights.json"
+    weights = None
+    if wfile.is_file():
+        try:
+            raw = json.loads(wfile.read_text(encoding="utf-8"))
+        except (OSError, ValueError) as exc:
+            raise CommandError(f"--examples {wfile}: not valid JSON ({exc})") from None
+        if not isinstance(raw, dict):
+            raise CommandError(f"--examples {wfile}: expected {{file: {{shape: value}}}}, got {type(raw).__name__}")
+        names = [f.name for f in files]
+        extra = sorted(set(raw) - set(names))
+        missing = [n for n in names if n not in raw]
+        if extra or missing:
+            raise CommandError(f"--examples {wfile}: needs one entry per example file; "
+                               + (f"no such example {extra}" if extra else f"missing {missing}"))
+        weights = []
+        for n in names:
+            w = raw[n]
+            if not isinstance(w, dict) or not all(isinstance(x, int | float) and not isinstance(x, bool)
+                                                  for x in w.values()):
+                raise CommandError(f"--examples {wfile}: {n!r}: expected {{shape: number}}, got {w!r}")
+            weights.append({str(k): float(x) for k, x in w.items()})
+    return [f.name for f in files], poses, weights
+
+
+def rig_command(args: argparse.Namespace) -> int:
+    """``workbench rig``: transfer (and refine) the template's shapes onto the target; see :mod:`workbench.rigging`."""
+    from workbench.geometry.mesh_checks import MeshFormatError
+    from workbench.io import load
+    from workbench.rigging import RigTransfer, RigTransferError
+
+    def say(msg: str) -> None:
+        print(msg, flush=True)
+
+    import re
+
+    def progress(stage: str) -> Callable[[float, str], None]:
+        last_kind = [""]
+        last_f = [-1.0]
+
+        def report(f: float, msg: str) -> None:
+            # one line per step; repeated counters ("factored shape 7/52") at most every 10 %
+            kind = re.sub(r"[\d.]+", "#", msg)
+            if kind != last_kind[0] or f - last_f[0] >= 0.1 or f >= 1.0 > last_f[0]:
+                last_kind[0], last_f[0] = kind, f
+                say(f"{stage} {100 * f:3.0f}%  {msg}")
+        return report
+
+    try:
+        if args.iterations < 1:
+            raise CommandError(f"--iterations must be >= 1, got {args.iterations}")
+        tpath = Path(args.target)
+        if not tpath.exists():
+            raise CommandError(f"TARGET {tpath}: no such file or folder")
+        out = Path(args.out)
+        if not out.parent.is_dir():
+            raise CommandError(f"--out {out}: the folder {out.parent} does not exist")
+        tpl = Path(args.template)
+        if tpl.exists():
+            try:
+                template = load(tpl)
+            except (OSError, ValueError, MeshFormatError) as exc:
+                raise CommandError(f"--template {tpl}: {exc}") from None
+        else:
+            import workbench
+
+            try:
+                template = workbench.load_sample(args.template)
+            except ValueError as exc:
+                raise CommandError(f"--template {args.template}: not a file, and {exc}") from None
+        try:
+            target = load(tpath, units=args.units)
+        except (OSError, ValueError, MeshFormatError) as exc:
+            raise CommandError(f"TARGET {tpath}: {exc}") from None
+        say(f"template {args.template}: {template.n_vertices} vertices, {len(template.shapes)} shapes")
+        say(f"target {tpath}: {target.n_vertices} vertices, units {target.metadata.units}")
+        landmarks = None
+        if args.landmarks is not None:
+            landmarks = read_landmarks(args.landmarks, template.n_vertices, target.n_vertices)
+            say(f"landmarks: {len(landmarks)} pairs")
+        examples = None
+        if args.examples is not None:
+            names, poses, weights = read_examples(args.examples, target.n_vertices)
+            if weights is not None:
+                unknown = sorted({k for w in weights for k in w} - set(template.shape_names))
+                if unknown:
+                    raise CommandError(f"--examples {Path(args.examples) / 'weights.json'}: unknown shapes "
+                                       f"{unknown[:5]}; the template has e.g. {list(template.shape_names[:5])}")
+            examples = (names, poses, weights)
+            say(f"examples: {len(poses)} poses" + (" with rough weights" if weights else ""))
+        try:
+            transfer = RigTransfer(template, target, landmarks=landmarks, progress=progress("transfer"))
+            result = transfer.run()
+        except RigTransferError as exc:
+            raise CommandError(f"TARGET {tpath}: {exc}") from None
+        rig = result.model
+        if examples is not None:
+            from workbench.rigging import refine_rig
+
+            names, poses, weights = examples
+            try:
+                refined = refine_rig(rig, poses, weights, iterations=args.iterations, progress=progress("refine"))
+            except ValueError as exc:
+                raise CommandError(f"--examples {args.examples}: {exc}") from None
+            rig = refined.model
+            for j, n in enumerate(names):
+                say(f"  example {n}: RMS error {refined.initial_errors[j]:.4g} -> {refined.errors[j, -1]:.4g} "
+                    f"{rig.metadata.units}")
+        if args.wrinkles:
+            from workbench.rigging import transfer_details
+
+            say("wrinkles: carrying the template's examples")
+            try:
+                facet = transfer_details(template, rig, transfer)
+            except ValueError as exc:
+                raise CommandError(f"--wrinkles: {exc}") from None
+            say(f"wrinkles: fitted {len(facet.example_names)} examples")
+        say(result.report.summary())
+        worst = sorted(result.report.shapes, key=lambda q: q.max_stretch, reverse=True)[:5]
+        if worst:
+            say("  worst shapes: " + ", ".join(
+                f"{q.name} (stretch {q.max_stretch:.2f}, template {q.source_max_stretch:.2f})" for q in worst))
+        try:
+            rig.save(out)
+        except OSError as exc:
+            raise CommandError(f"--out {out}: {exc}") from None
+    except CommandError as exc:
+        print(f"workbench rig: {exc}", file=sys.stderr)
+        return 2
+    say(f"saved {out}")
+    return 0
 
 
 def _markers_info(path: str) -> int:
