@@ -68,12 +68,13 @@ class DetailMap:
 
     def __init__(self, transfer: RigTransfer) -> None:
         t = transfer
-        ok = np.asarray(t._v_ok, bool)
-        fv = np.asarray(t._v_face, np.int64)[ok]
+        sc = t.skin_correspondence
+        ok = np.asarray(sc.matched, bool)
+        fv = np.asarray(sc.face, np.int64)[ok]
         self.target_vertices = np.asarray(t.tgt.skin_ids, np.int64)[ok]
         self.source_corners = np.asarray(t.src.skin_ids, np.int64)[np.asarray(t.src.skin_faces, np.int64)[fv]]
-        self.bary = np.asarray(t._v_bary, np.float64)[ok]
-        J = np.asarray(t._J_fit, np.float64)[fv]  # template rest -> fitted, working frame
+        self.bary = np.asarray(sc.bary, np.float64)[ok]
+        J = np.asarray(sc.jacobians, np.float64)[fv]  # template rest -> fitted, working frame
         s_lin = t.src.frame.scale * t.src.frame.R  # template model -> working
         t_inv = t.tgt.frame.R.T / t.tgt.frame.scale  # working -> target model
         self.linear = t_inv[None] @ J @ s_lin[None]

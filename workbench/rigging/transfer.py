@@ -189,6 +189,28 @@ class TransferResult:
     report: TransferReport
 
 
+@dataclass(frozen=True)
+class SkinCorrespondence:
+    """Target skin vertex -> template triangle, read-only views of a :class:`RigTransfer`.
+
+    Attributes
+    ----------
+    matched : (n_t,) bool
+        The vertex found a template triangle.
+    face : (n_t,) int
+        Template triangle of each target vertex (meaningful where ``matched``).
+    bary : (n_t, 3) float
+        Barycentric coordinates in that triangle.
+    jacobians : (m_s, 3, 3) float
+        Per template triangle, the fit's linear map from template rest to fitted frame.
+    """
+
+    matched: np.ndarray
+    face: np.ndarray
+    bary: np.ndarray
+    jacobians: np.ndarray
+
+
 class RigTransfer:
     """Set up a transfer from ``source`` (a rig) to ``target`` (a mesh); :meth:`run` does it.
 
@@ -629,6 +651,11 @@ class RigTransfer:
         k = deltas.shape[0]
         rhs = self._rhs_map @ np.asarray(deltas, np.float64).transpose(1, 2, 0).reshape(-1, k)  # (3 n, k)
         return np.asarray(rhs).reshape(-1, 3 * k)
+
+    @property
+    def skin_correspondence(self) -> SkinCorrespondence:
+        """Where each target skin vertex sits on the fitted template (for detail transfer)."""
+        return SkinCorrespondence(self._v_ok, self._v_face, self._v_bary, self._J_fit)
 
     def run(self) -> TransferResult:
         """Transfer every template shape; returns the rigged target and the report."""
