@@ -398,3 +398,31 @@ def test_euler_angles_round_trip(axes):
         head_rotation_from_euler(0, 0, 0, up_axis="+y", front_axis="-y")
     with pytest.raises(TrackError, match="signed axis name"):
         head_rotation_from_euler(0, 0, 0, up_axis="y")
+
+
+def test_prefetched_weights_are_the_same_bits_as_sampling_each_time() -> None:
+    from workbench.animation.curves import Key, Track, weight_track_name
+    from workbench.animation.tracks import Timeline
+
+    rng = np.random.default_rng(7)
+    tracks = {}
+    for i, kind in enumerate(["bezier", "linear", "step", "bezier"]):
+        name = weight_track_name(f"s{i}")
+        times = np.sort(rng.uniform(0, 3, 6))
+        tracks[name] = Track(name, tuple(Key(float(t), float(rng.uniform(-0.2, 1.2)), kind) for t in times))
+    tl = Timeline(fps=30.0, tracks=tracks).fit_range()
+    ts = np.concatenate([tl.frame_times(), rng.uniform(-1, 4, 50)])
+    alone = [tl.evaluate(float(t)).weights for t in ts]
+    tl.prefetch_weights(ts)
+    try:
+        together = [tl.evaluate(float(t)).weights for t in ts]
+    finally:
+        tl.forget_prefetched()
+    for a, b in zip(alone, together, strict=True):
+        assert a.keys() == b.keys()
+        assert all(np.float64(a[k]).tobytes() == np.float64(b[k]).tobytes() for k in a)
+    # an edit makes a new timeline that does not carry the table
+    tl.prefetch_weights(ts[:3])
+    assert "_prefetched" not in tl.add_key("weights/s0", 5.0, 0.5).__dict__
+    tl.forget_prefetched()
+    assert "_prefetched" not in tl.__dict__

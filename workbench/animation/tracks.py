@@ -276,7 +276,12 @@ class Timeline:
     # ------------------------------------------------------------ evaluation
     def evaluate(self, time: float) -> TimelineSample:
         """Weights, handle offsets, head transform and region weights at ``time`` (seconds)."""
-        weights = {s: float(tr.sample([time])[0, 0]) for s, tr in self.weight_tracks.items()}
+        pre = self.__dict__.get("_prefetched")
+        hit = None if pre is None else pre.get(float(time))
+        if hit is not None:
+            weights = dict(hit)
+        else:
+            weights = {s: float(tr.sample([time])[0, 0]) for s, tr in self.weight_tracks.items()}
         h = self.handles
         offsets = None if h is None else h.evaluate(time)
         hp = self.head_pose
@@ -286,6 +291,24 @@ class Timeline:
             tr_, rot = p[:3].copy(), p[3:].copy()
         regions = {r: tr.sample([time])[0] for r, tr in self.region_tracks.items()}
         return TimelineSample(weights, offsets, tr_, rot, self.region_level, regions)
+
+    def prefetch_weights(self, times: ArrayLike) -> None:
+        """Sample every weight track at all ``times`` in one go; :meth:`evaluate` then looks them up.
+
+        For exporters, which evaluate every frame: one vectorised pass per track
+        instead of one call per track and frame. The values are the same bits,
+        because curve sampling is elementwise arithmetic (no reductions), so a
+        time sampled alone or among others gives one result. Dropped by
+        :meth:`forget_prefetched`; edits make new timelines without it.
+        """
+        ts = np.asarray(times, np.float64).reshape(-1)
+        cols = {s: tr.sample(ts)[:, 0] for s, tr in self.weight_tracks.items()}
+        table = {float(t): {s: float(c[i]) for s, c in cols.items()} for i, t in enumerate(ts)}
+        object.__setattr__(self, "_prefetched", table)
+
+    def forget_prefetched(self) -> None:
+        """Drop what :meth:`prefetch_weights` stored."""
+        self.__dict__.pop("_prefetched", None)
 
     def weight_matrix(self, shape_names: Iterable[str], times: ArrayLike) -> NDArray[np.float64]:
         """(F, k) weights of ``shape_names`` (in that order) at ``times``; unkeyed shapes 0.

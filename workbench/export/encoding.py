@@ -509,8 +509,12 @@ class MeshEncoding:
         ts = np.asarray(times, np.float64).reshape(-1)
         n = self.n_vertices
         out = np.empty((ts.size, n, 3), np.float32)
-        for f, t in enumerate(ts):
-            out[f] = self.model.evaluation_at(float(t), self.timeline).mesh
+        self.timeline.prefetch_weights(ts)
+        try:
+            for f, t in enumerate(ts):
+                out[f] = self.model.evaluation_at(float(t), self.timeline).mesh
+        finally:
+            self.timeline.forget_prefetched()
         return out
 
     def points(self, times: ArrayLike) -> NDArray[np.float32]:
@@ -518,8 +522,12 @@ class MeshEncoding:
         ts = np.asarray(times, np.float64).reshape(-1)
         n = self.n_vertices
         out = np.empty((ts.size, n, 3), np.float32)
-        for f, t in enumerate(ts):
-            out[f] = self.model.evaluate_at(float(t), self.timeline)
+        self.timeline.prefetch_weights(ts)
+        try:
+            for f, t in enumerate(ts):
+                out[f] = self.model.evaluate_at(float(t), self.timeline)
+        finally:
+            self.timeline.forget_prefetched()
         return out
 
 
