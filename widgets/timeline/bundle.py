@@ -9,15 +9,13 @@ bundle runs. It is built, not committed (``npm --prefix widgets/js run build``).
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+
+from widgets.viewport.common import read_bundle
 
 _WIDGETS = Path(__file__).resolve().parent.parent
 
 #: the bundle anywidget loads (built by widgets/js/build.mjs)
 TIMELINE_BUNDLE = _WIDGETS / "static" / "timeline.js"
-
-_cache: dict[str, Any] = {}
-
 
 def load_timeline_bundle(path: Path = TIMELINE_BUNDLE) -> str:
     """The front end's ESM text, re-read when the bundle changes on disk.
@@ -27,16 +25,9 @@ def load_timeline_bundle(path: Path = TIMELINE_BUNDLE) -> str:
     FileNotFoundError
         When the bundle was not built.
     """
-    try:
-        stat = path.stat()
-    except FileNotFoundError:
-        raise FileNotFoundError(
-            f"the timeline's JavaScript bundle {path} is missing: it is built from "
-            "widgets/js/src (esbuild). Run `npm --prefix widgets/js ci && "
-            "npm --prefix widgets/js run build`."
-        ) from None
-    key = (str(path), stat.st_mtime_ns, stat.st_size)
-    if _cache.get("key") != key:
-        _cache["key"] = key
-        _cache["text"] = path.read_text(encoding="utf-8")
-    return str(_cache["text"])
+    return read_bundle(
+        path,
+        f"the timeline's JavaScript bundle {path} is missing: it is built from "
+        "widgets/js/src (esbuild). Run `npm --prefix widgets/js ci && "
+        "npm --prefix widgets/js run build`.",
+    )

@@ -41,7 +41,25 @@ STRAIN_RANGE = 0.2
 #: A strain update is sent only when some edge changed by more than this (0.01 %).
 STRAIN_TOLERANCE = 1e-4
 
-_bundle_cache: dict[str, Any] = {}
+#: path -> ((path, mtime_ns, size), text) of every bundle read
+_bundle_cache: dict[str, tuple[tuple[str, int, int], str]] = {}
+
+
+def read_bundle(path: Path, missing: str) -> str:
+    """The text of a built front-end bundle, re-read only when it changes on disk.
+
+    ``missing`` is the FileNotFoundError message when the file is not there.
+    """
+    try:
+        stat = path.stat()
+    except FileNotFoundError:
+        raise FileNotFoundError(missing) from None
+    key = (str(path), stat.st_mtime_ns, stat.st_size)
+    hit = _bundle_cache.get(key[0])
+    if hit is None or hit[0] != key:
+        hit = (key, path.read_text(encoding="utf-8"))
+        _bundle_cache[key[0]] = hit
+    return hit[1]
 
 
 def load_bundle(path: Path = BUNDLE) -> str:
@@ -52,19 +70,12 @@ def load_bundle(path: Path = BUNDLE) -> str:
     FileNotFoundError
         When the bundle was not built (``widgets/static/`` is not committed).
     """
-    try:
-        stat = path.stat()
-    except FileNotFoundError:
-        raise FileNotFoundError(
-            f"the viewport's JavaScript bundle {path} is missing: it is built from "
-            "widgets/js (three.js + esbuild). Run the README test/run command or "
-            "`npm --prefix widgets/js ci && npm --prefix widgets/js run build`."
-        ) from None
-    key = (str(path), stat.st_mtime_ns, stat.st_size)
-    if _bundle_cache.get("key") != key:
-        _bundle_cache["key"] = key
-        _bundle_cache["text"] = path.read_text(encoding="utf-8")
-    return str(_bundle_cache["text"])
+    return read_bundle(
+        path,
+        f"the viewport's JavaScript bundle {path} is missing: it is built from "
+        "widgets/js (three.js + esbuild). Run the README test/run command or "
+        "`npm --prefix widgets/js ci && npm --prefix widgets/js run build`.",
+    )
 
 
 def scene_key(model: Any) -> str:
