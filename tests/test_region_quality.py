@@ -12,11 +12,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from grid_meshes import two_bump_grid
 
 import workbench
 from workbench.methods.regions.hierarchy import Regions
 from workbench.methods.regions.segmentation import feature_share, segment_blend_regions
-from workbench.model import BlendShape, FaceModel
+from workbench.model import FaceModel
 
 #: one-sided features, both sides (the brow, the lids, the cheek, the nose wrinkle, the mouth corner and lips)
 FEATURES = tuple(
@@ -93,21 +94,7 @@ def test_the_brow_was_split_without_keeping_features(head: FaceModel) -> None:
 
 def test_feature_share_on_a_grid() -> None:
     # a 12 x 12 grid: 'a' bumps the left half, 'b' the right half, one region each
-    n = 13
-    xs, ys = np.meshgrid(np.arange(n, dtype=float), np.arange(n, dtype=float))
-    V = np.stack([xs.ravel() - 6, ys.ravel(), np.zeros(xs.size)], axis=1)
-    F = []
-    for j in range(n - 1):
-        for i in range(n - 1):
-            a = j * n + i
-            F += [[a, a + 1, a + n + 1], [a, a + n + 1, a + n]]
-
-    def bump(cx: float) -> np.ndarray:
-        d = np.zeros((V.shape[0], 3), np.float32)
-        d[:, 2] = np.exp(-((V[:, 0] - cx) ** 2 + (V[:, 1] - 6) ** 2) / 4.0)
-        return d
-
-    m = FaceModel(V, np.array(F), [BlendShape("browUpLeft", bump(3.5)), BlendShape("browUpRight", bump(-3.5))])
+    m = two_bump_grid()
     R = segment_blend_regions(m, 0.3, levels=2, min_region_size=0.02)
     for name in ("browUpLeft", "browUpRight"):
         assert feature_share(m, R, name, 0) == (1.0, 0.0)

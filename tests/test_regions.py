@@ -8,6 +8,7 @@ import re
 import numpy as np
 import pytest
 import scipy.sparse as sp
+from grid_meshes import two_bump_grid
 from scipy.sparse.csgraph import connected_components
 
 import workbench
@@ -205,21 +206,7 @@ def test_a_left_brow_shape_lands_in_left_regions_and_one_region_when_coarse(
 
 def test_synthetic_left_only_shape_in_one_region() -> None:
     # a 12x12 grid: shape 'a' bumps the left half, 'b' the right half
-    n = 13
-    xs, ys = np.meshgrid(np.arange(n, dtype=float), np.arange(n, dtype=float))
-    V = np.stack([xs.ravel() - 6, ys.ravel(), np.zeros(xs.size)], axis=1)
-    F = []
-    for j in range(n - 1):
-        for i in range(n - 1):
-            a = j * n + i
-            F += [[a, a + 1, a + n + 1], [a, a + n + 1, a + n]]
-
-    def bump(cx: float) -> np.ndarray:
-        d = np.zeros((V.shape[0], 3), np.float32)
-        d[:, 2] = np.exp(-((V[:, 0] - cx) ** 2 + (V[:, 1] - 6) ** 2) / 4.0)
-        return d
-
-    m = FaceModel(V, np.array(F), [BlendShape("browUpLeft", bump(3.5)), BlendShape("browUpRight", bump(-3.5))])
+    m = two_bump_grid()
     R = segment_blend_regions(m, 0.3, levels=1, min_region_size=0.02)
     moved = np.linalg.norm(m.deltas[0], axis=1) > 0.5
     labs = R.labels[0][moved]
