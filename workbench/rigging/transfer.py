@@ -657,8 +657,13 @@ class RigTransfer:
         """Where each target skin vertex sits on the fitted template (for detail transfer)."""
         return SkinCorrespondence(self._v_ok, self._v_face, self._v_bary, self._J_fit)
 
-    def run(self) -> TransferResult:
-        """Transfer every template shape; returns the rigged target and the report."""
+    def run(self, *, progress: Progress = None) -> TransferResult:
+        """Transfer every template shape; returns the rigged target and the report.
+
+        ``progress`` replaces the set-up's progress callback from here on.
+        """
+        if progress is not None:
+            self._progress = progress
         t0 = time.perf_counter()
         self._say(0.95, "transferring shapes")
         shapes = list(self.source.shapes)
