@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 
 from workbench.rigging.details import DetailMap, transfer_details
 from workbench.rigging.report import RigTransferError, ShapeQuality, TransferReport
+from workbench.rigging.session import RigExample, RigSession, RigState
 from workbench.rigging.transfer import (
     RigTransfer,
     TransferResult,
@@ -29,6 +30,9 @@ if TYPE_CHECKING:
 __all__ = [
     "DetailMap",
     "RefineResult",
+    "RigExample",
+    "RigSession",
+    "RigState",
     "RigTransfer",
     "RigTransferError",
     "ShapeQuality",
