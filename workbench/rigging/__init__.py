@@ -15,6 +15,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 from workbench.rigging.details import DetailMap, transfer_details
+from workbench.rigging.landmarks import SuggestedLandmark, suggest_landmarks, template_landmarks
 from workbench.rigging.report import RigTransferError, ShapeQuality, TransferReport
 from workbench.rigging.session import RigExample, RigSession, RigState
 from workbench.rigging.transfer import (
@@ -36,9 +37,12 @@ __all__ = [
     "RigTransfer",
     "RigTransferError",
     "ShapeQuality",
+    "SuggestedLandmark",
     "TransferReport",
     "TransferResult",
     "refine_rig",
+    "suggest_landmarks",
+    "template_landmarks",
     "transfer_details",
     "transfer_rig",
     "transfer_rig_report",
