@@ -10,39 +10,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from rig_faces import WARP, Actor
 
 import workbench
 from workbench.model import FaceModel, ModelMetadata
 from workbench.rigging import RigSession
-from workbench.rigging import synthetic as syn
-
-WARP = syn.SmoothWarp(
-    centres=np.array([[0.4, 7.3, 1.2], [-0.3, 6.4, 1.3]]),
-    radii=np.array([0.35, 0.4]),
-    amplitudes=np.array([[0.05, 0.04, 0.08], [-0.04, 0.0, 0.06]]),
-    scale=np.array([1.06, 0.96, 1.03]),
-    rotation=syn.SmoothWarp.rotation_xyz([0, 0, 0]),
-    unit=10.0,
-    translation=np.array([0.0, -60.0, 0.0]),
-)
-
-
-class Actor:
-    def __init__(self, head: FaceModel) -> None:
-        V2, F2, W = syn.split_remesh(head.vertices, head.faces, seed=3)
-        lab = head.component_labels[np.asarray(W.argmax(axis=1)).ravel()]
-        self.head, self.W, self.points = head, W, V2
-        self.model = FaceModel(WARP(V2), F2, component_labels=lab, component_names=head.component_names,
-                               metadata=ModelMetadata(name="actor", units="cm"))
-
-    def truth(self, name: str) -> np.ndarray:
-        d = self.W @ self.head.shapes[self.head.shape_names.index(name)].delta.astype(np.float64)
-        return WARP(self.points + d) - WARP(self.points)
-
-    def pose(self, weights: dict[str, float]) -> np.ndarray:
-        d = sum(self.W @ (w * self.head.shapes[self.head.shape_names.index(k)].delta.astype(np.float64))
-                for k, w in weights.items())
-        return WARP(self.points + d)
 
 
 @pytest.fixture(scope="module")
@@ -251,3 +223,19 @@ def test_session_rejects_bad_arguments(head: FaceModel, actor: Actor, tmp_path) 
     assert s.target.n_vertices == actor.model.n_vertices
     with pytest.raises(RuntimeError, match="transfer"):
         s.result()
+
+
+def test_moving_a_landmark_is_one_step_and_keeps_template_vertices_unique(head: FaceModel, actor: Actor) -> None:
+    s = RigSession(head, actor.model)
+    s.set_landmarks([(1, 2), (3, 4), (5, 6)])
+    s.move_landmark(1, "target", 40)
+    assert s.landmarks == ((1, 2), (3, 40), (5, 6))
+    s.move_landmark(0, "template", 5)  # pair 2 held template vertex 5: it goes
+    assert s.landmarks == ((5, 2), (3, 40))
+    assert s.history.undo_labels[-2:] == ["Move landmark 2 (target)", "Move landmark 1 (template)"]
+    s.undo()
+    assert s.landmarks == ((1, 2), (3, 40), (5, 6))
+    with pytest.raises(ValueError, match="side must be"):
+        s.move_landmark(0, "other", 1)
+    with pytest.raises(IndexError):
+        s.move_landmark(3, "target", 1)

@@ -22,6 +22,10 @@ this package.
   beside a tab of the panels ("Shapes", "Sculpt", "Regions", "Paint",
   "Export"), the timeline under it, undo/redo, a wireframe toggle and a status
   line on top, and a shared Output that callback errors go to.
+- :class:`RigStudio` / :func:`show_rig_studio`: rig your own face from the
+  template (two linked views to click landmark pairs, the transfer / refine /
+  wrinkle stages with progress bars, the quality report, a before/after
+  gallery, the examples with rough-weight sliders; *Open in Workbench*).
 - :func:`recovery_prompt`: offer to recover an autosaved session after a
   kernel crash or restart.
 """
@@ -33,6 +37,7 @@ from widgets.gallery import ExpressionGallery
 from widgets.panels import ExportPanel, ExpressionPanel, PaintPanel, SculptPanel
 from widgets.recovery import RecoveryPrompt, recovery_prompt
 from widgets.regions import RegionsPanel
+from widgets.rigging import RigStudio, show_rig_studio
 from widgets.timeline import TimelineWidget
 from widgets.viewport import Viewport
 from widgets.wrinkles import WrinklePanel
@@ -45,11 +50,13 @@ __all__ = [
     "PaintPanel",
     "RecoveryPrompt",
     "RegionsPanel",
+    "RigStudio",
     "SculptPanel",
     "TimelineWidget",
     "Viewport",
     "Workbench",
     "WrinklePanel",
     "recovery_prompt",
+    "show_rig_studio",
     "show_workbench",
 ]

@@ -140,6 +140,11 @@ class Viewport(anywidget.AnyWidget):
         rest, red stretched), with a colour-scale legend.
     strain_range : float
         Relative stretch drawn in full colour (default ``0.2``: ±20 %).
+    camera_group : str
+        Viewports with the same non-empty group orbit and zoom together in the
+        browser (the same side of the face at the same relative size, whatever
+        their units or up axes; no kernel messages), e.g. the Rig tab's template
+        and target views.
 
     The front end writes the markers' screen positions to ``data-handles``
     (JSON ``[[x, y, in_front], ...]`` in page pixels) after every render.
@@ -186,6 +191,7 @@ class Viewport(anywidget.AnyWidget):
     _feature_strain = t.Bytes(b"").tag(sync=True)
     feature_graph = t.Bool(True).tag(sync=True)
     strain_range = t.Float(STRAIN_RANGE).tag(sync=True)
+    camera_group = t.Unicode("").tag(sync=True)
 
     def __init__(
         self,
@@ -225,6 +231,10 @@ class Viewport(anywidget.AnyWidget):
         #: receives marker drags instead of the model's handles (a plain attribute:
         #: RegionsPanel sets its pin drag, region brush or seed picker here)
         self.drag_handler: Any = None
+        #: receives surface clicks and marker Alt-clicks instead of the model's handles: an
+        #: object with ``pick(vertex)`` and optionally ``remove(index, vertex)`` (the Rig
+        #: tab's landmark picker); ``None`` = add / remove model handles
+        self.pick_handler: Any = None
         #: every pointer gesture (widgets.viewport.gestures): one open at a time
         self.gestures = GestureDispatcher(
             self,
@@ -549,12 +559,19 @@ class Viewport(anywidget.AnyWidget):
         elif kind == "request_paint":
             self.errors.guard("Viewport paint resync")(self.sync.resend_paint)()
         elif kind == "add_handle":
-            self.errors.guard("add handle")(self.add_handle_at)(int(content["vertex"]))
+            if self.pick_handler is not None:
+                self.errors.guard("pick")(self.pick_handler.pick)(int(content["vertex"]))
+            else:
+                self.errors.guard("add handle")(self.add_handle_at)(int(content["vertex"]))
         elif kind == "remove_handle":
             v = content.get("vertex")
-            self.errors.guard("remove handle")(self.remove_handle_at)(
-                int(content["index"]), None if v is None else int(v)
-            )
+            vertex = None if v is None else int(v)
+            if self.pick_handler is not None:
+                remove = getattr(self.pick_handler, "remove", None)
+                if remove is not None:
+                    self.errors.guard("pick remove")(remove)(int(content["index"]), vertex)
+            else:
+                self.errors.guard("remove handle")(self.remove_handle_at)(int(content["index"]), vertex)
 
     # ----------------------------------------------- what the front end was sent
     # (read by tests and benchmarks; widgets.viewport.sync owns it)

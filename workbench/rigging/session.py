@@ -342,6 +342,23 @@ class RigSession:
         a, b = lm[i]
         self._commit(f"Remove landmark {a} \u2194 {b}", dataclasses.replace(self._state, landmarks=lm[:i] + lm[i + 1:]))
 
+    def move_landmark(self, index: int, side: str, vertex: int) -> None:
+        """Give pair ``index`` another ``"template"`` or ``"target"`` vertex (one undo step).
+
+        On the template side, a pair already holding that vertex is dropped.
+        """
+        lm = self._state.landmarks
+        if not -len(lm) <= index < len(lm):
+            raise IndexError(f"no landmark {index} (the session has {len(lm)})")
+        i = index % len(lm)
+        v = self._check_vertex(side, vertex)
+        a, b = lm[i]
+        pair = (v, b) if side == "template" else (a, v)
+        if pair == (a, b):
+            return
+        new = tuple(pair if j == i else p for j, p in enumerate(lm) if j == i or p[0] != pair[0])
+        self._commit(f"Move landmark {i + 1} ({side})", dataclasses.replace(self._state, landmarks=new))
+
     def clear_landmarks(self) -> None:
         if self._state.landmarks:
             self._commit("Clear landmarks", dataclasses.replace(self._state, landmarks=()))

@@ -10,6 +10,7 @@
 import * as THREE from "three";
 import { OrbitControls } from "three/examples/jsm/controls/OrbitControls.js";
 import { isPlaying, onPlayback } from "../shared/playback.js";
+import { cameraLinkMethods } from "./camera_link.js";
 import { markerMethods } from "./markers.js";
 import { pickingMethods } from "./picking.js";
 import { PaintTool, SculptTool } from "./tools.js";
@@ -142,10 +143,16 @@ export class View {
     controls.addEventListener("start", () => { this.controlsActive = true; });
     controls.addEventListener("end", () => { this.controlsActive = false; });
     controls.addEventListener("change", () => {
-      if (this.controlsActive) this.userCamera = true;
+      if (this.controlsActive) {
+        this.userCamera = true;
+        this.broadcastCamera(); // views in the same camera_group follow (./camera_link.js)
+      }
       this.requestRender(false);
     });
     this.controls = controls;
+    this.joinCameraGroup();
+    this.onCameraGroup = () => this.joinCameraGroup();
+    model.on("change:camera_group", this.onCameraGroup);
 
     // Pointer tools. Listeners sit on the container in the CAPTURE phase so a press on a
     // handle marker (or on the face with the brush) is taken before OrbitControls sees it.
@@ -495,6 +502,7 @@ export class View {
     this.controls.target.copy(center);
     this.controls.update();
     this.framed = true;
+    this.frameDist = dist; // the zoom a linked camera shares is relative to it (./camera_link.js)
   }
 
   resize() {
@@ -599,6 +607,8 @@ export class View {
   }
 
   dispose() {
+    this.leaveCameraGroup();
+    if (this.onCameraGroup) this.model.off("change:camera_group", this.onCameraGroup);
     // Never leave Python inside a drag interaction when the view goes away.
     if (this.tools) {
       try { this.tools.sculpt.end(null); } catch (err) { /* closing */ }
@@ -637,4 +647,4 @@ export class View {
 }
 
 
-Object.assign(View.prototype, markerMethods, pickingMethods);
+Object.assign(View.prototype, markerMethods, pickingMethods, cameraLinkMethods);
