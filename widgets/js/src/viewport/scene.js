@@ -152,7 +152,7 @@ export class View {
     this.controls = controls;
     this.joinCameraGroup();
     this.onCameraGroup = () => this.joinCameraGroup();
-    model.on("change:camera_group", this.onCameraGroup);
+    this.model.on("change:camera_group", this.onCameraGroup);
 
     // Pointer tools. Listeners sit on the container in the CAPTURE phase so a press on a
     // handle marker (or on the face with the brush) is taken before OrbitControls sees it.
