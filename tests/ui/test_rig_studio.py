@@ -154,3 +154,28 @@ def test_a_failing_stage_says_why_and_changes_nothing(head) -> None:
         assert studio.errors.count == 1
     finally:
         studio.close()
+
+
+def test_suggest_adds_named_pairs_in_one_step_with_progress(head, actor) -> None:
+    from widgets import RigStudio
+
+    studio = RigStudio(head, actor.model, height=200)
+    try:
+        lp = studio.landmarks
+        seen: list[float] = []
+        lp.progress.bar.observe(lambda ch: seen.append(ch["new"]), "value")
+        lp.suggest_button.click()
+        s = studio.session
+        assert len(s.landmarks) >= 10
+        assert s.history.undo_labels == [f"Suggest {len(s.landmarks)} landmarks"]
+        assert len(seen) >= 3 and "pairs suggested" in lp.progress.label.value
+        assert len(lp.views["target"].handles) == len(s.landmarks)
+        # each suggested target vertex is near the warped template vertex (ground truth)
+        size = np.ptp(actor.model.vertices, axis=0).max()
+        for a, b in s.landmarks:
+            true = WARP(head.vertices[a][None])[0]
+            assert np.linalg.norm(actor.model.vertices[b] - true) < 0.02 * size
+        studio.undo()
+        assert s.landmarks == () and len(lp.views["target"].handles) == 0
+    finally:
+        studio.close()
