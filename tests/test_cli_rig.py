@@ -171,3 +171,24 @@ def test_a_target_that_is_not_a_face_exits_2(tmp_path: Path, capsys) -> None:
     _write_points(path, np.asarray(s.vertices), np.asarray(s.faces))
     assert main(["rig", str(path), "--out", str(tmp_path / "rig.fwb")]) == 2
     assert f"TARGET {path}:" in capsys.readouterr().err
+
+
+def test_a_z_up_target_rigs_with_up_and_front(actor: Synthetic, tmp_path: Path,
+                                              capsys: pytest.CaptureFixture[str]) -> None:
+    # the same face lying in a Z-up file facing -y (Blender's convention): (x, y, z) -> (x, -z, y)
+    zup = tmp_path / "zup.obj"
+    V = np.c_[actor.V[:, 0], -actor.V[:, 2], actor.V[:, 1]]
+    _write_obj(zup, V, actor.faces, actor.labels, list(actor.head.component_names))
+    out = tmp_path / "rig.fwb"
+    assert main(["rig", str(zup), "--units", "cm", "--up=+z", "--front=-y", "--out", str(out)]) == 0
+    rig = workbench.load(out)
+    assert (rig.metadata.up_axis, rig.metadata.front_axis) == ("+z", "-y")
+    # jawOpen against the truth, turned the same way
+    d = rig.shapes[rig.shape_names.index("jawOpen")].delta.astype(np.float64)
+    t = actor.pose({"jawOpen": 1.0}) - actor.V
+    t = np.c_[t[:, 0], -t[:, 2], t[:, 1]]
+    skin = actor.labels == 0
+    err = np.linalg.norm(d - t, axis=1)[skin]
+    assert np.sqrt((err**2).mean()) < 0.05 * np.linalg.norm(t[skin], axis=1).max()
+    assert main(["rig", str(zup), "--up", "+q", "--out", str(out)]) == 2
+    assert "--up/--front" in capsys.readouterr().err

@@ -13,6 +13,7 @@ on 127.0.0.1 with a token in the printed URL.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import importlib.util
 import os
 import sys
@@ -106,6 +107,10 @@ def main(argv: Sequence[str] | None = None) -> int:
                        "weights.json {file: {shape: value}} of rough weights; refines the transferred shapes")
     p_rig.add_argument("--iterations", type=int, default=10, help="refinement iterations (default 10)")
     p_rig.add_argument("--units", default=None, help="length unit of the target (default: stated or inferred)")
+    p_rig.add_argument("--up", default=None, metavar="AXIS",
+                       help="the target's up axis, e.g. +z (default: as the file states, else +y)")
+    p_rig.add_argument("--front", default=None, metavar="AXIS",
+                       help="the axis the target's face looks along, e.g. --front=-y (default: as stated, else +z)")
     p_rig.add_argument("--wrinkles", action="store_true",
                        help="also carry the template's wrinkle examples to the rig and fit its wrinkles")
     p_rig.add_argument("--out", required=True, help="the rig to write (.fwb)")
@@ -317,6 +322,12 @@ def rig_command(args: argparse.Namespace) -> int:
             target = load(tpath, units=args.units)
         except (OSError, ValueError, MeshFormatError) as exc:
             raise CommandError(f"TARGET {tpath}: {exc}") from None
+        axes = {k: v for k, v in (("up_axis", args.up), ("front_axis", args.front)) if v is not None}
+        if axes:
+            try:
+                target.set_metadata(dataclasses.replace(target.metadata, **axes), label="Axes from the command line")
+            except ValueError as exc:
+                raise CommandError(f"--up/--front: {exc}") from None
         say(f"template {args.template}: {template.n_vertices} vertices, {len(template.shapes)} shapes")
         say(f"target {tpath}: {target.n_vertices} vertices, units {target.metadata.units}")
         landmarks = None
