@@ -1,4 +1,4 @@
-"""What a rig transfer did and how good it is: per-shape stretch and flips, registration, parts, warnings.
+"""What a rig transfer did and how good it is: per-shape stretch, flips and self-intersections, registration, parts, warnings.
 
 :class:`TransferReport` is returned by :func:`workbench.rigging.transfer_rig_report`
 and saved (as JSON) in the rig's ``metadata.provenance`` entry ``"method":
@@ -8,17 +8,34 @@ and saved (as JSON) in the rig's ``metadata.provenance`` entry ``"method":
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["METHOD", "RigTransferError", "ShapeQuality", "StretchMeter", "TransferReport", "triangle_stretch"]
+__all__ = [
+    "FLAG_COUNT_RATIO",
+    "FLAG_STRETCH_FLOOR",
+    "FLAG_STRETCH_RATIO",
+    "METHOD",
+    "RigTransferError",
+    "ShapeQuality",
+    "StretchMeter",
+    "TransferReport",
+    "triangle_stretch",
+]
 
 #: the provenance entry's ``"method"``
 METHOD = "rig transfer"
 
+#: a shape is flagged when its largest stretch on the target is above this floor ...
+FLAG_STRETCH_FLOOR = 1.5
+#: ... and above this many times its largest stretch on the template
+FLAG_STRETCH_RATIO = 1.3
+#: a shape is flagged when it flips, or newly self-intersects, more than this many times as many triangles
+#: on the target as on the template, once the two meshes' densities are allowed for (:meth:`ShapeQuality.concerns`)
+FLAG_COUNT_RATIO = 2.0
 
 class RigTransferError(ValueError):
     """The transfer cannot be done on these inputs; the message names the input and the problem."""
@@ -118,6 +135,20 @@ class ShapeQuality:
     source_flipped : int
     moved : int
         Target vertices the shape moves (by more than 1 % of its largest displacement).
+    intersecting : int
+        Target skin triangles that cross another triangle of the skin at
+        weight 1 and did not at rest (pairs sharing a vertex do not count; see
+        :class:`workbench.rigging.intersections.SelfIntersections`): a lip
+        pushed through the other, an eyelid through the cheek. 0 in reports
+        saved before it was measured, and when numba is not installed (the
+        check is skipped; the transfer logs it).
+    source_intersecting : int
+        The same on the template skin, for comparison (a template whose
+        ``mouthClose`` already presses the lips through each other passes it on).
+    triangles, source_triangles : int
+        Skin triangles of the target and of the template, to compare the
+        counts of two meshes of different density (0 in reports saved before
+        they were recorded).
     """
 
     name: str
@@ -127,6 +158,45 @@ class ShapeQuality:
     source_max_stretch: float
     source_flipped: int
     moved: int
+    intersecting: int = 0
+    source_intersecting: int = 0
+    triangles: int = 0
+    source_triangles: int = 0
+
+    def concerns(self) -> tuple[str, ...]:
+        """Why this shape needs a look: where it does worse on the target than on the template (empty: fine).
+
+        The rule, per measure:
+
+        * stretch: the largest stretch is above :data:`FLAG_STRETCH_FLOOR`
+          and :data:`FLAG_STRETCH_RATIO` times the template's;
+        * flips: more flipped triangles than :data:`FLAG_COUNT_RATIO` times
+          the template's count scaled by ``triangles / source_triangles``
+          (a flipped patch is an area: its triangle count grows with the
+          density);
+        * self-intersections: more new self-intersecting triangles than
+          :data:`FLAG_COUNT_RATIO` times the template's count scaled by
+          ``sqrt(triangles / source_triangles)`` (the triangles that cross
+          lie along a curve: their count grows with the edge density).
+
+        So any flip or self-intersection the template's shape does not have
+        is flagged, and one it has is flagged only when the target has it
+        much worse. Without the triangle counts (older reports) the scale is 1.
+        """
+        density = self.triangles / self.source_triangles if self.triangles > 0 and self.source_triangles > 0 else 1.0
+        out = []
+        if self.max_stretch > max(FLAG_STRETCH_FLOOR, FLAG_STRETCH_RATIO * self.source_max_stretch):
+            out.append(f"stretch {self.max_stretch:.2f} (template {self.source_max_stretch:.2f})")
+        if self.flipped > FLAG_COUNT_RATIO * self.source_flipped * density:
+            out.append(f"flipped triangles {self.flipped} (template {self.source_flipped})")
+        if self.intersecting > FLAG_COUNT_RATIO * self.source_intersecting * np.sqrt(density):
+            out.append(f"self-intersecting triangles {self.intersecting} (template {self.source_intersecting})")
+        return tuple(out)
+
+
+_SHAPE_FIELDS = frozenset(f.name for f in fields(ShapeQuality))
+#: flagged shapes listed by :meth:`TransferReport.summary`
+_SUMMARY_FLAGGED = 8
 
 
 @dataclass(frozen=True)
@@ -185,6 +255,11 @@ class TransferReport:
         """The shape with the largest stretch (None if no shapes)."""
         return max(self.shapes, key=lambda s: s.max_stretch, default=None)
 
+    @property
+    def flagged(self) -> tuple[ShapeQuality, ...]:
+        """The shapes that do worse on the target than on the template (:meth:`ShapeQuality.concerns`), in rig order."""
+        return tuple(s for s in self.shapes if s.concerns())
+
     def summary(self) -> str:
         """A few lines for people."""
         lines = [f"rig transfer {self.source} -> {self.target}: {len(self.shapes)} shapes"]
@@ -198,6 +273,19 @@ class TransferReport:
         if w is not None:
             flips = sum(s.flipped for s in self.shapes)
             lines.append(f"  worst stretch {w.max_stretch:.2f} ({w.name}), flipped triangles in all shapes: {flips}")
+            crossing = [s for s in self.shapes if s.intersecting]
+            src_crossing = [s for s in self.shapes if s.source_intersecting]
+            lines.append(
+                f"  new self-intersections at weight 1: {len(crossing)} shapes, "
+                f"{sum(s.intersecting for s in crossing)} triangles (template: {len(src_crossing)} shapes, "
+                f"{sum(s.source_intersecting for s in src_crossing)} triangles)"
+            )
+        flagged = self.flagged
+        if flagged:
+            lines.append(f"  flagged, worse than on the template: {len(flagged)} shapes")
+            lines += [f"    {s.name}: {'; '.join(s.concerns())}" for s in flagged[:_SUMMARY_FLAGGED]]
+            if len(flagged) > _SUMMARY_FLAGGED:
+                lines.append(f"    ... and {len(flagged) - _SUMMARY_FLAGGED} more (TransferReport.flagged)")
         lines += [f"  warning: {x}" for x in self.warnings]
         return "\n".join(lines)
 
@@ -211,10 +299,12 @@ class TransferReport:
 
     @classmethod
     def from_json(cls, d: Mapping[str, Any]) -> TransferReport:
+        """The report from :meth:`to_json` (also of older versions: missing per-shape entries take their defaults)."""
         return cls(
             source=str(d.get("source", "")),
             target=str(d.get("target", "")),
-            shapes=tuple(ShapeQuality(**s) for s in d.get("shapes", [])),
+            # keys this version does not know are dropped; ones added since the report was saved take their defaults
+            shapes=tuple(ShapeQuality(**{k: v for k, v in s.items() if k in _SHAPE_FIELDS}) for s in d.get("shapes", [])),
             alignment=dict(d.get("alignment", {})),
             registration=dict(d.get("registration", {})),
             correspondence=dict(d.get("correspondence", {})),

@@ -810,24 +810,46 @@ class RigTransfer:
             out.append(np.clip(t, 0.0, 1.0).astype(np.float32))
         return out
 
-    def _source_quality(self) -> list[tuple[float, int]]:
-        """(max stretch, flipped) of every template shape on the template skin (once, at set-up)."""
+    def _source_quality(self) -> list[tuple[float, int, int]]:
+        """(max stretch, flipped, new self-intersecting triangles) of every template shape on the template skin.
+
+        Once, at set-up. Self-intersections (:mod:`.intersections`) are counted
+        only with numba (0 without it; :meth:`_quality` logs that): the numpy
+        path takes ~0.5 s per shape on a 20k-vertex face.
+        """
+        from workbench.rigging.intersections import NUMBA, SelfIntersections
+
         meter = StretchMeter(self.src.skin_X, self.src.skin_faces)
+        crossing = SelfIntersections(self.src.skin_X, self.src.skin_faces) if NUMBA else None
         lin = self.src.frame.scale * self.src.frame.R
         out = []
         for s in self.source.shapes:
-            mx, _, fl, _ = meter.shape_quality(s.delta[self.src.skin_ids].astype(np.float64) @ lin.T)
-            out.append((mx, fl))
+            d = s.delta[self.src.skin_ids].astype(np.float64) @ lin.T
+            mx, _, fl, _ = meter.shape_quality(d)
+            out.append((mx, fl, 0 if crossing is None else crossing.count_new(d)))
         return out
 
     def _quality(self, shapes: list[BlendShape], work: NDArray[np.float64]) -> list[ShapeQuality]:
-        meter = StretchMeter(self.tgt.skin_X, self.tgt.skin_faces[self._t_good])
+        """Stretch, flips and new self-intersections of every transferred shape on the target skin, beside the template's."""
+        from workbench.rigging.intersections import NUMBA, SelfIntersections
+
+        faces = self.tgt.skin_faces[self._t_good]
+        meter = StretchMeter(self.tgt.skin_X, faces)
+        crossing: SelfIntersections | None = getattr(self, "_t_crossing", None)
+        if crossing is None and NUMBA:
+            crossing = self._t_crossing = SelfIntersections(self.tgt.skin_X, faces)  # the rest pose, once
+        elif crossing is None:
+            logger.warning("transfer_rig: self-intersections not checked (numba is not installed; "
+                           "pip install 'face-workbench[fast]')")
         out = []
         for i, s in enumerate(shapes):
             mx, med, fl, moved = meter.shape_quality(work[i])
-            smx, sfl = self._src_quality[i]
+            smx, sfl, sx = self._src_quality[i]
             out.append(ShapeQuality(name=s.name, max_stretch=mx, median_stretch=med, flipped=fl,
-                                    source_max_stretch=smx, source_flipped=sfl, moved=moved))
+                                    source_max_stretch=smx, source_flipped=sfl, moved=moved,
+                                    intersecting=0 if crossing is None else crossing.count_new(work[i]),
+                                    source_intersecting=sx, triangles=int(faces.shape[0]),
+                                    source_triangles=int(self.src.skin_faces.shape[0])))
         return out
 
 
