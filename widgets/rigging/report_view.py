@@ -5,7 +5,8 @@ largest and median stretch on your face beside the template's own largest
 stretch, flipped triangles and new self-intersections (the template's in
 brackets), and what is flagged: a shape that stretches your face much more than
 it stretches the template, turns triangles over or pushes the surface through
-itself where the template's shape does not. Flagged rows come first and are
+itself where the template's shape does not
+(:meth:`workbench.rigging.ShapeQuality.concerns`, the rule of the report's summary). Flagged rows come first and are
 tinted; above the table, the fit's coverage and residuals and the transfer's
 warnings. Clicking *Show* on a row picks the shape for the before/after gallery.
 """
@@ -22,23 +23,12 @@ from widgets.panels.base import ModelPanel
 
 __all__ = ["QualityReport", "shape_flags"]
 
-#: a shape is flagged when it stretches the target this much more than the template (and > STRETCH_FLOOR)
-STRETCH_RATIO = 1.3
-STRETCH_FLOOR = 1.5
 _OK = "\u2713"
 
 
 def shape_flags(q: Any) -> list[str]:
-    """Why a :class:`~workbench.rigging.ShapeQuality` needs a look (empty: it is fine)."""
-    out = []
-    if q.max_stretch > max(STRETCH_FLOOR, STRETCH_RATIO * q.source_max_stretch):
-        out.append(f"stretch {q.max_stretch:.2f} (template {q.source_max_stretch:.2f})")
-    if q.flipped > q.source_flipped:
-        out.append(f"{q.flipped} flipped triangles")
-    inter, src_inter = int(getattr(q, "intersecting", 0)), int(getattr(q, "source_intersecting", 0))
-    if inter > src_inter:
-        out.append(f"{inter} self-intersecting triangles")
-    return out
+    """Why a :class:`~workbench.rigging.ShapeQuality` needs a look (empty: fine); its own rule, :meth:`concerns`."""
+    return list(q.concerns())
 
 
 class QualityReport(ModelPanel):

@@ -839,8 +839,9 @@ class RigTransfer:
         if crossing is None and NUMBA:
             crossing = self._t_crossing = SelfIntersections(self.tgt.skin_X, faces)  # the rest pose, once
         elif crossing is None:
-            logger.warning("transfer_rig: self-intersections not checked (numba is not installed; "
-                           "pip install 'face-workbench[fast]')")
+            msg = "self-intersections not checked: numba is not installed (pip install 'face-workbench[fast]')"
+            if msg not in self.warnings:
+                self.warnings.append(msg)  # in the report, so a 0 in its table is not read as "none"
         out = []
         for i, s in enumerate(shapes):
             mx, med, fl, moved = meter.shape_quality(work[i])
