@@ -140,6 +140,11 @@ class Viewport(anywidget.AnyWidget):
         rest, red stretched), with a colour-scale legend.
     strain_range : float
         Relative stretch drawn in full colour (default ``0.2``: ±20 %).
+    overlay_points : (p, 3) float
+        Free points drawn over the face, always on top (:meth:`set_overlay_points`;
+        the Capture tab's input markers, landmarks or cloud at the current frame).
+    overlay_point_px : float
+        Their size in CSS pixels.
     camera_group : str
         Viewports with the same non-empty group orbit and zoom together in the
         browser (the same side of the face at the same relative size, whatever
@@ -192,6 +197,9 @@ class Viewport(anywidget.AnyWidget):
     feature_graph = t.Bool(True).tag(sync=True)
     strain_range = t.Float(STRAIN_RANGE).tag(sync=True)
     camera_group = t.Unicode("").tag(sync=True)
+    _overlay_points = t.Bytes(b"").tag(sync=True)
+    _overlay_colors = t.Bytes(b"").tag(sync=True)
+    overlay_point_px = t.Float(6.0).tag(sync=True)
 
     def __init__(
         self,
@@ -311,6 +319,40 @@ class Viewport(anywidget.AnyWidget):
     @probe_ids.setter
     def probe_ids(self, value: Any) -> None:
         self._probe_ids = u32_bytes(as_ids(value, self._model.n_vertices, "probe_ids"))
+
+    @property
+    def overlay_points(self) -> np.ndarray:
+        """(p, 3) float32: the free points drawn over the face (finite ones only)."""
+        return np.frombuffer(self._overlay_points, dtype="<f4").reshape(-1, 3).copy()
+
+    def set_overlay_points(self, points: Any, colors: Any = None) -> int:
+        """Draw free points over the face (None or empty: none); returns how many are drawn.
+
+        ``points`` (p, 3) in model units; rows with NaN (an occluded marker) are
+        not drawn. ``colors``: one sRGB colour (3,) or one per point (p, 3), in
+        [0, 1]; default green.
+        """
+        if points is None:
+            P = np.zeros((0, 3), np.float32)
+        else:
+            P = np.asarray(points, dtype=np.float64)
+            if P.ndim != 2 or P.shape[1] != 3:
+                raise ValueError(f"Viewport.set_overlay_points: points must be (p, 3), got {P.shape}")
+        keep = np.isfinite(P).all(axis=1)
+        C = b""
+        if colors is not None:
+            c = np.asarray(colors, dtype=np.float64)
+            if c.shape == (3,):
+                c = np.broadcast_to(c, P.shape)
+            if c.shape != P.shape or not np.isfinite(c).all():
+                raise ValueError(
+                    f"Viewport.set_overlay_points: colors must be (3,) or {P.shape} in [0, 1], got {c.shape}"
+                )
+            C = (np.clip(c[keep], 0.0, 1.0) * 255 + 0.5).astype(np.uint8).tobytes()
+        with self.hold_sync():
+            self._overlay_points = f32_bytes(P[keep])
+            self._overlay_colors = C
+        return int(keep.sum())
 
     def set_component_visible(self, name: str, visible: bool) -> None:
         """Show or hide one component (e.g. ``"eyelashes_left"``)."""

@@ -18,6 +18,7 @@
 // All views of one widget model share one geometry store (state lives in the model, not in
 // the view), so a second display of the same widget shows the same frame.
 import { FeatureGraphOverlay } from "./viewport/feature_graph.js";
+import { PointOverlay } from "./viewport/point_overlay.js";
 import { View } from "./viewport/scene.js";
 import { Store } from "./viewport/sync.js";
 
@@ -80,6 +81,7 @@ export default {
     store.views.add(view);
     const featureGraph = new FeatureGraphOverlay(view, model); // feature-graph overlay
     view.featureGraph = featureGraph;
+    const pointOverlay = new PointOverlay(view, model); // free points (capture input)
     const handlers = {
       "change:wireframe": () => { view.updateWireframe(); view.requestRender(); },
       "change:_vertex_colors": () => { view.updateColors(); view.requestRender(); },
@@ -100,6 +102,7 @@ export default {
       for (const [ev, fn] of Object.entries(handlers)) model.off(ev, fn);
       store.views.delete(view);
       featureGraph.dispose();
+      pointOverlay.dispose();
       view.dispose();
     };
   },
