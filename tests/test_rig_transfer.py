@@ -151,7 +151,9 @@ def test_a_warped_remeshed_head_in_cm_gets_the_true_shapes(warped: Target, warpe
     assert [q.name for q in report.shapes] == rig.shape_names
     assert report.alignment["method"] == "eyes"
     assert report.alignment["scale"] == pytest.approx(10.0, rel=0.1)  # cm per dm
-    assert report.registration["coverage"] > 0.95 and not report.warnings
+    # (a venv without numba is told the self-intersections were not checked; nothing else)
+    problems = [w for w in report.warnings if not w.startswith("self-intersections not checked")]
+    assert report.registration["coverage"] > 0.95 and not problems, report.warnings
     for q in report.shapes:
         assert (q.moved > 0) == (q.name != "tongueOut") and q.median_stretch < 1.5
         # flips per triangle (the target has four times the template's triangles)
