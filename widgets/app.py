@@ -15,6 +15,7 @@ import ipywidgets as W
 import traitlets
 
 from widgets._threading import ErrorSink, close_interactions
+from widgets.capture import CapturePanel
 from widgets.gallery import ExpressionGallery
 from widgets.panels import ExportPanel, ExpressionPanel, PaintPanel, SculptPanel, UndoRedoButtons
 from widgets.panels.shape_tools import ShapeToolsPanel
@@ -26,9 +27,9 @@ from widgets.wrinkles import WrinklePanel
 __all__ = ["PALETTE_COLUMNS", "PALETTE_THUMB_SIZE", "TAB_TITLES", "Workbench", "show_workbench"]
 
 #: tab titles, in order, and the viewport tool each tab selects
-TAB_TITLES = ("Shapes", "Sculpt", "Regions", "Paint", "Export")
-_TAB_TOOLS = ("orbit", "sculpt", "orbit", "paint", "orbit")
-_SHAPES, _SCULPT, _REGIONS, _PAINT, _EXPORT = range(5)
+TAB_TITLES = ("Shapes", "Sculpt", "Regions", "Paint", "Export", "Capture")
+_TAB_TOOLS = ("orbit", "sculpt", "orbit", "paint", "orbit", "orbit")
+_SHAPES, _SCULPT, _REGIONS, _PAINT, _EXPORT, _CAPTURE = range(6)
 #: thumbnail size and columns of the expression palette (Paint tab, timeline chips)
 PALETTE_THUMB_SIZE = (72, 72)
 PALETTE_COLUMNS = 7
@@ -140,6 +141,9 @@ class Workbench(W.VBox):
         self._sculpt_tab.add_class("fwb-sculpt-tab")
         self.timeline = TimelineWidget(model, errors=self.errors)
         self.export = ExportPanel(model, errors=self.errors)
+        self.capture = CapturePanel(
+            model, self.viewport, errors=self.errors, before_edit=[self.panel.grouper.flush]
+        )
         self._regions: RegionsPanel | None = None
         self._switching = False
         self._paint: PaintPanel | None = None
@@ -153,6 +157,7 @@ class Workbench(W.VBox):
                 self._regions_slot,
                 self._paint_slot,
                 self.export,
+                self.capture,
             ],
             titles=TAB_TITLES,
             layout=W.Layout(flex="0 0 650px", width="650px"),
@@ -290,6 +295,8 @@ class Workbench(W.VBox):
         if old == _SCULPT:
             # The wrinkle eraser's strokes belong to the Sculpt tab (the Paint tab paints).
             self.wrinkles.stop_erasing()
+        if old == _CAPTURE:
+            self.capture.hide_points()  # the take's points belong to the Capture tab
         if new is None or not 0 <= new < len(_TAB_TOOLS):
             return
         self.viewport.tool = _TAB_TOOLS[new]
@@ -303,6 +310,8 @@ class Workbench(W.VBox):
                 self.paint  # noqa: B018 - builds the panel
             except Exception as exc:
                 self.sink.report("building the Paint panel", exc)
+        elif new == _CAPTURE:
+            self.capture.show_frame()
 
     def _on_tool(self, change: dict) -> None:
         # The tool changed from elsewhere (front end, code, Regions' drag mode):

@@ -30,6 +30,7 @@ _TABS = {
     "Regions": ("orbit", ".fwb-region-status"),
     "Paint": ("paint", ".fwb-paint-palette .fw-thumb-button"),
     "Export": ("orbit", ".fwb-export-panel"),
+    "Capture": ("orbit", ".fwb-capture-load"),
 }
 
 

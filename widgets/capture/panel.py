@@ -1,0 +1,270 @@
+"""``CapturePanel``: the Capture tab — drive the face from a performance (Bouaziz et al. 2013, issue 17).
+
+Load a take (C3D or CSV markers with a marker → vertex map, NPZ marker arrays,
+a folder of PLY point clouds or an NPZ of clouds; from code,
+:meth:`CapturePanel.set_take`), then *Track*: rigid head pose and blendshape
+weights per frame (:func:`workbench.capture.track`) with a progress bar. The
+input points of the current frame are drawn over the face
+(:meth:`widgets.Viewport.set_overlay_points`); the frame slider scrubs them and
+the plot under it shows the busiest shapes' weights and the fit error, with the
+current frame marked and held frames shaded. The *sparsity* (λ₁) and
+*smoothness* (λ₂) sliders re-track the frames around the current one as soon as
+they are released (the rest of the take keeps its values until the next
+*Track*). *Apply to timeline* keys the result (reduced linear keys + head-pose
+keys, ``model.capture.apply``: one undo step); from then on, scrubbing the
+timeline also scrubs the input points.
+"""
+
+from __future__ import annotations
+
+import html
+import time
+from pathlib import Path
+from typing import Any
+
+import ipywidgets as W
+import numpy as np
+
+from widgets.capture.plots import take_plot_png
+from widgets.panels.base import ModelPanel, button
+from widgets.panels.progress import ProgressRow
+
+__all__ = ["CapturePanel"]
+
+#: frames re-tracked around the current one when a λ slider moves
+WINDOW = 60
+#: point-cloud points drawn over the face per frame at most
+MAX_DRAWN_POINTS = 3000
+MARKER_COLOR = (0.2, 1.0, 0.6)
+CLOUD_COLOR = (0.35, 0.75, 1.0)
+
+
+class CapturePanel(ModelPanel):
+    """The Capture tab (see the module docstring).
+
+    Parameters
+    ----------
+    model : workbench.FaceModel
+    viewport : widgets.Viewport
+        Where the input points are drawn.
+    errors : ipywidgets.Output or ErrorSink, optional
+    before_edit : iterable of callables
+
+    Attributes
+    ----------
+    take : dict or None
+        ``kind`` ("markers" | "clouds"), ``frames`` (model units), ``vertex_ids``,
+        ``fps``, ``name``.
+    result : workbench.capture.TrackResult or None
+    applied_start : float or None
+        Timeline seconds of frame 0 after *Apply to timeline*.
+    """
+
+    def __init__(self, model: Any, viewport: Any, *, errors: Any = None, before_edit: Any = ()) -> None:
+        super().__init__(model, errors=errors, before_edit=before_edit, layout=W.Layout(width="100%"))
+        self.viewport = viewport
+        self.take: dict[str, Any] | None = None
+        self.result: Any = None
+        self.applied_start: float | None = None
+        self.path = W.Text(placeholder="take: .c3d / .csv / .npz markers, or a folder of .ply clouds",
+                           layout=W.Layout(width="98%"))
+        self.path.add_class("fwb-capture-path")
+        self.map_path = W.Text(placeholder="marker → vertex map (.csv / .json), for markers",
+                               layout=W.Layout(width="98%"))
+        self.map_path.add_class("fwb-capture-map")
+        self.load_button = button("Load take", "fwb-capture-load", "Read the take", "folder-open")
+        self.info = W.HTML("<i>No take loaded.</i>")
+        self.info.add_class("fwb-capture-info")
+        self.frame = W.IntSlider(value=0, min=0, max=0, description="frame", continuous_update=True,
+                                 layout=W.Layout(width="98%"))
+        self.frame.add_class("fwb-capture-frame")
+        self.l1 = W.FloatLogSlider(value=0.5, base=10, min=-3, max=1, step=0.1, description="sparsity λ₁",
+                                   continuous_update=False, readout_format=".3g", style={"description_width": "90px"})
+        self.l1.add_class("fwb-capture-l1")
+        self.temporal = W.FloatLogSlider(value=1.0, base=10, min=-3, max=2, step=0.1, description="smooth λ₂",
+                                         continuous_update=False, readout_format=".3g",
+                                         style={"description_width": "90px"})
+        self.temporal.add_class("fwb-capture-temporal")
+        self.adapt = W.Checkbox(value=False, description="Adapt the rig to the actor (clouds)", indent=False)
+        self.adapt.add_class("fwb-capture-adapt")
+        self.track_button = button("Track", "fwb-capture-track", "Track the whole take", "play")
+        self.tolerance = W.BoundedFloatText(value=0.01, min=0.0, max=0.5, step=0.005, description="key tolerance",
+                                            style={"description_width": "90px"}, layout=W.Layout(width="190px"))
+        self.apply_button = button("Apply to timeline", "fwb-capture-apply",
+                                   "Key the tracked weights and head pose (one undo step)", "check")
+        self.progress = ProgressRow("fwb-capture-progress", "fwb-capture-status")
+        self.plot = W.Image(format="png", layout=W.Layout(width="100%"))
+        self.plot.add_class("fwb-capture-plot")
+        g = self.guard
+        self.load_button.on_click(g("load take")(lambda _b: self.load(self.path.value, self.map_path.value or None)))
+        self.track_button.on_click(g("track")(lambda _b: self.track()))
+        self.apply_button.on_click(g("apply capture")(lambda _b: self.apply()))
+        self.frame.observe(g("capture frame")(lambda _c: self.show_frame()), "value")
+        for s in (self.l1, self.temporal):
+            s.observe(g("retrack window")(lambda _c: self.retrack_window()), "value")
+        self.listen(model.events.time, self._on_time, "capture time")
+        self.children = [
+            W.HTML("<b>Take</b>"), self.path, self.map_path, self.load_button, self.info,
+            self.frame, W.HBox([self.l1, self.temporal]), self.adapt,
+            W.HBox([self.track_button, self.tolerance, self.apply_button]), self.progress, self.plot,
+        ]
+        self.on_close(self._clear_points)
+        self.refresh()
+
+    # ------------------------------------------------------------------ take
+    def load(self, path: str, vertex_map: Any = None) -> dict[str, Any]:
+        """Read a take from ``path`` (markers need ``vertex_map``); replaces the current take."""
+        from workbench.capture import inputs
+
+        p = Path(str(path).strip())
+        if not str(path).strip():
+            raise ValueError("Load take: type the path of a take first")
+        if p.is_dir() or p.suffix.lower() == ".ply":
+            clouds = inputs.read_point_clouds(p)
+            frames = inputs.to_model_units(clouds, self.model)
+            return self.set_take(frames, fps=clouds.fps, name=p.name)
+        seq = inputs.read_markers(p)
+        if vertex_map is None:
+            raise ValueError(f"Load take {p.name}: markers need a marker → vertex map (.csv or .json)")
+        ids = inputs.read_vertex_map(vertex_map, seq.names, self.model.n_vertices)
+        return self.set_take(inputs.to_model_units(seq, self.model), vertex_ids=ids, fps=seq.fps, name=p.name)
+
+    def set_take(self, frames: Any, *, vertex_ids: Any = None, fps: float = 30.0, name: str = "take") -> dict[str, Any]:
+        """Use ``frames`` (model units): (T, m, 3) markers with ``vertex_ids``, or a list of (p_t, 3) clouds."""
+        if vertex_ids is not None:
+            F = np.asarray(frames, np.float64)
+            if F.ndim != 3 or F.shape[2] != 3:
+                raise ValueError(f"set_take: markers must be (T, m, 3), got {F.shape}")
+            ids = np.asarray(vertex_ids, np.int64).reshape(-1)
+            if ids.size != F.shape[1]:
+                raise ValueError(f"set_take: {F.shape[1]} markers but {ids.size} vertex ids")
+            take = {"kind": "markers", "frames": F, "vertex_ids": ids, "fps": float(fps), "name": name}
+            n = F.shape[0]
+        else:
+            clouds = [np.asarray(c, np.float64).reshape(-1, 3) for c in frames]
+            take = {"kind": "clouds", "frames": clouds, "vertex_ids": None, "fps": float(fps), "name": name}
+            n = len(clouds)
+        if n == 0:
+            raise ValueError("set_take: the take has no frames")
+        self.take, self.result, self.applied_start = take, None, None
+        self.frame.max = n - 1
+        self.frame.value = 0
+        self.adapt.value = take["kind"] == "clouds"
+        self.refresh()
+        self.show_frame()
+        return take
+
+    # ------------------------------------------------------------------ tracking
+    def _track(self, frames: Any, progress: Any = None) -> Any:
+        from workbench.capture import track
+
+        t = self.take
+        assert t is not None
+        return track(self.model, frames, vertex_ids=t["vertex_ids"], fps=t["fps"], l1=float(self.l1.value),
+                     temporal=float(self.temporal.value),
+                     adapt=(bool(self.adapt.value) if t["kind"] == "clouds" else None), progress=progress)
+
+    def track(self) -> Any:
+        """Track the whole take (progress bar); returns the :class:`~workbench.capture.TrackResult`."""
+        if self.take is None:
+            raise ValueError("Track: load a take first")
+        self.progress.start("<i>tracking ...</i>")
+        t0 = time.perf_counter()
+        try:
+            res = self._track(self.take["frames"], self.progress)
+        except Exception as exc:
+            self.progress.fail(f"tracking failed: {exc}")
+            raise
+        dt = time.perf_counter() - t0
+        self.result = res
+        held = int(np.asarray(res.held).sum())
+        self.progress.finish(
+            f"{res.n_frames} frames in {dt:.2f} s ({res.n_frames / max(dt, 1e-9):.0f} frames/s); median error "
+            f"{np.nanmedian(res.errors):.3g} {html.escape(self.model.metadata.units)}"
+            + (f"; {held} frames held (too few points)" if held else "")
+        )
+        self.refresh()
+        self.show_frame()
+        return res
+
+    def retrack_window(self) -> None:
+        """Re-track the frames around the current one with the λ's as they are now."""
+        if self.take is None or self.result is None:
+            return
+        from workbench.capture.result import TrackResult
+
+        f = int(self.frame.value)
+        a, b = max(0, f - WINDOW), min(self.result.n_frames - 1, f + WINDOW)
+        frames = self.take["frames"][a : b + 1]
+        part = self._track(frames)
+        r = self.result
+        W_, P_, E_ = np.array(r.weights), np.array(r.poses), np.array(r.errors)
+        W_[a : b + 1], P_[a : b + 1], E_[a : b + 1] = part.weights, part.poses, part.errors
+        flags = list(r.flags)
+        flags[a : b + 1] = part.flags
+        self.result = TrackResult(W_, P_, E_, tuple(flags), r.fps, r.shape_names, r.derived, r.head_size, r.kind,
+                                  {**dict(r.info), "retracked": (a, b)})
+        self.progress.finish(f"re-tracked frames {a}–{b} with λ₁ {self.l1.value:.3g}, λ₂ {self.temporal.value:.3g}")
+        self.show_frame()
+
+    def apply(self) -> float:
+        """Key the result on the timeline (one undo step); returns the start time used (0)."""
+        if self.result is None:
+            raise ValueError("Apply to timeline: track the take first")
+        self.flush()
+        self.model.capture.apply(self.result, tolerance=float(self.tolerance.value))
+        self.applied_start = 0.0
+        self.progress.finish(f"applied {self.result.n_frames} frames to the timeline (undo: one step)")
+        return 0.0
+
+    # ------------------------------------------------------------------ display
+    def _on_time(self, t: float) -> None:
+        if self.take is None or self.applied_start is None:
+            return
+        f = round((float(t) - self.applied_start) * self.take["fps"])
+        if 0 <= f <= self.frame.max and f != self.frame.value:
+            self.frame.value = f
+
+    def _clear_points(self) -> None:
+        self.viewport.set_overlay_points(None)
+
+    def hide_points(self) -> None:
+        """Stop drawing the take's points (the Workbench calls it when another tab is picked)."""
+        self._clear_points()
+
+    def frame_points(self, f: int) -> np.ndarray:
+        """The input points of frame ``f`` as drawn (model units; clouds thinned)."""
+        assert self.take is not None
+        P = np.asarray(self.take["frames"][f], np.float64).reshape(-1, 3)
+        if self.take["kind"] == "clouds" and len(P) > MAX_DRAWN_POINTS:
+            P = P[np.linspace(0, len(P) - 1, MAX_DRAWN_POINTS).astype(int)]
+        return P
+
+    def show_frame(self) -> None:
+        """Draw the current frame's input points and the plot."""
+        if self.take is None:
+            self._clear_points()
+            return
+        f = int(self.frame.value)
+        color = MARKER_COLOR if self.take["kind"] == "markers" else CLOUD_COLOR
+        self.viewport.set_overlay_points(self.frame_points(f), colors=color)
+        if self.result is not None:
+            n = self.result.n_frames
+            win = None if n <= 4 * WINDOW else (max(0, f - 2 * WINDOW), min(n - 1, f + 2 * WINDOW))
+            self.plot.value = take_plot_png(self.result, frame=f, window=win, units=self.model.metadata.units)
+            self.plot.layout.display = None
+        else:
+            self.plot.layout.display = "none"
+
+    def refresh(self) -> None:
+        t = self.take
+        if t is None:
+            self.info.value = "<i>No take loaded.</i>"
+        else:
+            n = t["frames"].shape[0] if t["kind"] == "markers" else len(t["frames"])
+            what = (f"{t['frames'].shape[1]} markers" if t["kind"] == "markers"
+                    else f"point clouds of ~{int(np.median([len(c) for c in t['frames']]))} points")
+            self.info.value = f"<b>{html.escape(t['name'])}</b>: {n} frames at {t['fps']:g} fps, {what}"
+        self.track_button.disabled = t is None
+        self.apply_button.disabled = self.result is None
+        self.adapt.disabled = t is None or t["kind"] != "clouds"
