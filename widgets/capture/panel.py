@@ -78,10 +78,13 @@ class CapturePanel(ModelPanel):
         self.frame = W.IntSlider(value=0, min=0, max=0, description="frame", continuous_update=True,
                                  layout=W.Layout(width="98%"))
         self.frame.add_class("fwb-capture-frame")
-        self.l1 = W.FloatLogSlider(value=0.5, base=10, min=-3, max=1, step=0.1, description="sparsity λ₁",
+        from workbench.capture.track import DEFAULT_L1, DEFAULT_TEMPORAL
+
+        self.l1 = W.FloatLogSlider(value=DEFAULT_L1, base=10, min=-4, max=0, step=0.1, description="sparsity λ₁",
                                    continuous_update=False, readout_format=".3g", style={"description_width": "90px"})
         self.l1.add_class("fwb-capture-l1")
-        self.temporal = W.FloatLogSlider(value=1.0, base=10, min=-3, max=2, step=0.1, description="smooth λ₂",
+        self.temporal = W.FloatLogSlider(value=DEFAULT_TEMPORAL, base=10, min=-3, max=1, step=0.1,
+                                         description="smooth λ₂",
                                          continuous_update=False, readout_format=".3g",
                                          style={"description_width": "90px"})
         self.temporal.add_class("fwb-capture-temporal")

@@ -1,0 +1,121 @@
+"""The Capture tab (``widgets.capture.CapturePanel``) in the kernel, on a generated take with known answer.
+
+``workbench.capture.synthetic.synthetic_performance`` plays known weight curves
+and head motion on the sample head and observes them as noisy, partly occluded
+markers; the tab loads the take (from files, as a user would), tracks it, draws
+the markers over the face, re-tracks a window when λ moves, and applies the
+result to the timeline as one undo step. The browser test clicks the same
+buttons with the mouse.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+import workbench
+
+pytestmark = pytest.mark.ui
+
+
+@pytest.fixture(scope="module")
+def take():
+    from workbench.capture.synthetic import synthetic_performance
+
+    model = workbench.load_sample("head")
+    return model, synthetic_performance(model, 90, fps=30.0, seed=4, markers=60, noise=0.002, occlusion=0.05)
+
+
+def _write_take(tmp_path, model, perf):
+    """The take as a user's files: an NPZ-free CSV of markers (metres) and a JSON marker map."""
+    names = [f"M{i:02d}" for i in range(perf.markers.shape[1])]
+    scale = {"dm": 0.1, "cm": 0.01, "mm": 0.001, "m": 1.0}[model.metadata.units]
+    cols = ["frame"] + [f"{n}_{a}" for n in names for a in "xyz"]
+    rows = [",".join(cols)]
+    for f, P in enumerate(perf.markers * scale):
+        cells = [str(f)] + ["" if not np.isfinite(v) else f"{v:.6f}" for v in P.reshape(-1)]
+        rows.append(",".join(cells))
+    csv = tmp_path / "take.csv"
+    csv.write_text("# units: m\n# fps: 30\n" + "\n".join(rows) + "\n")
+    mapping = tmp_path / "markers.json"
+    mapping.write_text(json.dumps({n: int(v) for n, v in zip(names, perf.marker_ids, strict=True)}))
+    return csv, mapping
+
+
+def test_load_track_scrub_retrack_and_apply(take, tmp_path) -> None:
+    from widgets import Workbench
+
+    _, perf = take
+    model = workbench.load_sample("head")
+    wb = Workbench(model, height=240)
+    try:
+        cap = wb.capture
+        wb.tabs.selected_index = wb.tabs.titles.index("Capture")
+        assert cap.track_button.disabled and cap.apply_button.disabled
+        csv, mapping = _write_take(tmp_path, model, perf)
+        cap.path.value, cap.map_path.value = str(csv), str(mapping)
+        cap.load_button.click()
+        assert cap.take is not None and cap.take["kind"] == "markers", wb.errors.outputs
+        assert "90 frames at 30 fps, 60 markers" in cap.info.value
+        np.testing.assert_allclose(cap.take["frames"], perf.markers, atol=1e-5, equal_nan=True)
+        # frame 0's visible markers are drawn over the face
+        drawn = wb.viewport.overlay_points
+        assert len(drawn) == int(np.isfinite(perf.markers[0]).all(axis=1).sum())
+        cap.frame.value = 10
+        np.testing.assert_allclose(wb.viewport.overlay_points,
+                                   perf.markers[10][np.isfinite(perf.markers[10]).all(axis=1)], atol=1e-5)
+        # track: weights close to the truth, a plot
+        cap.track_button.click()
+        res = cap.result
+        assert res is not None and res.n_frames == 90
+        assert "frames/s" in cap.progress.label.value
+        rmse = np.sqrt(np.mean((res.weights - perf.weights) ** 2))
+        assert rmse < 0.08, rmse
+        assert cap.plot.value[:4] == b"\x89PNG"
+        # a stronger smoothness re-tracks the window around the current frame only
+        before = np.array(res.weights)
+        cap.frame.value = 45
+        cap.temporal.value = 10.0
+        after = np.array(cap.result.weights)
+        assert cap.result.info["retracked"] == (0, 89) or cap.result.info["retracked"][0] <= 45
+        assert not np.array_equal(before, after)
+        jitter = lambda W: float(np.mean(np.diff(W, 2, axis=0) ** 2))  # noqa: E731
+        assert jitter(after) < jitter(before)
+        # apply: one undo step; the timeline then reproduces the weights; scrubbing it moves the frame
+        n_undo = len(model.history.undo_labels)
+        cap.apply_button.click()
+        assert len(model.history.undo_labels) == n_undo + 1
+        model.set_time(30 / 30.0)
+        assert cap.frame.value == 30
+        got = np.array([model.weights.get(n, 0.0) for n in res.shape_names])
+        assert np.abs(got - cap.result.weights[30]).max() < 0.02
+        wb.undo()
+        assert len(model.history.undo_labels) == n_undo
+        # leaving the tab hides the points
+        wb.tabs.selected_index = 0
+        assert len(wb.viewport.overlay_points) == 0
+    finally:
+        wb.close()
+
+
+def test_bad_take_files_say_what_is_wrong(tmp_path) -> None:
+    from widgets import Workbench
+
+    wb = Workbench(workbench.load_sample("head"), height=240)
+    try:
+        cap = wb.capture
+        with pytest.raises(ValueError, match="type the path"):
+            cap.load("")
+        bad = tmp_path / "bad.csv"
+        bad.write_text("frame,A_x,A_y\n0,1,2\n")
+        with pytest.raises(Exception, match=r"bad\.csv"):
+            cap.load(str(bad), None)
+        assert cap.take is None and cap.track_button.disabled
+        cap.path.value = str(bad)
+        cap.load_button.click()  # through the button: reported, nothing loaded
+        assert cap.take is None and cap.errors.count == 1
+        assert "bad.csv" in wb.errors.outputs[-1]["text"]
+    finally:
+        wb.close()
