@@ -40,6 +40,7 @@ if TYPE_CHECKING:
     from workbench.animation.curves import Interpolation
     from workbench.animation.timeline import TimelineFacet
     from workbench.animation.tracks import Timeline
+    from workbench.capture.facet import CaptureFacet
     from workbench.methods.handles.facet import HandlesFacet
     from workbench.methods.paint.facet import ExpressionsFacet, PaintFacet
     from workbench.methods.paint.painting import Brush
@@ -76,6 +77,7 @@ class FaceModel(FaceState):
     wrinkles: WrinklesFacet
     timeline: TimelineFacet
     shape_tools: ShapeToolsFacet
+    capture: CaptureFacet
 
     def __init__(self, vertices: ArrayLike, faces: ArrayLike | None, shapes: Iterable[BlendShape] = (),
                  *, handles: HandleSet | None = None, **kwargs: Any) -> None:

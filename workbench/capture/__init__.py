@@ -1,5 +1,28 @@
-"""Performance capture: track markers, landmarks and point clouds onto the rig (Bouaziz et al. 2013)."""
+"""Performance capture: track markers, landmarks and point clouds onto the rig (Bouaziz et al. 2013).
 
+The method family of issue 17, after "Online Modeling for Realtime Facial
+Animation" (Bouaziz, Wang, Pauly, SIGGRAPH 2013): per frame, a rigid head pose
+and blendshape weights with an L1 sparsity prior and a second-difference
+temporal prior (§3.1), optionally adapting the rig to the actor (§2, §3.2).
+
+* :func:`track` — the entry point: ``(T, m, 3)`` markers / landmarks with
+  ``vertex_ids`` (:mod:`.track`), or point clouds (:mod:`.clouds`);
+* :class:`TrackResult` — weights, poses, errors, flags; ``to_timeline``
+  (:mod:`.result`); ``model.capture.apply(result)`` keys it as one undo step
+  (:mod:`.facet`, registered by :mod:`.family`);
+* :class:`WeightSolver` — the per-frame bounded L1 + temporal QP by warm-started
+  shooting (:mod:`.solver`); :mod:`.pose` — robust rigid pose;
+* :func:`synthetic_performance` — generated ground truth (:mod:`.synthetic`).
+
+Why the solver is hand-written: no kept library solves a bounded L1 +
+temporal QP warm-started per frame at this rate (``scipy.optimize.lsq_linear``
+has no L1 term nor warm start; OSQP through ``qpsolvers`` sets up per frame and
+is slower; ``benchmarks/bench_capture.py`` measures both).
+"""
+
+from workbench.capture.result import TrackResult
 from workbench.capture.solver import WeightSolver
+from workbench.capture.synthetic import SyntheticPerformance, synthetic_performance
+from workbench.capture.track import TrackError, track
 
-__all__ = ["WeightSolver"]
+__all__ = ["SyntheticPerformance", "TrackError", "TrackResult", "WeightSolver", "synthetic_performance", "track"]

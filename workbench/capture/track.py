@@ -1,0 +1,402 @@
+"""Online tracking of a take: rigid head pose + blendshape weights per frame (Bouaziz et al. 2013, §3.1).
+
+:func:`track` is the entry point for every input: ``(T, m, 3)`` markers or
+landmarks with ``vertex_ids`` (handled here), or a sequence of point clouds
+without correspondences (handed to :func:`workbench.capture.clouds.track_clouds`).
+
+Markers and landmarks, frame by frame, online (each frame sees only the past):
+
+1. **Rigid pose** from the markers the shapes barely move (forehead, temples,
+   nose bridge — the paper's "front head and nose region"), chosen from the
+   shapes' displacement at the markers (at most 1 % of the head size; all markers
+   when fewer than four are that still), by robust weighted Kabsch
+   (:func:`~workbench.capture.pose.fit_rigid_robust`, Tukey) against the current
+   expression at those markers.
+2. **Weights** by :class:`~workbench.capture.solver.WeightSolver`: the
+   observations brought into the model frame (``Rᵀ(y − t)``) minus the neutral
+   give ``c``, the plain shapes' deltas at the visible markers give ``A``;
+   ``min ||Aw − c||² + l1·Σw + temporal·||w − 2w₋₁ + w₋₂||²`` on the sliders'
+   box, warm-started from the previous frame.
+3. Steps 1–2 alternate ``iterations`` times (2 by default).
+
+The fit term is normalised per visible marker and by the head size squared, and
+the λ's are relative to the average shape's squared norm over all markers
+(``trace(AᵀA)/k`` with every marker visible, in those units), fixed for the take:
+so the λ's are unit-free, and a frame that loses markers keeps the balance of
+data and priors per marker. ``l1`` shrinks an average shape's weight by
+``l1/2``; ``temporal = 1`` trusts the constant-velocity prediction as much as
+one frame of data (see :mod:`.solver`).
+
+Occluded markers (NaN) drop their rows. A frame with fewer than ``min_markers``
+visible markers is not solved: it holds the previous frame's weights and pose
+and is flagged (:data:`~workbench.capture.result.FLAG_HELD`); frames before the
+first solvable one take its values. Derived (corrective) shapes are not
+unknowns: their current product is part of the prediction, and they follow
+their drivers (:class:`~workbench.capture.rig.ExpressionSpace`).
+
+Nothing here changes the model: the result is applied to the timeline by
+``model.capture.apply(result)`` (one undo step).
+"""
+
+from __future__ import annotations
+
+import importlib
+import math
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from workbench.capture.pose import PoseError, fit_rigid_robust
+from workbench.capture.result import FLAG_HELD, FLAG_POSE_ALL, TrackResult
+from workbench.capture.rig import ExpressionSpace
+from workbench.capture.solver import WeightSolver
+
+if TYPE_CHECKING:
+    from workbench.core.state import FaceState
+
+__all__ = ["DEFAULT_L1", "DEFAULT_TEMPORAL", "TrackError", "prepare_markers", "track", "track_markers"]
+
+#: default sparsity for markers and landmarks (relative, see the module docstring)
+DEFAULT_L1 = 0.01
+#: default temporal smoothness (relative, see the module docstring)
+DEFAULT_TEMPORAL = 0.25
+#: markers moving less than this share of the head size under any one shape count as rigid
+RIGID_MOTION = 0.01
+#: the markers must spread within this factor of the model's vertices, else they are in other units
+UNITS_FACTOR = 4.0
+
+Progress = Callable[[float, str], Any]
+
+
+class TrackError(ValueError):
+    """Input that cannot be tracked (wrong shape, wrong units, nothing visible); names the argument."""
+
+
+# ------------------------------------------------------------------ input checks
+def _vertex_ids(vertex_ids: Any, m: int, n: int) -> NDArray[np.intp]:
+    ids = np.asarray(vertex_ids)
+    if ids.ndim != 1:
+        raise TrackError(f"vertex_ids must be a 1-D array of {m} vertex ids (one per marker), got shape {ids.shape}")
+    if ids.size != m:
+        raise TrackError(f"vertex_ids has {ids.size} ids but frames have {m} markers per frame")
+    if ids.size and not np.issubdtype(ids.dtype, np.integer):
+        if not (np.issubdtype(ids.dtype, np.floating) and np.all(np.isfinite(ids)) and np.all(ids == np.round(ids))):
+            raise TrackError(f"vertex_ids must be integers, got dtype {ids.dtype}")
+    ids = ids.astype(np.intp)
+    bad = np.flatnonzero((ids < 0) | (ids >= n))
+    if bad.size:
+        raise TrackError(
+            f"vertex_ids[{int(bad[0])}] = {int(ids[bad[0]])} is not a vertex of the model (0..{n - 1}); "
+            f"{bad.size} of {m} ids are out of range"
+        )
+    return ids
+
+
+def _frames(frames: Any) -> NDArray[np.float64]:
+    try:
+        Y = np.asarray(frames, np.float64)
+    except (TypeError, ValueError) as exc:
+        raise TrackError(f"frames must be a (T, m, 3) array of marker positions: {exc}") from None
+    if Y.ndim != 3 or Y.shape[2] != 3:
+        raise TrackError(f"frames must be (T, m, 3) marker positions (NaN = occluded), got shape {Y.shape}")
+    if Y.shape[0] < 1 or Y.shape[1] < 1:
+        raise TrackError(f"frames must hold at least one frame and one marker, got shape {Y.shape}")
+    inf = np.isinf(Y)
+    if inf.any():
+        f, i, _ = (int(v) for v in np.argwhere(inf)[0])
+        raise TrackError(f"frames[{f}, {i}] is infinite (use NaN for an occluded marker)")
+    return Y
+
+
+def _positive(value: Any, what: str) -> float:
+    v = float(value)
+    if not (math.isfinite(v) and v > 0):
+        raise TrackError(f"{what} must be a positive number, got {value!r}")
+    return v
+
+
+def _lam(value: Any, default: float, what: str) -> float:
+    if value is None:
+        return default
+    v = float(value)
+    if not (math.isfinite(v) and v >= 0):
+        raise TrackError(f"{what} must be a number ≥ 0 (or None for the default {default:g}), got {value!r}")
+    return v
+
+
+def _check_units(Y: NDArray[np.float64], X0: NDArray[np.float64], model: FaceState) -> float:
+    """Median ratio of the markers' spread to the model's at the same vertices; raises when it is far from 1."""
+    ratios = []
+    step = max(1, Y.shape[0] // 50)
+    for f in range(0, Y.shape[0], step):
+        vis = np.isfinite(Y[f]).all(1)
+        if vis.sum() < 3:
+            continue
+        a = Y[f, vis]
+        b = X0[vis]
+        sa = float(np.sqrt(((a - a.mean(0)) ** 2).sum(1).mean()))
+        sb = float(np.sqrt(((b - b.mean(0)) ** 2).sum(1).mean()))
+        if sb > 0:
+            ratios.append(sa / sb)
+    if not ratios:
+        return 1.0
+    r = float(np.median(ratios))
+    if r == 0 or not (1.0 / UNITS_FACTOR <= r <= UNITS_FACTOR):
+        units = getattr(getattr(model, "metadata", None), "units", "") or "model units"
+        raise TrackError(
+            f"frames: the markers spread {r:.3g}× as far as the model's vertices at vertex_ids "
+            f"(the model is in {units}); they look like another unit or the wrong vertex_ids — "
+            f"scale the frames by about {1.0 / r:.3g}" if r > 0 else
+            "frames: all visible markers coincide; they cannot be tracked"
+        )
+    return r
+
+
+# ------------------------------------------------------------------ the marker tracker
+class _MarkerSetup:
+    """Everything per take that does not change per frame."""
+
+    def __init__(self, model: FaceState, ids: NDArray[np.intp], l1: float, temporal: float,
+                 rigid: ArrayLike | None) -> None:
+        space = ExpressionSpace.from_model(model)
+        self.space = space
+        self.ids = ids
+        self.X0, self.D = space.marker_basis(ids)  # (m, 3), (m, 3, kp)
+        m, kp = ids.size, space.plain.size
+        self.Gm = np.einsum("mck,mcl->mkl", self.D, self.D)  # per-marker Gram blocks
+        self.G_all = self.Gm.sum(0)
+        s2 = space.size**2
+        self.norm = 1.0 / s2
+        # the λ scale: an average shape's squared norm per marker, in head sizes², fixed for the take
+        ref = float(np.trace(self.G_all)) / max(kp, 1) / max(m, 1) * self.norm
+        self.ref = ref if ref > 0 else 1.0
+        self.solver = WeightSolver(space.lo, space.hi, l1=l1 * self.ref, temporal=temporal * self.ref,
+                                   relative=False, tol=1e-6 * math.sqrt(self.ref))
+        # rigid markers
+        if rigid is None:
+            motion = space.motion(ids) / space.size
+            self.motion = motion
+            still = np.flatnonzero(motion <= RIGID_MOTION)
+            self.rigid = still if still.size >= 4 and _spread_ok(self.X0[still]) else np.arange(m)
+        else:
+            r = np.asarray(rigid)
+            if r.dtype == bool:
+                if r.shape != (m,):
+                    raise TrackError(f"rigid must be ({m},) bool or marker indices, got shape {r.shape}")
+                r = np.flatnonzero(r)
+            r = r.astype(np.intp).reshape(-1)
+            if r.size and (r.min() < 0 or r.max() >= m):
+                raise TrackError(f"rigid: marker indices must be in 0..{m - 1}")
+            if r.size < 3:
+                raise TrackError(f"rigid: need at least 3 markers for the head pose, got {r.size}")
+            self.rigid = np.unique(r)
+        self.is_rigid = np.zeros(m, bool)
+        self.is_rigid[self.rigid] = True
+
+    def marker_positions(self, w: NDArray[np.float64], wf: NDArray[np.float64]) -> NDArray[np.float64]:
+        """(m, 3) model-space marker positions for plain weights ``w`` (full weights ``wf``)."""
+        X = self.X0 + self.D @ w
+        if self.space.derived:
+            X += self.space.derived_offset(wf, self.ids)
+        return X
+
+
+def _spread_ok(P: NDArray[np.float64]) -> bool:
+    if P.shape[0] < 3:
+        return False
+    ev = np.linalg.eigvalsh(np.cov(P.T) if P.shape[0] > 1 else np.zeros((3, 3)))
+    return bool(ev[2] > 0 and ev[1] > 1e-6 * ev[2])
+
+
+def prepare_markers(model: FaceState, frames: ArrayLike, vertex_ids: ArrayLike) -> tuple[
+    NDArray[np.float64], NDArray[np.intp]
+]:
+    """Checked ``(T, m, 3)`` float frames and ``(m,)`` vertex ids (raises :class:`TrackError` naming the argument)."""
+    Y = _frames(frames)
+    ids = _vertex_ids(vertex_ids, Y.shape[1], model.n_vertices)
+    return Y, ids
+
+
+def track_markers(
+    model: FaceState,
+    frames: ArrayLike,
+    vertex_ids: ArrayLike,
+    *,
+    fps: float = 30.0,
+    l1: float | None = None,
+    temporal: float | None = None,
+    iterations: int = 2,
+    min_markers: int = 4,
+    rigid: ArrayLike | None = None,
+    progress: Progress | None = None,
+) -> TrackResult:
+    """Track ``(T, m, 3)`` markers or landmarks glued to ``vertex_ids`` (see the module docstring).
+
+    Parameters are those of :func:`track`, plus ``iterations`` (pose/weight alternations
+    per frame, ≥ 1), ``min_markers`` (fewer visible markers hold the frame, ≥ 3) and
+    ``rigid`` (marker indices or an (m,) mask for the head pose; default: chosen from
+    the shapes' displacement).
+    """
+    fps_ = _positive(fps, "fps")
+    l1_ = _lam(l1, DEFAULT_L1, "l1")
+    temporal_ = _lam(temporal, DEFAULT_TEMPORAL, "temporal")
+    if isinstance(iterations, bool) or not isinstance(iterations, int | np.integer) or iterations < 1:
+        raise TrackError(f"iterations must be an int ≥ 1, got {iterations!r}")
+    if isinstance(min_markers, bool) or not isinstance(min_markers, int | np.integer) or min_markers < 3:
+        raise TrackError(f"min_markers must be an int ≥ 3, got {min_markers!r}")
+    if not model.shapes:
+        raise TrackError("model: it has no blendshapes to track")
+    Y, ids = prepare_markers(model, frames, vertex_ids)
+    T, m = Y.shape[:2]
+    setup = _MarkerSetup(model, ids, l1_, temporal_, rigid)
+    space = setup.space
+    _check_units(Y, setup.X0, model)
+    visible: NDArray[np.bool_] = np.asarray(np.isfinite(Y).all(2))
+    good: NDArray[np.bool_] = np.asarray(visible.sum(1) >= int(min_markers))
+    if not good.any():
+        raise TrackError(
+            f"frames: no frame has at least min_markers={int(min_markers)} visible markers "
+            f"(at most {int(visible.sum(1).max())} of {m})"
+        )
+
+    kp = space.plain.size
+    W = np.zeros((T, kp))
+    poses = np.tile(np.eye(4), (T, 1, 1))
+    errors = np.full(T, np.nan)
+    flags = [""] * T
+    w = np.zeros(kp)
+    wf = space.full_weights(w)
+    w_prev: NDArray[np.float64] | None = None
+    w_prev2: NDArray[np.float64] | None = None
+    M = np.eye(4)
+    solver = setup.solver
+    every = max(1, T // 100)
+    first = int(np.argmax(good))
+    sweeps = 0
+    for f in range(T):
+        if progress is not None and f % every == 0:
+            progress(f / T, f"tracking frame {f + 1} of {T}")
+        if not good[f]:
+            flags[f] = FLAG_HELD
+            if f > first:  # hold the previous frame
+                W[f], poses[f] = W[f - 1], poses[f - 1]
+                w_prev2, w_prev = w_prev, W[f].copy()
+            continue
+        vis: NDArray[np.bool_] = visible[f]
+        Yv = Y[f, vis]
+        Dv = setup.D[vis].reshape(-1, kp)
+        nv = int(vis.sum())
+        G = (setup.G_all if nv == m else setup.Gm[vis].sum(0)) * (setup.norm / nv)
+        rig = vis & setup.is_rigid
+        for _it in range(int(iterations)):
+            X = setup.marker_positions(w, wf)
+            pose = None
+            if rig.sum() >= 3:
+                try:
+                    pose = fit_rigid_robust(X[rig], Y[f, rig], max_iter=10)
+                except PoseError:
+                    pose = None
+            if pose is None:
+                flags[f] = FLAG_POSE_ALL
+                try:
+                    pose = fit_rigid_robust(X[vis], Yv, max_iter=10)
+                except PoseError:
+                    pose = None
+            if pose is not None:
+                M = pose.matrix
+            R, t = M[:3, :3], M[:3, 3]
+            local = (Yv - t) @ R  # Rᵀ (y − t), row-wise
+            c = local - setup.X0[vis]
+            if space.derived:
+                c = c - space.derived_offset(wf, ids[vis])
+            h = Dv.T @ c.reshape(-1) * (setup.norm / nv)
+            w = solver.solve_gram(G, h, w_prev, w_prev2, w0=w)
+            sweeps += solver.n_iter_
+            if space.derived:
+                wf = space.full_weights(w)
+        wf = space.full_weights(w)
+        X = setup.marker_positions(w, wf)
+        r = X[vis] @ M[:3, :3].T + M[:3, 3] - Yv
+        errors[f] = float(np.sqrt((r * r).sum(1).mean()))
+        W[f], poses[f] = w, M
+        w_prev2, w_prev = w_prev, w.copy()
+    # frames before the first solvable one take its values
+    W[:first], poses[:first] = W[first], poses[first]
+    if progress is not None:
+        progress(1.0, f"tracked {T} frames")
+    derived = tuple(space.shape_names[i] for i in sorted(set(space.derived) | set(space.dead.tolist())))
+    return TrackResult(
+        space.full_weights(W), poses, errors, tuple(flags), fps_, space.shape_names, derived, space.size,
+        "markers",
+        {"l1": l1_, "temporal": temporal_, "iterations": int(iterations), "min_markers": int(min_markers),
+         "rigid_markers": setup.rigid.copy(), "vertex_ids": ids.copy(), "lambda_scale": setup.ref,
+         "solver_sweeps": sweeps},
+    )
+
+
+def track(
+    model: FaceState,
+    frames: Any,
+    *,
+    vertex_ids: ArrayLike | None = None,
+    fps: float = 30.0,
+    l1: float | None = None,
+    temporal: float | None = None,
+    adapt: Any = None,
+    progress: Progress | None = None,
+    **options: Any,
+) -> TrackResult:
+    """Track a take onto the model's blendshapes: rigid head pose + weights per frame (Bouaziz 2013 §3.1).
+
+    Parameters
+    ----------
+    model : FaceModel
+        The rig (its shapes, slider ranges, masks, mutes and correctives as they are now).
+    frames : (T, m, 3) float, or sequence of (p_t, 3) float
+        Markers / landmarks (NaN = occluded) in correspondence with ``vertex_ids``; or,
+        without ``vertex_ids``, one point cloud per frame (no correspondences).
+    vertex_ids : (m,) int, optional
+        The model vertex of each marker. Given: the marker tracker (this module).
+        None: the point-cloud tracker, :func:`workbench.capture.clouds.track_clouds`.
+    fps : float
+        Frame rate of the take.
+    l1 : float, optional
+        Sparsity ``λ`` (relative, unit-free; default :data:`DEFAULT_L1` for markers).
+    temporal : float, optional
+        Temporal smoothness ``λ`` (relative; default :data:`DEFAULT_TEMPORAL` for markers).
+    adapt : optional
+        Rig adaptation (the dynamic expression model, §4), passed to the point-cloud
+        tracker. Markers do not adapt: it must be None or False for them.
+    progress : callable, optional
+        ``progress(fraction, message)``, called as frames are tracked.
+    **options
+        Passed on: for markers ``iterations``, ``min_markers``, ``rigid``
+        (:func:`track_markers`); for clouds, whatever ``track_clouds`` takes.
+
+    Returns
+    -------
+    TrackResult
+
+    Raises
+    ------
+    TrackError
+        Input that cannot be tracked, naming the argument (nothing is changed on the model).
+    """
+    if vertex_ids is None:
+        # by name while workbench/capture/clouds.py is being written (a missing module's import is an
+        # unresolvable edge for the import-cycle check); becomes `from workbench.capture.clouds import track_clouds`
+        try:
+            track_clouds = importlib.import_module("workbench.capture.clouds").track_clouds
+        except ModuleNotFoundError as exc:
+            if exc.name != "workbench.capture.clouds":
+                raise
+            raise TrackError("frames: point clouds (no vertex_ids) need workbench.capture.clouds, "
+                             "which is not installed; pass vertex_ids for markers") from None
+        return track_clouds(model, frames, fps=fps, l1=l1, temporal=temporal, adapt=adapt, progress=progress,
+                            **options)
+    if adapt not in (None, False):
+        raise TrackError("adapt: markers and landmarks track the rig as it is (adaptation is for point clouds)")
+    return track_markers(model, frames, vertex_ids, fps=fps, l1=l1, temporal=temporal, progress=progress,
+                         **options)
