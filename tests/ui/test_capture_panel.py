@@ -119,3 +119,27 @@ def test_bad_take_files_say_what_is_wrong(tmp_path) -> None:
         assert "bad.csv" in wb.errors.outputs[-1]["text"]
     finally:
         wb.close()
+
+
+def test_the_sliders_ignore_the_browsers_snapped_echo_of_off_grid_weights() -> None:
+    """The browser snaps a weight it is sent to the 0.01 step and sends it back, maybe late."""
+    from widgets.panels import ExpressionPanel
+
+    model = workbench.load_sample("head")
+    panel = ExpressionPanel(model)
+    try:
+        model.set_weights({"jawOpen": 0.2345})
+        model.set_weights({"jawOpen": 0.2712})  # the model moved on (a playing timeline)
+        n = len(model.history.undo_labels)
+        panel.sliders["jawOpen"].value = 0.23  # the late echo of 0.2345, snapped
+        panel.grouper.flush()
+        assert model.weights["jawOpen"] == pytest.approx(0.2712)
+        assert len(model.history.undo_labels) == n
+        # a real drag still works, also back to a value the model sent before
+        panel.sliders["jawOpen"].value = 0.5
+        panel.sliders["jawOpen"].value = 0.23
+        panel.grouper.flush()
+        assert model.weights["jawOpen"] == pytest.approx(0.23)
+        assert model.history.undo_labels[-1] == "Drag jawOpen"
+    finally:
+        panel.close()

@@ -21,7 +21,13 @@ The panel never keeps weights of its own: slider values follow
 ``model.events.weights`` / ``weights_changing``, so edits from Python cells or
 from another panel move the sliders. An update from the model sets a slider to
 the model's value, and the slider handler ignores values equal to the model's,
-which breaks the feedback loop without a (thread-unsafe) "updating" flag.
+which breaks the feedback loop without a (thread-unsafe) "updating" flag. The
+browser's slider snaps a value it is sent to its 0.01 step and sends the
+snapped value back — possibly after the model has moved on (a playing
+timeline, a tracked take: weights off the grid). So each slider also remembers
+the last few values sent to it, and a value that is one of them snapped to the
+step is an echo, not a drag (without this, playing a take recorded a "Drag"
+step per shape and pulled the weights onto the grid).
 
 Corrective (combination) shapes (``model.shape_tools.correctives``) play the
 product of their drivers' weights: their sliders are disabled, carry a
@@ -34,6 +40,7 @@ slider the user moved (the Shape tools' selection follows it).
 from __future__ import annotations
 
 import re
+from collections import deque
 from collections.abc import Mapping
 from typing import Any
 
@@ -129,6 +136,8 @@ class ExpressionPanel(ModelPanel):
         super().__init__(model, errors=errors, layout=W.Layout(width="620px", min_width="420px"))
         self.grouper = InteractionGrouper(model, idle_s=idle_s, errors=self.errors)
         self.sliders: dict[str, W.FloatSlider] = {}
+        #: per slider, the last values the model sent it (echo detection, see the module docstring)
+        self._sent: dict[str, deque[float]] = {}
         self.mutes: dict[str, W.Checkbox] = {}
         self.badges: dict[str, W.HTML] = {}
         self._badge_columns: dict[str, W.VBox] = {}  # slider over badge, in a corrective's cell
@@ -238,6 +247,9 @@ class ExpressionPanel(ModelPanel):
         with model.lock:
             if name not in model.weights or abs(model.weights[name] - value) < 1e-9:
                 return  # an echo of a model update, or a shape that went away
+        if self._is_echo(name, value):
+            return
+        self._sent.pop(name, None)  # the person moves this slider now: older values are not echoes
         self.selected = name
         self.grouper.touch(f"Drag {name}")
         model.set_weight(name, value)
@@ -265,11 +277,20 @@ class ExpressionPanel(ModelPanel):
             any_visible = any(id(b) in visible_rows for b in boxes)
             header.layout.display = None if any_visible else "none"
 
+    def _is_echo(self, name: str, value: float) -> bool:
+        """``value`` is a value recently sent to the slider, snapped to its step by the browser."""
+        sent = self._sent.get(name)
+        if not sent:
+            return False
+        step = float(self.sliders[name].step or 0.0)
+        return any(abs(v - value) <= 0.5 * step + 1e-9 for v in sent)
+
     # ------------------------------------------------------- model -> UI
     def _on_model_weights(self, values: Mapping[str, float]) -> None:
         for name, v in values.items():
             s = self.sliders.get(name)
             if s is not None and s.value != v:
+                self._sent.setdefault(name, deque(maxlen=8)).append(float(v))
                 s.value = v
         if self.badges:  # correctives: a driver's change names only the driver
             self._show_derived()
@@ -279,6 +300,7 @@ class ExpressionPanel(ModelPanel):
         for name in self.badges:
             s = self.sliders.get(name)
             if s is not None and name in played and s.value != played[name]:
+                self._sent.setdefault(name, deque(maxlen=8)).append(float(played[name]))
                 s.value = played[name]
 
     def _on_correctives(self) -> None:
