@@ -297,7 +297,14 @@ def synthetic_performance(
     if shapes is None:
         eligible = space.plain
     else:
-        sel = [names.index(s) if isinstance(s, str) else int(s) for s in np.atleast_1d(np.asarray(shapes, object))]
+        sel = []
+        for s in np.atleast_1d(np.asarray(shapes, object)):
+            if isinstance(s, str) and s not in names:
+                raise ValueError(f"shapes: the model has no shape {s!r}")
+            j = names.index(s) if isinstance(s, str) else int(s)
+            if not 0 <= j < k:
+                raise ValueError(f"shapes: index {j} is not a shape (0..{k - 1})")
+            sel.append(j)
         bad = [s for s in sel if s not in set(space.plain.tolist())]
         if bad:
             raise ValueError(f"shapes: {[names[b] for b in bad]} are muted or derived (not animatable)")

@@ -210,6 +210,30 @@ def _spread_ok(P: NDArray[np.float64]) -> bool:
     return bool(ev[2] > 0 and ev[1] > 1e-6 * ev[2])
 
 
+def _calibrate(setup: _MarkerSetup, Y: NDArray[np.float64], neutral: Any) -> NDArray[np.float64]:
+    """``(m, 3)`` model-frame offsets of the actor's rest markers from the rig's neutral at ``vertex_ids``."""
+    m = setup.ids.size
+    if isinstance(neutral, int | np.integer) and not isinstance(neutral, bool):
+        if not -Y.shape[0] <= int(neutral) < Y.shape[0]:
+            raise TrackError(f"neutral: frame {int(neutral)} is not in the take (0..{Y.shape[0] - 1})")
+        rest = Y[int(neutral)]
+    else:
+        rest = np.asarray(neutral, np.float64)
+        if rest.shape != (m, 3):
+            raise TrackError(f"neutral must be a frame index or ({m}, 3) rest positions, got shape {rest.shape}")
+        if np.isinf(rest).any():
+            raise TrackError("neutral: rest positions must be finite (NaN for a marker not seen)")
+    vis = np.isfinite(rest).all(1)
+    rig = vis & setup.is_rigid
+    try:
+        pose = fit_rigid_robust(setup.X0[rig] if rig.sum() >= 3 else setup.X0[vis],
+                                rest[rig] if rig.sum() >= 3 else rest[vis])
+    except PoseError as exc:
+        raise TrackError(f"neutral: the rest markers give no head pose ({exc})") from None
+    local = (rest - pose.translation) @ pose.rotation
+    return np.where(vis[:, None], local - setup.X0, 0.0)
+
+
 def prepare_markers(model: FaceState, frames: ArrayLike, vertex_ids: ArrayLike) -> tuple[
     NDArray[np.float64], NDArray[np.intp]
 ]:
@@ -230,14 +254,20 @@ def track_markers(
     iterations: int = 2,
     min_markers: int = 4,
     rigid: ArrayLike | None = None,
+    neutral: int | ArrayLike | None = None,
     progress: Progress | None = None,
 ) -> TrackResult:
     """Track ``(T, m, 3)`` markers or landmarks glued to ``vertex_ids`` (see the module docstring).
 
     Parameters are those of :func:`track`, plus ``iterations`` (pose/weight alternations
-    per frame, ≥ 1), ``min_markers`` (fewer visible markers hold the frame, ≥ 3) and
+    per frame, ≥ 1), ``min_markers`` (fewer visible markers hold the frame, ≥ 3),
     ``rigid`` (marker indices or an (m,) mask for the head pose; default: chosen from
-    the shapes' displacement).
+    the shapes' displacement) and ``neutral``: the actor at rest, as a frame index of
+    ``frames`` or ``(m, 3)`` positions (a calibration take), NaN for markers not seen.
+    With it, each marker's offset between the actor's rest face and the rig's neutral
+    (after rigid alignment) is added to the rig's neutral at that marker, so an actor
+    who is not the rig is not explained by expressions; the expressions themselves stay
+    the rig's. Default None: markers sit on the rig's neutral (the rig is the actor).
     """
     fps_ = _positive(fps, "fps")
     l1_ = _lam(l1, DEFAULT_L1, "l1")
@@ -253,6 +283,10 @@ def track_markers(
     setup = _MarkerSetup(model, ids, l1_, temporal_, rigid)
     space = setup.space
     _check_units(Y, setup.X0, model)
+    offsets = None
+    if neutral is not None:
+        offsets = _calibrate(setup, Y, neutral)
+        setup.X0 = setup.X0 + offsets
     visible: NDArray[np.bool_] = np.asarray(np.isfinite(Y).all(2))
     good: NDArray[np.bool_] = np.asarray(visible.sum(1) >= int(min_markers))
     if not good.any():
@@ -332,6 +366,7 @@ def track_markers(
         "markers",
         {"l1": l1_, "temporal": temporal_, "iterations": int(iterations), "min_markers": int(min_markers),
          "rigid_markers": setup.rigid.copy(), "vertex_ids": ids.copy(), "lambda_scale": setup.ref,
+         "neutral_offsets": offsets,
          "solver_sweeps": sweeps},
     )
 
