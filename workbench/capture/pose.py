@@ -103,34 +103,43 @@ def _points(P: ArrayLike, Q: ArrayLike, weights: ArrayLike | None) -> tuple[
     return P_, Q_, w
 
 
+def _det3(M: NDArray[np.float64]) -> float:
+    return float(M[0, 0] * (M[1, 1] * M[2, 2] - M[1, 2] * M[2, 1])
+                 - M[0, 1] * (M[1, 0] * M[2, 2] - M[1, 2] * M[2, 0])
+                 + M[0, 2] * (M[1, 0] * M[2, 1] - M[1, 1] * M[2, 0]))
+
+
 def _kabsch(P: NDArray[np.float64], Q: NDArray[np.float64], w: NDArray[np.float64], scale: bool,
-            what: str) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
-    """Weighted closed form on finite points with w > 0 (checked by the caller)."""
+            what: str, check: bool = True) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
+    """Weighted closed form on finite points with w ≥ 0, Σw > 0 (checked by the caller).
+
+    ``check``: raise :class:`PoseError` when the weighted points are collinear (else the
+    caller guards against it, e.g. by the singular values of the cross-covariance).
+    """
     sw = float(w.sum())
     mp = w @ P / sw
     mq = w @ Q / sw
     Pc = P - mp
     Pw = Pc * w[:, None]
     C = Pw.T @ Pc  # weighted covariance of P (times Σw)
-    ev = np.linalg.eigvalsh(C)  # ascending
-    if not ev[2] > 0 or ev[1] <= _DEGENERATE**2 * ev[2]:
-        spread = np.sqrt(np.maximum(ev[::-1], 0.0) / sw)
-        raise PoseError(
-            f"{what}: the {P.shape[0]} points are collinear or coincide "
-            f"(spread {spread[0]:.3g}, {spread[1]:.3g}): a rigid pose needs 3 points not on one line"
-        )
+    if check:
+        ev = np.linalg.eigvalsh(C)  # ascending
+        if not ev[2] > 0 or ev[1] <= _DEGENERATE**2 * ev[2]:
+            spread = np.sqrt(np.maximum(ev[::-1], 0.0) / sw)
+            raise PoseError(
+                f"{what}: the {P.shape[0]} points are collinear or coincide "
+                f"(spread {spread[0]:.3g}, {spread[1]:.3g}): a rigid pose needs 3 points not on one line"
+            )
     H = Pw.T @ (Q - mq)  # Σ w p qᵀ
     U, S, Vt = np.linalg.svd(H)
-    d = np.sign(np.linalg.det(Vt.T @ U.T))
-    if d == 0:
-        d = 1.0
-    D = np.array([1.0, 1.0, d])
-    R = (Vt.T * D) @ U.T
+    if not check and not S[1] > _DEGENERATE * S[0]:
+        raise PoseError(f"{what}: the weighted points are collinear")
+    d = 1.0 if _det3(U) * _det3(Vt) >= 0 else -1.0
+    R = Vt.T @ U.T if d > 0 else (Vt.T * np.array([1.0, 1.0, -1.0])) @ U.T
     s = 1.0
     if scale:
-        var = float(np.trace(C))
-        s = float((S * D).sum() / var)
-    t = mq - s * R @ mp
+        s = float((S[0] + S[1] + d * S[2]) / np.trace(C))
+    t = mq - s * (R @ mp)
     return R, t, s
 
 
@@ -163,6 +172,12 @@ def fit_rigid(P: ArrayLike, Q: ArrayLike, weights: ArrayLike | None = None, *,
         raise PoseError(f"P, Q: need at least 3 points finite in both (with weight > 0), got {int(ok.sum())}")
     R, t, s = _kabsch(P_[ok], Q_[ok], w[ok], scale, "P")
     return pose_matrix(R, t, s)
+
+
+def _median(r: NDArray[np.float64]) -> float:
+    """The median (the upper one for an even count: a scale estimate needs no more)."""
+    h = r.size // 2
+    return float(np.partition(r, h)[h])
 
 
 def _robust_weights(r: NDArray[np.float64], sigma: float, loss: Loss) -> NDArray[np.float64]:
@@ -234,26 +249,29 @@ def fit_rigid_robust(
     fixed_sigma = None if sigma is None else float(sigma)
     if fixed_sigma is not None and not (np.isfinite(fixed_sigma) and fixed_sigma > 0):
         raise PoseError(f"sigma must be a positive number, got {sigma!r}")
+    X = s * Pv @ R.T + t
     if loss != "l2":
+        floor = 1e-9 * extent
         for it in range(1, int(max_iter) + 1):  # noqa: B007 - `it` is reported
-            r = np.linalg.norm(s * Pv @ R.T + t - Qv, axis=1)
-            sig = fixed_sigma if fixed_sigma is not None else max(1.4826 * float(np.median(r)), 1e-9 * extent)
+            r = np.sqrt(((X - Qv) ** 2).sum(1))
+            sig = fixed_sigma if fixed_sigma is not None else max(1.4826 * _median(r), floor)
             new_rw = _robust_weights(r, sig, loss)
             wt = wv * new_rw
-            if int((wt > 0).sum()) < 3:
+            if int(np.count_nonzero(wt)) < 3:
                 break  # the loss would reject all but two points: keep the last pose
             try:
-                R2, t2, s2 = _kabsch(Pv[wt > 0], Qv[wt > 0], wt[wt > 0], scale, "P")
+                R2, t2, s2 = _kabsch(Pv, Qv, wt, scale, "P", check=False)
             except PoseError:
                 break
             rw = new_rw
-            move = float(np.abs(s2 * Pv @ R2.T + t2 - (s * Pv @ R.T + t)).max())
-            R, t, s = R2, t2, s2
+            X2 = s2 * Pv @ R2.T + t2
+            move = float(np.abs(X2 - X).max())
+            R, t, s, X = R2, t2, s2, X2
             if move <= tol * extent:
                 break
     weights_out = np.zeros(P_.shape[0])
     weights_out[ok] = rw
-    r = np.linalg.norm(s * Pv @ R.T + t - Qv, axis=1)
+    r = np.sqrt(((X - Qv) ** 2).sum(1))
     inl = rw > 0.5
     rms = float(np.sqrt(np.mean(r[inl] ** 2))) if inl.any() else float(np.sqrt(np.mean(r**2)))
     return RigidPose(pose_matrix(R, t, s), R, t, s, weights_out, rms, it)

@@ -40,7 +40,6 @@ Nothing here changes the model: the result is applied to the timeline by
 
 from __future__ import annotations
 
-import importlib
 import math
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
@@ -64,6 +63,8 @@ DEFAULT_L1 = 0.01
 DEFAULT_TEMPORAL = 0.25
 #: markers moving less than this share of the head size under any one shape count as rigid
 RIGID_MOTION = 0.01
+#: the reweighted pose stops when it moves the markers by less than this share of their extent
+POSE_TOL = 1e-6
 #: the markers must spread within this factor of the model's vertices, else they are in other units
 UNITS_FACTOR = 4.0
 
@@ -329,13 +330,13 @@ def track_markers(
             pose = None
             if rig.sum() >= 3:
                 try:
-                    pose = fit_rigid_robust(X[rig], Y[f, rig], max_iter=10)
+                    pose = fit_rigid_robust(X[rig], Y[f, rig], max_iter=10, tol=POSE_TOL)
                 except PoseError:
                     pose = None
             if pose is None:
                 flags[f] = FLAG_POSE_ALL
                 try:
-                    pose = fit_rigid_robust(X[vis], Yv, max_iter=10)
+                    pose = fit_rigid_robust(X[vis], Yv, max_iter=10, tol=POSE_TOL)
                 except PoseError:
                     pose = None
             if pose is not None:
@@ -420,15 +421,8 @@ def track(
         Input that cannot be tracked, naming the argument (nothing is changed on the model).
     """
     if vertex_ids is None:
-        # by name while workbench/capture/clouds.py is being written (a missing module's import is an
-        # unresolvable edge for the import-cycle check); becomes `from workbench.capture.clouds import track_clouds`
-        try:
-            track_clouds = importlib.import_module("workbench.capture.clouds").track_clouds
-        except ModuleNotFoundError as exc:
-            if exc.name != "workbench.capture.clouds":
-                raise
-            raise TrackError("frames: point clouds (no vertex_ids) need workbench.capture.clouds, "
-                             "which is not installed; pass vertex_ids for markers") from None
+        from workbench.capture.clouds import track_clouds
+
         return track_clouds(model, frames, fps=fps, l1=l1, temporal=temporal, adapt=adapt, progress=progress,
                             **options)
     if adapt not in (None, False):
