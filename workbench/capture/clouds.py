@@ -1,0 +1,672 @@
+"""Track a sequence of point clouds onto the rig: ICP pose + point-to-plane weights (Bouaziz et al. 2013, §3.1).
+
+Depth sensors and scanners give, per frame, points on the face without
+correspondences. :func:`track_clouds` (called by
+:func:`workbench.capture.track` when ``vertex_ids`` is None) tracks them online,
+frame by frame, as the paper does:
+
+1. **Sampling** (once per take, :func:`sample_vertices`): the front-facing skin
+   around the moving part of the face (:func:`~workbench.capture.synthetic.face_vertices`),
+   without the mesh border and its first ring, spread by farthest-point
+   sampling into ``samples`` vertices that the shapes move and ``rigid_samples``
+   vertices that they barely move (at most ``0.5 %`` of the head size under any
+   one shape: forehead, temples, nose bridge — the paper's "front head and nose
+   region").
+2. **Rigid pose** by point-to-plane ICP of the stable vertices (posed with the
+   current expression) against a k-d tree of the cloud (``scipy.spatial.cKDTree``):
+   linearised rotation and translation (a 6 × 6 solve) with Huber weights,
+   warm-started from the previous frame.
+3. **Weights** from point-to-plane constraints: each sampled vertex of the
+   posed mesh takes its nearest cloud point; pairs farther than a threshold
+   (``max_distance``, then ``2.5 ×`` the median distance, floored at
+   ``min_distance``), whose normals disagree (the cloud's local PCA normal vs
+   the mesh normal, more than ``max_normal_angle`` apart, either orientation),
+   or whose residual is a Tukey outlier are rejected. The rows
+   ``nᵀ(b0 + ΔB w) = nᵀ c`` (model frame; ``n`` the mesh normal, which follows
+   the expression to first order) go to
+   :class:`~workbench.capture.solver.WeightSolver` with the L1 and temporal
+   terms, warm-started.
+4. Steps 2–3 alternate ``iterations`` times (3), each with new correspondences.
+5. **Adaptation** (on by default for clouds): the final constraints of the
+   frame update an :class:`~workbench.capture.adapt.AdaptiveModel` (identity,
+   transfer, correctives, §2–3.2); the next frame tracks the adapted rig.
+   ``result.info["adapted"]`` is that model: ``.to_model()`` is the adapted rig.
+   As in the paper (§3, "Initialization"), the take is assumed to start with a
+   neutral face: on the first usable frame the identity and the pose are fitted
+   alone (eq. 1 by Gauss–Newton: ``init_iterations`` rounds of ICP,
+   correspondences and :meth:`~workbench.capture.adapt.AdaptiveModel.fit_neutral_planes`)
+   before the weights; ``neutral_start=False`` skips it.
+
+The fit term is normalised per accepted constraint and by the head size
+squared, and the λ's are relative to the average shape's squared norm along
+the normals over the samples (fixed for the take), as for markers
+(:mod:`workbench.capture.track`): the same ``l1`` and ``temporal`` mean the
+same for both kinds of input.
+
+A frame whose cloud is empty or has fewer than ``min_points`` points, or that
+keeps fewer than ``min_correspondences`` pairs (all outliers), holds the previous
+frame's weights and pose and is flagged (:data:`~workbench.capture.result.FLAG_HELD`),
+and the rig does not adapt on it; frames before the first solvable one take
+its values. ``errors`` is the RMS point-to-plane distance of the accepted pairs
+(model units).
+
+Shapes: clouds are ``(p_t, 3)`` float per frame (NaN rows are dropped), in the
+model's units; weights ``(T, k)`` in ``model.shape_names`` order.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import scipy.sparse as sp
+from numpy.typing import ArrayLike, NDArray
+from scipy.spatial import cKDTree
+from scipy.spatial.transform import Rotation
+
+from workbench.capture.adapt import AdaptiveModel
+from workbench.capture.result import FLAG_HELD, TrackResult
+from workbench.capture.rig import ExpressionSpace
+from workbench.capture.solver import WeightSolver
+from workbench.capture.synthetic import face_vertices
+
+if TYPE_CHECKING:
+    from workbench.core.state import FaceState
+
+__all__ = ["CLOUD_L1", "CLOUD_TEMPORAL", "CloudTrackError", "sample_vertices", "track_clouds"]
+
+#: default sparsity for point clouds (relative, as for markers). Twice the markers' default: on a face
+#: that is not the template, weaker L1 lets shapes switch on to explain the identity (the paper's
+#: "blendshape compensation"), which the adaptation then learns into their correctives
+CLOUD_L1 = 0.02
+#: default temporal smoothness for point clouds (relative). Lower than the markers' default: a
+#: point-to-plane row sees one direction of a vertex's motion, so the prior weighs more per frame and lags
+CLOUD_TEMPORAL = 0.05
+#: vertices moving less than this share of the head size under any one shape are the stable region
+STABLE_MOTION = 0.005
+#: the cloud's extent must be within this factor of the face's, else it is in other units
+UNITS_FACTOR = 4.0
+#: neighbours of a cloud point for its PCA normal
+_NORMAL_K = 8
+
+Progress = Callable[[float, str], Any]
+
+
+class CloudTrackError(ValueError):
+    """Point clouds that cannot be tracked (wrong shape, wrong units, nothing usable); names the argument."""
+
+
+def _farthest(V: NDArray[np.float64], cand: NDArray[np.intp], m: int, seed: int) -> NDArray[np.intp]:
+    """``m`` spread-out vertices of ``cand`` by farthest-point sampling (deterministic from ``seed``)."""
+    m = min(int(m), cand.size)
+    if m <= 0:
+        return np.zeros(0, np.intp)
+    P = V[cand]
+    first = int(np.random.default_rng(seed).integers(cand.size))
+    chosen = np.empty(m, np.intp)
+    chosen[0] = first
+    d = ((P - P[first]) ** 2).sum(1)
+    for j in range(1, m):
+        i = int(np.argmax(d))
+        chosen[j] = i
+        np.minimum(d, ((P - P[i]) ** 2).sum(1), out=d)
+    return np.sort(cand[chosen])
+
+
+def _border_ring(F: NDArray[np.int64], n: int) -> NDArray[np.bool_]:
+    """(n,) bool: vertices on the mesh border (an edge of one face) and their neighbours."""
+    he = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
+    key = he[:, 0] * n + he[:, 1]
+    uniq, counts = np.unique(key, return_counts=True)
+    b = uniq[counts == 1]
+    on = np.zeros(n, bool)
+    on[b // n] = True
+    on[b % n] = True
+    ring = on.copy()
+    touch = on[F].any(1)
+    ring[F[touch].ravel()] = True
+    return ring
+
+
+def sample_vertices(model: FaceState, samples: int = 1200, rigid_samples: int = 400, *, seed: int = 0
+                    ) -> tuple[NDArray[np.intp], NDArray[np.bool_]]:
+    """The vertices the cloud tracker fits: moving face vertices and stable ones (module docstring, step 1).
+
+    Parameters
+    ----------
+    model : FaceModel
+    samples : int
+        Vertices the shapes move (the weights' constraints), ≥ 1.
+    rigid_samples : int
+        Stable vertices (the rigid pose), ≥ 6.
+    seed : int
+        Start of the farthest-point sampling.
+
+    Returns
+    -------
+    ids : (s,) int
+        Sorted vertex ids (give them to :class:`AdaptiveModel` as ``vertex_ids`` to reuse it).
+    stable : (s,) bool
+        Which of them are stable.
+    """
+    if int(samples) < 1:
+        raise CloudTrackError(f"samples must be ≥ 1, got {samples!r}")
+    if int(rigid_samples) < 6:
+        raise CloudTrackError(f"rigid_samples must be ≥ 6, got {rigid_samples!r}")
+    V = np.asarray(model.vertices, np.float64)
+    F = np.asarray(model.faces, np.int64)
+    space = ExpressionSpace.from_model(model)
+    cand = face_vertices(model)
+    if F.size:
+        cand = cand[~_border_ring(F, model.n_vertices)[cand]]
+    if cand.size < 6:
+        raise CloudTrackError(f"model: only {cand.size} front-facing skin vertices away from the border to fit")
+    mot = space.motion(cand) / space.size
+    still = cand[mot <= STABLE_MOTION]
+    if still.size < 6:  # a face whose shapes move everything: the least moving vertices
+        still = cand[np.argsort(mot)[: max(6, min(int(rigid_samples), cand.size // 4))]]
+    moving = np.setdiff1d(cand, still)
+    if moving.size == 0:
+        moving = cand
+    r = _farthest(V, still, int(rigid_samples), seed)
+    w = _farthest(V, moving, int(samples), seed + 1)
+    ids = np.union1d(r, w)
+    return ids.astype(np.intp), np.isin(ids, r)
+
+
+# ------------------------------------------------------------------ input checks
+def _clouds(clouds: Any) -> list[NDArray[np.float64]]:
+    if isinstance(clouds, np.ndarray):
+        if clouds.ndim != 3 or clouds.shape[2] != 3:
+            raise CloudTrackError(
+                f"clouds must be a sequence of (p, 3) point clouds or a (T, p, 3) array, got shape {clouds.shape}")
+        seq: Sequence[Any] = list(clouds)
+    elif isinstance(clouds, Sequence) and not isinstance(clouds, str | bytes):
+        seq = clouds
+    else:
+        raise CloudTrackError(f"clouds must be a sequence of (p, 3) point clouds, got {type(clouds).__name__}")
+    if len(seq) == 0:
+        raise CloudTrackError("clouds: the take has no frames")
+    out = []
+    for f, c in enumerate(seq):
+        try:
+            P = np.asarray(c, np.float64)
+        except (TypeError, ValueError) as exc:
+            raise CloudTrackError(f"clouds[{f}] is not an array of points: {exc}") from None
+        if P.size == 0:
+            out.append(np.zeros((0, 3)))
+            continue
+        if P.ndim != 2 or P.shape[1] != 3:
+            raise CloudTrackError(f"clouds[{f}] must be (p, 3) points, got shape {P.shape}")
+        if np.isinf(P).any():
+            i = int(np.flatnonzero(np.isinf(P).any(1))[0])
+            raise CloudTrackError(f"clouds[{f}][{i}] is infinite")
+        out.append(P[np.isfinite(P).all(1)])
+    return out
+
+
+def _check_units(clouds: list[NDArray[np.float64]], X: NDArray[np.float64], model: FaceState) -> None:
+    """Raise when the clouds' spread is far from the face's (another unit)."""
+    ref = float(np.sqrt(((X - X.mean(0)) ** 2).sum(1).mean()))
+    ratios = []
+    step = max(1, len(clouds) // 50)
+    for P in clouds[::step]:
+        if P.shape[0] < 10:
+            continue
+        med = np.median(P, axis=0)
+        r = np.sqrt(((P - med) ** 2).sum(1))
+        ratios.append(float(np.sqrt(np.mean(np.minimum(r, np.quantile(r, 0.9)) ** 2))) / ref)
+    if not ratios or ref <= 0:
+        return
+    q = float(np.median(ratios))
+    if not (1.0 / UNITS_FACTOR <= q <= UNITS_FACTOR):
+        units = getattr(getattr(model, "metadata", None), "units", "") or "model units"
+        raise CloudTrackError(
+            f"clouds: the points spread {q:.3g}× as far as the model's face (the model is in {units}); "
+            f"they look like another unit — scale them by about {1.0 / q:.3g}" if q > 0 else
+            "clouds: all points coincide; they cannot be tracked")
+
+
+# ------------------------------------------------------------------ geometry
+def _normals_at(V: NDArray[np.float64], F: NDArray[np.int64], ids: NDArray[np.intp]) -> tuple[
+    NDArray[np.int64], sp.csr_matrix
+]:
+    """Faces touching ``ids`` and a (s, f) incidence matrix summing their area normals per vertex."""
+    on = np.zeros(V.shape[0], bool)
+    on[ids] = True
+    faces = np.flatnonzero(on[F].any(1))
+    pos = np.full(V.shape[0], -1, np.int64)
+    pos[ids] = np.arange(ids.size)
+    Fs = F[faces]
+    p = pos[Fs]  # (f, 3)
+    ok = p >= 0
+    cols = np.broadcast_to(np.arange(faces.size)[:, None], p.shape)
+    inc = sp.csr_matrix((np.ones(int(ok.sum())), (p[ok], cols[ok])), shape=(ids.size, faces.size))
+    return Fs, inc
+
+
+def _unit(N: NDArray[np.float64]) -> NDArray[np.float64]:
+    ln = np.linalg.norm(N, axis=-1, keepdims=True)
+    return N / np.where(ln > 0, ln, 1.0)
+
+
+@dataclass
+class _CloudSetup:
+    """Per take: samples, their neutral / deltas / normals, the solver."""
+
+    space: ExpressionSpace
+    ids: NDArray[np.intp]
+    stable: NDArray[np.bool_]
+    N0: NDArray[np.float64]  # (s, 3) neutral normals at the samples
+    dN: NDArray[np.float64]  # (k, s, 3) change of the (unnormalised) normal per shape
+    ref: float
+    solver: WeightSolver
+
+
+def _setup(model: FaceState, ids: NDArray[np.intp], stable: NDArray[np.bool_], l1: float, temporal: float
+           ) -> _CloudSetup:
+    space = ExpressionSpace.from_model(model)
+    V = space.neutral
+    F = np.asarray(model.faces, np.int64)
+    Fs, inc = _normals_at(V, F, ids)  # inc: sparse (s, f)
+    D = np.asarray(space.deltas, np.float64)
+
+    def area_normals(X: NDArray[np.float64]) -> NDArray[np.float64]:
+        return np.asarray(inc @ np.cross(X[Fs[:, 1]] - X[Fs[:, 0]], X[Fs[:, 2]] - X[Fs[:, 0]]))
+
+    n0 = area_normals(V)
+    scale = np.maximum(np.linalg.norm(n0, axis=1, keepdims=True), 1e-300)
+    # the normal of the blend to first order: n(x) ≈ n0 + Σ x_i (n(b0 + δ_i) − n0), per vertex relative to |n0|
+    dN = np.stack([(area_normals(V + D[i]) - n0) / scale for i in range(space.k)]) if space.k else \
+        np.zeros((0, ids.size, 3))
+    N0 = n0 / scale
+    # the λ scale: the average plain shape's squared norm along the normals per sample, in head sizes²
+    Dp = D[np.ix_(space.plain, ids)]  # (kp, s, 3)
+    proj = np.einsum("ksd,sd->ks", Dp, _unit(N0))
+    ref = float((proj**2).sum()) / max(space.plain.size, 1) / max(ids.size, 1) / space.size**2
+    ref = ref if ref > 0 else 1.0
+    solver = WeightSolver(space.lo, space.hi, l1=l1 * ref, temporal=temporal * ref, relative=False,
+                          tol=1e-6 * math.sqrt(ref))
+    return _CloudSetup(space, ids, stable, N0, dN, ref, solver)
+
+
+class _CloudNormals:
+    """PCA normals of one cloud, computed for the points that are asked for (cached)."""
+
+    def __init__(self, P: NDArray[np.float64], tree: cKDTree) -> None:
+        self.P = P
+        self.tree = tree
+        self.N = np.full((P.shape[0], 3), np.nan)
+
+    def __call__(self, j: NDArray[np.intp]) -> NDArray[np.float64]:
+        todo = np.unique(j[np.isnan(self.N[j, 0])])
+        if todo.size:
+            k = min(_NORMAL_K, self.P.shape[0])
+            _, nb = self.tree.query(self.P[todo], k=k)
+            nb = np.asarray(nb).reshape(todo.size, k)
+            Q = self.P[nb] - self.P[nb].mean(1, keepdims=True)
+            C = np.einsum("pki,pkj->pij", Q, Q)
+            _, vec = np.linalg.eigh(C)
+            self.N[todo] = vec[:, :, 0]
+        return self.N[j]
+
+
+def _rigid_icp(X: NDArray[np.float64], N: NDArray[np.float64], tree: cKDTree, cloud: NDArray[np.float64],
+               normals: _CloudNormals, M: NDArray[np.float64], thr: float, cos_min: float, steps: int,
+               min_pairs: int) -> tuple[NDArray[np.float64], int]:
+    """Point-to-plane ICP of model points ``X`` (normals ``N``) to the cloud from pose ``M``: (pose, pairs)."""
+    R, t = M[:3, :3].copy(), M[:3, 3].copy()
+    used = 0
+    for _ in range(steps):
+        Q = X @ R.T + t
+        Nw = N @ R.T
+        d, j = tree.query(Q, distance_upper_bound=thr)
+        ok = np.isfinite(d)
+        if ok.sum() < min_pairs:
+            break
+        jj = j[ok]
+        cos = np.abs((normals(jj) * Nw[ok]).sum(1))
+        keep = cos >= cos_min
+        if keep.sum() < min_pairs:
+            break
+        Qk, Nk, Ck = Q[ok][keep], Nw[ok][keep], cloud[jj[keep]]
+        r = (Nk * (Qk - Ck)).sum(1)
+        sig = max(1.4826 * float(np.median(np.abs(r))), 1e-12 * thr)
+        w = np.minimum(1.0, 1.345 * sig / np.maximum(np.abs(r), 1e-300))  # Huber
+        qc = Qk.mean(0)
+        J = np.concatenate([np.cross(Qk - qc, Nk), Nk], axis=1)  # d r / d (ω, τ)
+        H = (J * w[:, None]).T @ J
+        g = (J * w[:, None]).T @ r
+        H[np.diag_indices(6)] += 1e-12 * max(float(np.trace(H)), 1e-300)
+        try:
+            step = -np.linalg.solve(H, g)
+        except np.linalg.LinAlgError:
+            break
+        dR = Rotation.from_rotvec(step[:3]).as_matrix()
+        R = dR @ R
+        t = dR @ (t - qc) + qc + step[3:]
+        used = int(keep.sum())
+        if np.linalg.norm(step[:3]) * thr + np.linalg.norm(step[3:]) < 1e-4 * thr:
+            break
+    out = np.eye(4)
+    out[:3, :3], out[:3, 3] = R, t
+    return out, used
+
+
+def _pairs(X: NDArray[np.float64], N: NDArray[np.float64], M: NDArray[np.float64], tree: cKDTree,
+           cloud: NDArray[np.float64], normals: _CloudNormals, thr: float, cos_min: float, min_pairs: int,
+           size: float) -> tuple[NDArray[np.intp], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]] | None:
+    """One correspondence pass: each sample's nearest cloud point, with the rejections of the module docstring.
+
+    Returns
+    -------
+    (ok, C, rw, dist) or None
+        Accepted sample indices ``(m,)``, their targets in the model frame ``(m, 3)``, Tukey
+        weights ``(m,)`` and distances ``(m,)``; None when fewer than ``min_pairs`` remain.
+    """
+    R, t = M[:3, :3], M[:3, 3]
+    Q = X @ R.T + t
+    d, j = tree.query(Q, distance_upper_bound=thr)
+    ok = np.flatnonzero(np.isfinite(d))
+    if ok.size < min_pairs:
+        return None
+    cos = np.abs((normals(j[ok]) * (N[ok] @ R.T)).sum(1))
+    ok = ok[cos >= cos_min]
+    if ok.size < min_pairs:
+        return None
+    C = (cloud[j[ok]] - t) @ R  # model frame
+    r = (N[ok] * (X[ok] - C)).sum(1)
+    sig = max(1.4826 * float(np.median(np.abs(r))), 1e-9 * size)
+    good = np.abs(r) <= 4.685 * sig  # Tukey's rejection point
+    if int(good.sum()) < min_pairs:
+        return None
+    u = np.abs(r[good]) / (4.685 * sig)
+    return ok[good], C[good], (1.0 - u * u) ** 2, d[ok][good]
+
+
+# ------------------------------------------------------------------ the tracker
+def _count(value: Any, what: str, lo: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < lo:
+        raise CloudTrackError(f"{what} must be an int ≥ {lo}, got {value!r}")
+    return int(value)
+
+
+def _number(value: Any, what: str, lo: float, hi: float = math.inf) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise CloudTrackError(f"{what} must be a number, got {value!r}") from None
+    if not (math.isfinite(v) and lo <= v <= hi):
+        raise CloudTrackError(f"{what} must be a number in [{lo:g}, {hi:g}], got {value!r}")
+    return v
+
+
+def _adaptive(adapt: Any, model: FaceState, ids: NDArray[np.intp]) -> AdaptiveModel | None:
+    if adapt is None or adapt is True:
+        return AdaptiveModel(model, vertex_ids=ids)  # type: ignore[arg-type]
+    if adapt is False:
+        return None
+    if isinstance(adapt, dict):
+        return AdaptiveModel(model, vertex_ids=ids, **adapt)  # type: ignore[arg-type]
+    if isinstance(adapt, AdaptiveModel):
+        if adapt.model.n_vertices != model.n_vertices or adapt.shape_names != list(model.shape_names):
+            raise CloudTrackError("adapt: the AdaptiveModel was built on another model (vertices or shapes differ)")
+        return adapt
+    raise CloudTrackError(f"adapt must be None, a bool, a dict of AdaptiveModel options or an AdaptiveModel, "
+                          f"got {type(adapt).__name__}")
+
+
+def track_clouds(
+    model: FaceState,
+    clouds: Any,
+    *,
+    fps: float = 30.0,
+    l1: float | None = None,
+    temporal: float | None = None,
+    adapt: Any = True,
+    progress: Progress | None = None,
+    iterations: int = 3,
+    rigid_steps: int = 4,
+    samples: int = 1200,
+    rigid_samples: int = 400,
+    max_distance: float | None = None,
+    min_distance: float | None = None,
+    max_normal_angle: float = 60.0,
+    min_points: int = 50,
+    min_correspondences: int = 30,
+    initial_pose: ArrayLike | None = None,
+    neutral_start: bool = True,
+    init_iterations: int = 10,
+) -> TrackResult:
+    """Track a sequence of point clouds (see the module docstring): pose + weights per frame, adapting the rig.
+
+    Parameters
+    ----------
+    model : FaceModel
+        The rig.
+    clouds : sequence of (p_t, 3) float, or (T, p, 3) float
+        One cloud per frame, model units; empty clouds are allowed (held frames).
+    fps : float
+    l1, temporal : float, optional
+        Relative λ's (default :data:`CLOUD_L1`, :data:`CLOUD_TEMPORAL`).
+    adapt : bool, dict, AdaptiveModel or None
+        Adapt the rig while tracking (None or True: an :class:`AdaptiveModel` with its
+        defaults on the tracker's samples; a dict: its options; an AdaptiveModel: that
+        one, updated in place — its ``vertex_ids_`` become the samples; False: off).
+    progress : callable, optional
+        ``progress(fraction, message)``.
+    iterations : int
+        Pose / correspondence / weight alternations per frame (≥ 1).
+    rigid_steps : int
+        ICP steps per pose update (≥ 1).
+    samples, rigid_samples : int
+        Vertices fitted (:func:`sample_vertices`).
+    max_distance : float, optional
+        Pairs farther apart are rejected (model units; default 3 % of the head size).
+    min_distance : float, optional
+        Floor of the adaptive threshold (default 0.5 % of the head size).
+    max_normal_angle : float
+        Degrees; pairs whose normals disagree more are rejected.
+    min_points, min_correspondences : int
+        Below these a frame is held (flagged).
+    initial_pose : (4, 4) float, optional
+        Pose before the first frame (default identity: the cloud near the model).
+    neutral_start : bool
+        With adaptation: the take starts with a neutral face, as the paper requires
+        (§3, "Initialization"): on the first usable frame the identity and the pose
+        are fitted alone (eq. 1, ``init_iterations`` Gauss–Newton steps with new
+        correspondences each) before the weights. False: the identity is only
+        learnt from the aggregated frames.
+    init_iterations : int
+        Steps of that initialisation (≥ 1).
+
+    Returns
+    -------
+    TrackResult
+        ``kind == "clouds"``; ``info["adapted"]`` is the :class:`AdaptiveModel` (or None).
+
+    Raises
+    ------
+    CloudTrackError
+        Input that cannot be tracked, naming the argument.
+    """
+    t_start = time.perf_counter()
+    fps_ = _number(fps, "fps", 0.0)
+    if fps_ <= 0:
+        raise CloudTrackError(f"fps must be a positive number, got {fps!r}")
+    l1_ = CLOUD_L1 if l1 is None else _number(l1, "l1", 0.0)
+    temporal_ = CLOUD_TEMPORAL if temporal is None else _number(temporal, "temporal", 0.0)
+    iters = _count(iterations, "iterations", 1)
+    rsteps = _count(rigid_steps, "rigid_steps", 1)
+    min_pts = _count(min_points, "min_points", 6)
+    min_corr = _count(min_correspondences, "min_correspondences", 6)
+    init_iters = _count(init_iterations, "init_iterations", 1)
+    cos_min = math.cos(math.radians(_number(max_normal_angle, "max_normal_angle", 0.0, 90.0)))
+    if not model.shapes:
+        raise CloudTrackError("model: it has no blendshapes to track")
+    P_all = _clouds(clouds)
+    T = len(P_all)
+    M = np.eye(4)
+    if initial_pose is not None:
+        M = np.asarray(initial_pose, np.float64)
+        if M.shape != (4, 4) or not np.isfinite(M).all():
+            raise CloudTrackError(f"initial_pose must be a finite (4, 4) matrix, got shape {M.shape}")
+
+    if isinstance(adapt, AdaptiveModel):
+        ids = adapt.vertex_ids_.astype(np.intp)
+        space0 = ExpressionSpace.from_model(model)
+        mot = space0.motion(ids) / space0.size
+        stable = mot <= STABLE_MOTION
+        if stable.sum() < 6:
+            stable = np.zeros(ids.size, bool)
+            stable[np.argsort(mot)[: max(6, ids.size // 4)]] = True
+    else:
+        ids, stable = sample_vertices(model, samples, rigid_samples)
+    setup = _setup(model, ids, stable, l1_, temporal_)
+    space = setup.space
+    size = space.size
+    thr_max = 0.03 * size if max_distance is None else _number(max_distance, "max_distance", 0.0)
+    thr_min = 0.005 * size if min_distance is None else _number(min_distance, "min_distance", 0.0)
+    if thr_max <= 0:
+        raise CloudTrackError(f"max_distance must be > 0, got {max_distance!r}")
+    thr_min = min(thr_min, thr_max)
+    _check_units(P_all, space.neutral[ids], model)
+    am = _adaptive(adapt, model, ids)
+    t_setup = time.perf_counter() - t_start
+
+    plain = space.plain
+    derived = sorted(space.derived)
+    kp = plain.size
+    norm = 1.0 / size**2
+    if am is not None:
+        X0, D_all = am.neutral_at(), am.deltas_at()
+    else:
+        X0 = space.neutral[ids].copy()
+        D_all = np.asarray(space.deltas[:, ids], np.float64)
+    s_ = ids.size
+    k_all = space.k
+    dN_flat = setup.dN.reshape(k_all, -1)
+
+    def layouts(D: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """(k, 3s) for blending and (s, 3, kp) for the constraint rows."""
+        return D.reshape(k_all, -1), np.ascontiguousarray(D[plain].transpose(1, 2, 0))
+
+    D_flat, DpT = layouts(D_all)
+
+    def blend(wf: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Sample positions and unit normals (model frame) for full weights ``wf``."""
+        X = X0 + (wf @ D_flat).reshape(s_, 3)
+        N = _unit(setup.N0 + (wf @ dN_flat).reshape(s_, 3))
+        return X, N
+
+    W = np.zeros((T, kp))
+    poses = np.tile(np.eye(4), (T, 1, 1))
+    errors = np.full(T, np.nan)
+    flags = [""] * T
+    pairs = np.zeros(T, np.int64)
+    w = np.zeros(kp)
+    wf = space.full_weights(w)
+    w_prev: NDArray[np.float64] | None = None
+    w_prev2: NDArray[np.float64] | None = None
+    solver = setup.solver
+    every = max(1, T // 100)
+    first = -1
+    t_adapt = 0.0
+    for f in range(T):
+        if progress is not None and f % every == 0:
+            progress(f / T, f"tracking cloud {f + 1} of {T}")
+        P = P_all[f]
+        solved = False
+        if P.shape[0] >= min_pts:
+            tree = cKDTree(P)
+            cn = _CloudNormals(P, tree)
+            Mf = M.copy()
+            thr = thr_max if first >= 0 else 3.0 * thr_max  # the first frame may start farther away
+            found = False
+            if am is not None and neutral_start and first < 0:
+                # the paper's initialisation (eq. 1): a neutral face; identity and pose by Gauss–Newton
+                for _it in range(init_iters):
+                    X, N = blend(wf)
+                    Mf, _ = _rigid_icp(X, N, tree, P, cn, Mf, thr, cos_min, 4 * rsteps, 6)
+                    pr = _pairs(X, N, Mf, tree, P, cn, thr, cos_min, min_corr, size)
+                    if pr is None:
+                        break
+                    ok, C, rw, dist = pr
+                    sw = np.sqrt(rw)
+                    am.fit_neutral_planes(ok, N[ok] * sw[:, None], (N[ok] * C).sum(1) * sw)
+                    X0, D_all = am.neutral_at(), am.deltas_at()
+                    D_flat, DpT = layouts(D_all)
+                    thr = min(thr_max, max(2.5 * float(np.median(dist)), thr_min))
+                    found = True
+            acc: tuple[NDArray[np.intp], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]] | None = None
+            for it in range(iters):
+                X, N = blend(wf)
+                # rigid pose: the stable samples (all of them while the first frame's pose is unknown)
+                unknown = first < 0 and it == 0 and not found
+                sel = np.ones(ids.size, bool) if unknown else setup.stable
+                Mf, _ = _rigid_icp(X[sel], N[sel], tree, P, cn, Mf, thr, cos_min, 4 * rsteps if unknown else rsteps, 6)
+                pr = _pairs(X, N, Mf, tree, P, cn, thr, cos_min, min_corr, size)
+                if pr is None:
+                    break
+                ok, C, rw, dist = pr
+                Nn = N[ok] * np.sqrt(rw)[:, None]
+                A = (Nn[:, :, None] * DpT[ok]).sum(1)
+                base = X0[ok]
+                if derived:
+                    base = base + np.tensordot(wf[derived], D_all[derived][:, ok], axes=(0, 0))
+                c = (Nn * (C - base)).sum(1)
+                m = ok.size
+                G = (A.T @ A) * (norm / m)
+                h = (A.T @ c) * (norm / m)
+                w = solver.solve_gram(G, h, w_prev, w_prev2, w0=w)
+                wf = space.full_weights(w)
+                acc = pr
+                # the next pass looks closer
+                thr = min(thr_max, max(2.5 * float(np.median(dist)), thr_min))
+            if acc is not None:
+                solved = True
+                ok, C, rw, _ = acc
+                X, N = blend(wf)
+                res = (N[ok] * (X[ok] - C)).sum(1)
+                errors[f] = float(np.sqrt(np.mean(res**2)))
+                pairs[f] = ok.size
+                M = Mf
+                if am is not None:
+                    ta = time.perf_counter()
+                    sw = np.sqrt(rw)
+                    am.update_planes(ok, N[ok] * sw[:, None], (N[ok] * C).sum(1) * sw, wf)
+                    X0, D_all = am.neutral_at(), am.deltas_at()
+                    D_flat, DpT = layouts(D_all)
+                    t_adapt += time.perf_counter() - ta
+        if not solved:
+            flags[f] = FLAG_HELD
+            if first >= 0:
+                W[f], poses[f] = W[f - 1], poses[f - 1]
+                w_prev2, w_prev = w_prev, W[f].copy()
+            continue
+        if first < 0:
+            first = f
+        W[f], poses[f] = w, M
+        w_prev2, w_prev = w_prev, w.copy()
+    if first < 0:
+        raise CloudTrackError(
+            f"clouds: no frame could be tracked (each needs at least min_points={min_pts} points and "
+            f"min_correspondences={min_corr} pairs near the face; the largest cloud has "
+            f"{max(p.shape[0] for p in P_all)} points)")
+    W[:first], poses[:first] = W[first], poses[first]
+    if progress is not None:
+        progress(1.0, f"tracked {T} clouds")
+    names = space.shape_names
+    derived_names = tuple(names[i] for i in sorted(set(space.derived) | set(space.dead.tolist())))
+    total = time.perf_counter() - t_start
+    return TrackResult(
+        space.full_weights(W), poses, errors, tuple(flags), fps_, names, derived_names, size, "clouds",
+        {"l1": l1_, "temporal": temporal_, "iterations": iters, "rigid_steps": rsteps,
+         "vertex_ids": ids.copy(), "stable": stable.copy(), "pairs": pairs, "lambda_scale": setup.ref,
+         "max_distance": thr_max, "min_distance": thr_min, "adapted": am,
+         "seconds": {"setup": t_setup, "frames": total - t_setup, "adaptation": t_adapt}},
+    )
