@@ -369,3 +369,20 @@ def test_apply_refuses_a_result_for_other_shapes_and_changes_nothing(take):
     assert model.timeline.value is before and _state(model) == state
     with pytest.raises(ModelError, match="TrackResult"):
         model.capture.apply("not a result")  # type: ignore[arg-type]
+
+
+def test_track_result_checks_its_arrays_and_leaves_the_callers_alone(head):
+    names = tuple(head.shape_names)
+    W = np.zeros((4, len(names)))
+    res = TrackResult(W, np.tile(np.eye(4), (4, 1, 1)), np.zeros(4), ("",) * 4, 30.0, names)
+    assert W.flags.writeable and not res.weights.flags.writeable
+    W[0, 0] = 1.0
+    assert res.weights[0, 0] == 0.0
+    with pytest.raises(ValueError, match="weights must be"):
+        TrackResult(np.zeros(3), np.zeros((3, 4, 4)), np.zeros(3), ("",) * 3, 30.0, names)
+    with pytest.raises(ValueError, match="poses must be"):
+        TrackResult(W, np.zeros((3, 4, 4)), np.zeros(4), ("",) * 4, 30.0, names)
+    with pytest.raises(ValueError, match="flags must have 4"):
+        TrackResult(W, np.tile(np.eye(4), (4, 1, 1)), np.zeros(4), ("",), 30.0, names)
+    with pytest.raises(ValueError, match="tolerance"):
+        res.to_timeline(-1.0)

@@ -12,8 +12,11 @@ with ``Q ≈ s R P + t`` minimising ``Σ ρ(||s R p_i + t − q_i||)``:
   Huber or Tukey biweight loss, the residual scale from the median absolute
   deviation; points with a NaN coordinate (occluded markers) are ignored.
 
-Both are small numpy functions (a 3×3 SVD per iteration); nothing here needs
-a library beyond numpy. Shapes: ``P : (n, 3) float``, ``Q : (n, 3) float``,
+Both are small numpy functions (a 3×3 SVD per iteration). Why not a library:
+``scipy.spatial.transform.Rotation.align_vectors`` gives the weighted rotation
+only (no translation, scale, reweighting or NaN handling), and a general
+robust optimiser (``scipy.optimize.least_squares`` with a loss) iterates on a
+parameterised rotation for what the closed form gives in one SVD. Shapes: ``P : (n, 3) float``, ``Q : (n, 3) float``,
 ``weights : (n,) float``; results are ``(4, 4)`` homogeneous matrices acting on
 column vectors, ``q = M @ [p, 1]``.
 """

@@ -97,14 +97,14 @@ class TrackResult:
     info: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        W = np.asarray(self.weights, np.float64)
-        T = W.shape[0]
+        W = np.array(self.weights, np.float64)  # copies: the result's arrays are read-only, the caller's stay as they were
         if W.ndim != 2 or W.shape[1] != len(self.shape_names):
             raise ValueError(f"weights must be (T, {len(self.shape_names)}), got {W.shape}")
-        P = np.asarray(self.poses, np.float64)
+        T = W.shape[0]
+        P = np.array(self.poses, np.float64)
         if P.shape != (T, 4, 4):
             raise ValueError(f"poses must be ({T}, 4, 4), got {P.shape}")
-        E = np.asarray(self.errors, np.float64)
+        E = np.array(self.errors, np.float64)
         if E.shape != (T,):
             raise ValueError(f"errors must be ({T},), got {E.shape}")
         if len(self.flags) != T:
