@@ -441,6 +441,7 @@ def track_clouds(
     initial_pose: ArrayLike | None = None,
     neutral_start: bool = True,
     init_iterations: int = 10,
+    solver: Any = None,
 ) -> TrackResult:
     """Track a sequence of point clouds (see the module docstring): pose + weights per frame, adapting the rig.
 
@@ -483,6 +484,12 @@ def track_clouds(
         learnt from the aggregated frames.
     init_iterations : int
         Steps of that initialisation (≥ 1).
+    solver : optional
+        The per-frame weight solver: anything with WeightSolver's
+        ``solve_gram(G, h, w_prev, w_prev2, w0=...)`` on the normalised normal equations
+        (``G, h`` per accepted pair and head size², as the module docstring says). Default:
+        :class:`~workbench.capture.solver.WeightSolver` on the sliders' box with the λ's
+        (benchmarks put a per-frame ``scipy.optimize.lsq_linear`` here).
 
     Returns
     -------
@@ -508,6 +515,8 @@ def track_clouds(
     cos_min = math.cos(math.radians(_number(max_normal_angle, "max_normal_angle", 0.0, 90.0)))
     if not model.shapes:
         raise CloudTrackError("model: it has no blendshapes to track")
+    if solver is not None and not callable(getattr(solver, "solve_gram", None)):
+        raise CloudTrackError(f"solver must have a solve_gram method like WeightSolver's, got {type(solver).__name__}")
     P_all = _clouds(clouds)
     T = len(P_all)
     M = np.eye(4)
@@ -572,7 +581,7 @@ def track_clouds(
     wf = space.full_weights(w)
     w_prev: NDArray[np.float64] | None = None
     w_prev2: NDArray[np.float64] | None = None
-    solver = setup.solver
+    solver = setup.solver if solver is None else solver
     every = max(1, T // 100)
     first = -1
     t_adapt = 0.0
