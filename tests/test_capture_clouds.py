@@ -170,6 +170,16 @@ def test_adaptation_lowers_the_fit_error_on_a_face_that_is_not_the_template(head
     assert not np.allclose(rig.vertices, head.vertices)
 
 
+def test_progress_covers_the_set_up_and_the_frames(head: FaceModel, actor_take) -> None:
+    _, clouds, *_ = actor_take
+    calls: list[tuple[float, str]] = []
+    track_clouds(head, clouds[:6], adapt={"n_basis": 10}, progress=lambda f, msg: calls.append((f, msg)))
+    fractions = [f for f, _ in calls]
+    assert fractions == sorted(fractions) and fractions[-1] == 1.0
+    assert any("transfer rows" in msg for _, msg in calls)  # the adaptive model's set-up is not silent
+    assert sum("tracking cloud" in msg for _, msg in calls) == 6
+
+
 def test_a_given_adaptive_model_is_updated_in_place(head: FaceModel, actor_take) -> None:
     _, clouds, *_ = actor_take
     ids, _ = sample_vertices(head)

@@ -59,8 +59,9 @@ passes ``σ̄``.
 
 Transfer rows (``Δ_i E = (T_i* − I) E`` at the constraint vertices, one sparse
 solve per shape on the vertices it moves, CHOLMOD when installed) are computed
-once in the constructor: a few seconds on the 20k-vertex sample head
-(``benchmarks/bench_capture.py``). Per frame the cost is a few products of
+once in the constructor: 5–8 s on the 20k-vertex sample head on a shared
+2-core machine, 1 s on the 5k one (``benchmarks/bench_capture.py``); reuse the
+object across takes of one model. Per frame the cost is a few products of
 ``(m, 3K)`` matrices and one Cholesky of a ``3K × 3K`` block per optimised block.
 
 Shapes: ``n`` vertices, ``k`` shapes, ``K = n_basis``; constraint matrices
@@ -70,7 +71,7 @@ Shapes: ``n`` vertices, ``k`` shapes, ``K = n_basis``; constraint matrices
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -404,6 +405,8 @@ class AdaptiveModel:
         Block Gauss–Seidel sweeps per frame.
     max_vertices : int, default 2000
         Size of the default ``vertex_ids``.
+    progress : callable, optional
+        ``progress(fraction, message)`` while the basis and the transfer rows are built.
 
     Attributes
     ----------
@@ -435,6 +438,7 @@ class AdaptiveModel:
         vertex_ids: ArrayLike | None = None,
         sweeps: int = 2,
         max_vertices: int = 2000,
+        progress: Callable[[float, str], Any] | None = None,
     ) -> None:
         import time
 
@@ -474,6 +478,8 @@ class AdaptiveModel:
             raise ValueError("model: the skin has no triangles")
         if self.n_basis >= skin.size:
             raise ValueError(f"n_basis must be below the number of skin vertices ({skin.size}), got {n_basis}")
+        say = progress if progress is not None else (lambda f, msg: None)
+        say(0.0, "adaptive model: Laplacian eigenvectors of the skin")
         Vs = V[skin]
         ell = float(np.sqrt(((Vs - Vs.mean(0)) ** 2).sum(1).mean()))
         if not ell > 0:
@@ -522,6 +528,7 @@ class AdaptiveModel:
         K3 = 3 * self.n_basis
         blocks, rows_of = [], []
         for i in range(k):
+            say(0.1 + 0.9 * i / max(k, 1), f"adaptive model: transfer rows of {self._names[i]} ({i + 1} of {k})")
             on = np.flatnonzero(sl >= 0)
             on = on[self.transfer_.free[i][sl[on]]]
             X = self.transfer_.basis_rows(i, E_skin, sl[on])  # (r, 3, K, 3)
@@ -542,6 +549,7 @@ class AdaptiveModel:
             (b[0] * bend + b[2])[None]
         self.reset()
         self.setup_seconds_ = time.perf_counter() - t0
+        say(1.0, f"adaptive model ready ({self.setup_seconds_:.1f} s)")
 
     # ------------------------------------------------------------------ state
     def reset(self) -> AdaptiveModel:

@@ -88,8 +88,9 @@ CLOUD_L1 = 0.02
 CLOUD_TEMPORAL = 0.05
 #: vertices moving less than this share of the head size under any one shape are the stable region
 STABLE_MOTION = 0.005
-#: the cloud's extent must be within this factor of the face's, else it is in other units
-UNITS_FACTOR = 4.0
+#: the cloud's extent must be within this factor of the face's, else it is in other units (a factor of 10
+#: is caught; a cloud of head and shoulders, ~4x the face, is not mistaken for one)
+UNITS_FACTOR = 6.0
 #: neighbours of a cloud point for its PCA normal
 _NORMAL_K = 8
 
@@ -405,13 +406,18 @@ def _number(value: Any, what: str, lo: float, hi: float = math.inf) -> float:
     return v
 
 
-def _adaptive(adapt: Any, model: FaceState, ids: NDArray[np.intp]) -> AdaptiveModel | None:
+def _adaptive(adapt: Any, model: FaceState, ids: NDArray[np.intp], progress: Progress | None
+              ) -> AdaptiveModel | None:
+    say = None if progress is None else (lambda f, msg: progress(0.0, msg))  # frames start at 0
     if adapt is None or adapt is True:
-        return AdaptiveModel(model, vertex_ids=ids)  # type: ignore[arg-type]
+        return AdaptiveModel(model, vertex_ids=ids, progress=say)  # type: ignore[arg-type]
     if adapt is False:
         return None
     if isinstance(adapt, dict):
-        return AdaptiveModel(model, vertex_ids=ids, **adapt)  # type: ignore[arg-type]
+        if "vertex_ids" in adapt or "progress" in adapt:
+            raise CloudTrackError("adapt: the tracker sets vertex_ids and progress itself (pass an AdaptiveModel "
+                                  "built on sample_vertices(model) to choose them)")
+        return AdaptiveModel(model, vertex_ids=ids, progress=say, **adapt)  # type: ignore[arg-type]
     if isinstance(adapt, AdaptiveModel):
         if adapt.model.n_vertices != model.n_vertices or adapt.shape_names != list(model.shape_names):
             raise CloudTrackError("adapt: the AdaptiveModel was built on another model (vertices or shapes differ)")
@@ -544,7 +550,7 @@ def track_clouds(
         raise CloudTrackError(f"max_distance must be > 0, got {max_distance!r}")
     thr_min = min(thr_min, thr_max)
     _check_units(P_all, space.neutral[ids], model)
-    am = _adaptive(adapt, model, ids)
+    am = _adaptive(adapt, model, ids, progress)
     t_setup = time.perf_counter() - t_start
 
     plain = space.plain
