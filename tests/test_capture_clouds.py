@@ -247,3 +247,13 @@ def test_sample_vertices_split_the_face_into_stable_and_moving(head: FaceModel) 
     # front-facing skin, off the border (the neck cut)
     assert (head.component_labels[ids] == 0).all()
     assert head.vertices[ids, 1].min() > head.vertices[head.component_labels == 0, 1].min() + 0.1
+
+
+def test_cloud_errors_are_track_errors() -> None:
+    """``track`` promises TrackError for input it cannot track, whichever tracker runs."""
+    import workbench.capture as capture
+
+    model = workbench.load_sample("head")
+    with pytest.raises(capture.TrackError, match="no frames"):
+        capture.track(model, [])
+    assert issubclass(capture.CloudTrackError, capture.TrackError)

@@ -12,7 +12,12 @@ temporal prior (§3.1), optionally adapting the rig to the actor (§2, §3.2).
   (:mod:`.facet`, registered by :mod:`.family`);
 * :class:`WeightSolver` — the per-frame bounded L1 + temporal QP by warm-started
   shooting (:mod:`.solver`); :mod:`.pose` — robust rigid pose;
-* :func:`synthetic_performance` — generated ground truth (:mod:`.synthetic`).
+* :func:`synthetic_performance` — generated ground truth (:mod:`.synthetic`);
+* :func:`track_clouds` / :class:`AdaptiveModel` — point clouds and the dynamic
+  expression model (:mod:`.clouds`, :mod:`.adapt`);
+* :mod:`.inputs` — C3D, marker CSV, NPY/NPZ, PLY/NPZ clouds, depth PNGs;
+* :func:`track_video` and friends — video through MediaPipe FaceMesh (the
+  ``video`` extra; :mod:`.video`, imported on first use).
 
 Why the solver is hand-written: no kept library solves a bounded L1 +
 temporal QP warm-started per frame at this rate (``scipy.optimize.lsq_linear``
@@ -20,9 +25,41 @@ has no L1 term nor warm start; OSQP through ``qpsolvers`` sets up per frame and
 is slower; ``benchmarks/bench_capture.py`` measures both).
 """
 
-from workbench.capture.result import TrackResult
+from typing import Any
+
+from workbench.capture.adapt import AdaptiveModel
+from workbench.capture.clouds import CloudTrackError, track_clouds
+from workbench.capture.result import TrackError, TrackResult
 from workbench.capture.solver import WeightSolver
 from workbench.capture.synthetic import SyntheticPerformance, synthetic_performance
-from workbench.capture.track import TrackError, track
+from workbench.capture.track import track
 
-__all__ = ["SyntheticPerformance", "TrackError", "TrackResult", "WeightSolver", "synthetic_performance", "track"]
+__all__ = [
+    "AdaptiveModel",
+    "CloudTrackError",
+    "LandmarkSequence",
+    "SyntheticPerformance",
+    "TrackError",
+    "TrackResult",
+    "VideoExtraMissing",
+    "WeightSolver",
+    "landmark_vertex_map",
+    "register_landmarks",
+    "synthetic_performance",
+    "track",
+    "track_clouds",
+    "track_video",
+    "video_landmarks",
+]
+
+#: from :mod:`.video`, imported on first use (it loads OpenCV and MediaPipe only when called)
+_VIDEO = {"LandmarkSequence", "VideoExtraMissing", "landmark_vertex_map", "register_landmarks", "track_video",
+          "video_landmarks"}
+
+
+def __getattr__(name: str) -> Any:
+    if name in _VIDEO:
+        from workbench.capture import video
+
+        return getattr(video, name)
+    raise AttributeError(f"module 'workbench.capture' has no attribute {name!r}")

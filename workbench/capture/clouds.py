@@ -69,7 +69,7 @@ from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
 from workbench.capture.adapt import AdaptiveModel
-from workbench.capture.result import FLAG_HELD, TrackResult
+from workbench.capture.result import FLAG_HELD, TrackError, TrackResult
 from workbench.capture.rig import ExpressionSpace
 from workbench.capture.solver import WeightSolver
 from workbench.capture.synthetic import face_vertices
@@ -97,7 +97,7 @@ _NORMAL_K = 8
 Progress = Callable[[float, str], Any]
 
 
-class CloudTrackError(ValueError):
+class CloudTrackError(TrackError):
     """Point clouds that cannot be tracked (wrong shape, wrong units, nothing usable); names the argument."""
 
 

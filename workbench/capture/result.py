@@ -56,6 +56,14 @@ def pose_keys(poses: NDArray[np.float64], times: NDArray[np.float64], translatio
     return Track(HEAD_POSE, tuple(Key(float(times[i]), values[i], "linear") for i in idx))
 
 
+class TrackError(ValueError):
+    """Input that cannot be tracked (wrong shape, wrong units, nothing visible); names the argument.
+
+    Here, with the result, so every tracker (markers, clouds) raises one error type
+    without importing :mod:`.track` (which imports them).
+    """
+
+
 @dataclass(frozen=True, eq=False)
 class TrackResult:
     """A tracked take (Bouaziz et al. 2013, §3.1: rigid pose + blendshape weights per frame).

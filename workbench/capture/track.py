@@ -48,7 +48,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from workbench.capture.pose import PoseError, fit_rigid_robust
-from workbench.capture.result import FLAG_HELD, FLAG_POSE_ALL, TrackResult
+from workbench.capture.result import FLAG_HELD, FLAG_POSE_ALL, TrackError, TrackResult
 from workbench.capture.rig import ExpressionSpace
 from workbench.capture.solver import WeightSolver
 
@@ -69,10 +69,6 @@ POSE_TOL = 1e-6
 UNITS_FACTOR = 4.0
 
 Progress = Callable[[float, str], Any]
-
-
-class TrackError(ValueError):
-    """Input that cannot be tracked (wrong shape, wrong units, nothing visible); names the argument."""
 
 
 # ------------------------------------------------------------------ input checks
