@@ -143,3 +143,25 @@ def test_the_sliders_ignore_the_browsers_snapped_echo_of_off_grid_weights() -> N
         assert model.history.undo_labels[-1] == "Drag jawOpen"
     finally:
         panel.close()
+
+
+def test_point_clouds_are_thinned_on_screen_and_tracked(take) -> None:
+    from widgets import Workbench
+    from widgets.capture.panel import MAX_DRAWN_POINTS
+    from workbench.capture.synthetic import synthetic_performance
+
+    model = workbench.load_sample("head")
+    perf = synthetic_performance(model, 6, fps=30.0, seed=2, markers=20, points=4000, noise=0.001, head_motion=0.3)
+    wb = Workbench(model, height=240)
+    try:
+        cap = wb.capture
+        cap.set_take(perf.clouds, fps=30.0, name="clouds")
+        assert "point clouds of ~4000 points" in cap.info.value
+        assert not cap.adapt.disabled and cap.adapt.value  # adaptation on by default for clouds
+        assert len(wb.viewport.overlay_points) == MAX_DRAWN_POINTS
+        cap.adapt.value = False
+        cap.track()
+        assert cap.result.kind == "clouds" and cap.result.n_frames == 6
+        assert np.sqrt(np.mean((cap.result.weights - perf.weights) ** 2)) < 0.15
+    finally:
+        wb.close()
