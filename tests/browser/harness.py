@@ -16,6 +16,7 @@ import time
 import urllib.error
 import urllib.request
 import uuid
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -408,3 +409,18 @@ def write_notebook(path: Path, cells: list[str]) -> Path:
     }
     path.write_text(json.dumps(nb, indent=1))
     return path
+
+
+def wait_until(what: str, get: Callable[[], Any], ok: Callable[[Any], bool], timeout: float = 60.0) -> Any:
+    """Poll ``get()`` until ``ok(value)`` holds and return the value (no fixed sleeps).
+
+    Raises AssertionError naming ``what`` and the last value after ``timeout`` seconds.
+    """
+    deadline = time.monotonic() + timeout
+    value = get()
+    while not ok(value):
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out waiting for {what}: {value!r}")
+        time.sleep(0.05)
+        value = get()
+    return value

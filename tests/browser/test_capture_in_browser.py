@@ -14,12 +14,10 @@ screenshots in ``test-artifacts/<test>/``.
 from __future__ import annotations
 
 import json
-import time
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
-from harness import NotebookPage
+from harness import NotebookPage, wait_until
 
 _CELLS = [
     "import json, numpy as np, tempfile, pathlib\nimport workbench, widgets\n"
@@ -49,17 +47,6 @@ print(json.dumps({
 """
 
 
-def _until(what: str, get: Callable[[], Any], ok: Callable[[Any], bool], timeout: float = 60.0) -> Any:
-    deadline = time.monotonic() + timeout
-    value = get()
-    while not ok(value):
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out waiting for {what}: {value!r}")
-        time.sleep(0.05)
-        value = get()
-    return value
-
-
 def _state(nb: NotebookPage) -> dict[str, Any]:
     return nb.kernel_eval(_STATE)  # type: ignore[no-any-return]
 
@@ -79,9 +66,9 @@ def test_load_track_scrub_apply_and_undo_with_the_mouse(open_notebook) -> None:
     page.locator(".fwb-capture-path input").fill(paths[0])
     page.locator(".fwb-capture-map input").fill(paths[1])
     page.locator(".fwb-capture-load").click()
-    st = _until("the take", lambda: _state(nb), lambda s: s["loaded"] or s["errors"])
+    st = wait_until("the take", lambda: _state(nb), lambda s: s["loaded"] or s["errors"])
     assert st["loaded"] and not st["errors"], st
-    _until("the markers over the face", lambda: int(nb.viewport(0).get_attribute("data-overlay-points") or 0),
+    wait_until("the markers over the face", lambda: int(nb.viewport(0).get_attribute("data-overlay-points") or 0),
            lambda n: n == st["drawn"] and n > 40)
     page.mouse.move(5, 5)
     nb.screenshot("loaded")
@@ -94,9 +81,9 @@ def test_load_track_scrub_apply_and_undo_with_the_mouse(open_notebook) -> None:
 
     # ---- Track
     page.locator(".fwb-capture-track").click()
-    st = _until("the tracking", lambda: _state(nb), lambda s: s["tracked"], timeout=120)
+    st = wait_until("the tracking", lambda: _state(nb), lambda s: s["tracked"], timeout=120)
     assert st["rmse"] < 0.08, st
-    _until("the status line", page.locator(".fwb-capture-status").inner_text, lambda t: "frames/s" in t)
+    wait_until("the status line", page.locator(".fwb-capture-status").inner_text, lambda t: "frames/s" in t)
     plot = page.locator(".fwb-capture-plot")
     plot.wait_for(state="visible")
     pb = plot.bounding_box()
@@ -113,8 +100,8 @@ def test_load_track_scrub_apply_and_undo_with_the_mouse(open_notebook) -> None:
     page.mouse.down()
     page.mouse.move(tb["x"] + 0.6 * tb["width"], hb["y"] + hb["height"] / 2, steps=10)
     page.mouse.up()
-    st = _until("the frame", lambda: _state(nb), lambda s: s["frame"] > 30)
-    after = _until("the markers to move", lambda: _overlay(nb),
+    st = wait_until("the frame", lambda: _state(nb), lambda s: s["frame"] > 30)
+    after = wait_until("the markers to move", lambda: _overlay(nb),
                    lambda p: p.shape != before.shape or np.abs(p - before).max() > 2.0)
     assert after.size
     nb.screenshot("scrubbed")
@@ -122,7 +109,7 @@ def test_load_track_scrub_apply_and_undo_with_the_mouse(open_notebook) -> None:
     # ---- Apply to timeline: one undo step; Undo from the top bar removes it
     n_undo = len(st["undo"])
     page.locator(".fwb-capture-apply").click()
-    st = _until("the keys", lambda: _state(nb), lambda s: len(s["undo"]) == n_undo + 1)
+    st = wait_until("the keys", lambda: _state(nb), lambda s: len(s["undo"]) == n_undo + 1)
     played = nb.kernel_eval(
         "model.set_time(1.0)\n"
         "print(json.dumps(float(np.abs(np.array([model.weights.get(n, 0.0) for n in wb.capture.result.shape_names])"
@@ -130,5 +117,5 @@ def test_load_track_scrub_apply_and_undo_with_the_mouse(open_notebook) -> None:
     assert played < 0.02, played
     nb.screenshot("applied")
     page.locator(".fwb-wb-undo").click()
-    _until("the undo", lambda: _state(nb), lambda s: len(s["undo"]) == n_undo)
+    wait_until("the undo", lambda: _state(nb), lambda s: len(s["undo"]) == n_undo)
     assert json.dumps(_state(nb)["errors"]) == "[]"

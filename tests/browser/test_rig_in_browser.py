@@ -13,13 +13,11 @@ step is checked in the kernel and on the pixels; screenshots in
 
 from __future__ import annotations
 
-import time
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from harness import NotebookPage, pixel_change
+from harness import NotebookPage, pixel_change, wait_until
 
 TESTS = Path(__file__).resolve().parents[1]
 
@@ -54,17 +52,6 @@ print(json.dumps({"landmarks": [list(p) for p in _s.landmarks], "pending": studi
 """
 
 
-def _until(what: str, get: Callable[[], Any], ok: Callable[[Any], bool], timeout: float = 60.0) -> Any:
-    deadline = time.monotonic() + timeout
-    value = get()
-    while not ok(value):
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out waiting for {what}: {value!r}")
-        time.sleep(0.05)
-        value = get()
-    return value
-
-
 def _state(nb: NotebookPage) -> dict[str, Any]:
     return nb.kernel_eval(_STATE)  # type: ignore[no-any-return]
 
@@ -90,17 +77,17 @@ def test_click_pairs_orbit_linked_transfer_undo_and_open(open_notebook) -> None:
     at = nb.project([found["a"]], 0)[0]
     assert at[2] == 1, "the template point is not in view"
     page.mouse.click(at[0], at[1])
-    st = _until("the pending template point", lambda: _state(nb), lambda s: s["pending"]["template"] is not None)
+    st = wait_until("the pending template point", lambda: _state(nb), lambda s: s["pending"]["template"] is not None)
     assert st["landmarks"] == [] and not st["errors"], st
     bt = nb.project([found["b"]], 1)[0]
     assert bt[2] == 1, "the face point is not in view"
     page.mouse.click(bt[0], bt[1])
-    st = _until("the pair", lambda: _state(nb), lambda s: len(s["landmarks"]) == 2)
+    st = wait_until("the pair", lambda: _state(nb), lambda s: len(s["landmarks"]) == 2)
     assert st["undo"] == [f"Landmark {st['landmarks'][0][0]} \u2194 {st['landmarks'][0][1]} (mirrored)"], st
     # the clicked vertices are the ones under the pointer (a few mm at most on a head of ~2.5 dm)
     assert st["dist_a"] < 0.08 and st["dist_b"] < 0.8, st
-    _until("two markers on the template", lambda: _markers(nb, 0), lambda m: len(m) == 2)
-    _until("two markers on the face", lambda: _markers(nb, 1), lambda m: len(m) == 2)
+    wait_until("two markers on the template", lambda: _markers(nb, 0), lambda m: len(m) == 2)
+    wait_until("two markers on the face", lambda: _markers(nb, 1), lambda m: len(m) == 2)
     marks = np.array(_markers(nb, 1))
     # the mirror marker is on the other side of the face
     assert abs(marks[0][0] - marks[1][0]) > 40, marks
@@ -116,12 +103,12 @@ def test_click_pairs_orbit_linked_transfer_undo_and_open(open_notebook) -> None:
     page.mouse.down()
     page.mouse.move(cx + 120, cy - 10, steps=12)
     page.mouse.up()
-    cam = _until("the linked cameras",
+    cam = wait_until("the linked cameras",
                  lambda: [nb.viewport(i).get_attribute("data-camera") for i in (0, 1)],
                  lambda c: c[0] is not None and c[0] == c[1])
     direction = np.array([float(x) for x in cam[0].split(",")[:3]])
     assert abs(direction[0]) > 0.3, f"the orbit did not turn the view: {cam}"
-    face_after = _until("the face view to turn", lambda: nb.canvas_shot("face-after-orbit", 1),
+    face_after = wait_until("the face view to turn", lambda: nb.canvas_shot("face-after-orbit", 1),
                         lambda img: pixel_change(face_before, img) > 0.05)
     assert pixel_change(face_before, face_after) > 0.05
     msgs1 = nb.kernel_eval("print(json.dumps(studio.landmarks.views['target'].frontend_msg_count))")
@@ -131,9 +118,9 @@ def test_click_pairs_orbit_linked_transfer_undo_and_open(open_notebook) -> None:
     # ---- Transfer shapes: a progress bar, then the report line
     page.locator(".fwb-rig-transfer").scroll_into_view_if_needed()
     page.locator(".fwb-rig-transfer").click()
-    st = _until("the transfer", lambda: _state(nb), lambda s: s["done"] == ["transfer"], timeout=120)
+    st = wait_until("the transfer", lambda: _state(nb), lambda s: s["done"] == ["transfer"], timeout=120)
     assert "52 shapes" in st["transfer_status"] and not st["errors"], st
-    _until("the status line", page.locator(".fwb-rig-transfer-status").inner_text, lambda t: "52 shapes" in t)
+    wait_until("the status line", page.locator(".fwb-rig-transfer-status").inner_text, lambda t: "52 shapes" in t)
     nb.screenshot("transferred")
 
     # ---- Report and Gallery tabs
@@ -144,22 +131,22 @@ def test_click_pairs_orbit_linked_transfer_undo_and_open(open_notebook) -> None:
     nb.screenshot("report")
     page.locator(".fwb-rig-tabs .lm-TabBar-tab", has_text="Gallery").click()
     thumbs = page.locator(".fwb-rig-gallery img")
-    _until("the gallery pictures", thumbs.count, lambda n: n >= 8)
+    wait_until("the gallery pictures", thumbs.count, lambda n: n >= 8)
     thumbs.first.wait_for(state="visible")
     gallery = nb.screenshot("gallery", clip=page.locator(".fwb-rig-gallery").bounding_box())
     assert gallery.std() > 20, "the gallery is blank"
 
     # ---- undo / redo the transfer with the studio's buttons: one step each way
     page.locator(".fwb-rig-undo").click()
-    st = _until("the undo", lambda: _state(nb), lambda s: s["done"] == [])
+    st = wait_until("the undo", lambda: _state(nb), lambda s: s["done"] == [])
     assert len(st["undo"]) == 1 and len(st["landmarks"]) == 2
-    _until("the gallery to drop the column", thumbs.count, lambda n: n == 4)
+    wait_until("the gallery to drop the column", thumbs.count, lambda n: n == 4)
     page.locator(".fwb-rig-redo").click()
-    _until("the redo", lambda: _state(nb), lambda s: s["done"] == ["transfer"])
+    wait_until("the redo", lambda: _state(nb), lambda s: s["done"] == ["transfer"])
 
     # ---- Open in Workbench: a third viewport draws the rig
     page.locator(".fwb-rig-open").click()
-    _until("the workbench", lambda: _state(nb), lambda s: s["opened"])
+    wait_until("the workbench", lambda: _state(nb), lambda s: s["opened"])
     nb.wait_viewports(3)
     wb = nb.viewport(2)
     wb.scroll_into_view_if_needed()

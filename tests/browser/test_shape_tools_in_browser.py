@@ -13,12 +13,10 @@ opens the whole jaw again. Screenshots: ``test-artifacts/<test>/``.
 
 from __future__ import annotations
 
-import time
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
-from harness import NotebookPage, clip_around, pixel_change
+from harness import NotebookPage, clip_around, pixel_change, wait_until
 from test_viewport import _drag_slider
 
 _CELLS = [
@@ -59,23 +57,9 @@ def _state(nb: NotebookPage) -> dict[str, Any]:
     return nb.kernel_eval(_STATE)  # type: ignore[no-any-return]
 
 
-def _until(
-    what: str, get: Callable[[], Any], ok: Callable[[Any], bool], timeout: float = 30.0
-) -> Any:
-    """Poll ``get()`` until ``ok`` holds (no fixed sleeps)."""
-    deadline = time.monotonic() + timeout
-    value = get()
-    while not ok(value):
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out waiting for {what}: {value!r}")
-        time.sleep(0.05)
-        value = get()
-    return value
-
-
 def _settled(nb: NotebookPage) -> dict[str, Any]:
     """Wait until the slider burst ended (its undo step is recorded)."""
-    return _until(
+    return wait_until(
         "the slider interaction to end", lambda: _state(nb), lambda s: not s["interacting"]
     )
 
@@ -117,7 +101,7 @@ def test_split_the_jaw_with_the_mouse_then_close_one_half(open_notebook) -> None
     assert st["weights"] == {"jawOpen": 1.0}, st["weights"]
     assert st["selected"] == "jawOpen" and st["undo"] == ["Drag jawOpen"], st
     page.locator(".fwb-shape-tools-shape select").wait_for(state="visible")
-    _until(
+    wait_until(
         "the dropdown to show jawOpen",
         lambda: page.locator(".fwb-shape-tools-shape select").input_value(),
         lambda v: v == "jawOpen",
@@ -133,13 +117,13 @@ def test_split_the_jaw_with_the_mouse_then_close_one_half(open_notebook) -> None
 
     # ---- Preview: the left side orange, the right one blue
     page.locator(".fwb-split-preview").click()
-    _until("the preview", lambda: _state(nb), lambda s: s["previewing"] and s["colours"])
-    left1 = _until(
+    wait_until("the preview", lambda: _state(nb), lambda s: s["previewing"] and s["colours"])
+    left1 = wait_until(
         "the left jaw to be coloured",
         lambda: nb.screenshot("left-jaw-preview", clip=left_clip),
         lambda img: pixel_change(left0, img) > 0.5,
     )
-    right1 = _until(
+    right1 = wait_until(
         "the right jaw to be coloured",
         lambda: nb.screenshot("right-jaw-preview", clip=right_clip),
         lambda img: pixel_change(right0, img) > 0.5,
@@ -151,13 +135,13 @@ def test_split_the_jaw_with_the_mouse_then_close_one_half(open_notebook) -> None
 
     # ---- Split L/R with the mouse: one undo step, exact halves, the face as it was
     page.locator(".fwb-split").click()
-    st = _until("the split", lambda: _state(nb), lambda s: "jawOpen_L" in s["names"])
+    st = wait_until("the split", lambda: _state(nb), lambda s: "jawOpen_L" in s["names"])
     assert st["names"] == ["jawOpen_L", "jawOpen_R"], st["names"]
     assert st["weights"] == {"jawOpen_L": 1.0, "jawOpen_R": 1.0}
     assert st["exact"] and st["undo"] == ["Drag jawOpen", "Split jawOpen"], st
     assert not st["previewing"] and not st["colours"] and st["selected"] == "jawOpen_L"
     status = page.locator(".fwb-shape-tools-status")
-    _until(
+    wait_until(
         "the status line",
         status.inner_text,
         lambda t: f"split jawOpen into jawOpen_L + jawOpen_R (band {info['band']:.3g} dm)" in t,
@@ -165,7 +149,7 @@ def test_split_the_jaw_with_the_mouse_then_close_one_half(open_notebook) -> None
     page.mouse.move(5, 5)
     _drawn(nb)
     for name, clip, before in (("left", left_clip, left0), ("right", right_clip, right0)):
-        _until(
+        wait_until(
             f"the {name} jaw's own colours",
             lambda clip=clip, name=name: nb.screenshot(f"{name}-jaw-split", clip=clip),
             lambda img, before=before: pixel_change(before, img) < 0.01,
@@ -194,13 +178,13 @@ def test_split_the_jaw_with_the_mouse_then_close_one_half(open_notebook) -> None
 
     # ---- undo twice from the panel: the open jaw of one jawOpen again
     page.locator(".fwb-undo").click()
-    _until("the first undo", lambda: _state(nb), lambda s: s["undo"][-1] == "Split jawOpen")
+    wait_until("the first undo", lambda: _state(nb), lambda s: s["undo"][-1] == "Split jawOpen")
     page.locator(".fwb-undo").click()
-    st = _until("the second undo", lambda: _state(nb), lambda s: s["names"] == ["jawOpen"])
+    st = wait_until("the second undo", lambda: _state(nb), lambda s: s["names"] == ["jawOpen"])
     assert st["weights"] == {"jawOpen": 1.0} and st["undo"] == ["Drag jawOpen"]
     page.mouse.move(5, 5)
     _drawn(nb)
-    _until(
+    wait_until(
         "the left jaw open again",
         lambda: nb.screenshot("left-jaw-undone", clip=left_clip),
         lambda img: pixel_change(left0, img) < 0.01,
@@ -213,7 +197,7 @@ def test_split_the_jaw_with_the_mouse_then_close_one_half(open_notebook) -> None
     page.locator(".fwb-corrective-driver-b select").select_option("mouthSmileLeft")
     page.locator(".fwb-add-corrective").click()
     name = "jawOpen_mouthSmileLeft"
-    _until(
+    wait_until(
         "the corrective",
         lambda: nb.kernel_eval(
             "import json; print(json.dumps(dict(model.shape_tools.correctives)))"
@@ -241,7 +225,7 @@ def test_split_the_jaw_with_the_mouse_then_close_one_half(open_notebook) -> None
     assert 0.3 < w[0] < 0.7 and w[1] == w[0], (
         w
     )  # jawOpen is at 1: the product is the smile's weight
-    _until(
+    wait_until(
         "the corrective's readout",
         lambda: readout.inner_text().strip(),
         lambda t: t == f"{w[1]:.2f}",

@@ -53,24 +53,10 @@ Shapes: ``A : (r, k) float``, ``c : (r,) float``, ``G : (k, k) float``
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-try:
-    from numba import njit
-
-    NUMBA = True
-except ImportError:  # pragma: no cover - numba is optional
-    NUMBA = False
-
-    def njit(*args: Any, **kwargs: Any) -> Any:  # type: ignore[no-redef]
-        def wrap(f: Any) -> Any:
-            return f
-
-        return wrap if not (len(args) == 1 and callable(args[0])) else args[0]
-
+from workbench._numba import NUMBA, njit
 
 __all__ = ["NUMBA", "WeightSolver", "objective"]
 

@@ -59,22 +59,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
-try:
-    import numba
-    from numba import njit, prange
-
-    NUMBA = True
-except ImportError:  # pragma: no cover - numba is optional
-    NUMBA = False
-
-    def njit(*args: Any, **kwargs: Any) -> Any:  # type: ignore[no-redef]
-        def wrap(f: Any) -> Any:
-            return f
-
-        return wrap if not (len(args) == 1 and callable(args[0])) else args[0]
-
-    prange = range  # type: ignore[misc]
-
+from workbench._numba import NUMBA, njit, numba, prange
 
 __all__ = ["NUMBA", "SelfIntersections", "self_intersecting_triangles", "triangles_intersect"]
 

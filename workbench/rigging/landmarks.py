@@ -37,9 +37,9 @@ from scipy.spatial import cKDTree
 
 from workbench.arkit import canonical_arkit_name, split_half_of
 from workbench.model import FaceModel
-from workbench.rigging.meshes import axis_vector, vertex_normals
+from workbench.rigging.meshes import vertex_normals
 from workbench.rigging.report import RigTransferError
-from workbench.rigging.transfer import RigTransfer
+from workbench.rigging.transfer import RigTransfer, face_axes
 
 __all__ = ["LANDMARK_NAMES", "SuggestedLandmark", "suggest_landmarks", "template_landmarks"]
 
@@ -111,14 +111,7 @@ class _Rig:
     """A model's skin seen in its own canonical axes (x the subject's left, y up, z front), model units."""
 
     def __init__(self, model: FaceModel) -> None:
-        meta = model.metadata
-        up, front = axis_vector(meta.up_axis), axis_vector(meta.front_axis)
-        if abs(float(up @ front)) > 0.5:
-            raise RigTransferError(
-                f"{meta.name or 'model'}: metadata up_axis {meta.up_axis!r} and front_axis {meta.front_axis!r} "
-                "are not perpendicular"
-            )
-        R = np.stack([np.cross(up, front), up, front])
+        R = face_axes(model)
         self.model = model
         self.P = np.asarray(model.vertices, np.float64) @ R.T  # (n, 3)
         self.skin = _skin_vertices(model)

@@ -104,8 +104,14 @@ class _Side:
         return self.X[self.skin_ids]
 
 
-def _canonical(model: FaceModel) -> Similarity:
-    """Model coordinates -> metres, subject's left / up / front as x / y / z."""
+def face_axes(model: FaceModel) -> NDArray[np.float64]:
+    """(3, 3) rotation whose rows are the subject's left, up and front in model coordinates (from metadata).
+
+    Raises
+    ------
+    RigTransferError
+        ``up_axis`` and ``front_axis`` are not perpendicular.
+    """
     meta = model.metadata
     up, front = axis_vector(meta.up_axis), axis_vector(meta.front_axis)
     if abs(float(up @ front)) > 0.5:
@@ -113,8 +119,12 @@ def _canonical(model: FaceModel) -> Similarity:
             f"{meta.name or 'model'}: metadata up_axis {meta.up_axis!r} and front_axis {meta.front_axis!r} "
             "are not perpendicular"
         )
-    R = np.stack([np.cross(up, front), up, front])
-    return Similarity(UNIT_TO_METRES[meta.units], R, np.zeros(3))
+    return np.stack([np.cross(up, front), up, front])
+
+
+def _canonical(model: FaceModel) -> Similarity:
+    """Model coordinates -> metres, subject's left / up / front as x / y / z."""
+    return Similarity(UNIT_TO_METRES[model.metadata.units], face_axes(model), np.zeros(3))
 
 
 def _skin(model: FaceModel, what: str) -> tuple[NDArray[np.int64], NDArray[np.int64], tuple[str, ...]]:

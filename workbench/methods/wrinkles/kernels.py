@@ -17,24 +17,12 @@ numba's threads follow ``numba.set_num_threads`` (default: all cores).
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 
-try:
-    from numba import njit, prange
+from workbench._numba import NUMBA, njit, prange
 
-    AVAILABLE = True
-except ImportError:  # pragma: no cover - numba is optional
-    AVAILABLE = False
-
-    def njit(*args: Any, **kwargs: Any) -> Any:  # type: ignore[no-redef]
-        def wrap(f: Any) -> Any:
-            return f
-
-        return wrap if not (len(args) == 1 and callable(args[0])) else args[0]
-
-    prange = range  # type: ignore[misc]
+#: numba is installed (else the kernels run as plain Python; see workbench._numba)
+AVAILABLE = NUMBA
 
 _BLOCK = 1024
 
