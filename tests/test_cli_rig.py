@@ -19,15 +19,7 @@ from workbench.model import FaceModel
 from workbench.rigging import TransferReport
 from workbench.rigging import synthetic as syn
 
-WARP = syn.SmoothWarp(
-    centres=np.array([[0.4, 7.3, 1.2], [-0.3, 6.4, 1.3], [0.0, 8.0, 0.5]]),
-    radii=np.array([0.35, 0.4, 0.6]),
-    amplitudes=np.array([[0.05, 0.04, 0.08], [-0.04, 0.0, 0.06], [0.0, 0.08, 0.05]]),
-    scale=np.array([1.08, 0.95, 1.04]),
-    rotation=syn.SmoothWarp.rotation_xyz([8, 15, -5]),
-    unit=10.0,
-    translation=np.array([3.0, -60.0, 5.0]),
-)
+WARP = syn.sample_head_warp()
 
 
 def _write_obj(path: Path, V: np.ndarray, F: np.ndarray, labels: np.ndarray, names: list[str]) -> None:
