@@ -145,7 +145,7 @@ def test_the_sliders_ignore_the_browsers_snapped_echo_of_off_grid_weights() -> N
         panel.close()
 
 
-def test_point_clouds_are_thinned_on_screen_and_tracked(take) -> None:
+def test_point_clouds_are_thinned_on_screen_tracked_and_the_adapted_rig_saved(take, tmp_path) -> None:
     from widgets import Workbench
     from widgets.capture.panel import MAX_DRAWN_POINTS
     from workbench.capture.synthetic import synthetic_performance
@@ -163,5 +163,17 @@ def test_point_clouds_are_thinned_on_screen_and_tracked(take) -> None:
         cap.track()
         assert cap.result.kind == "clouds" and cap.result.n_frames == 6
         assert np.sqrt(np.mean((cap.result.weights - perf.weights) ** 2)) < 0.15
+        assert cap.save_adapted_button.disabled
+        with pytest.raises(ValueError, match="Adapt the rig"):
+            cap.save_adapted(str(tmp_path / "a.fwb"))
+        cap.adapt.value = True
+        cap.track()
+        assert not cap.save_adapted_button.disabled
+        with pytest.raises(ValueError, match=r"expected a \.fwb"):
+            cap.save_adapted(str(tmp_path / "a.obj"))
+        out = cap.save_adapted(str(tmp_path / "adapted.fwb"))
+        rig = workbench.load(out)
+        assert rig.shape_names == model.shape_names and rig.n_vertices == model.n_vertices
+        assert not np.array_equal(rig.vertices, model.vertices)  # the neutral moved toward the actor
     finally:
         wb.close()

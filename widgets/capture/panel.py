@@ -72,6 +72,10 @@ class CapturePanel(ModelPanel):
         self.map_path = W.Text(placeholder="marker → vertex map (.csv / .json), for markers",
                                layout=W.Layout(width="98%"))
         self.map_path.add_class("fwb-capture-map")
+        self.units = W.Dropdown(options=[("as the file states", ""), ("m", "m"), ("dm", "dm"), ("cm", "cm"),
+                                         ("mm", "mm"), ("in", "in")], value="", description="units",
+                                layout=W.Layout(width="220px"))
+        self.units.add_class("fwb-capture-units")
         self.load_button = button("Load take", "fwb-capture-load", "Read the take", "folder-open")
         self.info = W.HTML("<i>No take loaded.</i>")
         self.info.add_class("fwb-capture-info")
@@ -95,6 +99,10 @@ class CapturePanel(ModelPanel):
                                             style={"description_width": "90px"}, layout=W.Layout(width="190px"))
         self.apply_button = button("Apply to timeline", "fwb-capture-apply",
                                    "Key the tracked weights and head pose (one undo step)", "check")
+        self.adapted_path = W.Text(placeholder="adapted_rig.fwb", layout=W.Layout(width="220px"))
+        self.adapted_path.add_class("fwb-capture-adapted-path")
+        self.save_adapted_button = button("Save adapted rig", "fwb-capture-save-adapted",
+                                          "Save the rig adapted to the actor as a new model (.fwb)", "save")
         self.progress = ProgressRow("fwb-capture-progress", "fwb-capture-status")
         self.plot = W.Image(format="png", layout=W.Layout(width="100%"))
         self.plot.add_class("fwb-capture-plot")
@@ -102,14 +110,16 @@ class CapturePanel(ModelPanel):
         self.load_button.on_click(g("load take")(lambda _b: self.load(self.path.value, self.map_path.value or None)))
         self.track_button.on_click(g("track")(lambda _b: self.track()))
         self.apply_button.on_click(g("apply capture")(lambda _b: self.apply()))
+        self.save_adapted_button.on_click(g("save adapted rig")(lambda _b: self.save_adapted(self.adapted_path.value)))
         self.frame.observe(g("capture frame")(lambda _c: self.show_frame()), "value")
         for s in (self.l1, self.temporal):
             s.observe(g("retrack window")(lambda _c: self.retrack_window()), "value")
         self.listen(model.events.time, self._on_time, "capture time")
         self.children = [
-            W.HTML("<b>Take</b>"), self.path, self.map_path, self.load_button, self.info,
+            W.HTML("<b>Take</b>"), self.path, self.map_path, W.HBox([self.units, self.load_button]), self.info,
             self.frame, W.HBox([self.l1, self.temporal]), self.adapt,
             W.HBox([self.track_button, self.tolerance, self.apply_button]), self.progress, self.plot,
+            W.HBox([self.adapted_path, self.save_adapted_button]),
         ]
         self.on_close(self._clear_points)
         self.refresh()
@@ -122,11 +132,12 @@ class CapturePanel(ModelPanel):
         p = Path(str(path).strip())
         if not str(path).strip():
             raise ValueError("Load take: type the path of a take first")
+        units = self.units.value or None
         if p.is_dir() or p.suffix.lower() == ".ply":
-            clouds = inputs.read_point_clouds(p)
+            clouds = inputs.read_point_clouds(p, units=units)
             frames = inputs.to_model_units(clouds, self.model)
             return self.set_take(frames, fps=clouds.fps, name=p.name)
-        seq = inputs.read_markers(p)
+        seq = inputs.read_markers(p, units=units)
         if vertex_map is None:
             raise ValueError(f"Load take {p.name}: markers need a marker → vertex map (.csv or .json)")
         ids = inputs.read_vertex_map(vertex_map, seq.names, self.model.n_vertices)
@@ -220,6 +231,18 @@ class CapturePanel(ModelPanel):
         self.progress.finish(f"applied {self.result.n_frames} frames to the timeline (undo: one step)")
         return 0.0
 
+    def save_adapted(self, path: str) -> Path:
+        """Save the rig the cloud tracker adapted to the actor (a new ``.fwb``; this model is not changed)."""
+        adapted = None if self.result is None else self.result.info.get("adapted")
+        if adapted is None:
+            raise ValueError("Save adapted rig: track point clouds with 'Adapt the rig' on first")
+        out = Path(str(path).strip() or "adapted_rig.fwb")
+        if out.suffix.lower() != ".fwb":
+            raise ValueError(f"Save adapted rig: {out.name}: expected a .fwb path")
+        adapted.to_model().save(out)
+        self.progress.finish(f"saved the adapted rig to {html.escape(str(out))}")
+        return out
+
     # ------------------------------------------------------------------ display
     def _on_time(self, t: float) -> None:
         if self.take is None or self.applied_start is None:
@@ -271,3 +294,5 @@ class CapturePanel(ModelPanel):
         self.track_button.disabled = t is None
         self.apply_button.disabled = self.result is None
         self.adapt.disabled = t is None or t["kind"] != "clouds"
+        has_adapted = self.result is not None and self.result.info.get("adapted") is not None
+        self.save_adapted_button.disabled = not has_adapted
