@@ -93,6 +93,21 @@ def test_project_segments_far_from_origin():
     assert T[0, 3] == pytest.approx(0.3, abs=1e-8)
 
 
+def test_project_segments_matches_a_direct_loop():
+    # eq. 5 written out per segment, on a take with a hold (β_2 = β_3) and small steps far from the origin
+    rng = np.random.default_rng(7)
+    beta = np.cumsum(rng.normal(scale=0.01, size=(9, 15)), axis=0) + 500.0
+    beta[3] = beta[2]
+    alpha = beta[[1, 4, 7]] + rng.normal(scale=0.005, size=(3, 15))
+    T, E = project_segments(alpha, beta)
+    for i in range(3):
+        for j in range(8):
+            d = beta[j] - beta[j + 1]
+            t = 0.0 if j == 2 else np.clip((alpha[i] - beta[j + 1]) @ d / (d @ d), 0.0, 1.0)
+            assert T[i, j] == pytest.approx(t, abs=1e-6)
+            assert E[i, j] == pytest.approx(np.linalg.norm(alpha[i] - (t * beta[j] + (1 - t) * beta[j + 1])), rel=1e-6)
+
+
 def test_sequence_projection_matches_brute_force():
     rng = np.random.default_rng(1)
     for _ in range(5):

@@ -141,25 +141,24 @@ def project_segments(alpha: ArrayLike, beta: ArrayLike) -> tuple[NDArray[np.floa
     c = a.mean(axis=0)
     a = a - c
     b = b - c
-    nxt = b[1:]
-    d = b[:-1] - nxt  # (n-1, d): β_j − β_j+1
-    dd = np.einsum("jd,jd->j", d, d)
-    nn = np.einsum("jd,jd->j", nxt, nxt)
+    # everything from three inner products — |β_j|², <β_j, β_j+1>, <α_i, β_j> — so the database is read
+    # three times and never differenced into a copy (a 10k-frame mesh take is memory-bound)
+    g = np.einsum("jd,jd->j", b, b)
+    cj = np.einsum("jd,jd->j", b[:-1], b[1:])
+    p = a @ b.T  # (m, n)
     an = np.einsum("id,id->i", a, a)
-    # |α − β_j+1|² and <α − β_j+1, d> from inner products: one (m, d) × (d, n-1) product each
-    r2 = an[:, None] - 2.0 * (a @ nxt.T) + nn[None, :]
-    rd = a @ d.T - np.einsum("jd,jd->j", nxt, d)[None, :]
+    dd = g[:-1] - 2.0 * cj + g[1:]  # |β_j − β_j+1|²
+    r2 = an[:, None] - 2.0 * p[:, 1:] + g[None, 1:]  # |α_i − β_j+1|²
+    rd = p[:, :-1] - p[:, 1:] - (cj - g[1:])[None, :]  # <α_i − β_j+1, β_j − β_j+1>
+    # a hold (β_j = β_j+1) is dd = 0 up to rounding of g: relative threshold; its t is irrelevant (0)
+    moving = dd > 1e-12 * (g[:-1] + g[1:]) + 1e-300
+    dd = np.where(moving, dd, 0.0)
     with np.errstate(invalid="ignore", divide="ignore"):
-        t = np.where(dd > _EPS, rd / np.where(dd > _EPS, dd, 1.0), 0.0)
+        t = np.where(moving, rd / np.where(moving, dd, 1.0), 0.0)
     t = np.clip(t, 0.0, 1.0)
     e2 = r2 - 2.0 * t * rd + t * t * dd[None, :]
     E = np.sqrt(np.maximum(e2, 0.0))
     return t, E
-
-
-def _exact_error(alpha: NDArray[np.float64], beta: NDArray[np.float64], j: int, t: float) -> float:
-    p = t * beta[j] + (1.0 - t) * beta[j + 1]
-    return float(np.linalg.norm(alpha - p))
 
 
 def sequence_projection(alpha: ArrayLike, beta: ArrayLike) -> tuple[NDArray[np.intp], NDArray[np.float64], float]:
@@ -253,38 +252,66 @@ def _validate(
     return seqs, s.reshape(-1), e.reshape(-1), s.shape
 
 
-def _match_pair(keys: NDArray[np.float64], beta: NDArray[np.float64]) -> tuple[float, float, float] | None:
-    """Best ``(error, τ0, τ1)`` of the two keys on one sequence with ``τ1 > τ0``, or None.
+def _segment_tables(
+    keys: NDArray[np.float64], seqs: list[NDArray[np.float64]], batch: int = 1 << 15
+) -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
+    """Eq. 5 of the keys on every segment of every take, ``(T, E)`` per take.
 
-    Among (numerically) equal minima — holds, or a take that passes the end
-    pose on the way out and on the way back — the tightest span wins: the
-    latest start and the earliest end.
+    Short takes are concatenated into batches of about ``batch`` numbers (one
+    numpy pass per batch instead of one per take; small enough, 256 kB, to stay
+    in cache through the passes of :func:`project_segments`); segments that
+    would join two takes are sliced away.
     """
-    T, E = project_segments(keys, beta)
+    out = []
+    i = 0
+    while i < len(seqs):
+        j, size = i + 1, seqs[i].size
+        while j < len(seqs) and size + seqs[j].size <= batch:
+            size += seqs[j].size
+            j += 1
+        group = seqs[i:j]
+        T, E = project_segments(keys, group[0] if len(group) == 1 else np.concatenate(group))
+        off = 0
+        for g in group:
+            n = g.shape[0]
+            out.append((T[:, off : off + n - 1], E[:, off : off + n - 1]))
+            off += n
+        i = j
+    return out
+
+
+def _match_pair(T: NDArray[np.float64], E: NDArray[np.float64], scale: float) -> tuple[float, float, float] | None:
+    """Best ``(error, τ0, τ1)`` of the two keys on one take with ``τ1 > τ0``, or None.
+
+    ``T``, ``E`` : (2, n - 1), eq. 5 of the keys on the take. Among
+    (numerically) equal minima — holds, or a take that passes the end pose on
+    the way out and on the way back — the tightest span wins: the latest start
+    and the earliest end.
+    """
     J = E.shape[1]
     t0 = 1.0 - T[0]  # offset inside the segment
     t1 = 1.0 - T[1]
-    scale = float(np.linalg.norm(keys[1] - keys[0]))
-    cands: list[tuple[float, int, int]] = []
+    cands: list[tuple[int, int]] = []
     if J > 1:
         # the start on an earlier segment than the end: strict prefix minimum of the start's error
         run = np.minimum.accumulate(E[0][:-1])
         cost = E[1][1:] + run
-        tol = 1e-9 * (float(cost.min()) + scale)
-        k = int(np.flatnonzero(cost <= cost.min() + tol)[0])  # the earliest end
+        mn = float(cost.min())
+        tol = 1e-9 * (mn + scale)
+        k = int(np.flatnonzero(cost <= mn + tol)[0])  # the earliest end
         j0 = int(np.flatnonzero(E[0][: k + 1] <= run[k] + tol)[-1])  # the latest start before it
-        cands.append((float(cost[k]), j0, k + 1))
+        cands.append((j0, k + 1))
     # the start and the end on one segment, the end later in it
     same = np.where(t1 > t0 + 1e-9, E[0] + E[1], np.inf)
     k = int(np.argmin(same))
     if np.isfinite(same[k]):
-        cands.append((float(same[k]), k, k))
+        cands.append((k, k))
     best: tuple[float, float, float] | None = None
-    for _, j0, j1 in cands:
+    for j0, j1 in cands:
         tau0, tau1 = j0 + float(t0[j0]), j1 + float(t1[j1])
         if tau1 <= tau0:  # the start at the very end of its segment, the end at the very start of the next
             continue
-        err = _exact_error(keys[0], beta, j0, float(T[0, j0])) + _exact_error(keys[1], beta, j1, float(T[1, j1]))
+        err = float(E[0, j0] + E[1, j1])
         tol = 1e-9 * (err + scale)
         if best is None or err < best[0] - tol or (err <= best[0] + tol and tau1 - tau0 < best[2] - best[1]):
             best = (err, tau0, tau1)
@@ -383,14 +410,17 @@ def retime(
     """
     seqs, s_vec, e_vec, shape = _validate(database, start, end, n_frames)
     keys = np.vstack([s_vec, e_vec])
+    scale = float(np.linalg.norm(e_vec - s_vec))
     best: tuple[float, int, float, float] | None = None
-    for i, beta in enumerate(seqs):
-        m = _match_pair(keys, beta)
+    for i, (T, E) in enumerate(_segment_tables(keys, seqs)):
+        m = _match_pair(T, E, scale)
         if m is not None and (best is None or m[0] < best[0]):
             best = (m[0], i, m[1], m[2])
     if best is None:
         raise ValueError("database: no sequence moves from start towards end (every match is backwards in time)")
-    err, i, tau0, tau1 = best
+    _, i, tau0, tau1 = best
+    # the reported error exactly (eq. 5's inner-product expansion is only used to choose)
+    err = float(np.linalg.norm(s_vec - _at(seqs[i], tau0)) + np.linalg.norm(e_vec - _at(seqs[i], tau1)))
     if extend:
         tau0, tau1 = _extend(seqs[i], tau0, tau1)
     s, times = _progress_curve(seqs[i], tau0, tau1, int(n_frames))
