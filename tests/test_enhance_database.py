@@ -1,0 +1,271 @@
+"""PerformanceDatabase (Bermano et al. 2014, §4): frequency separation, detail encoding, patches, files.
+
+Ground truth is generated: spheres with known curvature and bumps, and the
+procedural wrinkled poses of the sample head (``WrinkleSculptor``) whose smooth
+blends are known exactly.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import igl
+import numpy as np
+import pytest
+import trimesh
+from scipy.sparse.csgraph import connected_components
+
+import workbench
+from workbench.enhance.database import DatabaseError, PerformanceDatabase
+from workbench.enhance.frequency import CurvatureFlowFilter
+from workbench.enhance.gradients import deformation_gradients, rigid_align
+from workbench.enhance.patches import face_patches, grow_patches
+from workbench.methods.wrinkles.examples import EXAMPLE_POSES, WrinkleSculptor
+
+
+def _sphere(radius: float, subdivisions: int = 5) -> tuple[np.ndarray, np.ndarray]:
+    s = trimesh.creation.icosphere(subdivisions=subdivisions, radius=radius)
+    return np.asarray(s.vertices, np.float64), np.asarray(s.faces, np.int64)
+
+
+def _bumpy(V: np.ndarray, radius: float, amplitude: float, wavelength: float) -> np.ndarray:
+    k = 2 * np.pi / wavelength
+    u = V / np.linalg.norm(V, axis=1, keepdims=True)
+    bump = amplitude * np.sin(k * V[:, 0]) * np.sin(k * V[:, 1]) * np.sin(k * V[:, 2])
+    return u * (radius + bump)[:, None]
+
+
+def _energy(H: np.ndarray, areas: np.ndarray) -> float:
+    d = np.sum((np.asarray(H, np.float64) - np.eye(3)) ** 2, axis=(1, 2))
+    return float((areas * d).sum() / areas.sum())
+
+
+def _tilt(H: np.ndarray, areas: np.ndarray) -> float:
+    """Area-weighted mean sin² of the angle between detailed and low-frequency triangle normals."""
+    h = np.asarray(H, np.float64)
+    c = np.cross(h[:, :, 0], h[:, :, 1])
+    c /= np.linalg.norm(c, axis=1, keepdims=True)
+    return float((areas * (1 - c[:, 2] ** 2)).sum() / areas.sum())
+
+
+# --------------------------------------------------------------------------- frequency separation
+
+
+@pytest.mark.parametrize(("radius", "metres_per_unit"), [(100.0, 1e-3), (1.0, 0.1), (0.1, 1.0)])
+def test_flow_sign_and_scale_pinned_on_a_smooth_sphere(radius: float, metres_per_unit: float) -> None:
+    # A 10 cm sphere in mm, dm or m: (2A_i − λdt L) X = 2A_i X0 shrinks it by 1 / (1 + λdt / (3 r²)),
+    # λdt = 125 mm². The printed sign of eq. 1 would grow it; the igl mass instead of 2A_i would
+    # shrink 6x more.
+    V, F = _sphere(radius)
+    flt = CurvatureFlowFilter(125.0, metres_per_unit=metres_per_unit, uniform_steps=0).fit(V, F)
+    low = flt.transform(V)
+    ratio = np.linalg.norm(low, axis=1) / radius
+    r_mm = radius * metres_per_unit * 1e3
+    expected = 1.0 / (1.0 + 125.0 / (3 * r_mm**2))
+    assert ratio.std() < 1e-3 * (1 - expected)
+    assert abs((1 - ratio.mean()) / (1 - expected) - 1) < 0.05
+    assert ratio.mean() > 0.99  # ~unchanged
+
+
+def test_flow_removes_bumps_and_the_detail_band_of_a_smooth_sphere_is_empty() -> None:
+    R = 100.0  # mm, a head-sized sphere; edges ~3.4 mm, bumps 1 mm high on a 15 mm wavelength
+    V, F = _sphere(R)
+    bumpy = _bumpy(V, R, 1.0, 15.0)
+    flt = CurvatureFlowFilter(125.0).fit(V, F)
+    low = flt.transform(bumpy)
+    bumps_before = np.linalg.norm(bumpy, axis=1) - R
+    r = np.linalg.norm(low, axis=1)
+    bumps_after = r - r.mean()
+    # one step with λdt = 125 mm² damps a mode of surface-Laplacian eigenvalue κ by 1 / (1 + λdt κ / 6):
+    # ~1/8 for these bumps (κ ≈ 2 (2π/15)² mm⁻²)
+    rms = np.sqrt(np.mean(bumps_after**2) / np.mean(bumps_before**2))
+    assert 0.05 < rms < 0.2
+    assert np.abs(bumps_after).max() < 0.25 * np.abs(bumps_before).max()
+    db = PerformanceDatabase.from_frames(V, F, np.stack([V, bumpy]), patch_size=50)
+    A = igl.doublearea(V, F)
+    smooth, rough = _energy(db.detail_[0], A), _energy(db.detail_[1], A)
+    assert smooth < 1e-2  # a uniform ~0.5 % shrink plus the umbrella step's tangential slide
+    assert rough > 10 * smooth
+    # the surface part of the detail band: tilt of each detailed triangle against its low-frequency one
+    tilt_smooth, tilt_rough = _tilt(db.detail_[0], A), _tilt(db.detail_[1], A)
+    assert tilt_smooth < 1e-5
+    assert tilt_rough > 1e3 * tilt_smooth
+
+
+def test_constants_are_kept_and_the_filter_commutes_with_affine_maps() -> None:
+    V, F = _sphere(100.0, 3)
+    X = _bumpy(V, 100.0, 2.0, 30.0)
+    flt = CurvatureFlowFilter(125.0).fit(V, F)
+    c = np.array([3.0, -1.0, 7.5])
+    np.testing.assert_allclose(flt.transform(np.tile(c, (len(V), 1))), np.tile(c, (len(V), 1)), atol=1e-9)
+    A = np.array([[1.2, 0.1, 0.0], [0.0, 0.9, 0.3], [0.2, 0.0, 1.1]])
+    np.testing.assert_allclose(flt.transform(X @ A.T + c), flt.transform(X) @ A.T + c, atol=1e-8)
+    stack = flt.transform(np.stack([X, X @ A.T]))
+    np.testing.assert_allclose(stack[0], flt.transform(X), atol=1e-10)
+
+
+# --------------------------------------------------------------------------- the head database
+
+
+@pytest.fixture(scope="module")
+def head() -> dict[str, object]:
+    model = workbench.load_sample("head", "25k")
+    sculptor = WrinkleSculptor(model)
+    V = np.asarray(model.vertices, np.float64)
+    F = np.asarray(model.faces, np.int64)
+    poses = list(EXAMPLE_POSES.values())
+    frames = np.stack([sculptor.detailed(w) for w in poses]).astype(np.float64)
+    smooth = np.stack([sculptor.blend(w) for w in poses])
+    db = PerformanceDatabase.from_frames(sculptor.detail_of(V), F, frames, metres_per_unit=0.1)
+    return {"model": model, "V": V, "F": F, "frames": frames, "smooth": smooth, "db": db}
+
+
+def test_low_plus_high_frequency_gradients_reconstruct_the_detailed_frame(head: dict) -> None:
+    db: PerformanceDatabase = head["db"]  # type: ignore[assignment]
+    frames = head["frames"]
+    for i in range(len(frames)):
+        low = db.lowpass(frames[i])
+        assert np.abs(low - frames[i]).max() > 1e-3  # the split is not trivial
+        x = db.reconstruct(db.compose(db.detail_[i], low), frames[i])
+        assert np.abs(x - frames[i]).max() < 1e-6  # dm: 0.1 µm
+        placed = db.frame(i, low)  # placed at the low frame: a translation per piece only
+        shift = placed - x
+        _, piece = connected_components(igl.adjacency_matrix(db.faces_), directed=False)
+        for p in np.unique(piece):
+            s = shift[piece == p]
+            assert np.abs(s - s[0]).max() < 1e-6
+
+
+def test_detail_of_a_wrinkled_pose_moves_a_smooth_blend_toward_the_truth(head: dict) -> None:
+    # §5 with the exact match: the detail of pose i put onto the low band of its smooth blend.
+    db: PerformanceDatabase = head["db"]  # type: ignore[assignment]
+    frames, smooth = head["frames"], head["smooth"]
+    ratios = []
+    for i in range(len(frames)):
+        wrinkled = np.linalg.norm(frames[i] - smooth[i], axis=1) > 1e-3
+        x = db.reconstruct(db.compose(db.detail_[i], db.lowpass(smooth[i])), smooth[i])
+        before = np.linalg.norm(smooth[i] - frames[i], axis=1)[wrinkled].mean()
+        after = np.linalg.norm(x - frames[i], axis=1)[wrinkled].mean()
+        ratios.append(after / before)
+    # brows ~7-9x closer; around the mouth (nasolabial fold, lips) 2-2.5x: the deep folds keep a
+    # low-frequency part that the smooth blend lacks
+    assert max(ratios) < 0.7, ratios
+    assert min(ratios) < 0.2, ratios
+    assert np.mean(ratios) < 0.4, ratios
+
+
+def test_detail_and_features_ignore_rigid_motions(head: dict) -> None:
+    db: PerformanceDatabase = head["db"]  # type: ignore[assignment]
+    frames = head["frames"][:2]
+    R = trimesh.transformations.rotation_matrix(0.4, [0.3, 1.0, 0.2])[:3, :3]
+    moved = frames @ R.T + np.array([0.5, -2.0, 1.0])
+    db2 = PerformanceDatabase.from_frames(db.neutral_, db.faces_, moved, metres_per_unit=0.1)
+    np.testing.assert_allclose(db2.detail_, db.detail_[:2], atol=2e-4)
+    np.testing.assert_allclose(db2.features_, db.features_[:2], atol=1e-6)
+
+
+def test_features_are_patch_means_of_low_frequency_gradients(head: dict) -> None:
+    db: PerformanceDatabase = head["db"]  # type: ignore[assignment]
+    np.testing.assert_allclose(db.encode(db.neutral_low_), np.tile(np.eye(3).ravel(), (db.n_patches_, 1)), atol=1e-9)
+    low = db.lowpass(head["frames"][3])
+    Rm, t = rigid_align(low, db.neutral_low_)
+    T = deformation_gradients(db.neutral_low_, db.faces_, low @ Rm.T + t).reshape(-1, 9)
+    A = igl.doublearea(db.neutral_low_, db.faces_)
+    p = db.face_patch_ == 7
+    np.testing.assert_allclose(db.features_[3, 7], (A[p, None] * T[p]).sum(0) / A[p].sum(), atol=1e-9)
+    assert db.features_.shape == (6, db.n_patches_, 9)
+    # frames differ from each other in the shape space
+    assert np.abs(db.features_[0] - db.features_[3]).max() > 1e-2
+
+
+def test_patches_cover_every_vertex_once_near_the_size_and_connected(head: dict) -> None:
+    V, F = head["V"], head["F"]
+    lab = grow_patches(V, F, 100, seed=3)
+    assert lab.shape == (len(V),) and lab.min() == 0
+    counts = np.bincount(lab)
+    assert np.all(counts > 0)
+    assert abs(len(V) / len(counts) - 100) < 15
+    assert 70 <= np.median(counts) <= 130
+    assert counts.max() < 3 * 100
+    adj = igl.adjacency_matrix(F).tocsr()
+    for p in range(len(counts)):
+        ids = np.flatnonzero(lab == p)
+        assert connected_components(adj[ids][:, ids], directed=False)[0] == 1, p
+    fl = face_patches(F, lab)
+    assert np.all((fl == lab[F[:, 0]]) | (fl == lab[F[:, 1]]))
+
+
+def test_regions_give_the_normal_matrices_of_eq3(head: dict) -> None:
+    db0: PerformanceDatabase = head["db"]  # type: ignore[assignment]
+    V = head["V"]
+    left = np.clip((V[:, 0] - 0.0) / 0.2, 0, 1)  # a soft left half, per vertex
+    db = PerformanceDatabase.from_frames(
+        db0.neutral_, db0.faces_, head["frames"], regions={"left": left, "right": left[::-1] * 0 + 1 - left},
+        metres_per_unit=0.1,
+    )
+    assert db.region_names_ == ["left", "right"]
+    w = db.region_weights_[0].astype(np.float64)
+    A = igl.doublearea(db.neutral_low_, db.faces_)
+    P = db.n_patches_
+    wp = np.bincount(db.face_patch_, A * w, P) / np.bincount(db.face_patch_, A, P)
+    Dt = db.features_.reshape(len(head["frames"]), -1).T  # columns are frames, as in the paper
+    gram = Dt.T @ np.diag(np.repeat(wp, 9)) @ Dt
+    np.testing.assert_allclose(db.region_gram_[0], gram, rtol=1e-10)
+    np.testing.assert_allclose(db.region_gram_.sum(0), db0.region_gram_[0], rtol=1e-8)
+
+
+def test_save_load_round_trip_is_exact(head: dict, tmp_path: Path) -> None:
+    db: PerformanceDatabase = head["db"]  # type: ignore[assignment]
+    path = db.save(tmp_path / "db.npz")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["db.npz"]  # no temp file left
+    with np.load(path, allow_pickle=False) as z:
+        assert all(z[k].dtype != object for k in z.files)
+    back = PerformanceDatabase.load(path)
+    for name in ("neutral_", "faces_", "detail_", "features_", "vertex_patch_", "face_patch_", "region_weights_",
+                 "neutral_low_", "region_gram_", "region_patch_weights_"):
+        a, b = getattr(db, name), getattr(back, name)
+        assert a.dtype == b.dtype and np.array_equal(a, b), name
+    assert back.region_names_ == db.region_names_
+    assert (back.patch_size, back.lambda_dt, back.metres_per_unit) == (db.patch_size, db.lambda_dt, db.metres_per_unit)
+    low = db.lowpass(head["frames"][1])
+    np.testing.assert_array_equal(back.frame(1, low), db.frame(1, low))
+
+
+def test_load_rejects_other_files(tmp_path: Path) -> None:
+    np.savez(tmp_path / "other.npz", a=np.zeros(3))
+    with pytest.raises(DatabaseError, match="path"):
+        PerformanceDatabase.load(tmp_path / "other.npz")
+    with pytest.raises(DatabaseError, match="path"):
+        PerformanceDatabase.load(tmp_path / "missing.npz")
+
+
+# --------------------------------------------------------------------------- bad input
+
+
+def test_bad_input_gives_clear_errors() -> None:
+    V, F = _sphere(10.0, 2)
+    ok = np.stack([V, V * 1.01])
+    with pytest.raises(DatabaseError, match=r"frames have 10 vertices.*neutral has"):
+        PerformanceDatabase.from_frames(V, F, np.zeros((2, 10, 3)))
+    with pytest.raises(DatabaseError, match="frames is empty"):
+        PerformanceDatabase.from_frames(V, F, np.zeros((0, len(V), 3)))
+    bad = ok.copy()
+    bad[1, 5, 2] = np.nan
+    with pytest.raises(DatabaseError, match=r"frames contains NaN.*frame 1"):
+        PerformanceDatabase.from_frames(V, F, bad)
+    with pytest.raises(DatabaseError, match="pass frames\\[None\\]"):
+        PerformanceDatabase.from_frames(V, F, V)
+    with pytest.raises(DatabaseError, match="faces index vertices"):
+        PerformanceDatabase.from_frames(V, F + 1, ok)
+    with pytest.raises(DatabaseError, match="faces must be integer"):
+        PerformanceDatabase.from_frames(V, F.astype(float), ok)
+    with pytest.raises(DatabaseError, match="neutral contains NaN"):
+        PerformanceDatabase.from_frames(np.where(V == V[0], np.nan, V), F, ok)
+    with pytest.raises(DatabaseError, match="patch_size"):
+        PerformanceDatabase.from_frames(V, F, ok, patch_size=0)
+    with pytest.raises(DatabaseError, match="regions\\['a'\\] must hold one weight per vertex"):
+        PerformanceDatabase.from_frames(V, F, ok, regions={"a": np.ones(7)})
+    with pytest.raises(DatabaseError, match="regions\\['a'\\] is zero everywhere"):
+        PerformanceDatabase.from_frames(V, F, ok, regions={"a": np.zeros(len(V))})
+    with pytest.raises(DatabaseError, match="regions is empty"):
+        PerformanceDatabase.from_frames(V, F, ok, regions={})

@@ -1,0 +1,174 @@
+"""Per-triangle deformation gradients, local triangle frames and the Poisson reconstruction.
+
+Deformation gradients follow Sumner & Popović 2004: a triangle ``(v1, v2, v3)``
+gets a fourth vertex along its normal scaled by ``1/sqrt(|e1 × e2|)``, and the
+gradient from a rest triangle to a deformed one is ``T = Ṽ V⁻¹`` with
+``V = [e1, e2, n]``. ``T`` maps both rest edges onto the deformed edges exactly.
+
+Reconstruction (Bermano et al. 2014, §5.5; Botsch et al. 2006): the positions
+whose piecewise-linear gradient over a reference mesh is closest to per-triangle
+target Jacobians ``J_t`` in the area-weighted least-squares sense,
+``(Gᵀ W G) x = Gᵀ W b`` with libigl's gradient ``G`` and triangle areas ``W``.
+The matrix is built and factored once on the reference mesh (back-substitution
+only per frame). It is singular along translations of each connected piece; a
+tiny ``ε D`` anchor term makes it positive definite and each piece is then moved
+so its area-weighted mean equals the anchor's. When the targets are the exact
+Jacobians of some mesh ``x`` (``J_t`` maps the reference triangle onto ``x``'s),
+the solve returns ``x`` up to that translation and round-off.
+
+Hand-written because the operators are batched numpy over libigl's ``grad``
+and ``doublearea``; no library ships deformation-gradient encoding.
+"""
+
+from __future__ import annotations
+
+import igl
+import numpy as np
+import scipy.sparse as sp
+from numpy.typing import ArrayLike, NDArray
+from scipy.sparse.csgraph import connected_components
+
+from workbench.enhance.frequency import lumped_areas
+from workbench.geometry.sparse_cholesky import Backend, SparseSPDSolver
+
+__all__ = [
+    "PoissonReconstructor",
+    "deformation_gradients",
+    "frame_inverses",
+    "frame_matrices",
+    "local_frames",
+    "rigid_align",
+]
+
+
+def frame_matrices(X: NDArray[np.float64], F: NDArray[np.int64]) -> NDArray[np.float64]:
+    """Sumner–Popović ``[e1, e2, n/sqrt|n|]`` as columns, (m, 3, 3)."""
+    p0 = X[F[:, 0]]
+    e1 = X[F[:, 1]] - p0
+    e2 = X[F[:, 2]] - p0
+    n = np.cross(e1, e2)
+    nn = np.sqrt(np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300))
+    return np.stack([e1, e2, n / nn], axis=2)
+
+
+def frame_inverses(E: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Inverse of each frame matrix; degenerate triangles (zero area) get a zero inverse."""
+    det = np.linalg.det(E)
+    scale = np.einsum("mij,mij->m", E, E) ** 1.5
+    ok = np.abs(det) > 1e-12 * np.maximum(scale, 1e-300)
+    inv = np.zeros_like(E)
+    inv[ok] = np.linalg.inv(E[ok])
+    return inv
+
+
+def deformation_gradients(
+    rest: ArrayLike, F: ArrayLike, X: ArrayLike, *, rest_inverse: NDArray[np.float64] | None = None
+) -> NDArray[np.float64]:
+    """Per-triangle deformation gradients from ``rest`` (n, 3) to ``X`` (n, 3), (m, 3, 3).
+
+    Degenerate rest triangles get the identity.
+    """
+    f = np.asarray(F, np.int64)
+    inv = frame_inverses(frame_matrices(np.asarray(rest, np.float64), f)) if rest_inverse is None else rest_inverse
+    T = frame_matrices(np.asarray(X, np.float64), f) @ inv
+    bad = ~np.any(inv, axis=(1, 2))
+    T[bad] = np.eye(3)
+    return T
+
+
+def local_frames(X: ArrayLike, F: ArrayLike) -> NDArray[np.float64]:
+    """Orthonormal per-triangle frames ``R = [t1, t2, n]`` (columns), (m, 3, 3), right-handed.
+
+    ``t1`` along the first edge, ``n`` the unit normal; degenerate triangles get the identity.
+    """
+    x = np.asarray(X, np.float64)
+    f = np.asarray(F, np.int64)
+    e1 = x[f[:, 1]] - x[f[:, 0]]
+    e2 = x[f[:, 2]] - x[f[:, 0]]
+    n = np.cross(e1, e2)
+    ln = np.linalg.norm(n, axis=1)
+    l1 = np.linalg.norm(e1, axis=1)
+    ok = (ln > 1e-300) & (l1 > 1e-300)
+    R = np.tile(np.eye(3), (f.shape[0], 1, 1))
+    t1 = e1[ok] / l1[ok, None]
+    nz = n[ok] / ln[ok, None]
+    R[ok] = np.stack([t1, np.cross(nz, t1), nz], axis=2)
+    return R
+
+
+def rigid_align(X: ArrayLike, target: ArrayLike, weights: ArrayLike | None = None) -> tuple[NDArray, NDArray]:
+    """Rotation ``R`` (3, 3) and translation ``t`` (3,) minimising ``Σ w |R x + t − y|²`` (Horn/Kabsch)."""
+    x = np.asarray(X, np.float64)
+    y = np.asarray(target, np.float64)
+    w = np.ones(x.shape[0]) if weights is None else np.asarray(weights, np.float64)
+    w = w / w.sum()
+    cx, cy = w @ x, w @ y
+    H = (x - cx).T @ ((y - cy) * w[:, None])
+    U, _, Vt = np.linalg.svd(H)
+    s = np.sign(np.linalg.det(Vt.T @ U.T))
+    R = Vt.T @ np.diag([1.0, 1.0, s]) @ U.T
+    return R, cy - R @ cx
+
+
+class PoissonReconstructor:
+    """Positions from per-triangle Jacobians over a reference mesh, factored once.
+
+    Parameters
+    ----------
+    epsilon : float
+        Relative weight of the anchor term (``ε`` times the mean ratio of the
+        Laplacian and area diagonals).
+    backend : {"auto", "cholmod", "superlu"}
+
+    Attributes
+    ----------
+    solver_ : SparseSPDSolver
+    pieces_ : (n,) int
+        Connected piece of each vertex.
+    """
+
+    def __init__(self, epsilon: float = 1e-9, *, backend: Backend = "auto") -> None:
+        self.epsilon = epsilon
+        self.backend = backend
+
+    def fit(self, V: ArrayLike, F: ArrayLike) -> PoissonReconstructor:
+        """Build ``Gᵀ W G + ε D`` on the reference mesh and factor it."""
+        v = np.ascontiguousarray(V, np.float64)
+        f = np.ascontiguousarray(F, np.int64)
+        n, m = v.shape[0], f.shape[0]
+        G = sp.csr_matrix(igl.grad(v, f))
+        if G.shape[1] < n:
+            G.resize((3 * m, n))
+        area = 0.5 * np.asarray(igl.doublearea(v, f)).ravel()
+        self._GtW = sp.csr_matrix(G.T @ sp.diags(np.tile(area, 3)))
+        K = sp.csr_matrix(self._GtW @ G)
+        d = lumped_areas(v, f)
+        d = np.where(d > 0, d, 1.0)  # isolated vertices: the anchor alone holds them
+        eps = float(self.epsilon) * float(np.mean(np.abs(K.diagonal()))) / float(np.mean(d))
+        self._anchor = eps * d
+        self._d = d
+        self.solver_ = SparseSPDSolver(sp.csc_matrix(K + sp.diags(self._anchor)), backend=self.backend)
+        self.n_pieces_, self.pieces_ = connected_components(igl.adjacency_matrix(f), directed=False)
+        if len(self.pieces_) < n:  # trailing isolated vertices
+            extra = np.arange(n - len(self.pieces_)) + self.n_pieces_
+            self.pieces_ = np.concatenate([self.pieces_, extra])
+            self.n_pieces_ += len(extra)
+        self._n, self._m = n, m
+        return self
+
+    def solve(self, jacobians: ArrayLike, anchor: ArrayLike) -> NDArray[np.float64]:
+        """Positions (n, 3) whose gradients best match ``jacobians`` (m, 3, 3), placed at ``anchor`` (n, 3)."""
+        J = np.asarray(jacobians, np.float64)
+        a = np.asarray(anchor, np.float64)
+        if J.shape != (self._m, 3, 3):
+            raise ValueError(f"jacobians must be ({self._m}, 3, 3), got {J.shape}")
+        if a.shape != (self._n, 3):
+            raise ValueError(f"anchor must be ({self._n}, 3), got {a.shape}")
+        # b[d*m + t, k] = J_t[k, d]  (libigl's grad stacks all x-derivatives, then y, then z)
+        b = J.transpose(2, 0, 1).reshape(3 * self._m, 3)
+        x = self.solver_.solve(self._GtW @ b + self._anchor[:, None] * a)
+        w = self._d
+        num = np.zeros((self.n_pieces_, 3))
+        np.add.at(num, self.pieces_, w[:, None] * (a - x))
+        den = np.bincount(self.pieces_, weights=w, minlength=self.n_pieces_)
+        return np.asarray(x + (num / den[:, None])[self.pieces_])
