@@ -80,6 +80,10 @@ from numpy.typing import ArrayLike, NDArray
 __all__ = ["RetimeResult", "project_segments", "retime", "sequence_projection"]
 
 _EPS = 1e-12
+# placements of the keys whose errors differ by less than this (relative to |end − start|) are ties
+# (holds, a take passing the end pose twice); larger values trim real, if slow, motion off the span
+_TIE = 1e-9
+_CHORD_BUDGET = 4_000_000  # entries of the (chord samples, segments) tables of §6.2
 
 
 @dataclass(frozen=True)
@@ -297,7 +301,7 @@ def _match_pair(T: NDArray[np.float64], E: NDArray[np.float64], scale: float) ->
         run = np.minimum.accumulate(E[0][:-1])
         cost = E[1][1:] + run
         mn = float(cost.min())
-        tol = 1e-9 * (mn + scale)
+        tol = _TIE * (mn + scale)
         k = int(np.flatnonzero(cost <= mn + tol)[0])  # the earliest end
         j0 = int(np.flatnonzero(E[0][: k + 1] <= run[k] + tol)[-1])  # the latest start before it
         cands.append((j0, k + 1))
@@ -312,7 +316,7 @@ def _match_pair(T: NDArray[np.float64], E: NDArray[np.float64], scale: float) ->
         if tau1 <= tau0:  # the start at the very end of its segment, the end at the very start of the next
             continue
         err = float(E[0, j0] + E[1, j1])
-        tol = 1e-9 * (err + scale)
+        tol = _TIE * (err + scale)
         if best is None or err < best[0] - tol or (err <= best[0] + tol and tau1 - tau0 < best[2] - best[1]):
             best = (err, tau0, tau1)
     return best
@@ -329,9 +333,11 @@ def _progress_curve(beta: NDArray[np.float64], tau0: float, tau1: float, n_frame
     inner = np.arange(int(np.floor(tau0)) + 1, int(np.ceil(tau1)))
     node_t = np.concatenate([[tau0], inner.astype(np.float64), [tau1]])
     sub = np.vstack([_at(beta, tau0)[None], beta[inner], _at(beta, tau1)[None]])
-    # the paper samples the chord n_frames times; sampled at least 4x per frame of the sub-sequence the
-    # piecewise-linear inverse keeps the take's slow ends when n_frames is small (same curve otherwise)
-    n_chord = max(n_frames, int(np.ceil(4.0 * (tau1 - tau0))) + 1)
+    # the paper samples the chord n_frames times; sampled 4x per frame of the sub-sequence the
+    # piecewise-linear inverse keeps the take's slow ends when n_frames is small (same curve otherwise).
+    # The eq. 5 tables are (n_chord, segments): the oversampling is capped at ~4M entries.
+    n_seg = sub.shape[0] - 1
+    n_chord = max(n_frames, min(int(np.ceil(4.0 * (tau1 - tau0))) + 1, _CHORD_BUDGET // n_seg))
     u = np.linspace(0.0, 1.0, n_chord)
     chord = sub[0] + u[:, None] * (sub[-1] - sub[0])
     P, local, _ = sequence_projection(chord, sub)
