@@ -80,9 +80,11 @@ from numpy.typing import ArrayLike, NDArray
 __all__ = ["RetimeResult", "project_segments", "retime", "sequence_projection"]
 
 _EPS = 1e-12
-# placements of the keys whose errors differ by less than this (relative to |end − start|) are ties
-# (holds, a take passing the end pose twice); larger values trim real, if slow, motion off the span
+# placements of the keys whose errors differ by less than _TIE · (error + |end − start|) + _RES · |end − start|
+# are ties (holds, a take passing the end pose twice). _RES is the resolution of eq. 5's distances near 0
+# (from an inner-product expansion: √ε of the scale); larger values would trim real, if slow, motion
 _TIE = 1e-9
+_RES = 1e-7
 _CHORD_BUDGET = 4_000_000  # entries of the (chord samples, segments) tables of §6.2
 
 
@@ -301,7 +303,7 @@ def _match_pair(T: NDArray[np.float64], E: NDArray[np.float64], scale: float) ->
         run = np.minimum.accumulate(E[0][:-1])
         cost = E[1][1:] + run
         mn = float(cost.min())
-        tol = _TIE * (mn + scale)
+        tol = _TIE * (mn + scale) + _RES * scale
         k = int(np.flatnonzero(cost <= mn + tol)[0])  # the earliest end
         j0 = int(np.flatnonzero(E[0][: k + 1] <= run[k] + tol)[-1])  # the latest start before it
         cands.append((j0, k + 1))
@@ -316,7 +318,7 @@ def _match_pair(T: NDArray[np.float64], E: NDArray[np.float64], scale: float) ->
         if tau1 <= tau0:  # the start at the very end of its segment, the end at the very start of the next
             continue
         err = float(E[0, j0] + E[1, j1])
-        tol = _TIE * (err + scale)
+        tol = _TIE * (err + scale) + _RES * scale
         if best is None or err < best[0] - tol or (err <= best[0] + tol and tau1 - tau0 < best[2] - best[1]):
             best = (err, tau0, tau1)
     return best
