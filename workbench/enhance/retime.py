@@ -25,21 +25,26 @@ Every database sequence is tried; the one with the least error wins.
 two-frame sequence; the paper's "valid mapping" means the end must land at a
 *later* time than the start, so for this pair the constraint is applied
 exactly (``P(0) < P(1)``, or the same segment with the end later in it). That
-gives the matched sub-sequence ``[τ0, τ1]`` (continuous times). ``β̂``, the
-uniform interpolation of the sub-sequence's ends ``β(τ0) → β(τ1)`` — with
-``n_frames`` samples in the paper, here with at least 4 per frame of the
-span so that a small ``n_frames`` does not flatten the take's slow ends
-(the piecewise-linear inverse below is only as fine as this sampling) — is
-projected onto the sub-sequence (eq. 5–6 again), which
-time-stamps each ``β̂_i`` — progress ``i / (N − 1)`` of the ``N`` samples is
-reached at time ``τ̂_i``. Among equally good placements of the keys (holds, a
-take passing the end pose on the way out and back) the tightest span wins. Read the other way round this is a piecewise-linear progress curve
-over the sub-sequence's time; resampled at ``n_frames`` uniform times between
-``τ0`` and ``τ1`` it is ``s``, and the in-betweens are
-``start + s (end − start)``: only the artist's keys, with the actor's timing.
-For meshes the paper's result is likewise "composed solely of the
-artistically generated keyframes" — the matched frames' shape off the
-start→end line is not added.
+gives the matched sub-sequence ``[τ0, τ1]`` (continuous times). Among equally
+good placements of the keys (holds, a take passing the end pose on the way
+out and back) the tightest span wins. ``β̂``, the uniform interpolation of
+the sub-sequence's ends ``β(τ0) → β(τ1)``, is projected onto the sub-sequence
+(eq. 5–6 again), which time-stamps each ``β̂_i``: progress ``i / (N − 1)`` is
+reached at time ``τ̂_i``. The paper samples ``β̂`` ``N = n_frames`` times;
+here ``N`` is at least 4 per frame of the span (capped at ~4M table
+entries), so that a small ``n_frames`` does not flatten the take's slow ends
+— the piecewise-linear inverse is only as fine as this sampling. Read the
+other way round the stamps are a piecewise-linear progress curve over the
+sub-sequence's time; resampled at ``n_frames`` uniform times between ``τ0``
+and ``τ1`` it is ``s``, and the in-betweens are ``start + s (end − start)``:
+only the artist's keys, with the actor's timing. For meshes the paper's
+result is likewise "composed solely of the artistically generated
+keyframes" — the matched frames' shape off the start→end line is not added.
+
+The direct match is sensitive where the take barely moves: a key whose pose
+is a little off (the held-out tests use noise 0.01) lands early on a slow
+ease-out tail and cuts the motion short (Fig. 7's cyan curve); ``extend=True``
+times the keys by the whole motion (Fig. 7's purple).
 
 ``s`` is non-decreasing from exactly 0 to exactly 1 (time stamps are made
 monotone by a running maximum; within one segment the DP does not order
@@ -60,7 +65,9 @@ Why hand-written: no kept library implements this projection. DTW libraries
 frame to frame with many-to-many warping and a fixed start/end; eq. 5–6
 projects onto *segments* (continuous time), allows an open start and end
 inside the database sequence, and assigns each input frame exactly one
-segment. The DP is a row-wise running minimum in numpy (``O(m · n)``, ``m`` = 2
+segment. Eq. 5 is three inner products per batch of takes (``|β_j|²``,
+``<β_j, β_j+1>``, ``<α_i, β_j>``, centred on the keys so the expansion does
+not cancel far from the origin); the DP is a row-wise running minimum in numpy (``O(m · n)``, ``m`` = 2
 for the match), so no numba kernel is needed; ``benchmarks/bench_retime.py``
 measures it against a brute-force window search in the same run.
 
