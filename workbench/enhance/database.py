@@ -39,6 +39,7 @@ from typing import Any
 
 import igl
 import numpy as np
+import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 
 from workbench.enhance.frequency import CurvatureFlowFilter
@@ -251,6 +252,7 @@ class PerformanceDatabase:
         say(0.05, "growing patches")
         self.vertex_patch_ = grow_patches(v, f, self.patch_size, seed=seed)
         self.face_patch_ = face_patches(f, self.vertex_patch_)
+        self._averager = None
         D, m = x.shape[0], f.shape[0]
         self.detail_ = np.empty((D, m, 3, 3), np.float32)
         self.features_ = np.empty((D, self.n_patches_, 9), np.float64)
@@ -273,6 +275,7 @@ class PerformanceDatabase:
         self._low_inverse = frame_inverses(frame_matrices(self.neutral_low_, self.faces_))
         self._poisson = PoissonReconstructor(backend=self.backend).fit(self.neutral_low_, self.faces_)
         self._face_area = 0.5 * np.asarray(igl.doublearea(self.neutral_low_, self.faces_)).ravel()
+        self._averager: sp.csr_matrix | None = None
 
     @property
     def n_patches_(self) -> int:
@@ -284,12 +287,14 @@ class PerformanceDatabase:
 
     def _patch_mean(self, values: NDArray[np.float64]) -> NDArray[np.float64]:
         """Area-weighted mean of per-triangle rows (m, k) per patch, (P, k)."""
-        w = self._face_area
-        P = self.n_patches_
-        num = np.zeros((P, values.shape[1]))
-        np.add.at(num, self.face_patch_, w[:, None] * values)
-        den = np.bincount(self.face_patch_, weights=w, minlength=P)
-        return num / np.where(den > 0, den, 1.0)[:, None]
+        avg = self._averager
+        if avg is None:
+            w = self._face_area
+            P, m = self.n_patches_, len(self.face_patch_)
+            den = np.bincount(self.face_patch_, weights=w, minlength=P)
+            S = sp.csr_matrix((w, (self.face_patch_, np.arange(m))), shape=(P, m))
+            avg = self._averager = sp.csr_matrix(sp.diags(1.0 / np.where(den > 0, den, 1.0)) @ S)
+        return np.asarray(avg @ values)
 
     def _fit_regions(self) -> None:
         w = self.region_weights_.astype(np.float64).T  # (m, R)
