@@ -41,6 +41,7 @@ if TYPE_CHECKING:
     from workbench.animation.timeline import TimelineFacet
     from workbench.animation.tracks import Timeline
     from workbench.capture.facet import CaptureFacet
+    from workbench.enhance.facet import EnhanceFacet
     from workbench.methods.handles.facet import HandlesFacet
     from workbench.methods.paint.facet import ExpressionsFacet, PaintFacet
     from workbench.methods.paint.painting import Brush
@@ -78,6 +79,7 @@ class FaceModel(FaceState):
     timeline: TimelineFacet
     shape_tools: ShapeToolsFacet
     capture: CaptureFacet
+    enhance: EnhanceFacet
 
     def __init__(self, vertices: ArrayLike, faces: ArrayLike | None, shapes: Iterable[BlendShape] = (),
                  *, handles: HandleSet | None = None, **kwargs: Any) -> None:
