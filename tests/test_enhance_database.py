@@ -20,6 +20,7 @@ from workbench.enhance.database import DatabaseError, PerformanceDatabase
 from workbench.enhance.frequency import CurvatureFlowFilter
 from workbench.enhance.gradients import deformation_gradients, rigid_align
 from workbench.enhance.patches import face_patches, grow_patches
+from workbench.enhance.voluntary import voluntary_region_weights
 from workbench.methods.wrinkles.examples import EXAMPLE_POSES, WrinkleSculptor
 
 
@@ -269,3 +270,39 @@ def test_bad_input_gives_clear_errors() -> None:
         PerformanceDatabase.from_frames(V, F, ok, regions={"a": np.zeros(len(V))})
     with pytest.raises(DatabaseError, match="regions is empty"):
         PerformanceDatabase.from_frames(V, F, ok, regions={})
+
+
+# --------------------------------------------------------------------------- voluntary regions
+
+
+def test_voluntary_region_weights_are_one_on_the_core_and_fall_off_with_geodesic_distance() -> None:
+    R = 100.0
+    V, F = _sphere(R, 4)
+    north = np.flatnonzero(V[:, 2] > 0.95 * R)
+    w = voluntary_region_weights(V, F, {"north": north}, sigma=20.0)["north"]
+    assert w.shape == (len(F),) and w.dtype == np.float32
+    inside = np.all(np.isin(F, north), axis=1)
+    np.testing.assert_array_equal(w[inside], 1.0)
+    # the geodesic distance from the cap's rim (polar angle acos 0.95) is R (θ − θ0)
+    theta = np.arccos(np.clip(V[F].mean(axis=1)[:, 2] / np.linalg.norm(V[F].mean(axis=1), axis=1), -1, 1))
+    d = R * (theta - np.arccos(0.95))
+    band = (d > 20) & (d < 100)
+    d_edges = 20.0 * np.sqrt(-2 * np.log(w[band].astype(np.float64)))
+    assert np.all(d_edges >= 0.97 * d[band])  # paths along edges are never shorter than geodesics
+    assert np.all(d_edges <= 1.2 * d[band] + 5.0)  # ... and not much longer
+    assert np.median(d_edges / d[band]) < 1.2  # ~15 % on an icosphere
+    south = V[F].mean(axis=1)[:, 2] < -0.9 * R
+    assert w[south].max() < 1e-10
+    with pytest.raises(ValueError, match="sigma"):
+        voluntary_region_weights(V, F, {"a": north}, sigma=0.0)
+    with pytest.raises(ValueError, match=r"cores\['a'\]"):
+        voluntary_region_weights(V, F, {"a": [len(V)]}, sigma=1.0)
+
+
+def test_progress_is_reported_from_0_to_1() -> None:
+    V, F = _sphere(50.0, 2)
+    seen: list[tuple[float, str]] = []
+    PerformanceDatabase.from_frames(V, F, np.stack([V, V * 1.01, V * 0.99]), patch_size=20, progress=lambda f, m: seen.append((f, m)))
+    fr = [f for f, _ in seen]
+    assert fr[0] == 0.0 and fr[-1] == 1.0 and fr == sorted(fr)
+    assert "3 frames" in seen[-1][1]
