@@ -142,7 +142,11 @@ class Workbench(W.VBox):
         self.timeline = TimelineWidget(model, errors=self.errors)
         self.export = ExportPanel(model, errors=self.errors)
         self.capture = CapturePanel(
-            model, self.viewport, errors=self.errors, before_edit=[self.panel.grouper.flush]
+            model,
+            self.viewport,
+            errors=self.errors,
+            before_edit=[self.panel.grouper.flush],
+            selected_keys=lambda: self.timeline.selected_keys,
         )
         self._regions: RegionsPanel | None = None
         self._switching = False

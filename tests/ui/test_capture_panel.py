@@ -177,3 +177,32 @@ def test_point_clouds_are_thinned_on_screen_tracked_and_the_adapted_rig_saved(ta
         assert not np.array_equal(rig.vertices, model.vertices)  # the neutral moved toward the actor
     finally:
         wb.close()
+
+
+def test_retime_the_selected_key_pair_from_the_tracked_take(take) -> None:
+    from widgets import Workbench
+
+    model = workbench.load_sample("head")
+    _, perf = take
+    wb = Workbench(model, height=240)
+    try:
+        cap = wb.capture
+        cap.set_take(perf.markers, vertex_ids=perf.marker_ids, fps=30.0)
+        cap.track()
+        W = cap.result.weights
+        j = int(np.argmax(W.max(axis=0)))  # the busiest shape of the take
+        name = cap.result.shape_names[j]
+        f1 = int(np.argmax(W[:, j]))
+        model.timeline.add_key(f"weights/{name}", 0.0, float(W[0, j]))
+        model.timeline.add_key(f"weights/{name}", 1.0, float(W[f1, j]))
+        with pytest.raises(ValueError, match="exactly two times"):
+            cap.retime_selected()
+        wb.timeline.selected_keys = [[f"weights/{name}", 0], [f"weights/{name}", 1]]
+        n = len(model.history.undo_labels)
+        cap.retime_button.click()
+        assert len(model.history.undo_labels) == n + 1, wb.errors.outputs
+        assert model.history.undo_labels[-1] == "Retime 0–1 s from performance"
+        assert len(model.slot("tracks").tracks[f"weights/{name}"].keys) > 2
+        assert "retimed 0–1 s" in cap.progress.label.value
+    finally:
+        wb.close()

@@ -60,9 +60,12 @@ class CapturePanel(ModelPanel):
         Timeline seconds of frame 0 after *Apply to timeline*.
     """
 
-    def __init__(self, model: Any, viewport: Any, *, errors: Any = None, before_edit: Any = ()) -> None:
+    def __init__(self, model: Any, viewport: Any, *, errors: Any = None, before_edit: Any = (),
+                 selected_keys: Any = None) -> None:
         super().__init__(model, errors=errors, before_edit=before_edit, layout=W.Layout(width="100%"))
         self.viewport = viewport
+        #: returns the timeline's selected keys as [(track, index), ...] (the Workbench's timeline)
+        self.selected_keys = selected_keys
         self.take: dict[str, Any] | None = None
         self.result: Any = None
         self.applied_start: float | None = None
@@ -99,6 +102,9 @@ class CapturePanel(ModelPanel):
                                             style={"description_width": "90px"}, layout=W.Layout(width="190px"))
         self.apply_button = button("Apply to timeline", "fwb-capture-apply",
                                    "Key the tracked weights and head pose (one undo step)", "check")
+        self.retime_button = button("Retime selected keys from this take", "fwb-capture-retime",
+                                    "Bermano et al. 2014 §6: key the in-betweens of the two selected key times "
+                                    "with this take's timing (one undo step)", "clock-o")
         self.adapted_path = W.Text(placeholder="adapted_rig.fwb", layout=W.Layout(width="220px"))
         self.adapted_path.add_class("fwb-capture-adapted-path")
         self.save_adapted_button = button("Save adapted rig", "fwb-capture-save-adapted",
@@ -110,6 +116,7 @@ class CapturePanel(ModelPanel):
         self.load_button.on_click(g("load take")(lambda _b: self.load(self.path.value, self.map_path.value or None)))
         self.track_button.on_click(g("track")(lambda _b: self.track()))
         self.apply_button.on_click(g("apply capture")(lambda _b: self.apply()))
+        self.retime_button.on_click(g("retime from performance")(lambda _b: self.retime_selected()))
         self.save_adapted_button.on_click(g("save adapted rig")(lambda _b: self.save_adapted(self.adapted_path.value)))
         self.frame.observe(g("capture frame")(lambda _c: self.show_frame()), "value")
         for s in (self.l1, self.temporal):
@@ -119,6 +126,7 @@ class CapturePanel(ModelPanel):
             W.HTML("<b>Take</b>"), self.path, self.map_path, W.HBox([self.units, self.load_button]), self.info,
             self.frame, W.HBox([self.l1, self.temporal]), self.adapt,
             W.HBox([self.track_button, self.tolerance, self.apply_button]), self.progress, self.plot,
+            self.retime_button,
             W.HBox([self.adapted_path, self.save_adapted_button]),
         ]
         self.on_close(self._clear_points)
@@ -231,6 +239,21 @@ class CapturePanel(ModelPanel):
         self.progress.finish(f"applied {self.result.n_frames} frames to the timeline (undo: one step)")
         return 0.0
 
+    def retime_selected(self) -> Any:
+        """Retime the timeline between the two selected key times from the tracked take (one undo step)."""
+        if self.result is None:
+            raise ValueError("Retime: track a take first (it is the performance the timing comes from)")
+        keys = list(self.selected_keys() if self.selected_keys is not None else [])
+        tracks = self.model.slot("tracks").tracks
+        times = sorted({float(tracks[tn].keys[int(i)].time) for tn, i in keys if tn in tracks})
+        if len(times) != 2:
+            raise ValueError(f"Retime: select keys at exactly two times on the timeline (selected: {times})")
+        self.flush()
+        res = self.model.enhance.retime(times[0], times[1], [self.result])
+        self.progress.finish(f"retimed {times[0]:g}–{times[1]:g} s from frames {res.matched[1]}–{res.matched[2]} "
+                             f"of the take (undo: one step)")
+        return res
+
     def save_adapted(self, path: str) -> Path:
         """Save the rig the cloud tracker adapted to the actor (a new ``.fwb``; this model is not changed)."""
         adapted = None if self.result is None else self.result.info.get("adapted")
@@ -293,6 +316,7 @@ class CapturePanel(ModelPanel):
             self.info.value = f"<b>{html.escape(t['name'])}</b>: {n} frames at {t['fps']:g} fps, {what}"
         self.track_button.disabled = t is None
         self.apply_button.disabled = self.result is None
+        self.retime_button.disabled = self.result is None
         self.adapt.disabled = t is None or t["kind"] != "clouds"
         has_adapted = self.result is not None and self.result.info.get("adapted") is not None
         self.save_adapted_button.disabled = not has_adapted
