@@ -306,3 +306,12 @@ def test_progress_is_reported_from_0_to_1() -> None:
     fr = [f for f, _ in seen]
     assert fr[0] == 0.0 and fr[-1] == 1.0 and fr == sorted(fr)
     assert "3 frames" in seen[-1][1]
+
+
+def test_float32_frames_are_encoded_like_float64() -> None:
+    V, F = _sphere(100.0, 3)
+    frames = np.stack([_bumpy(V, 100.0, 1.0, 20.0), _bumpy(V, 100.0, 0.5, 25.0)])
+    a = PerformanceDatabase.from_frames(V, F, frames, patch_size=30)
+    b = PerformanceDatabase.from_frames(V, F, frames.astype(np.float32), patch_size=30)
+    np.testing.assert_allclose(b.features_, a.features_, atol=1e-4)
+    np.testing.assert_allclose(b.detail_, a.detail_, atol=1e-3)

@@ -80,8 +80,11 @@ def _check_mesh(neutral: ArrayLike, faces: ArrayLike) -> tuple[NDArray[np.float6
     return np.ascontiguousarray(v), np.ascontiguousarray(f, dtype=np.int64)
 
 
-def _check_frames(frames: ArrayLike, n: int) -> NDArray[np.float64]:
-    x = np.asarray(frames, dtype=np.float64)
+def _check_frames(frames: ArrayLike, n: int) -> NDArray[np.floating[Any]]:
+    """The frames as given when they are a float array (no (D, n, 3) float64 copy), else as float64."""
+    x = np.asarray(frames)
+    if not np.issubdtype(x.dtype, np.floating):
+        x = np.asarray(x, dtype=np.float64)
     if x.ndim == 2 and x.shape == (n, 3):
         raise DatabaseError(f"frames must be a stack (D, {n}, 3); got one frame {x.shape} — pass frames[None]")
     if x.ndim != 3 or x.shape[2] != 3:
@@ -261,7 +264,7 @@ class PerformanceDatabase:
             say(0.1 + 0.85 * s / D, f"encoding frames {s + 1}–{min(D, s + chunk)} of {D}")
             lows = self._filter.transform(x[s : s + chunk])
             for i, low in enumerate(lows):
-                self.detail_[s + i] = self._detail(low, x[s + i])
+                self.detail_[s + i] = self._detail(low, np.asarray(x[s + i], np.float64))
                 self.features_[s + i] = self.encode(low)
         self._fit_regions()
         say(1.0, f"encoded {D} frames")
