@@ -240,6 +240,17 @@ def test_load_rejects_other_files(tmp_path: Path) -> None:
         PerformanceDatabase.load(tmp_path / "missing.npz")
 
 
+def test_load_rejects_a_damaged_file(head: dict, tmp_path: Path) -> None:
+    db: PerformanceDatabase = head["db"]  # type: ignore[assignment]
+    path = db.save(tmp_path / "db.npz")
+    with np.load(path, allow_pickle=False) as z:
+        data = {k: z[k] for k in z.files}
+    data["features"] = data["features"][:, :-1]
+    np.savez(tmp_path / "bad.npz", **data)
+    with pytest.raises(DatabaseError, match="do not fit together"):
+        PerformanceDatabase.load(tmp_path / "bad.npz")
+
+
 # --------------------------------------------------------------------------- bad input
 
 

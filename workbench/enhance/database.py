@@ -403,6 +403,17 @@ class PerformanceDatabase:
         self.face_patch_ = data["face_patch"]
         self.region_names_ = [str(s) for s in data["region_names"]]
         self.region_weights_ = data["region_weights"]
+        n, m = len(self.neutral_), len(self.faces_)
+        D = self.detail_.shape[0]
+        if (
+            self.detail_.shape[1:] != (m, 3, 3)
+            or self.features_.shape[0] != D
+            or self.vertex_patch_.shape != (n,)
+            or self.face_patch_.shape != (m,)
+            or self.features_.shape[1:] != (int(self.vertex_patch_.max()) + 1, 9)
+            or self.region_weights_.shape != (len(self.region_names_), m)
+        ):
+            raise DatabaseError(f"path {str(path)!r}: the arrays do not fit together (a damaged or edited file)")
         self._fit_operators()
         self._fit_regions()
         return self
