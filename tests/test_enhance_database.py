@@ -19,6 +19,7 @@ import workbench
 from workbench.enhance.database import DatabaseError, PerformanceDatabase
 from workbench.enhance.frequency import CurvatureFlowFilter
 from workbench.enhance.gradients import deformation_gradients, rigid_align
+from workbench.enhance.matching import simplex_lsq
 from workbench.enhance.patches import face_patches, grow_patches
 from workbench.enhance.voluntary import voluntary_region_weights
 from workbench.methods.wrinkles.examples import EXAMPLE_POSES, WrinkleSculptor
@@ -326,3 +327,68 @@ def test_float32_frames_are_encoded_like_float64() -> None:
     b = PerformanceDatabase.from_frames(V, F, frames.astype(np.float32), patch_size=30)
     np.testing.assert_allclose(b.features_, a.features_, atol=1e-4)
     np.testing.assert_allclose(b.detail_, a.detail_, atol=1e-3)
+
+
+# --------------------------------------------------------------------------- matching (eq. 2-3) and blending (eq. 4)
+
+
+def test_simplex_lsq_matches_a_general_solver_and_recovers_convex_weights() -> None:
+    from scipy.optimize import minimize
+
+    rng = np.random.default_rng(4)
+    for trial in range(5):
+        Dt = rng.normal(size=(40, 7))
+        w0 = rng.dirichlet(np.ones(7) * 0.5)
+        a = Dt @ w0 + (0.0 if trial == 0 else 0.3) * rng.normal(size=40)
+        G, b = Dt.T @ Dt, Dt.T @ a
+        w = simplex_lsq(G, b)
+        assert np.all(w >= 0) and abs(w.sum() - 1) < 1e-12
+        if trial == 0:
+            np.testing.assert_allclose(w, w0, atol=1e-5)
+        def f(v: np.ndarray, Dt: np.ndarray = Dt, a: np.ndarray = a) -> float:
+            return float(np.sum((Dt @ v - a) ** 2))
+
+        ref = minimize(
+            f,
+            np.full(7, 1 / 7),
+            method="SLSQP",
+            bounds=[(0, 1)] * 7,
+            constraints=[{"type": "eq", "fun": lambda v: v.sum() - 1}],
+            options={"ftol": 1e-14, "maxiter": 500},
+        )
+        assert f(w) <= f(ref.x) + 1e-6 * (1 + f(ref.x))
+    with pytest.raises(ValueError, match="G must be"):
+        simplex_lsq(np.eye(3), np.ones(2))
+
+
+def test_match_finds_a_database_frame_from_its_low_frequency_version(head: dict) -> None:
+    db: PerformanceDatabase = head["db"]  # type: ignore[assignment]
+    R = trimesh.transformations.rotation_matrix(0.3, [0.0, 1.0, 0.1])[:3, :3]
+    for i in range(db.n_frames_):
+        low = db.lowpass(head["frames"][i]) @ R.T + 0.2  # aligned by Horn before encoding
+        w = db.match(low)
+        assert w.shape == (1, db.n_frames_)
+        assert w[0, i] > 0.99, (i, w.round(3))
+
+
+def test_blend_detail_follows_eq4(head: dict) -> None:
+    db0: PerformanceDatabase = head["db"]  # type: ignore[assignment]
+    V = head["V"]
+    left = (V[:, 0] > 0).astype(float)
+    db = PerformanceDatabase.from_frames(
+        db0.neutral_, db0.faces_, head["frames"][:3], regions={"left": left, "right": 1 - left}, metres_per_unit=0.1
+    )
+    one_hot = np.eye(3)[[0, 0]]
+    np.testing.assert_allclose(db.blend_detail(one_hot), db.detail_[0], atol=1e-6)
+    W = np.eye(3)[[1, 2]]  # the left region takes frame 1, the right frame 2
+    H = db.blend_detail(W)
+    om = db.region_weights_.astype(np.float64)
+    only_left = (om[0] == 1) & (om[1] == 0)
+    mixed = (om[0] > 0) & (om[1] > 0)
+    np.testing.assert_allclose(H[only_left], db.detail_[1][only_left], atol=1e-6)
+    assert mixed.any()
+    share = om[0, mixed] / om[:, mixed].sum(0)
+    expected = share[:, None, None] * db.detail_[1][mixed] + (1 - share)[:, None, None] * db.detail_[2][mixed]
+    np.testing.assert_allclose(H[mixed], expected, atol=1e-6)
+    with pytest.raises(ValueError, match="weights must be"):
+        db.blend_detail(np.ones((1, 3)))

@@ -23,7 +23,12 @@ For detailed frames ``d`` (D, n, 3) of one mesh in full correspondence:
 What §5 needs is served by :meth:`PerformanceDatabase.lowpass`,
 :meth:`~PerformanceDatabase.encode`, :meth:`~PerformanceDatabase.compose` and
 :meth:`~PerformanceDatabase.reconstruct` (the Poisson solve, factored once on
-``f(d0)``). Matching (eq. 2–3) and blending (eq. 4) are not built here.
+``f(d0)``). The matching of eq. 2–3 (:meth:`~PerformanceDatabase.match`,
+convex weights per region by :func:`~workbench.enhance.matching.simplex_lsq`)
+and the blending of eq. 4 (:meth:`~PerformanceDatabase.blend_detail`) are here
+too; chaining them into ``enhance`` is §5's step (not built: on held-out frames
+of the 25k procedural performance the blended detail was not yet reliably
+closer to the truth than the smooth input — see the report of issue 18).
 
 Hand-written because no library implements the paper's database; the
 operators are libigl's, the factorizations CHOLMOD's (SuperLU as fallback).
@@ -51,6 +56,7 @@ from workbench.enhance.gradients import (
     local_frames,
     rigid_align,
 )
+from workbench.enhance.matching import simplex_lsq
 from workbench.enhance.patches import face_patches, grow_patches
 from workbench.geometry.sparse_cholesky import Backend
 
@@ -348,6 +354,36 @@ class PerformanceDatabase:
     def frame(self, index: int, low: ArrayLike) -> NDArray[np.float64]:
         """Database frame ``index``'s detail put onto ``low`` (n, 3) and reconstructed, (n, 3)."""
         return self.reconstruct(self.compose(self.detail_[index], low), low)
+
+    # ------------------------------------------------------------------ §5 matching and blending
+    def match(self, low: ArrayLike) -> NDArray[np.float64]:
+        """Convex weights per region (R, D) of a low-frequency frame (n, 3) (§5.3, eq. 2–3).
+
+        The frame is aligned to ``f(d0)`` and encoded (:meth:`encode`); per region the
+        weighted projection onto the database's compressed shape space uses the
+        precomputed normal matrices :attr:`region_gram_`.
+        """
+        a = self.encode(low).ravel()  # (9P,)
+        Dt = self.features_.reshape(self.n_frames_, -1)  # (D, 9P)
+        om = np.repeat(self.region_patch_weights_, 9, axis=1)  # (R, 9P)
+        rhs = (om * a) @ Dt.T  # (R, D)
+        return np.stack([simplex_lsq(self.region_gram_[r], rhs[r]) for r in range(len(rhs))])
+
+    def blend_detail(self, weights: ArrayLike) -> NDArray[np.float64]:
+        """Detail ``b^h`` (m, 3, 3) blended from per-region weights (R, D) by eq. 4.
+
+        Triangles outside every region (all ``ω = 0``) take the regions' mean.
+        """
+        W = np.asarray(weights, np.float64)
+        R, D = len(self.region_names_), self.n_frames_
+        if W.shape != (R, D):
+            raise ValueError(f"weights must be ({R}, {D}) (regions, frames), got {W.shape}")
+        om = self.region_weights_.astype(np.float64)
+        tot = om.sum(axis=0)
+        om = np.where(tot > 0, om / np.where(tot > 0, tot, 1.0), 1.0 / R)  # (R, m)
+        active = np.flatnonzero(W.max(axis=0) > 1e-6)
+        C = om.T @ W[:, active]  # (m, k)
+        return np.einsum("tk,ktij->tij", C, self.detail_[active].astype(np.float64))
 
     # ------------------------------------------------------------------ files
     def save(self, path: str | os.PathLike[str]) -> Path:
