@@ -1,11 +1,20 @@
 """Performance enhancement (Bermano et al. 2014): data-driven retiming of key pairs (§6).
 
+* :class:`PerformanceDatabase` — the detail database (§4): frequency separation
+  by one implicit curvature-flow step, high-frequency detail as per-triangle
+  gradients, the compressed shape space of patch-mean gradients, voluntary
+  region weights, the eq. 2–3 convex matching and eq. 4 blending
+  (:mod:`.database`); spatial enhancement (§5) is not built yet;
 * :func:`retime` / :class:`RetimeResult` — sequence projection (eq. 5–6) and
   temporally driven interpolation (§6.2) (:mod:`.retime`);
 * ``model.enhance.retime(t0, t1, takes)`` — *Retime from performance* on the
   timeline, one undo step (:mod:`.facet`, registered by :mod:`.family`).
 """
 
+from workbench.enhance.database import DatabaseError, PerformanceDatabase
+from workbench.enhance.matching import simplex_lsq
 from workbench.enhance.retime import RetimeResult, retime
+from workbench.enhance.voluntary import voluntary_region_weights
 
-__all__ = ["RetimeResult", "retime"]
+__all__ = ["DatabaseError", "PerformanceDatabase", "RetimeResult", "retime", "simplex_lsq",
+           "voluntary_region_weights"]
