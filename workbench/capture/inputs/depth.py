@@ -149,9 +149,9 @@ def depth_to_points(
 def _read_depth_png(f: Path, t: int) -> NDArray[np.uint16]:
     try:
         from PIL import Image
-    except ImportError:  # pragma: no cover - pillow is in the ui extra
+    except ImportError:  # pragma: no cover - pillow is a dependency of the core
         raise ImportError(
-            "reading depth PNGs needs Pillow: pip install pillow (or the workbench's [ui] extra)"
+            "reading depth PNGs needs Pillow: pip install pillow"
         ) from None
     try:
         with Image.open(f) as im:
