@@ -81,11 +81,12 @@ import scipy.sparse.linalg as spla
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
+from workbench.capture.result import TrackError
 from workbench.geometry.operators import cotangent_laplacian, mass_matrix
 from workbench.geometry.sparse_cholesky import SparseSPDSolver
 from workbench.model import BlendShape, FaceModel
 
-__all__ = ["AdaptiveModel", "ExpressionTransfer", "laplacian_basis", "point_to_plane_rows", "skin_vertices"]
+__all__ = ["AdaptiveModel", "ExpressionTransfer", "adaptive_model", "laplacian_basis", "point_to_plane_rows", "skin_vertices"]
 
 #: a template vertex moving less than this (times the length scale) in a shape is pinned in its transfer
 PIN_TOL = 1e-7
@@ -889,3 +890,33 @@ class AdaptiveModel:
     def regularization_(self) -> NDArray[np.float64]:
         """The diagonal ``D`` of eq. 6, (3K (k + 1),)."""
         return self._reg.reshape(-1).copy()
+
+
+def adaptive_model(adapt: Any, model: Any, vertex_ids: ArrayLike, progress: Callable[[float, str], Any] | None = None,
+                   *, error: type[TrackError] = TrackError) -> AdaptiveModel | None:
+    """The trackers' ``adapt`` argument → an :class:`AdaptiveModel` on ``vertex_ids`` (or None).
+
+    ``True`` builds one with the defaults, a dict with those options (the tracker sets
+    ``vertex_ids`` and ``progress``), ``False`` gives None and an :class:`AdaptiveModel`
+    built on ``model`` is used as it is (updated in place). ``None`` is the caller's
+    default and must be resolved by it. Anything else raises ``error`` naming ``adapt``.
+    """
+    say = None if progress is None else (lambda f, msg: progress(0.0, msg))  # frames start at 0
+    if adapt is True:
+        return AdaptiveModel(model, vertex_ids=vertex_ids, progress=say)
+    if adapt is False:
+        return None
+    if isinstance(adapt, dict):
+        if "vertex_ids" in adapt or "progress" in adapt:
+            raise error("adapt: the tracker sets vertex_ids and progress itself (pass an AdaptiveModel "
+                        "built on the vertices you want to choose them)")
+        try:
+            return AdaptiveModel(model, vertex_ids=vertex_ids, progress=say, **adapt)
+        except (TypeError, ValueError) as exc:
+            raise error(f"adapt: {exc}") from None
+    if isinstance(adapt, AdaptiveModel):
+        if adapt.model.n_vertices != model.n_vertices or adapt.shape_names != list(model.shape_names):
+            raise error("adapt: the AdaptiveModel was built on another model (vertices or shapes differ)")
+        return adapt
+    raise error(f"adapt must be None, a bool, a dict of AdaptiveModel options or an AdaptiveModel, "
+                f"got {type(adapt).__name__}")

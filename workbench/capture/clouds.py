@@ -68,7 +68,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
-from workbench.capture.adapt import AdaptiveModel
+from workbench.capture.adapt import AdaptiveModel, adaptive_model
 from workbench.capture.result import FLAG_HELD, TrackError, TrackResult
 from workbench.capture.rig import ExpressionSpace
 from workbench.capture.solver import WeightSolver
@@ -406,26 +406,6 @@ def _number(value: Any, what: str, lo: float, hi: float = math.inf) -> float:
     return v
 
 
-def _adaptive(adapt: Any, model: FaceState, ids: NDArray[np.intp], progress: Progress | None
-              ) -> AdaptiveModel | None:
-    say = None if progress is None else (lambda f, msg: progress(0.0, msg))  # frames start at 0
-    if adapt is None or adapt is True:
-        return AdaptiveModel(model, vertex_ids=ids, progress=say)  # type: ignore[arg-type]
-    if adapt is False:
-        return None
-    if isinstance(adapt, dict):
-        if "vertex_ids" in adapt or "progress" in adapt:
-            raise CloudTrackError("adapt: the tracker sets vertex_ids and progress itself (pass an AdaptiveModel "
-                                  "built on sample_vertices(model) to choose them)")
-        return AdaptiveModel(model, vertex_ids=ids, progress=say, **adapt)  # type: ignore[arg-type]
-    if isinstance(adapt, AdaptiveModel):
-        if adapt.model.n_vertices != model.n_vertices or adapt.shape_names != list(model.shape_names):
-            raise CloudTrackError("adapt: the AdaptiveModel was built on another model (vertices or shapes differ)")
-        return adapt
-    raise CloudTrackError(f"adapt must be None, a bool, a dict of AdaptiveModel options or an AdaptiveModel, "
-                          f"got {type(adapt).__name__}")
-
-
 def track_clouds(
     model: FaceState,
     clouds: Any,
@@ -550,7 +530,7 @@ def track_clouds(
         raise CloudTrackError(f"max_distance must be > 0, got {max_distance!r}")
     thr_min = min(thr_min, thr_max)
     _check_units(P_all, space.neutral[ids], model)
-    am = _adaptive(adapt, model, ids, progress)
+    am = adaptive_model(True if adapt is None else adapt, model, ids, progress, error=CloudTrackError)
     t_setup = time.perf_counter() - t_start
 
     plain = space.plain

@@ -34,6 +34,11 @@ first solvable one take its values. Derived (corrective) shapes are not
 unknowns: their current product is part of the prediction, and they follow
 their drivers (:class:`~workbench.capture.rig.ExpressionSpace`).
 
+With ``adapt`` (off by default for markers) the rig is adapted to the actor as the
+take goes (the dynamic expression model, §4, :mod:`.adapt`): each solved frame's
+markers in the model frame update the adapted neutral and shapes at the markers, and
+the next frames are tracked on them; ``info["adapted"]`` holds the model.
+
 Nothing here changes the model: the result is applied to the timeline by
 ``model.capture.apply(result)`` (one undo step).
 """
@@ -47,6 +52,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from workbench.capture.adapt import AdaptiveModel, adaptive_model
 from workbench.capture.pose import PoseError, fit_rigid_robust
 from workbench.capture.result import FLAG_HELD, FLAG_POSE_ALL, TrackError, TrackResult
 from workbench.capture.rig import ExpressionSpace
@@ -191,12 +197,33 @@ class _MarkerSetup:
             self.rigid = np.unique(r)
         self.is_rigid = np.zeros(m, bool)
         self.is_rigid[self.rigid] = True
+        self.D_derived: NDArray[np.float64] | None = None  # (k, m, 3) every shape's adapted deltas, once adapted
+
+    def adopt(self, am: AdaptiveModel, rows: NDArray[np.intp]) -> None:
+        """Track the adapted rig from now on: its neutral and deltas at the markers (``rows`` in ``am.vertex_ids_``)."""
+        D_all = am.deltas_at()[:, rows]  # (k, m, 3)
+        self.X0 = am.neutral_at()[rows]
+        self.D = np.ascontiguousarray(np.moveaxis(D_all[self.space.plain], 0, -1))
+        self.Gm = np.einsum("mck,mcl->mkl", self.D, self.D)
+        self.G_all = self.Gm.sum(0)
+        self.D_derived = D_all
+
+    def derived_offset(self, wf: NDArray[np.float64], vis: NDArray[np.bool_] | None = None) -> NDArray[np.float64]:
+        """``(m, 3)`` (or at the ``vis`` markers): what the derived shapes add for the full weights ``wf``."""
+        if self.D_derived is None:
+            return self.space.derived_offset(wf, self.ids if vis is None else self.ids[vis])
+        D = self.D_derived if vis is None else self.D_derived[:, vis]
+        X = np.zeros((D.shape[1], 3))
+        for i in self.space.derived:
+            if wf[i] != 0.0:
+                X += wf[i] * D[i]
+        return X
 
     def marker_positions(self, w: NDArray[np.float64], wf: NDArray[np.float64]) -> NDArray[np.float64]:
         """(m, 3) model-space marker positions for plain weights ``w`` (full weights ``wf``)."""
         X = self.X0 + self.D @ w
         if self.space.derived:
-            X += self.space.derived_offset(wf, self.ids)
+            X += self.derived_offset(wf)
         return X
 
 
@@ -207,8 +234,8 @@ def _spread_ok(P: NDArray[np.float64]) -> bool:
     return bool(ev[2] > 0 and ev[1] > 1e-6 * ev[2])
 
 
-def _calibrate(setup: _MarkerSetup, Y: NDArray[np.float64], neutral: Any) -> NDArray[np.float64]:
-    """``(m, 3)`` model-frame offsets of the actor's rest markers from the rig's neutral at ``vertex_ids``."""
+def _rest(setup: _MarkerSetup, Y: NDArray[np.float64], neutral: Any) -> NDArray[np.float64]:
+    """The actor's ``(m, 3)`` rest markers (NaN: not seen) from ``neutral``, a frame index or positions."""
     m = setup.ids.size
     if isinstance(neutral, int | np.integer) and not isinstance(neutral, bool):
         if not -Y.shape[0] <= int(neutral) < Y.shape[0]:
@@ -220,7 +247,13 @@ def _calibrate(setup: _MarkerSetup, Y: NDArray[np.float64], neutral: Any) -> NDA
             raise TrackError(f"neutral must be a frame index or ({m}, 3) rest positions, got shape {rest.shape}")
         if np.isinf(rest).any():
             raise TrackError("neutral: rest positions must be finite (NaN for a marker not seen)")
-    vis = np.isfinite(rest).all(1)
+    return rest
+
+
+def _calibrate(setup: _MarkerSetup, Y: NDArray[np.float64], neutral: Any) -> NDArray[np.float64]:
+    """``(m, 3)`` model-frame offsets of the actor's rest markers from the rig's neutral at ``vertex_ids``."""
+    rest = _rest(setup, Y, neutral)
+    vis: NDArray[np.bool_] = np.asarray(np.isfinite(rest).all(1))
     rig = vis & setup.is_rigid
     try:
         pose = fit_rigid_robust(setup.X0[rig] if rig.sum() >= 3 else setup.X0[vis],
@@ -229,6 +262,24 @@ def _calibrate(setup: _MarkerSetup, Y: NDArray[np.float64], neutral: Any) -> NDA
         raise TrackError(f"neutral: the rest markers give no head pose ({exc})") from None
     local = (rest - pose.translation) @ pose.rotation
     return np.where(vis[:, None], local - setup.X0, 0.0)
+
+
+def _adaptive(adapt: Any, model: FaceState, ids: NDArray[np.intp], progress: Progress | None) -> tuple[
+    AdaptiveModel | None, NDArray[np.intp]
+]:
+    """The AdaptiveModel for ``adapt`` (None: off) and each marker's row in its ``vertex_ids_``."""
+    if adapt is None or adapt is False:
+        return None, ids
+    am = adaptive_model(adapt, model, np.unique(ids), progress)
+    if am is None:
+        return None, ids
+    col = np.full(model.n_vertices, -1, np.intp)
+    col[am.vertex_ids_] = np.arange(am.vertex_ids_.size)
+    rows = col[ids]
+    if (rows < 0).any():
+        raise TrackError(f"adapt: the AdaptiveModel's vertex_ids_ miss {int((rows < 0).sum())} of the marker "
+                         f"vertices (build it with vertex_ids holding every marker vertex)")
+    return am, rows
 
 
 def prepare_markers(model: FaceState, frames: ArrayLike, vertex_ids: ArrayLike) -> tuple[
@@ -252,6 +303,7 @@ def track_markers(
     min_markers: int = 4,
     rigid: ArrayLike | None = None,
     neutral: int | ArrayLike | None = None,
+    adapt: Any = None,
     progress: Progress | None = None,
 ) -> TrackResult:
     """Track ``(T, m, 3)`` markers or landmarks glued to ``vertex_ids`` (see the module docstring).
@@ -265,6 +317,17 @@ def track_markers(
     (after rigid alignment) is added to the rig's neutral at that marker, so an actor
     who is not the rig is not explained by expressions; the expressions themselves stay
     the rig's. Default None: markers sit on the rig's neutral (the rig is the actor).
+
+    ``adapt`` (default None: off) adapts the rig to the actor while tracking (the dynamic
+    expression model, Bouaziz 2013 §4): True, a dict of
+    :class:`~workbench.capture.adapt.AdaptiveModel` options, or an AdaptiveModel built on
+    the model whose ``vertex_ids_`` hold every marker vertex (updated in place). Each
+    solved frame's visible markers, brought into the model frame, constrain the adapted
+    neutral and shapes at the markers (three axis-aligned planes per marker, the frame's
+    weights); the next frames are tracked on the adapted rig. With ``neutral``, the
+    identity is fitted to the rest markers first (the paper's eq. 1, alternated with the
+    pose) instead of the per-marker offsets. ``info["adapted"]`` is the AdaptiveModel
+    (None without adaptation); ``.to_model()`` is the adapted rig.
     """
     fps_ = _positive(fps, "fps")
     l1_ = _lam(l1, DEFAULT_L1, "l1")
@@ -280,10 +343,22 @@ def track_markers(
     setup = _MarkerSetup(model, ids, l1_, temporal_, rigid)
     space = setup.space
     _check_units(Y, setup.X0, model)
+    am, rows = _adaptive(adapt, model, ids, progress)
     offsets = None
     if neutral is not None:
-        offsets = _calibrate(setup, Y, neutral)
-        setup.X0 = setup.X0 + offsets
+        if am is None:
+            offsets = _calibrate(setup, Y, neutral)
+            setup.X0 = setup.X0 + offsets
+        else:  # the paper's neutral start: the identity from the rest markers, alternated with the pose
+            rest = _rest(setup, Y, neutral)
+            seen: NDArray[np.bool_] = np.asarray(np.isfinite(rest).all(1))
+            for _it in range(3):
+                offsets = _calibrate(setup, Y, neutral)
+                n_seen = int(seen.sum())
+                am.fit_neutral_planes(np.repeat(rows[seen], 3), np.tile(np.eye(3), (n_seen, 1)),
+                                      (setup.X0[seen] + offsets[seen]).reshape(-1))
+                setup.adopt(am, rows)
+            offsets = _calibrate(setup, Y, neutral)
     visible: NDArray[np.bool_] = np.asarray(np.isfinite(Y).all(2))
     good: NDArray[np.bool_] = np.asarray(visible.sum(1) >= int(min_markers))
     if not good.any():
@@ -341,7 +416,7 @@ def track_markers(
             local = (Yv - t) @ R  # Rᵀ (y − t), row-wise
             c = local - setup.X0[vis]
             if space.derived:
-                c = c - space.derived_offset(wf, ids[vis])
+                c = c - setup.derived_offset(wf, vis)
             h = Dv.T @ c.reshape(-1) * (setup.norm / nv)
             w = solver.solve_gram(G, h, w_prev, w_prev2, w0=w)
             sweeps += solver.n_iter_
@@ -353,6 +428,10 @@ def track_markers(
         errors[f] = float(np.sqrt((r * r).sum(1).mean()))
         W[f], poses[f] = w, M
         w_prev2, w_prev = w_prev, w.copy()
+        if am is not None:  # the frame's markers refine the rig for the next frames
+            local = (Yv - M[:3, 3]) @ M[:3, :3]
+            am.update_planes(np.repeat(rows[vis], 3), np.tile(np.eye(3), (nv, 1)), local.reshape(-1), wf)
+            setup.adopt(am, rows)
     # frames before the first solvable one take its values
     W[:first], poses[:first] = W[first], poses[first]
     if progress is not None:
@@ -363,7 +442,7 @@ def track_markers(
         "markers",
         {"l1": l1_, "temporal": temporal_, "iterations": int(iterations), "min_markers": int(min_markers),
          "rigid_markers": setup.rigid.copy(), "vertex_ids": ids.copy(), "lambda_scale": setup.ref,
-         "neutral_offsets": offsets,
+         "neutral_offsets": offsets, "adapted": am,
          "solver_sweeps": sweeps},
     )
 
@@ -398,9 +477,10 @@ def track(
         Sparsity ``λ`` (relative, unit-free; default :data:`DEFAULT_L1` for markers).
     temporal : float, optional
         Temporal smoothness ``λ`` (relative; default :data:`DEFAULT_TEMPORAL` for markers).
-    adapt : optional
-        Rig adaptation (the dynamic expression model, §4), passed to the point-cloud
-        tracker. Markers do not adapt: it must be None or False for them.
+    adapt : bool, dict, AdaptiveModel or None
+        Rig adaptation (the dynamic expression model, §4). Off by default for markers
+        (None or False; see :func:`track_markers`), on for point clouds
+        (:func:`~workbench.capture.clouds.track_clouds`).
     progress : callable, optional
         ``progress(fraction, message)``, called as frames are tracked.
     **options
@@ -421,7 +501,5 @@ def track(
 
         return track_clouds(model, frames, fps=fps, l1=l1, temporal=temporal, adapt=adapt, progress=progress,
                             **options)
-    if adapt not in (None, False):
-        raise TrackError("adapt: markers and landmarks track the rig as it is (adaptation is for point clouds)")
-    return track_markers(model, frames, vertex_ids, fps=fps, l1=l1, temporal=temporal, progress=progress,
-                         **options)
+    return track_markers(model, frames, vertex_ids, fps=fps, l1=l1, temporal=temporal, adapt=adapt,
+                         progress=progress, **options)
