@@ -59,6 +59,7 @@ def test_load_track_scrub_retrack_and_apply(take, tmp_path) -> None:
         cap.load_button.click()
         assert cap.take is not None and cap.take["kind"] == "markers", wb.errors.outputs
         assert "90 frames at 30 fps, 60 markers" in cap.info.value
+        assert not cap.adapt.disabled and not cap.adapt.value  # markers: adaptation offered, off by default
         np.testing.assert_allclose(cap.take["frames"], perf.markers, atol=1e-5, equal_nan=True)
         # frame 0's visible markers are drawn over the face
         drawn = wb.viewport.overlay_points

@@ -95,7 +95,8 @@ class CapturePanel(ModelPanel):
                                          continuous_update=False, readout_format=".3g",
                                          style={"description_width": "90px"})
         self.temporal.add_class("fwb-capture-temporal")
-        self.adapt = W.Checkbox(value=False, description="Adapt the rig to the actor (clouds)", indent=False)
+        self.adapt = W.Checkbox(value=False, description="Adapt the rig to the actor (default: on for clouds)",
+                                indent=False)
         self.adapt.add_class("fwb-capture-adapt")
         self.track_button = button("Track", "fwb-capture-track", "Track the whole take", "play")
         self.tolerance = W.BoundedFloatText(value=0.01, min=0.0, max=0.5, step=0.005, description="key tolerance",
@@ -177,14 +178,14 @@ class CapturePanel(ModelPanel):
         return take
 
     # ------------------------------------------------------------------ tracking
-    def _track(self, frames: Any, progress: Any = None) -> Any:
+    def _track(self, frames: Any, progress: Any = None, adapt: Any = None) -> Any:
         from workbench.capture import track
 
         t = self.take
         assert t is not None
         return track(self.model, frames, vertex_ids=t["vertex_ids"], fps=t["fps"], l1=float(self.l1.value),
                      temporal=float(self.temporal.value),
-                     adapt=(bool(self.adapt.value) if t["kind"] == "clouds" else None), progress=progress)
+                     adapt=bool(self.adapt.value) if adapt is None else adapt, progress=progress)
 
     def track(self) -> Any:
         """Track the whole take (progress bar); returns the :class:`~workbench.capture.TrackResult`."""
@@ -218,7 +219,9 @@ class CapturePanel(ModelPanel):
         f = int(self.frame.value)
         a, b = max(0, f - WINDOW), min(self.result.n_frames - 1, f + WINDOW)
         frames = self.take["frames"][a : b + 1]
-        part = self._track(frames)
+        # the take's adapted rig carries on (a new one would redo its set-up for every slider move)
+        adapted = self.result.info.get("adapted")
+        part = self._track(frames, adapt=adapted if adapted is not None else False)
         r = self.result
         W_, P_, E_ = np.array(r.weights), np.array(r.poses), np.array(r.errors)
         W_[a : b + 1], P_[a : b + 1], E_[a : b + 1] = part.weights, part.poses, part.errors
@@ -258,7 +261,7 @@ class CapturePanel(ModelPanel):
         """Save the rig the cloud tracker adapted to the actor (a new ``.fwb``; this model is not changed)."""
         adapted = None if self.result is None else self.result.info.get("adapted")
         if adapted is None:
-            raise ValueError("Save adapted rig: track point clouds with 'Adapt the rig' on first")
+            raise ValueError("Save adapted rig: track with 'Adapt the rig' on first")
         out = Path(str(path).strip() or "adapted_rig.fwb")
         if out.suffix.lower() != ".fwb":
             raise ValueError(f"Save adapted rig: {out.name}: expected a .fwb path")
@@ -317,6 +320,6 @@ class CapturePanel(ModelPanel):
         self.track_button.disabled = t is None
         self.apply_button.disabled = self.result is None
         self.retime_button.disabled = self.result is None
-        self.adapt.disabled = t is None or t["kind"] != "clouds"
+        self.adapt.disabled = t is None
         has_adapted = self.result is not None and self.result.info.get("adapted") is not None
         self.save_adapted_button.disabled = not has_adapted
