@@ -793,12 +793,14 @@ class AdaptiveModel:
         c : (m,) float
         """
         AS, cv = self._local_rows(A, c)
-        return self._fit_neutral(AS, cv)
+        with _one_blas_thread():
+            return self._fit_neutral(AS, cv)
 
     def fit_neutral_planes(self, rows: ArrayLike, normals: ArrayLike, targets: ArrayLike) -> AdaptiveModel:
         """:meth:`fit_neutral` with point-to-plane rows at constraint vertices (see :meth:`update_planes`)."""
         AS, cv = self._plane_rows(rows, normals, targets)
-        return self._fit_neutral(AS, cv)
+        with _one_blas_thread():
+            return self._fit_neutral(AS, cv)
 
     def _fit_neutral(self, AS: sp.csr_matrix, cv: NDArray[np.float64]) -> AdaptiveModel:
         xv = np.zeros(len(self._names))
@@ -868,7 +870,8 @@ class AdaptiveModel:
         if isinstance(sweeps, bool) or not isinstance(sweeps, int | np.integer) or sweeps < 1:
             raise ValueError(f"sweeps must be a positive integer, got {sweeps!r}")
         todo = [bk for bk in range(len(self._names) + 1) if not self.saturated_[bk] and (bk, bk) in self._M]
-        self._gauss_seidel(todo, int(sweeps))
+        with _one_blas_thread():
+            self._gauss_seidel(todo, int(sweeps))
         self._refresh()
         return self
 
@@ -896,15 +899,16 @@ class AdaptiveModel:
 
 
 def _spd_solve(A: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``A⁻¹ b`` for a small SPD ``A`` by Cholesky (LAPACK potrf/potrs), on one BLAS thread.
+    """``A⁻¹ b`` for a small SPD ``A`` by Cholesky (LAPACK potrf/potrs).
 
     ``scipy.linalg.solve(assume_a="pos")`` does the same factorisation but measured
     ~40× slower per 150×150 block on a loaded 2-core machine (scipy 1.17: extra checks,
-    and a threaded BLAS whose threads wait for busy cores); these blocks are far too
-    small to gain from threads, so BLAS is held to one while they are solved.
+    and a threaded BLAS whose threads wait for busy cores). These blocks are far too
+    small to gain from threads: every public method that solves them (update,
+    update_planes, fit_neutral, fit_neutral_planes, refine) holds BLAS to one thread
+    with :func:`_one_blas_thread` once, around all its work.
     """
-    with _one_blas_thread():
-        return sla.cho_solve(sla.cho_factor(A, check_finite=False), b, check_finite=False)
+    return sla.cho_solve(sla.cho_factor(A, check_finite=False), b, check_finite=False)
 
 
 def _one_blas_thread() -> Any:
