@@ -92,6 +92,19 @@ class HandlesFacet:
         """The shell deformer of the current handle set (built on first use)."""
         return self.layer.deformer(self._model.view())
 
+    def basis(self) -> tuple[NDArray[np.float32], NDArray[np.int64]]:
+        """The linear shell of the current handle set: ``(B, columns)``.
+
+        ``B`` (n, H_unique) float32, read-only, and ``columns`` (H,) int, the column of
+        each handle: the handle layer adds ``B @ u`` with ``u[j]`` the mean offset of
+        the handles in column ``j`` (a view can evaluate the shell itself, e.g. on the
+        GPU). Builds the deformer on first use.
+        """
+        d = self.deformer()
+        B = d.basis_.view()
+        B.flags.writeable = False
+        return B, d.handle_columns
+
     def displacement(self) -> NDArray[np.float32]:
         """(n, 3) float32 copy of what the handle layer adds to the live mesh."""
         return self._model.layer_displacement("handles")

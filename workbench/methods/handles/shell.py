@@ -440,6 +440,16 @@ class ShellDeformer:
         return self._u
 
     @property
+    def handle_columns(self) -> NDArray[np.int64]:
+        """(H,) int: the basis column of each handle (handles on one vertex share a column).
+
+        ``displacement(d) == basis_ @ u`` where ``u[j]`` is the mean of ``d`` over the
+        handles in column ``j``.
+        """
+        out: NDArray[np.int64] = np.array(self._handle_column, dtype=np.int64)
+        return out
+
+    @property
     def current_displacement(self) -> NDArray[np.float32]:
         """(n, 3) float32 displacement for the handle state set by reset/update."""
         return self._u
