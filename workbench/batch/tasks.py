@@ -1,0 +1,363 @@
+"""One (character, take, step) task, as it runs on a Dask worker.
+
+:func:`execute` is the function every Dask task calls: it skips a task whose content address
+(:mod:`.cache`) is recorded with intact outputs, otherwise runs the step with a per-task log
+file (``<output>/.batch/logs/<character>/<take>/NN-kind.log``) and records what it wrote. Any
+error becomes a ``failed`` :class:`~workbench.batch.report.TaskOutcome` naming the input (the
+other tasks carry on); the later steps of that (character, take) are ``blocked``.
+
+The steps call the existing core APIs:
+
+* ``track`` — :func:`workbench.capture.inputs.read_markers`, ``read_vertex_map``,
+  :func:`workbench.capture.track`, then ``model.capture.apply(result)``;
+* ``transfer_rig`` — :class:`workbench.rigging.RigTransfer` (template → character), as ``workbench rig``;
+* ``retime`` — ``model.enhance.retime(t0, t1, takes)``;
+* ``enhance`` — ``PerformanceDatabase.load(path).enhance(frames)``, written as a PC2 point cache;
+* ``export`` — :func:`workbench.export.export` for each format, to ``<output>/<character>/<take>.<ext>``.
+
+A take that no ``track`` step reads is imported as an animation
+(:func:`workbench.io.animation.read_file_animation`) by the first step that needs one. Between
+steps the animation travels as :meth:`Timeline.to_json` in the task's result (kilobytes); the
+rig never travels: each worker loads it (and builds a transferred rig or a database) once,
+keyed by content digest (:func:`workbench.batch.cache.memo`).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import time
+import traceback
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from workbench.batch.cache import MemoEntry, TaskRecord, atomic_write_text, file_digest, memo
+from workbench.batch.jobfile import Take
+from workbench.batch.report import TaskOutcome
+
+if TYPE_CHECKING:
+    from workbench.animation.tracks import Timeline
+    from workbench.model import FaceModel
+
+__all__ = ["RigSpec", "TaskSpec", "execute"]
+
+
+@dataclass(frozen=True)
+class RigSpec:
+    """How to get a rig: a file, optionally with the template's shapes transferred onto it.
+
+    ``digest`` is the content address of the result (file digest, or a key over the base rig,
+    the template and the landmarks).
+    """
+
+    path: str
+    digest: str
+    template: str | None = None
+    template_digest: str | None = None
+    landmarks: str | None = None
+    base_digest: str | None = None
+    units: str | None = None
+
+
+@dataclass(frozen=True)
+class TaskSpec:
+    """Everything a worker needs for one task (plain data: it is pickled to the worker)."""
+
+    label: str
+    character: str
+    take: Take
+    vertex_map: str | None
+    index: int
+    kind: str
+    options: dict[str, Any]
+    output: str
+    key: str
+    rig_in: RigSpec
+    rig_out: RigSpec
+    run_id: str
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def log_path(self) -> Path:
+        return Path(self.output) / ".batch" / "logs" / self.character / self.take.name / f"{self.index:02d}-{self.kind}.log"
+
+    def output_path(self, suffix: str) -> Path:
+        return Path(self.output) / self.character / f"{self.take.name}.{suffix}"
+
+
+# ------------------------------------------------------------------ heavy set-ups, once per worker
+def _load_rig(spec: RigSpec, output: str) -> FaceModel:
+    from workbench.io import load
+
+    if spec.template is None:
+        model = load(spec.path, units=spec.units) if spec.units else load(spec.path)
+        model.history.clear()
+        return model
+    saved = Path(output) / ".batch" / "rigs" / f"{spec.digest}.fwb"
+    if saved.is_file():
+        return load(saved)
+    from workbench.rigging import RigTransfer
+
+    base = rig_entry(RigSpec(spec.path, spec.base_digest or "", units=spec.units), output)
+    with base.lock:
+        template = _template(spec.template)
+        pairs = None
+        if spec.landmarks:  # template_vertex,target_vertex with a header row, as `workbench rig --landmarks`
+            table = np.loadtxt(spec.landmarks, delimiter=",", skiprows=1, dtype=np.int64, ndmin=2)
+            pairs = [(int(a), int(b)) for a, b in table[:, :2]]
+        model = RigTransfer(template, base.value, landmarks=pairs).run().model
+    model.history.clear()
+    saved.parent.mkdir(parents=True, exist_ok=True)
+    model.save(saved)  # atomic; another worker may write the same rig: the rename wins either way
+    return model
+
+
+def _template(name: str) -> FaceModel:
+    if os.path.exists(name):
+        from workbench.io import load
+
+        return load(name)
+    import workbench
+
+    return workbench.load_sample(name)
+
+
+def rig_entry(spec: RigSpec, output: str) -> MemoEntry:
+    """The rig of ``spec`` in this worker (loaded or transferred on first use)."""
+    return memo(f"rig:{spec.digest}", lambda: _load_rig(spec, output))
+
+
+def _animation_takes(paths: list[str], shape_names: list[str]) -> list[Timeline]:
+    from workbench.batch.cache import task_key
+    from workbench.io.animation import read_file_animation
+
+    key = "retime-db:" + task_key([file_digest(p) for p in paths], shape_names)
+    return memo(key, lambda: [read_file_animation(p, shape_names) for p in paths]).value  # type: ignore[no-any-return]
+
+
+def _performance_database(path: str) -> Any:
+    from workbench.enhance import PerformanceDatabase
+
+    return memo(f"enhance-db:{file_digest(path)}", lambda: PerformanceDatabase.load(path)).value
+
+
+# ------------------------------------------------------------------ the steps
+@dataclass
+class _Context:
+    spec: TaskSpec
+    model: FaceModel
+    timeline: Timeline | None
+    log: logging.Logger
+
+    def animation(self) -> Timeline:
+        """The animation so far, reading the take as an animation when no step has yet."""
+        if self.timeline is None:
+            from workbench.io.animation import read_file_animation
+
+            take, md = self.spec.take, self.model.metadata
+            self.log.info("reading the take %s as an animation", take.path)
+            kw: dict[str, Any] = {"up_axis": md.up_axis, "front_axis": md.front_axis}
+            if take.fps is not None:
+                kw["fps"] = take.fps
+            self.timeline = read_file_animation(take.path, self.model.shape_names, **kw)
+        return self.timeline
+
+    @contextmanager
+    def on_model(self, timeline: Timeline) -> Iterator[FaceModel]:
+        """The shared rig with ``timeline`` installed, restored (and its undo history dropped) after."""
+        m = self.model
+        before = m.tracks
+        m.timeline.set(timeline, "batch: the take's animation")  # type: ignore[attr-defined]
+        try:
+            yield m
+        finally:
+            m.timeline.set(before, "batch: restore")  # type: ignore[attr-defined]
+            m.history.clear()
+
+
+def _step_track(c: _Context) -> list[Path]:
+    from workbench.capture import track
+    from workbench.capture.inputs import read_markers, read_vertex_map, to_model_units
+
+    take, o = c.spec.take, c.spec.options
+    if c.spec.vertex_map is None:
+        raise ValueError("track needs a vertex_map (marker -> vertex) on the take or the character")
+    seq = read_markers(take.path, units=take.units, fps=take.fps)
+    ids = read_vertex_map(c.spec.vertex_map, seq, c.model.n_vertices)
+    frames = to_model_units(seq, c.model)
+    c.log.info("tracking %d frames x %d markers at %g fps", seq.n_frames, len(seq.names), seq.fps)
+    kw = {k: o[k] for k in ("l1", "temporal", "adapt") if k in o}
+    result = track(c.model, frames, vertex_ids=ids, fps=seq.fps, **kw)
+    c.log.info("%s", result)
+    with c.on_model(c.timeline if c.timeline is not None else c.model.tracks) as m:
+        m.capture.apply(result, tolerance=float(o.get("tolerance", 0.01)))  # type: ignore[attr-defined]
+        c.timeline = m.tracks
+    return []
+
+
+def _step_transfer_rig(c: _Context) -> list[Path]:
+    # the rig is built (once per worker) before the step runs: c.model is the transferred rig;
+    # the animation so far keeps the tracks of shapes the new rig has
+    if c.timeline is not None:
+        names = {f"weights/{n}" for n in c.model.shape_names}
+        kept = {k: t for k, t in c.timeline.tracks.items() if not k.startswith("weights/") or k in names}
+        dropped = sorted(set(c.timeline.tracks) - set(kept))
+        if dropped:
+            c.log.warning("the transferred rig has no shapes for %s", ", ".join(dropped[:10]))
+        c.timeline = c.timeline.replace(tracks=kept)
+    c.log.info("rig %s: %d vertices, %d shapes", c.spec.rig_out.digest[:12], c.model.n_vertices,
+               len(c.model.shapes))
+    return []
+
+
+def _step_retime(c: _Context) -> list[Path]:
+    o = c.spec.options
+    takes = _animation_takes(list(o["database"]), list(c.model.shape_names))
+    with c.on_model(c.animation()) as m:
+        res = m.enhance.retime(float(o["t0"]), float(o["t1"]), takes,  # type: ignore[attr-defined]
+                               n_frames=o.get("n_frames"), extend=bool(o.get("extend", False)))
+        c.log.info("retimed %g-%g s: %s", o["t0"], o["t1"], res)
+        c.timeline = m.tracks
+    return []
+
+
+def _step_enhance(c: _Context) -> list[Path]:
+    from workbench.export import atomic_path
+    from workbench.export.pointcache import PC2_HEADER
+
+    database = _performance_database(c.spec.options["database"])
+    if not hasattr(database, "enhance"):
+        raise NotImplementedError("PerformanceDatabase.enhance is not available in this workbench version "
+                                  "(spatial enhancement, Bermano et al. 2014 §5, is not built yet)")
+    tl = c.animation()
+    times = tl.frame_times()
+    frames = np.stack([c.model.evaluate_at(float(t), tl) for t in times])
+    c.log.info("enhancing %d frames of %d vertices", len(times), c.model.n_vertices)
+    detailed = np.asarray(database.enhance(frames), np.float32) * np.float32(c.model.metadata.metres_per_unit)
+    path = c.spec.output_path("enhanced.pc2")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    header = np.zeros((), PC2_HEADER)
+    header["signature"], header["version"] = b"POINTCACHE2\0", 1
+    header["points"], header["samples"] = detailed.shape[1], detailed.shape[0]
+    header["start_frame"], header["sample_rate"] = tl.start * tl.fps, 1.0
+    with atomic_path(path) as tmp, open(tmp, "wb") as fh:
+        fh.write(header.tobytes() + detailed.astype("<f4").tobytes())
+    return [path]
+
+
+def _step_export(c: _Context) -> list[Path]:
+    from workbench.export import export
+
+    o = c.spec.options
+    tl = c.animation()
+    written: list[Path] = []
+    for suffix in o["formats"]:
+        path = c.spec.output_path(suffix)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        kw: dict[str, Any] = {"fps": o.get("fps"), "bake": bool(o.get("bake", False))}
+        if suffix == "csv" and "style" in o:
+            kw["style"] = o["style"]
+        result = export(c.model, tl, path, **kw)
+        for note in getattr(result, "notes", ()):
+            c.log.info("note: %s", note)
+        c.log.info("wrote %s", ", ".join(str(p) for p in result))
+        written += [Path(p) for p in result]
+    return written
+
+
+STEPS = {"track": _step_track, "transfer_rig": _step_transfer_rig, "retime": _step_retime,
+         "enhance": _step_enhance, "export": _step_export}
+
+
+# ------------------------------------------------------------------ the task
+@contextmanager
+def _task_log(spec: TaskSpec) -> Iterator[tuple[logging.Logger, list[str]]]:
+    """A logger whose records (and the core's ``workbench.*`` records) go to the task's log file."""
+    lines: list[str] = []
+
+    class _Collect(logging.Handler):
+        def emit(self, record: logging.LogRecord) -> None:
+            lines.append(f"{time.strftime('%H:%M:%S')} {record.levelname:<7} {record.name}: {record.getMessage()}")
+
+    handler = _Collect(logging.INFO)
+    root = logging.getLogger("workbench")
+    log = logging.getLogger(f"workbench.batch.task.{os.getpid()}")
+    old_level = root.level
+    root.addHandler(handler)
+    if root.level == logging.NOTSET or root.level > logging.INFO:
+        root.setLevel(logging.INFO)
+    try:
+        yield log, lines
+    finally:
+        root.removeHandler(handler)
+        root.setLevel(old_level)
+        atomic_write_text(spec.log_path, "\n".join(lines) + "\n")
+
+
+def _error_message(spec: TaskSpec, exc: BaseException) -> str:
+    msg = str(exc) or type(exc).__name__
+    if spec.take.path.name not in msg and str(spec.take.path) not in msg:
+        msg = f"{spec.take.path}: {msg}"
+    return f"{type(exc).__name__}: {msg}"
+
+
+def execute(spec: TaskSpec, previous: TaskOutcome | None = None) -> TaskOutcome:
+    """Run (or skip) one task; never raises for a problem with its inputs.
+
+    Parameters
+    ----------
+    spec : TaskSpec
+    previous : TaskOutcome, optional
+        The outcome of the previous step of the same (character, take): its timeline is this
+        step's input. ``failed``/``blocked`` there makes this one ``blocked``.
+    """
+    worker = _worker_address()
+    base = TaskOutcome(spec.label, "done", input=str(spec.take.path), log=str(spec.log_path), key=spec.key,
+                       rig_digest=spec.rig_out.digest, worker=worker)
+    if previous is not None and previous.status in ("failed", "blocked"):
+        base.status, base.error = "blocked", f"not run: {previous.label} {previous.status}"
+        return base
+    record = TaskRecord.load_valid(spec.output, spec.key)
+    if record is not None:
+        base.status = "done" if record.run_id == spec.run_id else "skipped"
+        base.seconds = record.seconds if base.status == "done" else 0.0
+        base.outputs, base.timeline = list(record.outputs), record.timeline
+        return base
+    t0 = time.perf_counter()
+    with _task_log(spec) as (log, lines):
+        log.info("%s on %s (key %s)", spec.label, worker or "this process", spec.key[:16])
+        try:
+            from workbench.animation.tracks import Timeline
+
+            entry = rig_entry(spec.rig_out, spec.output)
+            timeline = None if previous is None or previous.timeline is None else Timeline.from_json(previous.timeline)
+            with entry.lock:
+                ctx = _Context(spec, entry.value, timeline, log)
+                written = STEPS[spec.kind](ctx)
+            out_tl = None if ctx.timeline is None else ctx.timeline.to_json()
+        except Exception as exc:  # a bad input fails this task only; the traceback goes to its log
+            lines.append(traceback.format_exc())
+            base.status, base.error = "failed", _error_message(spec, exc)
+            base.seconds = time.perf_counter() - t0
+            log.error("%s", base.error)
+            return base
+        base.seconds = time.perf_counter() - t0
+        log.info("done in %.2f s", base.seconds)
+    base.outputs, base.timeline = [str(p) for p in written], out_tl
+    TaskRecord(spec.key, spec.label, {str(p): file_digest(p) for p in written}, out_tl, spec.rig_out.digest,
+               base.seconds, spec.run_id).save(spec.output)
+    return base
+
+
+def _worker_address() -> str:
+    try:
+        from distributed import get_worker
+
+        return str(get_worker().address)
+    except (ImportError, ValueError):
+        return ""
