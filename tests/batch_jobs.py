@@ -62,3 +62,24 @@ def make_project(root: Path, *, characters: int = 2, takes: int = 3, formats: tu
     job = root / "jobs.toml"
     job.write_text("\n".join(lines))
     return job
+
+
+def write_marker_take(model: FaceModel, path: Path, map_path: Path, seed: int, frames: int = 30,
+                      fps: float = 30.0) -> Path:
+    """A marker CSV in mm (the flat layout) and its ``marker -> vertex`` JSON, as in notebooks/capture.ipynb."""
+    import json
+
+    from workbench.capture import synthetic_performance
+    from workbench.capture.inputs import metres_per_unit
+
+    mm = 1000 * metres_per_unit(model.metadata.units)
+    take = synthetic_performance(model, frames, fps=fps, seed=seed, markers=60, noise=0.2 / mm)
+    names = [f"M{j + 1:02d}" for j in range(take.markers.shape[1])]
+    with open(path, "w") as f:
+        f.write(f"# units: mm\n# fps: {fps:g}\n")
+        f.write(",".join(["frame", "time"] + [f"{m}_{a}" for m in names for a in "xyz"]) + "\n")
+        for i, row in enumerate(take.markers.reshape(frames, -1) * mm):
+            cells = ["" if np.isnan(v) else f"{v:.3f}" for v in row]
+            f.write(f"{i + 1},{i / fps:.4f}," + ",".join(cells) + "\n")
+    map_path.write_text(json.dumps({m: int(v) for m, v in zip(names, take.marker_ids, strict=True)}))
+    return path

@@ -1,4 +1,4 @@
-"""Command line: ``workbench info PATH``, ``workbench export``, ``workbench rig``, ``workbench app``.
+"""Command line: ``workbench info PATH``, ``workbench export``, ``workbench rig``, ``workbench app``, ``workbench batch``.
 
 ``info`` prints what a new user wants to know before opening a face: vertex,
 triangle and polygon counts, the connected components (eyes, teeth...), the
@@ -7,7 +7,8 @@ animation of a saved ``.fwb`` file. ``rig`` gives a face mesh the template's
 blendshapes (:mod:`workbench.rigging`: deformation transfer, optionally
 refined from example poses) and saves the rig. ``app`` serves the workbench notebook as an
 app without code cells (Voila, a separate process: the core never imports it),
-on 127.0.0.1 with a token in the printed URL.
+on 127.0.0.1 with a token in the printed URL. ``batch`` runs a TOML job file of characters ×
+takes × steps as Dask tasks (:mod:`workbench.batch`; the ``batch`` extra).
 """
 
 from __future__ import annotations
@@ -120,7 +121,20 @@ def main(argv: Sequence[str] | None = None) -> int:
         "--no-token", action="store_true", help="serve without the access token (only for a machine of your own)"
     )
     p_app.add_argument("--notebook", default=None, help="notebook to serve (default: notebooks/workbench.ipynb)")
+    p_batch = sub.add_parser(
+        "batch",
+        help="run a TOML job file (characters x takes x steps: track, transfer_rig, retime, enhance, export) "
+        "as Dask tasks on a local cluster or a scheduler (needs the batch extra)",
+    )
+    p_batch.add_argument("jobs", help="the job file (.toml); see workbench.batch.jobfile")
+    p_batch.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                         help="a running Dask scheduler, e.g. tcp://host:8786 (default: a local cluster on 127.0.0.1)")
+    p_batch.add_argument("--workers", type=int, default=None,
+                         help="processes of the local cluster (default: one per CPU)")
+    p_batch.add_argument("--no-dashboard", action="store_true", help="start the local cluster without its dashboard")
     args = parser.parse_args(argv)
+    if args.command == "batch":
+        return batch_command(args)
     if args.command == "app":
         return serve_app(args.port, token=not args.no_token, notebook=args.notebook)
     if args.command == "rig":
@@ -385,6 +399,29 @@ def rig_command(args: argparse.Namespace) -> int:
         return 2
     say(f"saved {out}")
     return 0
+
+
+def batch_command(args: argparse.Namespace) -> int:
+    """``workbench batch``: check the job file (exit 2 naming line and field), run it, print the summary.
+
+    Exit code 0 when every task is done or skipped, 1 when one failed or was blocked.
+    """
+    from workbench.batch import JobFileError, load_jobs
+
+    try:
+        jobs = load_jobs(args.jobs)
+        if args.workers is not None and args.workers < 1:
+            raise CommandError(f"--workers must be >= 1, got {args.workers}")
+    except (JobFileError, CommandError) as exc:
+        print(f"workbench batch: {exc}", file=sys.stderr)
+        return 2
+    if importlib.util.find_spec("distributed") is None:
+        print("workbench batch: needs Dask: pip install 'face-workbench[batch]'", file=sys.stderr)
+        return 2
+    from workbench.batch import run
+
+    report = run(jobs, scheduler=args.scheduler, workers=args.workers, dashboard=not args.no_dashboard)
+    return 0 if report.ok else 1
 
 
 def _markers_info(path: str) -> int:
