@@ -24,6 +24,12 @@ size since the front end last got it (the shell basis of a handle moves almost
 every vertex by a tiny amount); the final event of the interaction sends the
 exact positions.
 
+GPU mode (``Viewport.gpu``, the default, when the front end can): after the full
+buffer, updates are the parameters of the rig the browser evaluates itself
+(:mod:`widgets.viewport.gpu`: weights, shell offsets, head pose, changed
+residual rows) instead of vertex rows; ``_positions`` is then kept current
+silently after each exact update, for a reloaded page.
+
 While a gesture message runs several edits (the dabs of one paint message),
 :meth:`SceneSync.held` turns model events into one overlay + geometry update
 sent after the last edit.
@@ -49,6 +55,7 @@ from widgets.viewport.common import (
     neutral_bounds,
     u32_bytes,
 )
+from widgets.viewport.gpu import GpuSync
 from workbench.geometry.parts import model_part_roles, part_material
 
 
@@ -93,6 +100,8 @@ class SceneSync:
         self.strain_sent: np.ndarray | None = None
         self.strain_pending: np.ndarray | None = None
         self.feature_updates_sent = 0
+        #: the GPU path (parameters instead of vertex rows)
+        self.gpu = GpuSync(self)
 
     # ------------------------------------------------------------------ batching
     @contextmanager
@@ -146,8 +155,21 @@ class SceneSync:
                 or (faces is not self.faces_ref and not np.array_equal(self.last_faces, faces))
             )
             self.faces_ref = faces
-            if topo_changed or force_full:
+            gpu = self.gpu.active
+            if topo_changed or force_full or gpu != (w._gpu_mode == "gpu"):
+                if topo_changed:
+                    self.gpu.reset()
                 self.send_full(pos, faces if topo_changed else None)
+                if gpu:
+                    self.gpu.push(0.0, full=True)
+                return
+            if gpu:
+                self.gpu.push(tolerance, full=False)
+                # what a reloaded page gets: the exact positions, not mid-interaction
+                self.last = pos
+                self.positions_stale = True
+                if tolerance == 0:
+                    self.store_positions_silently()
                 return
             assert self.last is not None
             changed = changed_rows(pos, self.last, tolerance)
@@ -185,6 +207,7 @@ class SceneSync:
         self.positions_stale = False
         self.last = pos.copy()
         with w.hold_sync():
+            w._gpu_mode = "stream"  # GpuSync.push(full=True) switches it on with its state
             if faces is not None:
                 self.last_faces = faces.copy()
                 labels = np.asarray(model.component_labels)

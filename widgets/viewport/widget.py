@@ -145,6 +145,12 @@ class Viewport(anywidget.AnyWidget):
         the Capture tab's input markers, landmarks or cloud at the current frame).
     overlay_point_px : float
         Their size in CSS pixels.
+    gpu : bool
+        Evaluate the rig in the browser (default): the kernel uploads the neutral,
+        the shapes' deltas and the shell basis once and then sends only weights,
+        handle offsets, the head pose and the rows of layers the GPU does not
+        evaluate (:mod:`widgets.viewport.gpu`). ``False`` (or a browser without
+        WebGL2 float textures) streams evaluated vertex rows, with a note in the view.
     camera_group : str
         Viewports with the same non-empty group orbit and zoom together in the
         browser (the same side of the face at the same relative size, whatever
@@ -200,6 +206,17 @@ class Viewport(anywidget.AnyWidget):
     _overlay_points = t.Bytes(b"").tag(sync=True)
     _overlay_colors = t.Bytes(b"").tag(sync=True)
     overlay_point_px = t.Float(6.0).tag(sync=True)
+    # GPU evaluation (widgets.viewport.gpu): the rig once, then parameters per update
+    gpu = t.Bool(True).tag(sync=True)
+    _gpu_mode = t.Unicode("stream").tag(sync=True)
+    _gpu_meta = t.Dict().tag(sync=True)
+    _gpu_neutral = t.Bytes(b"").tag(sync=True)
+    _gpu_morph_index = t.Bytes(b"").tag(sync=True)
+    _gpu_morph_entries = t.Bytes(b"").tag(sync=True)
+    _gpu_basis = t.Bytes(b"").tag(sync=True)
+    _gpu_gain = t.Bytes(b"").tag(sync=True)
+    _gpu_residual = t.Bytes(b"").tag(sync=True)
+    _gpu_params = t.Bytes(b"").tag(sync=True)
 
     def __init__(
         self,
@@ -564,6 +581,28 @@ class Viewport(anywidget.AnyWidget):
                 return int(hits[0])
         return None
 
+    @property
+    def gpu_active(self) -> bool:
+        """True while updates go to the browser as rig parameters (:mod:`widgets.viewport.gpu`)."""
+        return self._gpu_mode == "gpu"
+
+    @property
+    def gpu_unavailable(self) -> str:
+        """Why the front end cannot evaluate on the GPU ("" when it can or has not said)."""
+        return self.sync.gpu.unavailable
+
+    @property
+    def gpu_payload(self) -> Any:
+        """Bytes of each parameter message sent (JSON + buffers), newest last."""
+        return self.sync.gpu.payload
+
+    @t.observe("gpu")
+    def _on_gpu(self, change: Any) -> None:
+        if self._connected:
+            if change["new"]:
+                self.sync.gpu.unavailable = ""  # try again
+            self.errors.guard("Viewport resync")(self.sync.push_geometry)(force_full=True)
+
     @t.observe("paint_expression", "paint_overlay")
     def _on_paint_settings(self, _change: Any) -> None:
         if self._connected:
@@ -596,6 +635,10 @@ class Viewport(anywidget.AnyWidget):
         kind = content.get("type")
         if kind in ("handle", "paint"):
             self.gestures.on_message(kind, content)
+        elif kind == "gpu_unavailable":
+            # a view cannot evaluate the rig: stream vertex rows to every view of this widget
+            self.sync.gpu.unavailable = str(content.get("reason") or "unavailable")
+            self.errors.guard("Viewport resync")(self.sync.push_geometry)(force_full=True)
         elif kind == "request_full":
             self.errors.guard("Viewport resync")(self.sync.push_geometry)(force_full=True)
         elif kind == "request_paint":

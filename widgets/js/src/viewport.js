@@ -14,6 +14,8 @@
 //   viewport/gestures.js       GestureClient: the ONE gesture protocol (start/move/end/cancel,
 //                              one message in flight, acks) used by every tool
 //   viewport/feature_graph.js  feature-graph strain overlay
+//   viewport/gpu_morph.js      the rig evaluated on the GPU (float render targets), and
+//   viewport/gpu_view.js       its use by a view: readback for picking, the fallback note
 //   shared/playback.js         which timelines play (draft resolution), shared with timeline.js
 // All views of one widget model share one geometry store (state lives in the model, not in
 // the view), so a second display of the same widget shows the same frame.
@@ -47,9 +49,14 @@ export default {
     store.loadPaintFull();
     const onFull = () => store.loadFull();
     const onPaintFull = () => store.loadPaintFull();
+    const onRig = () => { store.loadGpuRig(); store.notify(); };
     const onMsg = (content, buffers) => {
       if (!content) return;
-      if (content.type === "patch") {
+      if (content.type === "gpu_params") {
+        store.applyGpuParams(content, buffers || []);
+        if (content.seq != null) for (const v of store.views) v.onAck(content);
+      }
+      else if (content.type === "patch") {
         store.applyPatch(content, buffers || []);
         // The patch of a gesture message doubles as its acknowledgement (gestures.js).
         if (content.seq != null) for (const v of store.views) v.onAck(content);
@@ -63,11 +70,13 @@ export default {
     model.on("change:_version", onFull);
     model.on("change:_topology", onFull);
     model.on("change:_paint_version", onPaintFull);
+    model.on("change:_gpu_meta", onRig);
     model.on("msg:custom", onMsg);
     return () => {
       model.off("change:_version", onFull);
       model.off("change:_topology", onFull);
       model.off("change:_paint_version", onPaintFull);
+      model.off("change:_gpu_meta", onRig);
       model.off("msg:custom", onMsg);
       STORES.delete(model.get("_uid"));
     };

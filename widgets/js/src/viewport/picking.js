@@ -16,6 +16,7 @@ export const pickingMethods = {
   pickHandle(clientX, clientY, visible) {
     const ids = this.handleIds;
     if (!ids.length || !this.store.positions) return -1;
+    this.ensureCpuPositions();
     const rect = this.renderer.domElement.getBoundingClientRect();
     const tanHalf = Math.tan(THREE.MathUtils.degToRad(this.camera.fov / 2));
     const r = this.markerRadius();
@@ -50,6 +51,7 @@ export const pickingMethods = {
   // this loop is several times faster and needs no bounds (the mesh has no transform).
   raycastSurface(clientX, clientY) {
     if (!this.positionAttr || !this.geometry.index) return null;
+    this.ensureCpuPositions();
     this.raycaster.setFromCamera(this.ndc(clientX, clientY), this.camera);
     const ray = this.raycaster.ray;
     const ox = ray.origin.x, oy = ray.origin.y, oz = ray.origin.z;

@@ -11,6 +11,7 @@ import * as THREE from "three";
 import { OrbitControls } from "three/examples/jsm/controls/OrbitControls.js";
 import { isPlaying, onPlayback } from "../shared/playback.js";
 import { cameraLinkMethods } from "./camera_link.js";
+import { gpuViewMethods } from "./gpu_view.js";
 import { markerMethods } from "./markers.js";
 import { pickingMethods } from "./picking.js";
 import { PaintTool, SculptTool } from "./tools.js";
@@ -116,6 +117,7 @@ export class View {
     this.wire.frustumCulled = false;
     this.wire.visible = false;
     scene.add(this.wire);
+    this.initGpu(); // GPU evaluation of the rig (./gpu_view.js), or the note why not
     this.handleMesh = null;
     this.handlesDirty = true;
     this.refreshHandleCache();
@@ -226,6 +228,8 @@ export class View {
     el.fwbHandles = () => this.handleScreenPositions();
     // Test hook: the brush cursor's centre in page coordinates, or null when hidden.
     el.fwbBrush = () => this.tools.paint.brushScreenPosition();
+    // Test hook: the positions the GPU evaluated (read back), or null when not on the GPU.
+    el.fwbGpuPositions = () => this.gpuPositions();
 
     this.resize();
     this.syncAll();
@@ -260,7 +264,8 @@ export class View {
     if (!s.positions || !s.faces) return false;
     const g = this.geometry;
     const n = s.positions.length / 3;
-    if (this.seenTopology !== s.topologyVersion) {
+    const topo = this.seenTopology !== s.topologyVersion;
+    if (topo) {
       this.positionAttr = new THREE.BufferAttribute(new Float32Array(s.positions), 3);
       this.positionAttr.setUsage(THREE.DynamicDrawUsage);
       g.setAttribute("position", this.positionAttr);
@@ -271,7 +276,14 @@ export class View {
       this.updateColors();
       this.el.setAttribute("data-vertex-count", String(n));
       this.el.setAttribute("data-face-count", String(s.faces.length / 3));
-    } else {
+    }
+    if (this.gpuFrame()) { // positions and normals evaluated on the GPU
+      this.seenPositions = s.positionsVersion;
+      if (!this.framed) { g.computeBoundingSphere(); this.frameCamera(); }
+      this.updateHandles();
+      return true;
+    }
+    if (!topo) {
       const arr = this.positionAttr.array;
       const ids = s.lastPatchIds;
       if (ids && this.seenPositions === s.positionsVersion - 1) {
@@ -580,6 +592,7 @@ export class View {
   // ---- test hooks ---------------------------------------------------------------------
 
   project(ids) {
+    this.ensureCpuPositions();
     const P = this.store.positions;
     if (!P || !this.renderer) return [];
     const rect = this.renderer.domElement.getBoundingClientRect();
@@ -629,6 +642,7 @@ export class View {
     }
     if (this.resizeObserver) this.resizeObserver.disconnect();
     if (this.offPlayback) this.offPlayback();
+    this.disposeGpu();
     if (this.controls) this.controls.dispose();
     if (this.handleMesh) this.handleMesh.geometry.dispose();
     if (this.geometry) this.geometry.dispose();
@@ -643,8 +657,9 @@ export class View {
     delete this.el.fwbHandles;
     delete this.el.fwbPaintStats;
     delete this.el.fwbBrush;
+    delete this.el.fwbGpuPositions;
   }
 }
 
 
-Object.assign(View.prototype, markerMethods, pickingMethods, cameraLinkMethods);
+Object.assign(View.prototype, markerMethods, pickingMethods, cameraLinkMethods, gpuViewMethods);

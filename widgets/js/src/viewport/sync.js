@@ -9,7 +9,14 @@
 //   _paint_weights  bytes, float32 (n) or empty: the paint overlay (selected expression's
 //   msg:custom      {type: "paint_patch", version}, buffers [ids uint32, weights float32]
 //                   weights, or a stroke handler's mask)
+// GPU mode (_gpu_mode == "gpu", widgets/viewport/gpu.py): the rig once (_gpu_meta, _gpu_neutral,
+// _gpu_morph_index, _gpu_morph_entries, _gpu_basis, _gpu_gain, _gpu_residual), then per update
+//   msg:custom  {type: "gpu_params", version[, seq], count, k, hu}, buffers [params f32
+//               (k weights, hu*3 shell offsets, 16 head matrix), residual ids u32, rows f32]
+// in the same version sequence as patches; the views evaluate it (./gpu_morph.js) and read
+// positions back when they need them on the CPU (picking, markers).
 // A version gap (a missed update) asks Python for a full buffer: request_full / request_paint.
+import { padded, texRows } from "./gpu_morph.js";
 import { typed } from "./util.js";
 
 export class Store {
@@ -26,6 +33,118 @@ export class Store {
     this.paintW = null; // Float32Array n: painted weights of the selected expression, or null
     this.paintVersion = -1;
     this.seq = 0; // gesture message numbers, unique over the views of this model
+    this.gpu = null; // the rig for GPU evaluation (loadGpuRig), or null
+    this.gpuParams = null; // Float32Array: weights, shell offsets, head matrix
+    this.gpuMode = false; // Python sends parameters instead of vertex rows
+    this.meta = {};
+  }
+
+  // The rig traits (on load and whenever _gpu_meta changes): only the parts whose version moved.
+  loadGpuRig() {
+    const m = this.model.get("_gpu_meta") || {};
+    if (!m.n) return;
+    let g = this.gpu;
+    if (!g || g.n !== m.n) {
+      g = { n: m.n, morphVersion: 0, baseVersion: 0, gainVersion: 0, basisVersion: 0, hu: 0, hq: 0, k: 0 };
+      this.gpu = g;
+      this.meta = {};
+    }
+    if (m.morph !== this.meta.morph) {
+      g.k = m.k;
+      g.half = !!m.half;
+      g.index = padded(typed(this.model.get("_gpu_morph_index"), Uint32Array), 2);
+      const raw = g.half
+        ? typed(this.model.get("_gpu_morph_entries"), Uint16Array)
+        : typed(this.model.get("_gpu_morph_entries"), Float32Array);
+      g.entries = padded(raw, 4);
+      g.entryRows = texRows(raw.length / 4);
+      g.neutral = new Float32Array(typed(this.model.get("_gpu_neutral"), Float32Array));
+      if (!g.residual || g.residual.length !== g.n * 3) g.residual = new Float32Array(g.n * 3);
+      this.rebuildBase();
+      g.morphVersion += 1;
+    }
+    if (m.gain !== this.meta.gain) {
+      const gain = typed(this.model.get("_gpu_gain"), Float32Array);
+      g.gain = padded(gain && gain.length === 2 * g.n ? gain : new Float32Array(2 * g.n).fill(1), 2);
+      g.gainVersion += 1;
+    }
+    if (m.basis !== this.meta.basis) {
+      g.hu = m.hu || 0;
+      g.hq = Math.ceil(g.hu / 4);
+      const b = typed(this.model.get("_gpu_basis"), Float32Array);
+      g.basis = g.hq && b && b.length === g.n * g.hq * 4 ? padded(b, 4) : null;
+      if (!g.basis) { g.hu = 0; g.hq = 0; }
+      g.basisRows = texRows(g.n * g.hq);
+      g.basisVersion += 1;
+    }
+    this.meta = { ...m };
+  }
+
+  // base = neutral + residual, RGBA texels (all rows, or only `ids`)
+  rebuildBase(ids) {
+    const g = this.gpu;
+    if (!g || !g.neutral) return;
+    if (!g.base || g.base.length < g.n * 4) g.base = padded(new Float32Array(g.n * 4), 4);
+    const B = g.base, N = g.neutral, R = g.residual;
+    const one = (i) => {
+      B[4 * i] = N[3 * i] + R[3 * i];
+      B[4 * i + 1] = N[3 * i + 1] + R[3 * i + 1];
+      B[4 * i + 2] = N[3 * i + 2] + R[3 * i + 2];
+    };
+    if (ids) for (let k = 0; k < ids.length; k++) { if (ids[k] < g.n) one(ids[k]); }
+    else for (let i = 0; i < g.n; i++) one(i);
+    g.baseVersion += 1;
+  }
+
+  // The GPU state of a full update (traits): mode, parameters, the whole residual.
+  loadGpuFull() {
+    this.gpuMode = this.model.get("_gpu_mode") === "gpu";
+    if (!this.gpuMode) return;
+    this.loadGpuRig();
+    const g = this.gpu;
+    const P = typed(this.model.get("_gpu_params"), Float32Array);
+    this.gpuParams = P ? new Float32Array(P) : null;
+    const R = typed(this.model.get("_gpu_residual"), Float32Array);
+    if (g && R && R.length === g.n * 3) {
+      g.residual = new Float32Array(R);
+      this.rebuildBase();
+    }
+  }
+
+  // Is the GPU state complete and consistent with the positions / faces we have?
+  gpuReady() {
+    const g = this.gpu;
+    return !!(this.gpuMode && g && g.index && g.base && g.gain && this.gpuParams &&
+      this.positions && this.positions.length === g.n * 3 &&
+      this.gpuParams.length >= g.k + 3 * g.hu + 16);
+  }
+
+  applyGpuParams(content, buffers) {
+    if (!this.positions) return;
+    if (content.version <= this.version) return;
+    if (content.version !== this.version + 1 || !this.gpu) {
+      this.model.send({ type: "request_full", have: this.version });
+      return;
+    }
+    this.gpuMode = true;
+    this.gpuParams = new Float32Array(typed(buffers[0], Float32Array));
+    const ids = typed(buffers[1], Uint32Array);
+    const rows = typed(buffers[2], Float32Array);
+    const g = this.gpu;
+    if (ids && ids.length && rows && rows.length === ids.length * 3) {
+      const R = g.residual;
+      for (let k = 0; k < ids.length; k++) {
+        const i = ids[k];
+        if (i >= g.n) continue;
+        R[3 * i] = rows[3 * k]; R[3 * i + 1] = rows[3 * k + 1]; R[3 * i + 2] = rows[3 * k + 2];
+      }
+      this.rebuildBase(ids);
+    }
+    this.version = content.version;
+    this.lastPatchIds = null;
+    this.lastUpdateTime = performance.now();
+    this.positionsVersion += 1;
+    this.notify();
   }
 
   nextSeq() {
@@ -85,6 +204,7 @@ export class Store {
     this.lastPatchIds = null;
     this.lastUpdateTime = performance.now();
     this.positionsVersion += 1;
+    this.loadGpuFull();
     this.notify();
   }
 
@@ -108,6 +228,7 @@ export class Store {
       P[3 * i + 1] = values[3 * k + 1];
       P[3 * i + 2] = values[3 * k + 2];
     }
+    this.gpuMode = false;
     this.version = content.version;
     this.lastPatchIds = ids;
     this.lastUpdateTime = performance.now();

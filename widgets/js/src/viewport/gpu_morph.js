@@ -1,0 +1,363 @@
+// GPU evaluation of the rig for one view (Python side: widgets/viewport/gpu.py).
+//
+// Two passes into float render targets, one texel per vertex (vertex i at (i % W, i / W)):
+//   1. positions: p = M (base + a Σ_k w_k δ_k + c B u_H), base = neutral + residual, with the
+//      deltas vertex-major and sparse (per vertex (offset, count) into (dx, dy, dz, shape)
+//      entries), B the shell basis (ceil(H/4) RGBA texels per vertex), w a k-texel row, u_H
+//      and M uniforms;
+//   2. normals: area-weighted, the sum of cross(p_b - p_i, p_c - p_i) over the faces (i, b, c)
+//      around vertex i (the same sum as util.js computeNormals).
+// The view's materials read both targets in the vertex shader by gl_VertexID (patchMaterial).
+// The rig arrays come from the Store (./sync.js, padded to the texture width once per model);
+// each view owns its textures, because each view has its own WebGL context.
+import * as THREE from "three";
+
+export const TEX_WIDTH = 4096;
+const MAX_HQ = 64; // ≤ 256 handles in the shell uniforms
+
+const EVAL_FS = `
+precision highp float; precision highp int;
+precision highp sampler2D; precision highp usampler2D;
+uniform sampler2D baseTex;
+uniform sampler2D gainTex;
+uniform usampler2D indexTex;
+uniform sampler2D entryTex;
+uniform sampler2D weightTex;
+uniform sampler2D basisTex;
+uniform vec4 uHx[${MAX_HQ}];
+uniform vec4 uHy[${MAX_HQ}];
+uniform vec4 uHz[${MAX_HQ}];
+uniform int hq;
+uniform mat4 head;
+uniform int n;
+out vec4 outColor;
+ivec2 at(int i) { return ivec2(i % ${TEX_WIDTH}, i / ${TEX_WIDTH}); }
+void main() {
+  int v = int(gl_FragCoord.y) * ${TEX_WIDTH} + int(gl_FragCoord.x);
+  if (v >= n) { outColor = vec4(0.0); return; }
+  vec4 base = texelFetch(baseTex, at(v), 0);
+  vec2 g = texelFetch(gainTex, at(v), 0).xy;
+  uvec2 oc = texelFetch(indexTex, at(v), 0).xy;
+  vec3 blend = vec3(0.0);
+  int off = int(oc.x);
+  int cnt = int(oc.y);
+  for (int e = 0; e < cnt; e++) {
+    vec4 d = texelFetch(entryTex, at(off + e), 0);
+    float w = texelFetch(weightTex, ivec2(int(d.w + 0.5), 0), 0).x;
+    blend += w * d.xyz;
+  }
+  vec3 shell = vec3(0.0);
+  for (int j = 0; j < hq; j++) {
+    vec4 b = texelFetch(basisTex, at(v * hq + j), 0);
+    shell += vec3(dot(b, uHx[j]), dot(b, uHy[j]), dot(b, uHz[j]));
+  }
+  vec3 p = base.xyz + g.x * blend + g.y * shell;
+  outColor = vec4((head * vec4(p, 1.0)).xyz, 1.0);
+}`;
+
+const NORMAL_FS = `
+precision highp float; precision highp int;
+precision highp sampler2D; precision highp usampler2D;
+uniform sampler2D posTex;
+uniform usampler2D adjIndexTex;
+uniform usampler2D adjTex;
+uniform int n;
+out vec4 outColor;
+ivec2 at(int i) { return ivec2(i % ${TEX_WIDTH}, i / ${TEX_WIDTH}); }
+void main() {
+  int v = int(gl_FragCoord.y) * ${TEX_WIDTH} + int(gl_FragCoord.x);
+  if (v >= n) { outColor = vec4(0.0); return; }
+  vec3 p = texelFetch(posTex, at(v), 0).xyz;
+  uvec2 oc = texelFetch(adjIndexTex, at(v), 0).xy;
+  vec3 nrm = vec3(0.0);
+  int off = int(oc.x);
+  int cnt = int(oc.y);
+  for (int e = 0; e < cnt; e++) {
+    uvec2 bc = texelFetch(adjTex, at(off + e), 0).xy;
+    vec3 pb = texelFetch(posTex, at(int(bc.x)), 0).xyz;
+    vec3 pc = texelFetch(posTex, at(int(bc.y)), 0).xyz;
+    nrm += cross(pb - p, pc - p);
+  }
+  float l = length(nrm);
+  outColor = vec4(l > 0.0 ? nrm / l : nrm, 1.0);
+}`;
+
+const QUAD_VS = `
+in vec3 position;
+void main() { gl_Position = vec4(position.xy, 0.0, 1.0); }`;
+
+// rows of a TEX_WIDTH-wide texture holding `count` texels
+export function texRows(count) {
+  return Math.max(1, Math.ceil(count / TEX_WIDTH));
+}
+
+// A copy of `src` padded to whole rows of `channels`-component texels.
+export function padded(src, channels, Ctor = src.constructor) {
+  const texels = Math.ceil(src.length / channels);
+  const out = new Ctor(texRows(texels) * TEX_WIDTH * channels);
+  out.set(src);
+  return out;
+}
+
+function dataTexture(data, channels, type, width = TEX_WIDTH) {
+  const height = data.length / channels / width;
+  const integer = type === THREE.UnsignedIntType;
+  const formats = integer
+    ? { 1: THREE.RedIntegerFormat, 2: THREE.RGIntegerFormat, 4: THREE.RGBAIntegerFormat }
+    : { 1: THREE.RedFormat, 2: THREE.RGFormat, 4: THREE.RGBAFormat };
+  const suffix = integer ? "32UI" : type === THREE.HalfFloatType ? "16F" : "32F";
+  const names = { 1: "R", 2: "RG", 4: "RGBA" };
+  const t = new THREE.DataTexture(data, width, height, formats[channels], type);
+  t.internalFormat = names[channels] + suffix;
+  t.minFilter = THREE.NearestFilter;
+  t.magFilter = THREE.NearestFilter;
+  t.generateMipmaps = false;
+  t.flipY = false;
+  t.unpackAlignment = 1;
+  t.needsUpdate = true;
+  return t;
+}
+
+// Can this renderer evaluate on the GPU? "" when yes, else the reason (shown in the view).
+export function gpuUnsupported(renderer, store) {
+  if (globalThis.fwbDisableGpu) return "disabled by the page (fwbDisableGpu)";
+  const gl = renderer.getContext();
+  if (typeof WebGL2RenderingContext === "undefined" || !(gl instanceof WebGL2RenderingContext)) {
+    return "WebGL2 is not available";
+  }
+  if (!gl.getExtension("EXT_color_buffer_float")) return "float render targets (EXT_color_buffer_float) are missing";
+  const maxTex = gl.getParameter(gl.MAX_TEXTURE_SIZE);
+  if (maxTex < TEX_WIDTH) return `the largest texture (${maxTex}) is smaller than ${TEX_WIDTH}`;
+  if (gl.getParameter(gl.MAX_VERTEX_TEXTURE_IMAGE_UNITS) < 2) return "the vertex shader cannot read textures";
+  const g = store && store.gpu;
+  if (g) {
+    const rows = Math.max(g.entryRows || 1, g.basisRows || 1, texRows(g.n));
+    if (rows > maxTex) return `the rig needs ${rows} texture rows, the largest texture has ${maxTex}`;
+    if (g.hq > MAX_HQ) return `more than ${4 * MAX_HQ} shell handles`;
+  }
+  return "";
+}
+
+export class GpuMorph {
+  constructor(renderer) {
+    this.renderer = renderer;
+    this.textures = {};
+    this.seen = {}; // store versions the textures were built from
+    const dummyF = dataTexture(new Float32Array(4), 4, THREE.FloatType, 1);
+    const dummyU = dataTexture(new Uint32Array(4), 4, THREE.UnsignedIntType, 1);
+    this.dummyF = dummyF;
+    this.dummyU = dummyU;
+    this.evalUniforms = {
+      baseTex: { value: dummyF }, gainTex: { value: dummyF }, indexTex: { value: dummyU },
+      entryTex: { value: dummyF }, weightTex: { value: dummyF }, basisTex: { value: dummyF },
+      uHx: { value: Array.from({ length: MAX_HQ }, () => new THREE.Vector4()) },
+      uHy: { value: Array.from({ length: MAX_HQ }, () => new THREE.Vector4()) },
+      uHz: { value: Array.from({ length: MAX_HQ }, () => new THREE.Vector4()) },
+      hq: { value: 0 }, head: { value: new THREE.Matrix4() }, n: { value: 0 },
+    };
+    this.normalUniforms = {
+      posTex: { value: dummyF }, adjIndexTex: { value: dummyU }, adjTex: { value: dummyU }, n: { value: 0 },
+    };
+    const quad = new THREE.BufferGeometry();
+    quad.setAttribute("position", new THREE.BufferAttribute(new Float32Array([-1, -1, 0, 3, -1, 0, -1, 3, 0]), 3));
+    const mat = (fs, uniforms) => new THREE.RawShaderMaterial({
+      vertexShader: QUAD_VS, fragmentShader: fs, uniforms, glslVersion: THREE.GLSL3,
+      depthTest: false, depthWrite: false,
+    });
+    this.evalMesh = new THREE.Mesh(quad, mat(EVAL_FS, this.evalUniforms));
+    this.normalMesh = new THREE.Mesh(quad, mat(NORMAL_FS, this.normalUniforms));
+    for (const m of [this.evalMesh, this.normalMesh]) m.frustumCulled = false;
+    this.evalScene = new THREE.Scene();
+    this.evalScene.add(this.evalMesh);
+    this.normalScene = new THREE.Scene();
+    this.normalScene.add(this.normalMesh);
+    this.quadCamera = new THREE.OrthographicCamera(-1, 1, 1, -1, 0, 1);
+    // what the view's materials read (patchMaterial)
+    this.drawUniforms = { fwbPos: { value: dummyF }, fwbNrm: { value: dummyF }, fwbGpu: { value: false } };
+    this.posRT = null;
+    this.nrmRT = null;
+    this.n = 0;
+    this.evaluations = 0;
+  }
+
+  // Build or refresh the textures from the store's rig (only what changed since last time).
+  sync(store) {
+    const g = store.gpu;
+    if (!g) return false;
+    const T = this.textures;
+    const set = (name, tex) => {
+      if (T[name]) T[name].dispose();
+      T[name] = tex;
+    };
+    if (this.seen.morph !== g.morphVersion) {
+      set("index", dataTexture(g.index, 2, THREE.UnsignedIntType));
+      set("entry", dataTexture(g.entries, 4, g.half ? THREE.HalfFloatType : THREE.FloatType));
+      this.seen.morph = g.morphVersion;
+      this.n = g.n;
+      this.evalUniforms.n.value = g.n;
+      this.normalUniforms.n.value = g.n;
+      const rows = texRows(g.n);
+      if (!this.posRT || this.posRT.height !== rows) {
+        if (this.posRT) { this.posRT.dispose(); this.nrmRT.dispose(); }
+        const opts = {
+          type: THREE.FloatType, format: THREE.RGBAFormat, depthBuffer: false,
+          minFilter: THREE.NearestFilter, magFilter: THREE.NearestFilter, generateMipmaps: false,
+        };
+        this.posRT = new THREE.WebGLRenderTarget(TEX_WIDTH, rows, opts);
+        this.nrmRT = new THREE.WebGLRenderTarget(TEX_WIDTH, rows, opts);
+      }
+    }
+    if (this.seen.base !== g.baseVersion) {
+      if (T.base && T.base.image.data === g.base) T.base.needsUpdate = true;
+      else set("base", dataTexture(g.base, 4, THREE.FloatType));
+      this.seen.base = g.baseVersion;
+    }
+    if (this.seen.gain !== g.gainVersion) {
+      set("gain", dataTexture(g.gain, 2, THREE.FloatType));
+      this.seen.gain = g.gainVersion;
+    }
+    if (this.seen.basis !== g.basisVersion) {
+      set("basis", g.hq ? dataTexture(g.basis, 4, THREE.FloatType) : null);
+      this.seen.basis = g.basisVersion;
+    }
+    if (this.seen.topology !== store.topologyVersion && store.faces) {
+      const { index, pairs } = faceFans(store.faces, g.n);
+      set("adjIndex", dataTexture(index, 2, THREE.UnsignedIntType));
+      set("adj", dataTexture(pairs, 2, THREE.UnsignedIntType));
+      this.seen.topology = store.topologyVersion;
+    }
+    // parameters: weights (a k-texel row), shell offsets, head pose
+    const P = store.gpuParams;
+    const k = g.k;
+    if (P && P.length >= k + 3 * g.hu + 16) {
+      const wdata = new Float32Array(Math.max(k, 1));
+      wdata.set(P.subarray(0, k));
+      if (T.weight && T.weight.image.width === wdata.length) {
+        T.weight.image.data.set(wdata);
+        T.weight.needsUpdate = true;
+      } else {
+        set("weight", dataTexture(wdata, 1, THREE.FloatType, wdata.length));
+      }
+      const u = this.evalUniforms;
+      let any = false;
+      for (let j = 0; j < g.hq; j++) {
+        for (const [c, arr] of [[0, u.uHx.value], [1, u.uHy.value], [2, u.uHz.value]]) {
+          const vals = [0, 0, 0, 0];
+          for (let q = 0; q < 4; q++) {
+            const h = 4 * j + q;
+            if (h < g.hu) vals[q] = P[k + 3 * h + c];
+            if (vals[q] !== 0) any = true;
+          }
+          arr[j].set(vals[0], vals[1], vals[2], vals[3]);
+        }
+      }
+      u.hq.value = any && T.basis ? g.hq : 0; // no offsets: skip the shell loop
+      u.head.value.fromArray(P, k + 3 * g.hu);
+    }
+    const u = this.evalUniforms;
+    u.baseTex.value = T.base || this.dummyF;
+    u.gainTex.value = T.gain || this.dummyF;
+    u.indexTex.value = T.index || this.dummyU;
+    u.entryTex.value = T.entry || this.dummyF;
+    u.weightTex.value = T.weight || this.dummyF;
+    u.basisTex.value = T.basis || this.dummyF;
+    this.normalUniforms.adjIndexTex.value = T.adjIndex || this.dummyU;
+    this.normalUniforms.adjTex.value = T.adj || this.dummyU;
+    return !!(T.base && T.gain && T.index && T.entry && this.posRT);
+  }
+
+  // Run both passes; the materials then draw the result.
+  evaluate() {
+    const r = this.renderer;
+    const prev = r.getRenderTarget();
+    const clear = r.autoClear;
+    r.autoClear = false;
+    r.setRenderTarget(this.posRT);
+    r.render(this.evalScene, this.quadCamera);
+    this.normalUniforms.posTex.value = this.posRT.texture;
+    r.setRenderTarget(this.nrmRT);
+    r.render(this.normalScene, this.quadCamera);
+    r.setRenderTarget(prev);
+    r.autoClear = clear;
+    this.drawUniforms.fwbPos.value = this.posRT.texture;
+    this.drawUniforms.fwbNrm.value = this.nrmRT.texture;
+    this.evaluations += 1;
+  }
+
+  // The evaluated positions (n*3) (a readback of the position target).
+  readPositions(out) {
+    const rows = this.posRT.height;
+    if (!this.readBuf || this.readBuf.length !== TEX_WIDTH * rows * 4) {
+      this.readBuf = new Float32Array(TEX_WIDTH * rows * 4);
+    }
+    this.renderer.readRenderTargetPixels(this.posRT, 0, 0, TEX_WIDTH, rows, this.readBuf);
+    const B = this.readBuf;
+    const n = Math.min(this.n, out.length / 3);
+    for (let i = 0; i < n; i++) {
+      out[3 * i] = B[4 * i]; out[3 * i + 1] = B[4 * i + 1]; out[3 * i + 2] = B[4 * i + 2];
+    }
+    return out;
+  }
+
+  // Bytes held in this view's textures and targets (the benchmark's texture memory).
+  textureBytes() {
+    let b = 0;
+    const bpp = { RGBA32F: 16, RG32F: 8, R32F: 4, RGBA16F: 8, RG32UI: 8, RGBA32UI: 16 };
+    for (const t of Object.values(this.textures)) {
+      if (t) b += t.image.width * t.image.height * (bpp[t.internalFormat] || 16);
+    }
+    if (this.posRT) b += 2 * this.posRT.width * this.posRT.height * 16;
+    return b;
+  }
+
+  dispose() {
+    for (const t of Object.values(this.textures)) if (t) t.dispose();
+    this.textures = {};
+    this.dummyF.dispose();
+    this.dummyU.dispose();
+    if (this.posRT) { this.posRT.dispose(); this.nrmRT.dispose(); }
+    this.evalMesh.geometry.dispose();
+    this.evalMesh.material.dispose();
+    this.normalMesh.material.dispose();
+  }
+}
+
+// Per vertex i: (offset, count) into (b, c) pairs, one per face (i, b, c) in winding order.
+function faceFans(F, n) {
+  const counts = new Uint32Array(n);
+  for (let f = 0; f < F.length; f++) if (F[f] < n) counts[F[f]] += 1;
+  const index = new Uint32Array(n * 2);
+  let off = 0;
+  for (let i = 0; i < n; i++) { index[2 * i] = off; index[2 * i + 1] = counts[i]; off += counts[i]; }
+  const fill = new Uint32Array(n);
+  const pairs = new Uint32Array(off * 2);
+  for (let f = 0; f < F.length; f += 3) {
+    const a = F[f], b = F[f + 1], c = F[f + 2];
+    if (a >= n || b >= n || c >= n) continue;
+    for (const [i, j, k] of [[a, b, c], [b, c, a], [c, a, b]]) {
+      const at = index[2 * i] + fill[i]++;
+      pairs[2 * at] = j; pairs[2 * at + 1] = k;
+    }
+  }
+  return { index: padded(index, 2), pairs: padded(pairs, 2) };
+}
+
+// Let a view's material draw the GPU positions and normals (when drawUniforms.fwbGpu is on).
+export function patchMaterial(material, uniforms) {
+  material.onBeforeCompile = (shader) => {
+    Object.assign(shader.uniforms, uniforms);
+    shader.vertexShader = shader.vertexShader
+      .replace("#include <common>", `#include <common>
+uniform highp sampler2D fwbPos;
+uniform highp sampler2D fwbNrm;
+uniform bool fwbGpu;
+ivec2 fwbAt(int i) { return ivec2(i % ${TEX_WIDTH}, i / ${TEX_WIDTH}); }`)
+      .replace("#include <beginnormal_vertex>", `vec3 objectNormal = fwbGpu ? texelFetch(fwbNrm, fwbAt(gl_VertexID), 0).xyz : vec3(normal);
+#ifdef USE_TANGENT
+vec3 objectTangent = vec3(tangent.xyz);
+#endif`)
+      .replace("#include <begin_vertex>", `vec3 transformed = fwbGpu ? texelFetch(fwbPos, fwbAt(gl_VertexID), 0).xyz : vec3(position);`);
+  };
+  material.customProgramCacheKey = () => "fwb-gpu-morph";
+  material.needsUpdate = true;
+}

@@ -1,0 +1,136 @@
+// The GPU path of a View (methods mixed into View, see ./scene.js): evaluate the rig with
+// ./gpu_morph.js when Python sends parameters (_gpu_mode "gpu"), read positions back when
+// the CPU needs them (picking, markers, probes, the feature graph), and show a note when
+// the view falls back to vertices streamed from the kernel.
+import { isPlaying } from "../shared/playback.js";
+import { GpuMorph, gpuUnsupported, patchMaterial } from "./gpu_morph.js";
+
+export const gpuViewMethods = {
+  initGpu() {
+    this.gpu = null;
+    this.gpuReason = "";
+    this.cpuSeen = -1; // store.positionsVersion the CPU positions show
+    this.gpuDrawn = false;
+    const note = document.createElement("div");
+    Object.assign(note.style, {
+      position: "absolute", left: "6px", bottom: "6px", padding: "2px 6px", maxWidth: "80%",
+      background: "rgba(20,24,30,0.72)", color: "#e8c468", font: "11px sans-serif",
+      borderRadius: "3px", display: "none", pointerEvents: "none",
+    });
+    note.className = "fwb-gpu-note";
+    this.el.appendChild(note);
+    this.gpuNote = note;
+    this.gpuReason = gpuUnsupported(this.renderer, this.store);
+    if (!this.gpuReason) {
+      try {
+        this.gpu = new GpuMorph(this.renderer);
+        patchMaterial(this.material, this.gpu.drawUniforms);
+        patchMaterial(this.wireMaterial, this.gpu.drawUniforms);
+      } catch (err) {
+        this.gpu = null;
+        this.gpuReason = `GPU set-up failed: ${err}`;
+      }
+    }
+    this.onGpuTrait = () => { this.reportGpu(); this.updateGpuNote(); this.geometryChanged(); };
+    this.model.on("change:gpu", this.onGpuTrait);
+    this.model.on("change:_gpu_mode", this.onGpuTrait);
+    this.reportGpu();
+    this.updateGpuNote();
+  },
+
+  // Python is in GPU mode but this view cannot follow: ask it to stream vertices.
+  reportGpu() {
+    if (this.gpuReason && this.model.get("_gpu_mode") === "gpu" && !this.gpuReported) {
+      this.gpuReported = true;
+      this.model.send({ type: "gpu_unavailable", reason: this.gpuReason });
+    }
+  },
+
+  failGpu(reason) {
+    this.gpuReason = reason;
+    if (this.gpu) this.gpu.drawUniforms.fwbGpu.value = false;
+    this.reportGpu();
+    this.updateGpuNote();
+  },
+
+  updateGpuNote() {
+    if (!this.gpuNote) return;
+    let text = "";
+    if (!this.model.get("gpu")) text = "Vertices stream from the kernel (Viewport.gpu = False)";
+    else if (this.gpuReason) text = `GPU evaluation unavailable (${this.gpuReason}): vertices stream from the kernel`;
+    this.gpuNote.textContent = text;
+    this.gpuNote.style.display = text ? "block" : "none";
+    this.el.setAttribute("data-gpu-note", text);
+  },
+
+  gpuOn() {
+    return !!(this.gpu && !this.gpuReason && this.store.gpuReady());
+  },
+
+  // New geometry in GPU mode: evaluate both passes (from uploadGeometry). False: not GPU.
+  gpuFrame() {
+    const on = this.gpuOn();
+    if (this.gpu) this.gpu.drawUniforms.fwbGpu.value = on;
+    this.el.setAttribute("data-gpu", on ? "1" : "0");
+    if (!on) return false;
+    const again = gpuUnsupported(this.renderer, this.store); // the rig may outgrow the textures
+    if (again) { this.failGpu(again); return false; }
+    try {
+      if (!this.gpu.sync(this.store)) return false;
+      this.gpu.evaluate();
+    } catch (err) {
+      this.failGpu(`GPU evaluation failed: ${err}`);
+      return false;
+    }
+    this.el.setAttribute("data-gpu-texture-bytes", String(this.gpu.textureBytes()));
+    this.el.setAttribute("data-gpu-evaluations", String(this.gpu.evaluations));
+    this.gpuDrawn = true;
+    if (this.needCpuPositions()) this.readBack();
+    return true;
+  },
+
+  // Does this frame need the positions on the CPU (markers, probes, overlays, tools)?
+  needCpuPositions() {
+    if (isPlaying(this.model.get("_scene"))) return false; // keep playback on the GPU
+    const probe = this.model.get("_probe_ids");
+    return !!(
+      (this.handleIds && this.handleIds.length) ||
+      (probe && probe.byteLength) ||
+      (this.featureGraph && this.featureGraph.edges && this.featureGraph.edges.length) ||
+      this.model.get("tool") !== "orbit"
+    );
+  },
+
+  readBack() {
+    const s = this.store;
+    if (!this.positionAttr) return;
+    this.gpu.readPositions(this.positionAttr.array);
+    if (s.positions && s.positions.length === this.positionAttr.array.length) s.positions.set(this.positionAttr.array);
+    this.positionAttr.needsUpdate = true;
+    this.cpuSeen = s.positionsVersion;
+  },
+
+  // Before CPU work on positions (picking, projecting): make them current.
+  ensureCpuPositions() {
+    if (!this.gpu || !this.gpuDrawn || !this.gpuOn()) return;
+    if (this.geometryDirty) {
+      this.geometryDirty = false;
+      this.uploadGeometry();
+      this.geometryDirty = true; // still draw it on the next frame
+    }
+    if (this.cpuSeen !== this.store.positionsVersion) this.readBack();
+  },
+
+  // Test hook: the GPU's evaluated positions (n*3), read back now.
+  gpuPositions() {
+    if (!this.gpuOn()) return null;
+    this.ensureCpuPositions();
+    return this.gpu.readPositions(new Float32Array(this.store.gpu.n * 3));
+  },
+
+  disposeGpu() {
+    this.model.off("change:gpu", this.onGpuTrait);
+    this.model.off("change:_gpu_mode", this.onGpuTrait);
+    if (this.gpu) this.gpu.dispose();
+  },
+};

@@ -1,0 +1,291 @@
+"""The GPU path of the viewport: the rig is uploaded once, updates send only weights.
+
+The browser evaluates the linear part of the rig itself (``widgets/js/src/viewport/
+gpu_morph.js``); the kernel sends, per slider tick, handle drag update or
+playback frame, only the parameters::
+
+    p = M · ( base + a(v) · Σ_k w_k δ_k(v) + c(v) · B(v) u_H )
+    base = neutral + r(v)
+
+* ``w`` (k,) the shapes' effective weights (derived corrective weights, muted
+  shapes 0: :meth:`StateView.weight_vector`), ``u_H`` (H_u, 3) the handle
+  offsets per shell-basis column (``model.handles.basis()``), ``M`` the rigid
+  head pose;
+* ``δ`` the shapes' deltas, vertex-major and sparse (only the vertices a shape
+  moves: per vertex ``(offset, count)`` into ``(dx, dy, dz, shape)`` entries),
+  half floats when that rounds no vertex by more than :data:`HALF_TOLERANCE` of
+  the face size at the largest slider value, else floats; ``B`` the shell basis
+  of the current handle set;
+* ``a(v)``, ``c(v)`` per-vertex gains of the linear layers: the region blend
+  keeps ``background(v)`` of the global blend (Joshi 2003: the rest is the
+  regions' own weights, constant in the sliders) and the paint layer keeps
+  ``1 - Σ_e W_e(v)`` of everything below it (Pighin 1998 §4.2), so
+  ``a = background · (1 - Σ W)`` and ``c = 1 - Σ W``;
+* ``r(v)`` the *residual*: whatever the kernel's ``evaluate()`` holds beyond
+  that linear part — the regions' and the painted expressions' constant terms
+  and the nonlinear layers (pose-space wrinkles). The kernel computes it from
+  its own evaluation, so Python stays the truth: any layer this model does not
+  describe lands in ``r`` and is streamed as sparse rows, exactly like today's
+  patches. During an interaction rows are re-sent only when they moved more
+  than the drag tolerance; after it they agree with ``evaluate()`` to float
+  rounding (:data:`RESIDUAL_FLOOR`).
+
+Transfer protocol (added to :mod:`widgets.viewport.sync`'s):
+
+* traits, once per change: ``_gpu_neutral`` (f32 n*3), ``_gpu_morph_index``
+  (u32 n*2), ``_gpu_morph_entries`` (f32 or f16 nnz*4), ``_gpu_basis`` (f32,
+  n * ceil(H_u/4) * 4), ``_gpu_gain`` (f32 n*2), ``_gpu_residual`` (f32 n*3,
+  also kept current silently for a reloaded page), ``_gpu_params`` (f32: k
+  weights, H_u*3 offsets, 16 head matrix, column-major), ``_gpu_meta``;
+* a custom message ``{"type": "gpu_params", "version"[, "seq"], "count"}`` with
+  buffers ``[params f32, residual ids u32 (c), residual rows f32 (c*3)]`` per
+  update: ``4 (k + 3 H_u + 16)`` bytes plus changed residual rows.
+
+``_gpu_mode`` is ``"gpu"`` while the kernel sends parameters and ``"stream"``
+while it streams vertex rows (``Viewport.gpu = False``, or a front end without
+WebGL2 float textures said ``gpu_unavailable``).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections import deque
+from typing import Any
+
+import numpy as np
+
+from widgets.viewport.common import SPARSE_FRACTION, changed_rows, f32_bytes, u32_bytes
+
+#: half floats for the deltas only when no vertex moves by more than this fraction of the
+#: face size (the neutral's bounding-box diagonal) through the rounding, at the largest
+#: slider value: well below the GPU = kernel tolerance of 1e-5
+HALF_TOLERANCE = 1e-6
+
+#: after an interaction, residual rows are re-sent when they changed by more than this
+#: fraction of the face size (float32 rounding of the two evaluation orders is ~1e-8)
+RESIDUAL_FLOOR = 1e-7
+
+
+def morph_csr(deltas: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Vertex-major sparse deltas: ``index`` (n, 2) uint32 (offset, count), ``entries`` (nnz, 4).
+
+    ``entries[i] = (dx, dy, dz, shape)`` for every shape that moves the vertex.
+    """
+    D = np.asarray(deltas, np.float32)
+    k, n = D.shape[0], D.shape[1]
+    if k == 0:
+        return np.zeros((n, 2), np.uint32), np.zeros((0, 4), np.float32)
+    moves = (D != 0).any(axis=2)  # (k, n)
+    v, s = np.nonzero(moves.T)  # sorted by vertex, then shape
+    entries = np.empty((v.size, 4), np.float32)
+    entries[:, :3] = D[s, v]
+    entries[:, 3] = s
+    counts = np.bincount(v, minlength=n).astype(np.uint32)
+    index = np.empty((n, 2), np.uint32)
+    index[:, 1] = counts
+    index[:, 0] = np.concatenate(([0], np.cumsum(counts)[:-1])).astype(np.uint32)
+    return index, entries
+
+
+def half_ok(entries: np.ndarray, max_weight: float, size: float) -> bool:
+    """Do half floats keep every delta within :data:`HALF_TOLERANCE` of ``size``?"""
+    if not entries.size:
+        return True
+    xyz = entries[:, :3]
+    if np.abs(xyz).max() > 60000 or entries[:, 3].max() > 2048:
+        return False
+    err = np.abs(xyz.astype(np.float16).astype(np.float32) - xyz).max()
+    return bool(err * max(max_weight, 1.0) <= HALF_TOLERANCE * size)
+
+
+def layer_gains(model: Any) -> np.ndarray:
+    """(n, 2) float32 ``(a, c)``: how much of the global blend and of the shell each vertex keeps."""
+    n = model.n_vertices
+    a = np.ones(n, np.float32)
+    keep = np.ones(n, np.float32)
+    try:
+        state = model.slot("regions")
+        regions, weights, level = state.regions, state.weights, state.level
+        if weights is not None and regions.n_vertices == n:
+            a = np.asarray(regions.background[regions.check_level(level)], np.float32).copy()
+    except (KeyError, AttributeError, ValueError, IndexError):
+        pass  # no regions family, or no blend: the residual carries whatever it adds
+    try:
+        mix = model.slot("paint_layers")
+        for w in mix.maps.values():
+            keep -= np.asarray(w, np.float32)
+    except (KeyError, AttributeError):
+        pass
+    out = np.empty((n, 2), np.float32)
+    out[:, 0] = a * keep
+    out[:, 1] = keep
+    return out
+
+
+class GpuSync:
+    """The GPU half of :class:`~widgets.viewport.sync.SceneSync` (same widget, same locks)."""
+
+    def __init__(self, sync: Any) -> None:
+        self.sync = sync
+        self.widget = sync.widget
+        self.model = sync.model
+        #: why the front end cannot evaluate on the GPU ("" = it can, or has not said)
+        self.unavailable = ""
+        V = np.asarray(self.model.vertices, np.float64)
+        self.size = float(np.linalg.norm(np.ptp(V, axis=0))) if V.size else 1.0
+        self.neutral = np.asarray(V, np.float32)
+        self.morph_key: Any = None
+        self.basis_key: Any = None
+        self.gain_key: Any = None
+        self.gain: np.ndarray | None = None
+        self.columns: np.ndarray | None = None  # basis column of each handle
+        self.hu = 0
+        self.k = 0
+        self.residual: np.ndarray | None = None  # what the front end has (n, 3)
+        self.residual_stale = False
+        #: bytes of each gpu_params message (JSON + buffers), for tests and benchmarks
+        self.payload: deque[int] = deque(maxlen=512)
+        self.updates_sent = {"params": 0, "rig": 0, "basis": 0, "gain": 0, "residual_rows": 0}
+        self.upload_ms: deque[float] = deque(maxlen=64)
+
+    @property
+    def active(self) -> bool:
+        return bool(self.widget.gpu) and not self.unavailable
+
+    # ------------------------------------------------------------------ the rig
+    def ensure_rig(self, view: Any) -> None:
+        """Send the neutral + deltas, the shell basis and the gains when they changed."""
+        model, w = self.model, self.widget
+        n = model.n_vertices
+        key = (view.version("shapes"), n, len(view.shape_names))
+        if key != self.morph_key:
+            t0 = time.perf_counter()
+            index, entries = morph_csr(view.effective_deltas)
+            wmax = max((max(abs(s.slider_min), abs(s.slider_max)) for s in view.shapes), default=1.0)
+            half = half_ok(entries, wmax, self.size)
+            data = entries.astype("<f2").tobytes() if half else f32_bytes(entries)
+            self.neutral = np.asarray(view.vertices32, np.float32)
+            self.k = len(view.shape_names)
+            with w.hold_sync():
+                w._gpu_neutral = f32_bytes(self.neutral)
+                w._gpu_morph_index = u32_bytes(index)
+                w._gpu_morph_entries = data
+                self.morph_key = key
+                self.set_meta(half=half, nnz=int(entries.shape[0]), k=self.k, n=n,
+                              morph=int(w._gpu_meta.get("morph", 0)) + 1)
+            self.residual = None  # re-sent whole below
+            self.updates_sent["rig"] += 1
+            self.upload_ms.append((time.perf_counter() - t0) * 1e3)
+        h = model.handles.value
+        bkey = (h.vertices.tobytes(), tuple(model.handles.stiffness)) if len(h) else None
+        if bkey != self.basis_key:
+            t0 = time.perf_counter()
+            if bkey is None:
+                self.hu, self.columns = 0, None
+                basis = b""
+            else:
+                B, columns = model.handles.basis()
+                self.hu, self.columns = int(B.shape[1]), np.asarray(columns)
+                hq = (self.hu + 3) // 4
+                P = np.zeros((n, hq * 4), np.float32)
+                P[:, : self.hu] = B
+                basis = P.tobytes()
+            with w.hold_sync():
+                w._gpu_basis = basis
+                self.basis_key = bkey
+                self.set_meta(hu=self.hu, basis=int(w._gpu_meta.get("basis", 0)) + 1)
+            self.updates_sent["basis"] += 1
+            self.upload_ms.append((time.perf_counter() - t0) * 1e3)
+        gkey = (id(model.slot("regions")) if "regions" in view.slots else None,
+                id(model.slot("paint_layers")) if "paint_layers" in view.slots else None)
+        if gkey != self.gain_key:
+            gain = layer_gains(model)
+            self.gain_key = gkey
+            if self.gain is None or not np.array_equal(gain, self.gain):
+                self.gain = gain
+                with w.hold_sync():
+                    w._gpu_gain = f32_bytes(gain)
+                    self.set_meta(gain=int(w._gpu_meta.get("gain", 0)) + 1)
+                self.updates_sent["gain"] += 1
+
+    def set_meta(self, **kv: Any) -> None:
+        self.widget._gpu_meta = {**self.widget._gpu_meta, **kv}
+
+    # --------------------------------------------------------------- parameters
+    def params(self, view: Any) -> np.ndarray:
+        """f32: the k weights, the H_u x 3 offsets per basis column, the head matrix (column-major)."""
+        wv = view.weight_vector()
+        uH = np.zeros((self.hu, 3), np.float64)
+        h = self.model.handles.value
+        if self.hu and self.columns is not None and len(h) == self.columns.size:
+            np.add.at(uH, self.columns, np.asarray(h.offsets, np.float64))
+            uH /= np.maximum(np.bincount(self.columns, minlength=self.hu), 1)[:, None]
+        M = np.asarray(self.model.head_matrix(), np.float64)
+        return np.concatenate([wv, uH.reshape(-1), M.T.reshape(-1)]).astype("<f4")
+
+    def linear(self, view: Any) -> np.ndarray:
+        """The kernel's float32 version of the part the GPU evaluates (before the head pose)."""
+        model = self.model
+        assert self.gain is not None
+        G = np.asarray(model.blended(), np.float32) - self.neutral
+        lin = self.neutral + self.gain[:, :1] * G
+        h = model.handles.value
+        if self.hu and len(h) and np.any(h.offsets):
+            lin += self.gain[:, 1:] * model.layer_displacement("handles")
+        return lin
+
+    def push(self, tolerance: float, full: bool) -> None:
+        """Send the parameters (and changed residual rows); ``full``: every trait instead."""
+        model, w = self.model, self.widget
+        view = model.view()
+        self.ensure_rig(view)
+        params = self.params(view)
+        local = np.asarray(model.evaluate(posed=False), np.float32)
+        residual = local - self.linear(view)
+        floor = RESIDUAL_FLOOR * self.size
+        if full or self.residual is None or self.residual.shape != residual.shape:
+            self.residual = residual.copy()
+            version = w._version + 1
+            with w.hold_sync():
+                w._gpu_residual = f32_bytes(residual)
+                w._gpu_params = params.tobytes()
+                w._gpu_mode = "gpu"
+                w._version = version
+            self.residual_stale = False
+            return
+        ids = changed_rows(residual, self.residual, max(tolerance, floor))
+        rows = residual[ids]
+        if ids.size >= SPARSE_FRACTION * residual.shape[0]:
+            # e.g. regions switched on: the whole residual, once, as a trait
+            self.residual = residual.copy()
+            with w.hold_sync():
+                w._gpu_residual = f32_bytes(residual)
+                w._gpu_params = params.tobytes()
+                w._version = w._version + 1
+            return
+        self.residual[ids] = rows
+        version = w._version + 1
+        w._trait_values["_version"] = version
+        w._trait_values["_gpu_params"] = params.tobytes()
+        if ids.size:
+            self.residual_stale = True
+        if tolerance == 0 and self.residual_stale:
+            # silent: a reloaded page gets the current residual (not mid-drag: 1 MB at 80k)
+            w._trait_values["_gpu_residual"] = f32_bytes(self.residual)
+            self.residual_stale = False
+        content: dict[str, Any] = {"type": "gpu_params", "version": version, "count": int(ids.size),
+                                   "k": self.k, "hu": self.hu}
+        if self.sync.patch_seq is not None:
+            content["seq"] = self.sync.patch_seq
+        buffers = [params.tobytes(), u32_bytes(ids), f32_bytes(rows)]
+        w.send(content, buffers=buffers)
+        self.payload.append(len(json.dumps(content)) + sum(len(b) for b in buffers))
+        self.updates_sent["params"] += 1
+        self.updates_sent["residual_rows"] += int(ids.size)
+
+    def reset(self) -> None:
+        """Forget what the front end has (a new topology, or back from streaming)."""
+        self.morph_key = self.basis_key = self.gain_key = None
+        self.gain = None
+        self.residual = None
