@@ -92,13 +92,16 @@ def plan(jobs: JobFile, run_id: str | None = None) -> list[list[TaskSpec]]:
 def local_cluster(workers: int | None = None, *, dashboard: bool = True, **kwargs: Any) -> Any:
     """A ``LocalCluster`` of ``workers`` processes with one thread each, every server on 127.0.0.1.
 
-    ``dashboard=False`` starts no dashboard; otherwise it listens on 127.0.0.1 on a free port.
+    The dashboard listens on 127.0.0.1 on a free port; ``dashboard=False`` leaves only the
+    scheduler's health/metrics routes on that port (Dask always starts its HTTP server).
     """
     from distributed import LocalCluster
 
     n = workers or os.cpu_count() or 1
+    if not dashboard:
+        kwargs["scheduler_kwargs"] = {**kwargs.get("scheduler_kwargs", {}), "dashboard": False}
     return LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
-                        dashboard_address="127.0.0.1:0" if dashboard else None, **kwargs)
+                        dashboard_address="127.0.0.1:0", **kwargs)
 
 
 def _in_notebook() -> bool:

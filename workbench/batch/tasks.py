@@ -241,6 +241,7 @@ def _step_enhance(c: _Context) -> list[Path]:
     detailed = np.asarray(database.enhance(frames), np.float32) * np.float32(c.model.metadata.metres_per_unit)
     path = c.spec.output_path("enhanced.pc2")
     path.parent.mkdir(parents=True, exist_ok=True)
+    _remove_stale_temporaries(path)
     header = np.zeros((), PC2_HEADER)
     header["signature"], header["version"] = b"POINTCACHE2\0", 1
     header["points"], header["samples"] = detailed.shape[1], detailed.shape[0]
@@ -259,6 +260,7 @@ def _step_export(c: _Context) -> list[Path]:
     for suffix in o["formats"]:
         path = c.spec.output_path(suffix)
         path.parent.mkdir(parents=True, exist_ok=True)
+        _remove_stale_temporaries(path)
         kw: dict[str, Any] = {"fps": o.get("fps"), "bake": bool(o.get("bake", False))}
         if suffix == "csv" and "style" in o:
             kw["style"] = o["style"]
@@ -268,6 +270,16 @@ def _step_export(c: _Context) -> list[Path]:
         c.log.info("wrote %s", ", ".join(str(p) for p in result))
         written += [Path(p) for p in result]
     return written
+
+
+def _remove_stale_temporaries(path: Path) -> None:
+    """Delete temporaries of ``path`` a killed worker left (``atomic_path`` names them ``.<name>.*.tmp*``).
+
+    Only this task writes ``path``, and Dask runs it again only after the worker that ran it is
+    gone, so no live writer owns them.
+    """
+    for stale in path.parent.glob(f".{path.name}.*.tmp*"):
+        stale.unlink(missing_ok=True)
 
 
 STEPS = {"track": _step_track, "transfer_rig": _step_transfer_rig, "retime": _step_retime,
