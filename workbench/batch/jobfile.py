@@ -28,6 +28,7 @@ file's folder.
 
 from __future__ import annotations
 
+import os
 import re
 import tomllib
 from dataclasses import dataclass, field
@@ -300,14 +301,14 @@ def parse_jobs(text: str, source: str | Path = "jobs.toml") -> JobFile:
                      "expected a string (the output folder)" if "output" in data else "missing field 'output'")
     out = Path(data["output"]).expanduser()
     out = (out if out.is_absolute() else c.base / out).resolve()
-    characters, names = [], set()
+    characters, names = [], set[str]()
     for i, raw in enumerate(_tables(c, data, "characters")):
         c.fields("characters", i, raw, _CHARACTER_FIELDS)
         vmap = raw.get("vertex_map")
         characters.append(Character(
             c.name("characters", i, raw["name"], names), c.existing("characters", i, "rig", raw["rig"]),
             None if vmap is None else c.existing("characters", i, "vertex_map", vmap), raw.get("units")))
-    takes, names = [], set()
+    takes, names = [], set[str]()
     for i, raw in enumerate(_tables(c, data, "takes")):
         c.fields("takes", i, raw, _TAKE_FIELDS)
         vmap = raw.get("vertex_map")
@@ -335,7 +336,7 @@ def parse_jobs(text: str, source: str | Path = "jobs.toml") -> JobFile:
     return JobFile(src, out, tuple(characters), tuple(takes), tuple(steps))
 
 
-def load_jobs(path: str | Path) -> JobFile:
+def load_jobs(path: str | os.PathLike[str]) -> JobFile:
     """Read and check a job file; see :func:`parse_jobs`."""
     p = Path(path)
     try:

@@ -137,7 +137,7 @@ def _animation_takes(paths: list[str], shape_names: list[str]) -> list[Timeline]
     from workbench.io.animation import read_file_animation
 
     key = "retime-db:" + task_key([file_digest(p) for p in paths], shape_names)
-    return memo(key, lambda: [read_file_animation(p, shape_names) for p in paths]).value  # type: ignore[no-any-return]
+    return memo(key, lambda: [read_file_animation(p, shape_names) for p in paths]).value
 
 
 def _performance_database(path: str) -> Any:
@@ -172,11 +172,11 @@ class _Context:
         """The shared rig with ``timeline`` installed, restored (and its undo history dropped) after."""
         m = self.model
         before = m.tracks
-        m.timeline.set(timeline, "batch: the take's animation")  # type: ignore[attr-defined]
+        m.timeline.set(timeline, "batch: the take's animation")
         try:
             yield m
         finally:
-            m.timeline.set(before, "batch: restore")  # type: ignore[attr-defined]
+            m.timeline.set(before, "batch: restore")
             m.history.clear()
 
 
@@ -195,7 +195,7 @@ def _step_track(c: _Context) -> list[Path]:
     result = track(c.model, frames, vertex_ids=ids, fps=seq.fps, **kw)
     c.log.info("%s", result)
     with c.on_model(c.timeline if c.timeline is not None else c.model.tracks) as m:
-        m.capture.apply(result, tolerance=float(o.get("tolerance", 0.01)))  # type: ignore[attr-defined]
+        m.capture.apply(result, tolerance=float(o.get("tolerance", 0.01)))
         c.timeline = m.tracks
     return []
 
@@ -219,7 +219,7 @@ def _step_retime(c: _Context) -> list[Path]:
     o = c.spec.options
     takes = _animation_takes(list(o["database"]), list(c.model.shape_names))
     with c.on_model(c.animation()) as m:
-        res = m.enhance.retime(float(o["t0"]), float(o["t1"]), takes,  # type: ignore[attr-defined]
+        res = m.enhance.retime(float(o["t0"]), float(o["t1"]), takes,
                                n_frames=o.get("n_frames"), extend=bool(o.get("extend", False)))
         c.log.info("retimed %g-%g s: %s", o["t0"], o["t1"], res)
         c.timeline = m.tracks
