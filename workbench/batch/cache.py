@@ -20,7 +20,7 @@ import os
 import threading
 from collections import OrderedDict
 from collections.abc import Callable, Iterable
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -129,7 +129,8 @@ class TaskRecord:
         return Path(output) / ".batch" / "tasks" / key[:2] / f"{key}.json"
 
     def save(self, output: str | os.PathLike[str]) -> Path:
-        return atomic_write_text(self.path(output, self.key), json.dumps(asdict(self)))
+        # vars(), not dataclasses.asdict: asdict deep-copies the timeline (0.3 s for a 25k-key take)
+        return atomic_write_text(self.path(output, self.key), json.dumps(vars(self)))
 
     @classmethod
     def load_valid(cls, output: str | os.PathLike[str], key: str) -> TaskRecord | None:
