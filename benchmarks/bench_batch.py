@@ -10,8 +10,8 @@ per-worker memo) before the timed run; every timed run writes a fresh output fol
 task is skipped. Prints:
 
 * throughput (tasks/s) with 1 and 2 workers and the speed-up;
-* per-task overhead: the same export called directly in this process vs one batch task
-  (1 worker, wall time / tasks), an empty Dask task (submit + result of a no-op), and a
+* per-task overhead: the same export called directly in this process, the batch task function
+  in this process (no Dask), one batch task (1 worker, wall time / tasks), an empty Dask task (submit + result of a no-op), and a
   skipped task (a re-run of a finished job: hashing inputs and checking the task records).
 """
 
@@ -24,12 +24,20 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
+
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "tests"))
 
 
 def _noop(x: int) -> int:
     return x
+
+
+def _peak_rss_mb() -> float:
+    import resource
+
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # Linux: kB
 
 
 def _job(root: Path, takes: int, resolution: str, formats: tuple[str, ...], output: str) -> Path:
@@ -42,7 +50,7 @@ def _job(root: Path, takes: int, resolution: str, formats: tuple[str, ...], outp
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--takes", type=int, default=8)
+    ap.add_argument("--takes", type=int, default=12)
     ap.add_argument("--resolution", default="25k")
     ap.add_argument("--formats", nargs="+", default=["glb", "usda"])
     args = ap.parse_args()
@@ -50,7 +58,7 @@ def main() -> None:
     from distributed import Client
 
     import workbench
-    from workbench.batch import load_jobs, run
+    from workbench.batch import load_jobs, plan, run
     from workbench.batch.runner import local_cluster
     from workbench.export import export
     from workbench.io.animation import read_file_animation
@@ -71,6 +79,15 @@ def main() -> None:
             for f in formats:
                 export(model, tl, tmp / "direct" / f"take{t}.{f}")
         direct = (time.perf_counter() - t0) / args.takes
+        # the same tasks through workbench.batch's task function, in this process (no Dask)
+        from workbench.batch.tasks import execute
+
+        chains = plan(load_jobs(_job(tmp, args.takes, args.resolution, formats, "inprocess")))
+        execute(chains[0][0])  # loads the rig into this process's memo
+        t0 = time.perf_counter()
+        for chain in chains[1:]:
+            execute(chain[0])
+        in_process = (time.perf_counter() - t0) / max(1, len(chains) - 1)
     load_before = os.getloadavg()[0]
 
     rows = {}
@@ -91,7 +108,8 @@ def main() -> None:
             t0 = time.perf_counter()
             client.gather([client.submit(_noop, i, pure=False) for i in range(n)])
             empty = (time.perf_counter() - t0) / n
-            rows[workers] = (wall, report, skipped, empty)
+            rss = client.run(_peak_rss_mb)
+            rows[workers] = (wall, report, skipped, empty, max(rss.values()))
         cluster.close()
 
     w1 = rows[1][0]
@@ -109,10 +127,17 @@ def main() -> None:
     print("| per task | seconds |")
     print("|---|---|")
     print(f"| direct call in this process (read take + export) | {direct:.3f} |")
-    print(f"| batch task, 1 worker (wall / tasks) | {task_1:.3f} |")
-    print(f"| overhead of a batch task (difference) | {task_1 - direct:.3f} |")
+    print(f"| the task function in this process, no Dask (record, log, digests) | {in_process:.3f} |")
+    print(f"| batch task, 1 worker (wall / tasks, incl. planning and hashing inputs) | {task_1:.3f} |")
+    print(f"| overhead of a batch task (1 worker - direct) | {task_1 - direct:.3f} |")
     print(f"| empty Dask task (submit + gather a no-op, 2 workers) | {rows[2][3]:.4f} |")
     print(f"| skipped task (re-run of a finished job, 1 worker) | {rows[1][2]:.3f} |")
+    print()
+    import json
+
+    sizes = [len(json.dumps(o.timeline)) for o in rows[1][1].outcomes]
+    print(f"peak worker memory (RSS): {rows[1][4]:.0f} MB (1 worker), {rows[2][4]:.0f} MB (2 workers); "
+          f"timeline JSON handed on per take: {np.mean(sizes) / 1e6:.2f} MB")
 
 
 if __name__ == "__main__":
