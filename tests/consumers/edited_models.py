@@ -103,3 +103,32 @@ def fitted_head(n_frames: int = 10) -> FaceModel:
     m.timeline.key_head_pose(float(times[-1]), head_rotation_from_euler(15, -5, 3), [0.05, 0.0, 0.02],
                     interpolation="linear")
     return m
+
+
+def enhanced_head() -> FaceModel:
+    """The *Enhanced* preview on (a layer that is not linear in the weights: exports bake it).
+
+    The database is the procedural wrinkled performance of the head itself (its
+    six example expressions and 12 frames of a generated performance), with
+    ``browInnerUp`` and ``mouthSmileLeft`` keyed so that the detail changes.
+    """
+    from workbench.enhance import PerformanceDatabase
+    from workbench.methods.wrinkles.examples import (
+        EXAMPLE_POSES,
+        WrinkleSculptor,
+        performance_weights,
+    )
+
+    m = load_sample("head")
+    sc = WrinkleSculptor(m)
+    poses = list(EXAMPLE_POSES.values()) + performance_weights(24)[:12]
+    V = np.asarray(m.vertices, np.float64)
+    db = PerformanceDatabase.from_frames(sc.detail_of(V), m.faces.astype(np.int64),
+                                         np.stack([sc.detailed(w) for w in poses]),
+                                         metres_per_unit=m.metadata.metres_per_unit)
+    m.enhance.set_database(db, source="procedural performance", preview=True)  # type: ignore[attr-defined]
+    for t, w in ((0.0, {"browInnerUp": 0.0, "mouthSmileLeft": 0.0}), (0.5, {"browInnerUp": 1.0, "mouthSmileLeft": 0.9}),
+                 (1.0, {"browInnerUp": 0.3, "mouthSmileLeft": 0.2})):
+        m.set_weights(w)
+        m.timeline.key_weights(t, list(w))
+    return m

@@ -1,4 +1,4 @@
-"""Edited heads (moved handles, painted expression, regions, wrinkles) played by real consumers.
+"""Edited heads (moved handles, painted expression, regions, wrinkles, enhanced) played by real consumers.
 
 The reference is always ``model.evaluate_at(t)`` — what the workbench shows at
 time ``t`` with every editing layer — in metres. The consumers: the Khronos
@@ -14,14 +14,22 @@ import struct
 import numpy as np
 import pytest
 from consumer_timelines import expected_points
-from edited_models import SAMPLE_TIMES, fitted_head, painted_head, regions_head, wrinkled_head
+from edited_models import (
+    SAMPLE_TIMES,
+    enhanced_head,
+    fitted_head,
+    painted_head,
+    regions_head,
+    wrinkled_head,
+)
 from test_usd_consumer import usdskel_points
 
 from workbench.export import export
 
-MODELS = {"painted": painted_head, "regions": regions_head, "wrinkles": wrinkled_head}
-#: three.js sample times per model: the wrinkle layer is baked per frame, so frames only
-THREE_TIMES = {"painted": SAMPLE_TIMES, "regions": SAMPLE_TIMES, "wrinkles": [0.0, 0.2, 0.5, 0.8, 1.0]}
+MODELS = {"painted": painted_head, "regions": regions_head, "wrinkles": wrinkled_head, "enhanced": enhanced_head}
+#: three.js sample times per model: the wrinkle and enhance layers are baked per frame, so frames only
+THREE_TIMES = {"painted": SAMPLE_TIMES, "regions": SAMPLE_TIMES, "wrinkles": [0.0, 0.2, 0.5, 0.8, 1.0],
+               "enhanced": [0.0, 0.2, 0.5, 0.8, 1.0]}
 FRAMES = [0, 6, 11, 15, 24, 30]
 
 
@@ -43,7 +51,7 @@ def files(models, tmp_path_factory):
 def test_the_layers_really_move_the_face(models):
     # without them the consumer checks below would not prove the layers are exported
     for name, layers in (("painted", ["handles", "paint"]), ("regions", ["regions", "handles", "paint"]),
-                         ("wrinkles", ["wrinkles"])):
+                         ("wrinkles", ["wrinkles"]), ("enhanced", ["enhance"])):
         m = models[name]
         for layer, d in m.layers_at(0.5, layers).items():
             assert d is not None and np.abs(d).max() * m.metadata.metres_per_unit > 5e-4, (name, layer)
@@ -51,10 +59,13 @@ def test_the_layers_really_move_the_face(models):
 
 def test_reports_say_how_each_layer_was_written(files):
     enc = {name: {r.name: r.encoding for r in files[name, ".glb"].layers} for name in MODELS}
-    # every model has the wrinkles layer; unfitted it is written as nothing
-    assert enc["painted"] == {"regions": "inactive", "handles": "linear", "paint": "linear", "wrinkles": "inactive"}
-    assert enc["regions"] == {"regions": "linear", "handles": "linear", "paint": "linear", "wrinkles": "inactive"}
+    # every model has the wrinkles and enhance layers; unfitted / switched off they are written as nothing
+    assert enc["painted"] == {"regions": "inactive", "handles": "linear", "paint": "linear", "wrinkles": "inactive",
+                              "enhance": "inactive"}
+    assert enc["regions"] == {"regions": "linear", "handles": "linear", "paint": "linear", "wrinkles": "inactive",
+                              "enhance": "inactive"}
     assert enc["wrinkles"]["wrinkles"] == "baked"
+    assert enc["enhanced"]["enhance"] == "baked"
     assert {r.name: r.encoding for r in files["painted", ".pc2"].layers}["paint"] == "baked"
 
 

@@ -4,7 +4,9 @@
   by one implicit curvature-flow step, high-frequency detail as per-triangle
   gradients, the compressed shape space of patch-mean gradients, voluntary
   region weights, the eq. 2–3 convex matching and eq. 4 blending
-  (:mod:`.database`); spatial enhancement (§5) is not built yet;
+  (:mod:`.database`);
+* :meth:`PerformanceDatabase.enhance` / :func:`enhance_frames` — spatial
+  enhancement (§5) of input frames through a :class:`Correspondence` (:mod:`.spatial`);
 * :func:`retime` / :class:`RetimeResult` — sequence projection (eq. 5–6) and
   temporally driven interpolation (§6.2) (:mod:`.retime`);
 * ``model.enhance.retime(t0, t1, takes)`` — *Retime from performance* on the
@@ -14,7 +16,8 @@
 from workbench.enhance.database import DatabaseError, PerformanceDatabase
 from workbench.enhance.matching import simplex_lsq
 from workbench.enhance.retime import RetimeResult, retime
+from workbench.enhance.spatial import Correspondence, EnhanceResult, enhance_frames
 from workbench.enhance.voluntary import voluntary_region_weights
 
-__all__ = ["DatabaseError", "PerformanceDatabase", "RetimeResult", "retime", "simplex_lsq",
-           "voluntary_region_weights"]
+__all__ = ["Correspondence", "DatabaseError", "EnhanceResult", "PerformanceDatabase", "RetimeResult",
+           "enhance_frames", "retime", "simplex_lsq", "voluntary_region_weights"]

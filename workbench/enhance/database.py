@@ -26,9 +26,8 @@ What §5 needs is served by :meth:`PerformanceDatabase.lowpass`,
 ``f(d0)``). The matching of eq. 2–3 (:meth:`~PerformanceDatabase.match`,
 convex weights per region by :func:`~workbench.enhance.matching.simplex_lsq`)
 and the blending of eq. 4 (:meth:`~PerformanceDatabase.blend_detail`) are here
-too; chaining them into ``enhance`` is §5's step (not built: on held-out frames
-of the 25k procedural performance the blended detail was not yet reliably
-closer to the truth than the smooth input — see the report of issue 18).
+too; :meth:`~PerformanceDatabase.enhance` chains them per input frame
+(:mod:`workbench.enhance.spatial`).
 
 Hand-written because no library implements the paper's database; the
 operators are libigl's, the factorizations CHOLMOD's (SuperLU as fallback).
@@ -38,7 +37,7 @@ from __future__ import annotations
 
 import os
 import tempfile
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -47,6 +46,7 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 
+from workbench.enhance.errors import DatabaseError
 from workbench.enhance.frequency import CurvatureFlowFilter
 from workbench.enhance.gradients import (
     PoissonReconstructor,
@@ -58,16 +58,12 @@ from workbench.enhance.gradients import (
 )
 from workbench.enhance.matching import simplex_lsq
 from workbench.enhance.patches import face_patches, grow_patches
+from workbench.enhance.spatial import Correspondence, EnhanceResult, Progress, enhance_frames
 from workbench.geometry.sparse_cholesky import Backend
 
 __all__ = ["DatabaseError", "PerformanceDatabase"]
 
-Progress = Callable[[float, str], Any]
 FORMAT = "workbench.enhance.database/1"
-
-
-class DatabaseError(ValueError):
-    """Bad input to :class:`PerformanceDatabase` (the message names the argument)."""
 
 
 def _check_mesh(neutral: ArrayLike, faces: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
@@ -351,6 +347,41 @@ class PerformanceDatabase:
         """Poisson reconstruction (§5.5) from Jacobians over ``f(d0)``; each piece placed at ``anchor``'s mean."""
         return self._poisson.solve(jacobians, anchor)
 
+    def place_pieces(self, X: ArrayLike, low: ArrayLike) -> NDArray[np.float64]:
+        """Per-vertex translation (n, 3) putting each piece of ``X`` where its low band matches ``low``.
+
+        ``f`` keeps translations, so shifting a piece by the area-weighted mean of
+        ``low − f(X)`` over it makes ``f(X)`` and ``low`` share their centroids.
+        """
+        return self._poisson.piece_shift(np.asarray(low, np.float64) - self.lowpass(X))
+
+    def enhance(
+        self, frames: ArrayLike, *, correspondence: Correspondence | None = None, progress: Progress | None = None
+    ) -> NDArray[np.float64]:
+        """Enhanced frames (T, n, 3) on the database's mesh (§5; :func:`workbench.enhance.spatial.enhance_frames`).
+
+        Parameters
+        ----------
+        frames : (T, n_in, 3) or (n_in, 3) float
+            Input frames: the database's own mesh, or another one through ``correspondence``.
+        correspondence : Correspondence, optional
+            :meth:`Correspondence.loop` (the database is a Loop subdivision of the input),
+            :meth:`Correspondence.from_surface`, or the identity (default).
+        progress : callable(fraction, message), optional
+
+        Raises
+        ------
+        DatabaseError
+            Frames of the wrong shape or vertex count, or NaN/inf.
+        """
+        return self.enhance_result(frames, correspondence=correspondence, progress=progress).frames
+
+    def enhance_result(
+        self, frames: ArrayLike, *, correspondence: Correspondence | None = None, progress: Progress | None = None
+    ) -> EnhanceResult:
+        """Like :meth:`enhance`, with the matched weights per frame and region and the time per stage."""
+        return enhance_frames(self, frames, correspondence=correspondence, progress=progress)
+
     def frame(self, index: int, low: ArrayLike) -> NDArray[np.float64]:
         """Database frame ``index``'s detail put onto ``low`` (n, 3) and reconstructed, (n, 3)."""
         return self.reconstruct(self.compose(self.detail_[index], low), low)
@@ -382,8 +413,11 @@ class PerformanceDatabase:
         tot = om.sum(axis=0)
         om = np.where(tot > 0, om / np.where(tot > 0, tot, 1.0), 1.0 / R)  # (R, m)
         active = np.flatnonzero(W.max(axis=0) > 1e-6)
-        C = om.T @ W[:, active]  # (m, k)
-        return np.einsum("tk,ktij->tij", C, self.detail_[active].astype(np.float64))
+        C = (om.T @ W[:, active]).astype(np.float32)  # (m, k)
+        out = np.zeros((len(om[0]), 3, 3), np.float32)
+        for j, i in enumerate(active):  # k is small (the convex weights are sparse): one axpy per frame
+            out += C[:, j, None, None] * self.detail_[i]
+        return out.astype(np.float64)
 
     # ------------------------------------------------------------------ files
     def save(self, path: str | os.PathLike[str]) -> Path:

@@ -1,4 +1,15 @@
-"""``model.enhance``: *Retime from performance* on the model's timeline (Bermano et al. 2014 §6.2).
+"""``model.enhance``: the *Enhanced* preview (§5) and *Retime from performance* (§6.2) (Bermano et al. 2014).
+
+Spatial enhancement: :meth:`EnhanceFacet.set_database` installs a
+:class:`~workbench.enhance.database.PerformanceDatabase` and the correspondence
+from the model's mesh to it (found by itself: the same mesh, a Loop subdivision
+of it, or the closest points of its surface); :meth:`~EnhanceFacet.set_preview`
+turns the *Enhanced* preview layer on and off (:mod:`.layer`; every exporter
+then bakes it); :meth:`~EnhanceFacet.enhance_timeline` enhances every frame of
+the timeline at the database's resolution (:class:`~workbench.enhance.bake.EnhancedTake`,
+exported like any face). Each edit is one undo step.
+
+Retiming:
 
 :meth:`EnhanceFacet.retime` takes two times on the timeline (a key pair), reads
 the weights there, finds the transition between them in a database of takes
@@ -20,10 +31,14 @@ from numpy.typing import NDArray
 
 from workbench.animation.tracks import Timeline, add_keys
 from workbench.core.shapes import ModelError
+from workbench.enhance.bake import EnhancedTake
+from workbench.enhance.layer import EnhancementState
 from workbench.enhance.retime import RetimeResult, retime
+from workbench.enhance.spatial import Correspondence, Progress
 
 if TYPE_CHECKING:
     from workbench.core.state import FaceState
+    from workbench.enhance.database import PerformanceDatabase
 
 __all__ = ["EnhanceFacet", "weight_takes"]
 
@@ -52,6 +67,30 @@ def weight_takes(database: Any, shape_names: Sequence[str]) -> list[NDArray[np.f
     return out
 
 
+def default_correspondence(model: FaceState, database: PerformanceDatabase) -> Correspondence:
+    """The model's mesh → the database's: the same mesh, a Loop subdivision of it (1–3 levels), else closest points.
+
+    The first two are recognised by vertex count and checked on the neutral
+    (within 1 % of the head size); closest points assume both meshes are in the same place and units.
+    """
+    from workbench.geometry.subdivision import subdivided_vertex_count
+
+    V = np.asarray(model.vertices, np.float64)
+    F = np.asarray(model.faces, np.int64)
+    d0 = database.neutral_
+    size = float(np.linalg.norm(np.ptp(V, axis=0))) or 1.0
+    candidates: list[Correspondence] = []
+    if d0.shape[0] == V.shape[0]:
+        candidates.append(Correspondence.identity(V.shape[0]))
+    for levels in (1, 2, 3):
+        if subdivided_vertex_count(F, V.shape[0], levels) == d0.shape[0]:
+            candidates.append(Correspondence.loop(F, V.shape[0], levels))
+    for corr in candidates:
+        if float(np.sqrt(np.mean(np.sum((corr(V[None])[0] - d0) ** 2, axis=1)))) < 0.01 * size:
+            return corr
+    return Correspondence.from_surface(V, F, d0, database.faces_)
+
+
 class EnhanceFacet:
     """Performance enhancement on one model (see the module docstring); keeps nothing of its own."""
 
@@ -59,7 +98,99 @@ class EnhanceFacet:
         self._model = model
 
     def __repr__(self) -> str:
-        return "<enhance: retime(t0, t1, database) keys a transition with a take's timing>"
+        st = self.state
+        db = "no database" if st.database is None else f"database of {st.database.n_frames_} frames ({st.source or '-'})"
+        return f"<enhance: {db}, preview {'on' if st.enabled else 'off'}; retime(t0, t1, takes)>"
+
+    # ------------------------------------------------------------------ spatial (§5)
+    @property
+    def state(self) -> EnhancementState:
+        """The ``enhancement`` slot (database, correspondence, preview on/off)."""
+        st: EnhancementState = self._model.slot("enhancement")
+        return st
+
+    @property
+    def database(self) -> PerformanceDatabase | None:
+        return self.state.database
+
+    @property
+    def preview(self) -> bool:
+        """Whether the *Enhanced* preview layer is on."""
+        return self.state.enabled
+
+    def set_database(self, database: PerformanceDatabase | None, *, correspondence: Correspondence | None = None,
+                     source: str = "", preview: bool | None = None) -> None:
+        """Use ``database`` for enhancement (one undo step; ``None`` removes it and turns the preview off).
+
+        Parameters
+        ----------
+        database : PerformanceDatabase or None
+        correspondence : Correspondence, optional
+            The model's mesh → the database's; default :func:`default_correspondence`.
+        source : str
+            Where it came from (shown by panels).
+        preview : bool, optional
+            Turn the *Enhanced* preview on/off in the same step (default: keep it).
+        """
+        m = self._model
+        old = self.state
+        if database is None:
+            m.set_slot("enhancement", EnhancementState(), "Remove enhancement database")
+            return
+        corr = correspondence or default_correspondence(m, database)
+        on = old.enabled if preview is None else bool(preview)
+        m.set_slot("enhancement", EnhancementState(database, corr, on, source),
+                   f"Enhancement database ({database.n_frames_} frames)")
+
+    def set_preview(self, on: bool = True) -> None:
+        """Turn the *Enhanced* preview on or off (one undo step)."""
+        st = self.state
+        if st.enabled == bool(on):
+            return
+        self._model.set_slot("enhancement", st.replace(enabled=bool(on)), "Enhanced preview " + ("on" if on else "off"))
+
+    def enhance_timeline(self, times: Sequence[float] | None = None, *, progress: Progress | None = None) -> EnhancedTake:
+        """Enhance the animation at the database's resolution: every frame of the timeline (or ``times``).
+
+        Each frame is the model evaluated at that time (head pose included; the
+        preview layer itself left out), mapped onto the database mesh and enhanced
+        (enhancement is rotation-equivariant, so the pose stays). The model is not changed.
+
+        Raises
+        ------
+        ModelError
+            No database is set.
+        """
+        from workbench.animation.family import head_matrix
+        from workbench.core.pipeline import posed_points
+
+        m = self._model
+        st = self.state
+        if st.database is None or st.correspondence is None:
+            raise ModelError("enhance_timeline: no database; call model.enhance.set_database(...) first")
+        tl: Timeline = m.slot("tracks")
+        t = np.asarray(tl.frame_times() if times is None else list(times), np.float64)
+        if t.size == 0:
+            raise ModelError("enhance_timeline: no frames to enhance (the timeline range is empty)")
+        say = progress or (lambda f, msg: None)
+        frames = np.empty((t.size, m.n_vertices, 3), np.float64)
+        for i, ti in enumerate(t):
+            if i % 8 == 0:
+                say(0.2 * i / t.size, f"evaluating frame {i + 1} of {t.size}")
+            ev = m.evaluation_at(float(ti))
+            below = np.asarray(ev.mesh, np.float64)
+            shown = ev.displacements.get("enhance")
+            if shown is not None:
+                below = below - shown
+            M = head_matrix(m.view_at(float(ti)))
+            frames[i] = below if M is None else posed_points(below.astype(np.float32), M)
+        result = st.database.enhance_result(
+            frames, correspondence=st.correspondence, progress=lambda f, msg: say(0.2 + 0.8 * f, msg)
+        )
+        return EnhancedTake(result.frames, t, st.database.faces_, result.weights, tl.fps,
+                            m.metadata.metres_per_unit, m.metadata, str(m.metadata.name or "face"))
+
+    # ------------------------------------------------------------------ temporal (§6.2)
 
     def retime(self, t0: float, t1: float, database: Any, *, n_frames: int | None = None, extend: bool = False,
                label: str | None = None) -> RetimeResult:

@@ -1,13 +1,26 @@
-"""Registers performance enhancement: the facet ``model.enhance`` (retime a key pair from a take).
+"""Registers performance enhancement: the ``enhancement`` slot, the ``enhance`` layer, ``model.enhance``.
 
-No slot, no layer, no file part (a retimed transition is timeline keys, which the
-timeline family saves). Imported by ``workbench/__init__.py``, like capture's
-family: enhancement builds timelines from takes and may import what builds models.
+The slot holds the database and the *Enhanced* preview switch (:mod:`.layer`);
+the layer runs last (after wrinkles), so it enhances the whole edited face. No
+file part: the database is its own file (:meth:`PerformanceDatabase.save`), and
+the preview is a view setting, off when a face is opened. A retimed transition
+is timeline keys, which the timeline family saves. Imported by
+``workbench/__init__.py``, like capture's family: enhancement builds faces from
+frames and may import what builds models.
 """
 
 from __future__ import annotations
 
-from workbench.core.families import Family, register_family
+from workbench.core.families import Family, SlotSpec, register_family
 from workbench.enhance.facet import EnhanceFacet
+from workbench.enhance.layer import EnhanceLayer, EnhancementState, check_state
 
-FAMILY = register_family(Family(name="enhance", facet=EnhanceFacet, order=96))
+FAMILY = register_family(
+    Family(
+        name="enhance",
+        slots=(SlotSpec("enhancement", lambda m: EnhancementState(), deforms=True, check=check_state),),
+        facet=EnhanceFacet,
+        layer=EnhanceLayer,
+        order=96,
+    )
+)

@@ -180,8 +180,13 @@ class PoissonReconstructor:
         # b[d*m + t, k] = J_t[k, d]  (libigl's grad stacks all x-derivatives, then y, then z)
         b = J.transpose(2, 0, 1).reshape(3 * self._m, 3)
         x = self.solver_.solve(self._GtW @ b + self._anchor[:, None] * a)
+        return x + self.piece_shift(a - x)
+
+    def piece_shift(self, offset: ArrayLike) -> NDArray[np.float64]:
+        """Per-vertex translation (n, 3): each piece's area-weighted mean of ``offset`` (n, 3)."""
+        d = np.asarray(offset, np.float64)
         w = self._d
         num = np.zeros((self.n_pieces_, 3))
-        np.add.at(num, self.pieces_, w[:, None] * (a - x))
+        np.add.at(num, self.pieces_, w[:, None] * d)
         den = np.bincount(self.pieces_, weights=w, minlength=self.n_pieces_)
-        return np.asarray(x + (num / den[:, None])[self.pieces_])
+        return np.asarray((num / den[:, None])[self.pieces_])

@@ -15,13 +15,17 @@ Hand-written because it is a few lines around scipy's Dijkstra.
 from __future__ import annotations
 
 from collections.abc import Mapping
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 from scipy.sparse.csgraph import dijkstra
 
-__all__ = ["voluntary_region_weights"]
+if TYPE_CHECKING:
+    from workbench.core.state import FaceState
+
+__all__ = ["face_voluntary_cores", "voluntary_region_weights"]
 
 
 def voluntary_region_weights(
@@ -65,4 +69,53 @@ def voluntary_region_weights(
         d = dijkstra(graph, directed=False, indices=idx, min_only=True)
         d = np.where(np.isfinite(d), d, np.inf)[F].mean(axis=1)
         out[str(name)] = np.exp(-0.5 * (d / sigma) ** 2).astype(np.float32)
+    return out
+
+
+#: shape-name fragments (lower case) of the two voluntary groups, after Tena et al.'s segmentation
+_GROUPS = {"brow": ("brow",), "mouth": ("mouth", "jaw", "lip", "cheek")}
+
+
+def face_voluntary_cores(model: FaceState, share: float = 0.04) -> dict[str, NDArray[np.int64]]:
+    """The paper's four voluntary regions on a rigged face: mouth and brow, left and right.
+
+    A group's core is the ``share`` of the vertices its shapes (names containing
+    ``brow``; ``mouth``/``jaw``/``lip``/``cheek`` — ARKit's and most rigs' spelling)
+    move most, split by the side of the face (the model's left axis from its
+    metadata, about the median of the core).
+
+    Parameters
+    ----------
+    model : FaceModel
+    share : float
+        Fraction of the vertices in each group's core (before the left/right split).
+
+    Returns
+    -------
+    dict name -> (k,) int64
+        ``mouth_left``, ``mouth_right``, ``brow_left``, ``brow_right`` (groups the rig has no shape for are left out).
+
+    Raises
+    ------
+    ValueError
+        The rig has no brow or mouth shapes at all.
+    """
+    from workbench.rigging.transfer import face_axes
+
+    V = np.asarray(model.vertices, np.float64)
+    left = V @ face_axes(model)[0]  # type: ignore[arg-type]
+    k = max(2, round(share * len(V)))
+    out: dict[str, NDArray[np.int64]] = {}
+    for group, parts in _GROUPS.items():
+        mags = [np.linalg.norm(np.asarray(s.delta, np.float64), axis=1)
+                for s in model.shapes if any(p in s.name.lower() for p in parts)]
+        if not mags:
+            continue
+        motion = np.sum(mags, axis=0)
+        core = np.argsort(motion)[-k:]
+        mid = float(np.median(left[core]))
+        out[f"{group}_left"] = np.sort(core[left[core] >= mid])
+        out[f"{group}_right"] = np.sort(core[left[core] < mid])
+    if not out:
+        raise ValueError("face_voluntary_cores: the rig has no brow or mouth shapes (names with brow/mouth/jaw/lip/cheek)")
     return out
