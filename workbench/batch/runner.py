@@ -192,7 +192,16 @@ def run(
         if progress:
             from distributed import progress as dask_progress
 
-            dask_progress(futures, notebook=_in_notebook())
+            if _in_notebook():
+                # Dask's widget displays itself (distributed imports IPython, the core does not); the
+                # kernel is busy in wait() below, so it updates when the cell ends: the dashboard
+                # link above is the live view
+                bar = dask_progress(futures, notebook=True)
+                show = getattr(bar, "_ipython_display_", None)
+                if show is not None:
+                    show()
+            else:
+                dask_progress(futures, notebook=False)  # a text bar; returns when all are finished
         wait(futures)
         outcomes = [_outcome_of(f, s) for f, s in zip(futures, specs, strict=True)]
         for f in futures:
