@@ -8,11 +8,15 @@ A job file (read with the standard library's :mod:`tomllib`) looks like::
     name = "head"                  # the folder name under output/
     rig = "head.fwb"               # a .fwb or anything workbench.load reads
     vertex_map = "markers.json"    # optional: marker -> vertex map for `track`
+    units = "cm"                   # optional: the rig's length unit (as `workbench rig --units`)
 
     [[takes]]
     name = "take1"                 # the file name stem of the outputs
     path = "take1.csv"             # an animation (weights CSV, Live Link, glTF, FBX, USD, Alembic)
                                    # or, with a `track` step, markers (C3D, marker CSV, NPY/NPZ)
+    vertex_map = "take1_map.json"  # optional: this take's marker map (wins over the character's)
+    fps = 30                       # optional: the take's frame rate (wins over the file's)
+    units = "mm"                   # optional: the markers' unit (wins over the file's)
 
     [[steps]]
     kind = "export"
@@ -21,8 +25,8 @@ A job file (read with the standard library's :mod:`tomllib`) looks like::
 :data:`STEP_FIELDS` lists every step kind and its fields. Every problem —
 a TOML syntax error, an unknown table or field, a value of the wrong type,
 a file that does not exist — raises :class:`JobFileError` naming the file,
-the line and the field, e.g. ``jobs.toml line 7: [[steps]] kind = "exprot":
-expected one of export, track, ...``. Paths are resolved against the job
+the line and the field, e.g. ``jobs.toml line 9: [[steps]] kind = "exprot":
+expected one of track, transfer_rig, retime, enhance, export``. Paths are resolved against the job
 file's folder.
 """
 
