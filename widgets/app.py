@@ -16,6 +16,7 @@ import traitlets
 
 from widgets._threading import ErrorSink, close_interactions
 from widgets.capture import CapturePanel
+from widgets.enhance import EnhancePanel
 from widgets.gallery import ExpressionGallery
 from widgets.panels import ExportPanel, ExpressionPanel, PaintPanel, SculptPanel, UndoRedoButtons
 from widgets.panels.shape_tools import ShapeToolsPanel
@@ -27,8 +28,8 @@ from widgets.wrinkles import WrinklePanel
 __all__ = ["PALETTE_COLUMNS", "PALETTE_THUMB_SIZE", "TAB_TITLES", "Workbench", "show_workbench"]
 
 #: tab titles, in order, and the viewport tool each tab selects
-TAB_TITLES = ("Shapes", "Sculpt", "Regions", "Paint", "Export", "Capture")
-_TAB_TOOLS = ("orbit", "sculpt", "orbit", "paint", "orbit", "orbit")
+TAB_TITLES = ("Shapes", "Sculpt", "Regions", "Paint", "Export", "Capture", "Enhance")
+_TAB_TOOLS = ("orbit", "sculpt", "orbit", "paint", "orbit", "orbit", "orbit")
 _SHAPES, _SCULPT, _REGIONS, _PAINT, _EXPORT, _CAPTURE = range(6)
 #: thumbnail size and columns of the expression palette (Paint tab, timeline chips)
 PALETTE_THUMB_SIZE = (72, 72)
@@ -148,6 +149,13 @@ class Workbench(W.VBox):
             before_edit=[self.panel.grouper.flush],
             selected_keys=lambda: self.timeline.selected_keys,
         )
+        self.enhance = EnhancePanel(
+            model,
+            errors=self.errors,
+            before_edit=[self.panel.grouper.flush],
+            selected_keys=lambda: self.timeline.selected_keys,
+            capture_result=lambda: self.capture.result,
+        )
         self._regions: RegionsPanel | None = None
         self._switching = False
         self._paint: PaintPanel | None = None
@@ -162,6 +170,7 @@ class Workbench(W.VBox):
                 self._paint_slot,
                 self.export,
                 self.capture,
+                self.enhance,
             ],
             titles=TAB_TITLES,
             layout=W.Layout(flex="0 0 650px", width="650px"),
@@ -413,6 +422,8 @@ class Workbench(W.VBox):
         self.wrinkles.close()
         self.sculpt.close()
         self.export.close()
+        self.capture.close()
+        self.enhance.close()
         self.shape_tools.close()
         self.timeline.close()
         if self._gallery is not None:

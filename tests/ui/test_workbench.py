@@ -50,7 +50,7 @@ def test_exports_the_tool_widgets() -> None:
 
 
 def test_tabs_exist_and_heavy_panels_wait_for_their_tab(wb: Workbench) -> None:
-    assert tuple(wb.tabs.titles) == ("Shapes", "Sculpt", "Regions", "Paint", "Export", "Capture")
+    assert tuple(wb.tabs.titles) == ("Shapes", "Sculpt", "Regions", "Paint", "Export", "Capture", "Enhance")
     assert wb._regions is None and wb._paint is None
     assert wb.timeline in wb.children[1].children[0].children  # under the viewport
     _select(wb, "Regions")

@@ -1,0 +1,111 @@
+"""The Enhance tab in the kernel: build, preview (with undo/redo), bake, save/load, retime with its plot."""
+
+from __future__ import annotations
+
+import struct
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import workbench
+from widgets import TAB_TITLES, Workbench
+
+pytestmark = pytest.mark.ui
+
+SMILE = {"mouthSmileLeft": 0.9, "mouthSmileRight": 0.9, "browInnerUp": 0.8}
+
+
+def _key_smile(model: workbench.FaceModel, t1: float = 0.3) -> None:
+    for t, w in ((0.0, dict.fromkeys(SMILE, 0.0)), (t1, SMILE)):
+        model.set_weights(w)
+        model.timeline.key_weights(t, list(w))
+
+
+def test_build_preview_undo_and_bake(tmp_path: Path) -> None:
+    model = workbench.load_sample("head")
+    wb = Workbench(model, height=240)
+    try:
+        assert TAB_TITLES[-1] == "Enhance" and wb.tabs.children[-1] is wb.enhance
+        p = wb.enhance
+        assert p.preview.disabled and p.bake_button.disabled
+        p.n_frames.value = 20
+        shown: list[float] = []
+        p.progress.bar.observe(lambda c: shown.append(c["new"]), "value")
+        db = p.build()  # procedural, one subdivision finer (the default)
+        assert shown and max(shown) > 0.3  # the bar moved while it encoded
+        assert db.neutral_.shape[0] > 4 * model.n_vertices - 1000
+        assert "procedural performance" in p.info.value and "loop" in p.info.value
+        assert not p.preview.disabled
+        _key_smile(model)
+        model.set_time(0.3)
+        before = np.array(model.evaluate())
+        p.preview.value = True  # the user ticks the box
+        assert model.enhance.preview
+        assert np.abs(np.array(model.evaluate()) - before).max() > 1e-3
+        wb.undo()
+        assert not model.enhance.preview and p.preview.value is False  # the box follows undo
+        wb.redo()
+        assert p.preview.value is True
+        files = p.bake(str(tmp_path / "enhanced.pc2"))
+        assert files[0].exists()
+        _, _, points, _, _, samples = struct.unpack_from("<12siiffi", files[0].read_bytes(), 0)
+        assert (points, samples) == (db.neutral_.shape[0], len(model.tracks.frame_times()))
+        assert "baked" in p.progress.label.value and "s/frame" in p.progress.label.value
+        saved = p.save(str(tmp_path / "db.npz"))
+        p.source.value = "file"
+        assert p.build_button.description == "Load database"
+        p.path.value = str(saved)
+        p.build()
+        assert model.enhance.state.source == "db.npz"
+    finally:
+        wb.close()
+
+
+def test_retime_from_the_performance_draws_the_timing_plot() -> None:
+    model = workbench.load_sample("head")
+    wb = Workbench(model, height=240)
+    try:
+        p = wb.enhance
+        p.n_frames.value = 30
+        p.source.value = "procedural"
+        p.build()
+        _key_smile(model, 1.0)
+        tl = model.tracks
+        track = "weights/mouthSmileLeft"
+        p.selected_keys = lambda: [(track, 0), (track, 1)]
+        p.extend.value = True
+        res = p.retime_selected()
+        assert p.plot.layout.display is None and p.plot.value[:4] == b"\x89PNG"
+        assert res.frames.shape[0] == round(tl.fps) + 1
+        # in-betweens were keyed: the smile is no longer a straight line between the keys
+        w = model.tracks.weight_matrix(model.shape_names, np.linspace(0, 1, 31))[:, model.shape_names.index("mouthSmileLeft")]
+        assert np.abs(w - np.linspace(w[0], w[-1], 31)).max() > 0.02
+        wb.undo()
+        assert len(model.tracks.tracks[track].keys) == 2
+    finally:
+        wb.close()
+
+
+def test_clear_errors_for_what_is_missing(tmp_path: Path) -> None:
+    model = workbench.load_sample("head")
+    wb = Workbench(model, height=240)
+    try:
+        p = wb.enhance
+        with pytest.raises(ValueError, match="build or load one first"):
+            p.save(str(tmp_path / "x.npz"))
+        with pytest.raises(ValueError, match="build the procedural performance database first"):
+            p.selected_keys = lambda: [("weights/jawOpen", 0), ("weights/jawOpen", 1)]
+            model.set_weights({"jawOpen": 0.0})
+            model.timeline.key_weights(0.0, ["jawOpen"])
+            model.set_weights({"jawOpen": 1.0})
+            model.timeline.key_weights(1.0, ["jawOpen"])
+            p.retime_selected()
+        p.source.value = "file"
+        p.path.value = str(tmp_path / "missing.npz")
+        with pytest.raises(Exception, match=r"missing\.npz"):
+            p.build()
+        assert "database failed" in p.progress.label.value
+        assert model.enhance.database is None
+    finally:
+        wb.close()

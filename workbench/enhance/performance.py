@@ -1,0 +1,130 @@
+"""A detailed performance of any rigged face, for a database when no scans are at hand.
+
+The procedural wrinkles of :mod:`workbench.methods.wrinkles.examples` put onto
+the face's own expressions: the six example expressions and the frames of a
+generated performance (:func:`~workbench.methods.wrinkles.examples.performance_weights`),
+on the face's mesh or on its Loop subdivision (``levels``: the 80k head from the
+25k one, as §5 enhances a low-resolution input from a high-resolution database).
+:func:`procedural_database` encodes it with the paper's four voluntary regions
+(:func:`~workbench.enhance.voluntary.face_voluntary_cores`) and returns the
+weights of the performance as a take for *Retime from performance*.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from workbench.enhance.database import PerformanceDatabase
+from workbench.enhance.voluntary import face_voluntary_cores, voluntary_region_weights
+
+if TYPE_CHECKING:
+    from workbench.core.state import FaceState
+
+__all__ = ["ProceduralPerformance", "procedural_database"]
+
+Progress = Callable[[float, str], Any]
+
+
+@dataclass
+class ProceduralPerformance:
+    """What :func:`procedural_database` made.
+
+    Attributes
+    ----------
+    database : PerformanceDatabase
+    weights : (T, k) float64
+        The generated performance's blendshape weights in ``shape_names`` order
+        (without the six example expressions, which are poses, not motion): a take
+        for :meth:`EnhanceFacet.retime`.
+    shape_names : list of str
+    fps : float
+        The rate the performance was generated at.
+    """
+
+    database: PerformanceDatabase
+    weights: NDArray[np.float64]
+    shape_names: list[str]
+    fps: float = 30.0
+
+
+def procedural_database(
+    model: FaceState,
+    *,
+    n_frames: int = 60,
+    levels: int = 0,
+    lambda_dt: float = 125.0,
+    regions: bool = True,
+    seed: int = 7,
+    progress: Progress | None = None,
+) -> ProceduralPerformance:
+    """Encode a procedural detailed performance of ``model`` (on its mesh, or ``levels`` Loop steps finer).
+
+    Parameters
+    ----------
+    model : FaceModel
+        A rig with ARKit-like shapes (any spelling; split halves are fine).
+    n_frames : int
+        Frames of the generated performance (plus the six example expressions).
+    levels : int
+        Loop subdivisions of the database mesh (0: the model's own mesh).
+    lambda_dt : float
+        Curvature-flow step in mm² (the paper's 125).
+    regions : bool
+        Use the four voluntary regions (mouth and brows, left and right); else one region.
+    seed : int
+        Seed of the generated performance.
+    progress : callable(fraction, message), optional
+
+    Raises
+    ------
+    ValueError
+        ``n_frames`` < 2 or ``levels`` not in 0..2; the rig has none of the example expressions' shapes.
+    """
+    from workbench.arkit import rig_weights
+    from workbench.geometry.subdivision import subdivide_model
+    from workbench.methods.wrinkles.examples import (
+        EXAMPLE_POSES,
+        WrinkleSculptor,
+        performance_weights,
+    )
+
+    if int(n_frames) < 2:
+        raise ValueError(f"procedural_database: n_frames must be >= 2, got {n_frames!r}")
+    if int(levels) not in (0, 1, 2):
+        raise ValueError(f"procedural_database: levels must be 0, 1 or 2, got {levels!r}")
+    say = progress or (lambda f, msg: None)
+    say(0.0, "preparing the detailed face")
+    fine: Any = subdivide_model(model, int(levels)) if levels else model  # type: ignore[arg-type]
+    sculptor = WrinkleSculptor(fine)
+    poses = list(EXAMPLE_POSES.values()) + performance_weights(int(n_frames), seed=seed)
+    names = list(model.shape_names)
+    weights = np.zeros((len(poses), len(names)))
+    index = {n: j for j, n in enumerate(names)}
+    for i, w in enumerate(poses):
+        own, _ = rig_weights(w, names)
+        for name, value in own.items():
+            weights[i, index[name]] = value
+    if not np.any(weights):
+        raise ValueError("procedural_database: the rig has none of the example expressions' shapes")
+    frames = np.empty((len(poses), fine.n_vertices, 3), np.float32)
+    for i, w in enumerate(poses):
+        if i % 8 == 0:
+            say(0.4 * i / len(poses), f"sculpting detailed frame {i + 1} of {len(poses)}")
+        frames[i] = sculptor.detailed(w)
+    V = np.asarray(fine.vertices, np.float64)
+    F = np.asarray(fine.faces, np.int64)
+    mpu = float(model.metadata.metres_per_unit)
+    region_w = None
+    if regions:
+        # σ 1 cm, in model units
+        region_w = voluntary_region_weights(V, F, face_voluntary_cores(fine), sigma=0.01 / mpu)
+    db = PerformanceDatabase.from_frames(
+        sculptor.detail_of(V), F, frames, regions=region_w, lambda_dt=lambda_dt, metres_per_unit=mpu,
+        progress=lambda f, msg: say(0.4 + 0.6 * f, msg),
+    )
+    return ProceduralPerformance(db, weights[len(EXAMPLE_POSES):], names)
