@@ -202,6 +202,7 @@ def test_track_and_transfer_rig_steps(tmp_path, client):
 
 def test_enhance_step(tmp_path, client):
     from workbench.enhance import PerformanceDatabase
+    from workbench.export.pointcache import PC2_HEADER
 
     head = small_head()
     frames = np.stack([head.evaluate_at(0.0) + 0.001 * i for i in range(3)])
@@ -216,8 +217,16 @@ def test_enhance_step(tmp_path, client):
         return
     assert outcome.status == "done", outcome.error
     (pc2,) = outcome.outputs
-    data = np.fromfile(pc2, np.uint8)
-    assert data.size == 32 + 31 * head.n_vertices * 12
+    assert pc2.endswith("char0/take0.enhanced.pc2")
+    header = np.fromfile(pc2, PC2_HEADER, count=1)[0]
+    assert (header["signature"], header["points"], header["samples"]) == (b"POINTCACHE2", head.n_vertices, 31)
+    got = np.fromfile(pc2, "<f4", offset=32).reshape(31, head.n_vertices, 3)
+    # the same as calling the database directly on the take's frames (metres in the file)
+    tl = Timeline.from_json(report.by_label()["char0/take0/00-export"].timeline)
+    frames = np.stack([head.evaluate_at(float(t), tl) for t in tl.frame_times()])
+    database = PerformanceDatabase.load(tmp_path / "db.npz")
+    want = database.enhance(frames) * head.metadata.metres_per_unit
+    np.testing.assert_allclose(got, want, atol=1e-6, rtol=0)
 
 
 def test_a_killed_worker_loses_nothing(tmp_path):
