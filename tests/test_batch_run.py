@@ -270,3 +270,13 @@ def test_a_killed_worker_loses_nothing(tmp_path):
         stage = pxr.Usd.Stage.Open(str(usda))
         assert stage.GetPrimAtPath("/Face/Mesh"), usda
     shutil.rmtree(out)
+
+
+def test_a_bad_rig_fails_its_character_alone(tmp_path, client):
+    job = make_project(tmp_path, characters=2, takes=1, formats=("glb",))
+    (tmp_path / "char1.fwb").write_bytes(b"PK\x03\x04 not a workbench file")
+    report = _run(job, client)
+    assert {o.label: o.status for o in report.outcomes} == {"char0/take0/00-export": "done",
+                                                           "char1/take0/00-export": "failed"}
+    (failed,) = report.failures()
+    assert failed.input.endswith("char1.fwb") and "char1.fwb" in failed.error, failed.error

@@ -311,11 +311,21 @@ def _task_log(spec: TaskSpec) -> Iterator[tuple[logging.Logger, list[str]]]:
         atomic_write_text(spec.log_path, "\n".join(lines) + "\n")
 
 
-def _error_message(spec: TaskSpec, exc: BaseException) -> str:
+def _error_message(source: Path | str, exc: BaseException) -> str:
+    """``<Type>: <source>: <message>``, ``source`` left out when the message names it already."""
     msg = str(exc) or type(exc).__name__
-    if spec.take.path.name not in msg and str(spec.take.path) not in msg:
-        msg = f"{spec.take.path}: {msg}"
+    if Path(source).name not in msg:
+        msg = f"{source}: {msg}"
     return f"{type(exc).__name__}: {msg}"
+
+
+def _failed(outcome: TaskOutcome, source: Path | str, exc: BaseException, lines: list[str], log: logging.Logger,
+            t0: float) -> TaskOutcome:
+    lines.append(traceback.format_exc())
+    outcome.status, outcome.error, outcome.input = "failed", _error_message(source, exc), str(source)
+    outcome.seconds = time.perf_counter() - t0
+    log.error("%s", outcome.error)
+    return outcome
 
 
 def execute(spec: TaskSpec, previous: TaskOutcome | None = None) -> TaskOutcome:
@@ -344,20 +354,19 @@ def execute(spec: TaskSpec, previous: TaskOutcome | None = None) -> TaskOutcome:
     with _task_log(spec) as (log, lines):
         log.info("%s on %s (key %s)", spec.label, worker or "this process", spec.key[:16])
         try:
+            entry = rig_entry(spec.rig_out, spec.output)
+        except Exception as exc:  # the rig (or the transfer onto it) is the bad input
+            return _failed(base, spec.rig_out.path, exc, lines, log, t0)
+        try:
             from workbench.animation.tracks import Timeline
 
-            entry = rig_entry(spec.rig_out, spec.output)
             timeline = None if previous is None or previous.timeline is None else Timeline.from_json(previous.timeline)
             with entry.lock:
                 ctx = _Context(spec, entry.value, timeline, log)
                 written = STEPS[spec.kind](ctx)
             out_tl = None if ctx.timeline is None else ctx.timeline.to_json()
         except Exception as exc:  # a bad input fails this task only; the traceback goes to its log
-            lines.append(traceback.format_exc())
-            base.status, base.error = "failed", _error_message(spec, exc)
-            base.seconds = time.perf_counter() - t0
-            log.error("%s", base.error)
-            return base
+            return _failed(base, spec.take.path, exc, lines, log, t0)
         base.seconds = time.perf_counter() - t0
         log.info("done in %.2f s", base.seconds)
     base.outputs, base.timeline = [str(p) for p in written], out_tl
