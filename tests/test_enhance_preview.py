@@ -128,3 +128,37 @@ def test_a_session_without_enhancement_pays_nothing() -> None:
     m.set_weights(SMILE)
     ev = m.evaluation_at(0.0)
     assert ev.displacements.get("enhance") is None
+
+
+def test_a_procedural_database_for_a_rig_with_other_names_and_units() -> None:
+    """Shapes spelled ``mouth_smile_L`` style, in centimetres: the regions and the performance still find them."""
+    import re
+
+    from workbench.core.shapes import BlendShape, ModelMetadata
+    from workbench.enhance.performance import procedural_database
+
+    src = workbench.load_sample("head")
+
+    def respell(name: str) -> str:
+        side = {"Left": "_L", "Right": "_R"}
+        m = re.match(r"(.*?)(Left|Right)?$", name)
+        assert m is not None
+        return re.sub(r"(?<!^)([A-Z])", r"_\1", m.group(1)).lower() + side.get(m.group(2) or "", "")
+
+    shapes = [BlendShape(respell(s.name), np.asarray(s.delta) * 10.0) for s in src.shapes]
+    rig = workbench.FaceModel(np.asarray(src.vertices) * 10.0, src.faces, shapes,
+                              component_labels=src.component_labels, component_names=src.component_names,
+                              metadata=ModelMetadata(name="respelled", units="cm"))
+    assert "mouth_smile_L" in rig.shape_names
+    perf = procedural_database(rig, n_frames=12, levels=0)
+    db = perf.database
+    assert db.region_names_ == ["brow_left", "brow_right", "mouth_left", "mouth_right"]
+    assert perf.weights.shape == (12, len(rig.shape_names)) and perf.weights.max() > 0.4
+    assert perf.weights[:, rig.shape_names.index("mouth_smile_L")].max() > 0
+    assert db.metres_per_unit == pytest.approx(0.01)
+    # the same detail as the decimetre head, ten times the numbers: the example smile's wrinkles
+    rig.enhance.set_database(db)
+    rig.enhance.set_preview(True)
+    rig.set_weights({"mouth_smile_L": 1.0, "mouth_smile_R": 1.0, "cheek_squint_L": 0.5, "cheek_squint_R": 0.5})
+    d = rig.layer_displacement("enhance")
+    assert 0.02 < np.abs(d).max() < 1.0  # 0.2–10 mm in cm

@@ -1,7 +1,9 @@
 """A detailed performance of any rigged face, for a database when no scans are at hand.
 
 The procedural wrinkles of :mod:`workbench.methods.wrinkles.examples` put onto
-the face's own expressions: the six example expressions and the frames of a
+the face's own expressions (sculpted in the sample head's frame — decimetres,
++y up, +z front — so any units and axes work; the wrinkles are placed by the
+sample's landmarks, so a face far from the sample's shape needs its own scans): the six example expressions and the frames of a
 generated performance (:func:`~workbench.methods.wrinkles.examples.performance_weights`),
 on the face's mesh or on its Loop subdivision (``levels``: the 80k head from the
 25k one, as §5 enhances a low-resolution input from a high-resolution database).
@@ -17,7 +19,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from workbench.enhance.database import PerformanceDatabase
 from workbench.enhance.voluntary import face_voluntary_cores, voluntary_region_weights
@@ -86,12 +88,15 @@ def procedural_database(
         ``n_frames`` < 2 or ``levels`` not in 0..2; the rig has none of the example expressions' shapes.
     """
     from workbench.arkit import rig_weights
+    from workbench.core.shapes import BlendShape, ModelMetadata
     from workbench.geometry.subdivision import subdivide_model
     from workbench.methods.wrinkles.examples import (
         EXAMPLE_POSES,
         WrinkleSculptor,
         performance_weights,
     )
+    from workbench.model import FaceModel
+    from workbench.rigging.transfer import face_axes
 
     if int(n_frames) < 2:
         raise ValueError(f"procedural_database: n_frames must be >= 2, got {n_frames!r}")
@@ -99,7 +104,25 @@ def procedural_database(
         raise ValueError(f"procedural_database: levels must be 0, 1 or 2, got {levels!r}")
     say = progress or (lambda f, msg: None)
     say(0.0, "preparing the detailed face")
-    fine: Any = subdivide_model(model, int(levels)) if levels else model  # type: ignore[arg-type]
+    # the wrinkles are laid out in the sample head's frame (decimetres, +y up, +z front):
+    # sculpt a copy turned and scaled into it, and bring the frames back
+    axes = face_axes(model)  # type: ignore[arg-type]
+    scale = float(model.metadata.metres_per_unit) / 0.1
+
+    def to_sample(P: ArrayLike) -> NDArray[np.float64]:
+        return np.asarray(P, np.float64) @ axes.T * scale
+
+    def from_sample(P: NDArray[Any]) -> NDArray[np.float64]:
+        return (np.asarray(P, np.float64) / scale) @ axes
+
+    canonical = FaceModel(
+        to_sample(model.vertices), model.faces,
+        [BlendShape(s.name, to_sample(s.delta).astype(np.float32), slider_min=s.slider_min, slider_max=s.slider_max)
+         for s in model.shapes],
+        component_labels=model.component_labels, component_names=model.component_names,
+        metadata=ModelMetadata(name=model.metadata.name, units="dm"),
+    )
+    fine: Any = subdivide_model(canonical, int(levels)) if levels else canonical
     sculptor = WrinkleSculptor(fine)
     poses = list(EXAMPLE_POSES.values()) + performance_weights(int(n_frames), seed=seed)
     names = list(model.shape_names)
@@ -115,8 +138,8 @@ def procedural_database(
     for i, w in enumerate(poses):
         if i % 8 == 0:
             say(0.4 * i / len(poses), f"sculpting detailed frame {i + 1} of {len(poses)}")
-        frames[i] = sculptor.detailed(w)
-    V = np.asarray(fine.vertices, np.float64)
+        frames[i] = from_sample(sculptor.detailed(w))
+    V = from_sample(fine.vertices)
     F = np.asarray(fine.faces, np.int64)
     mpu = float(model.metadata.metres_per_unit)
     region_w = None
@@ -124,7 +147,7 @@ def procedural_database(
         # σ 1 cm, in model units
         region_w = voluntary_region_weights(V, F, face_voluntary_cores(fine), sigma=0.01 / mpu)
     db = PerformanceDatabase.from_frames(
-        sculptor.detail_of(V), F, frames, regions=region_w, lambda_dt=lambda_dt, metres_per_unit=mpu,
+        from_sample(sculptor.detail_of(fine.vertices)), F, frames, regions=region_w, lambda_dt=lambda_dt, metres_per_unit=mpu,
         progress=lambda f, msg: say(0.4 + 0.6 * f, msg),
     )
     return ProceduralPerformance(db, weights[len(EXAMPLE_POSES):], names)
