@@ -280,3 +280,18 @@ def test_a_bad_rig_fails_its_character_alone(tmp_path, client):
                                                            "char1/take0/00-export": "failed"}
     (failed,) = report.failures()
     assert failed.input.endswith("char1.fwb") and "char1.fwb" in failed.error, failed.error
+
+
+def test_the_dashboard_link_serves_on_localhost_only():
+    import urllib.request
+
+    from distributed import Client
+
+    cluster = local_cluster(1, silence_logs=50)
+    try:
+        with Client(cluster) as c:
+            link = c.dashboard_link
+            assert link.startswith("http://127.0.0.1:"), link
+            assert urllib.request.urlopen(link, timeout=60).status == 200  # bokeh serves it (the batch extra)
+    finally:
+        cluster.close()
