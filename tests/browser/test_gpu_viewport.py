@@ -111,3 +111,161 @@ def test_slider_update_is_weights_only_and_the_gpu_matches_the_kernel(open_noteb
         "print(json.dumps(int(model.n_vertices * 3 * 4 * (1 + len(model.shape_names)))))"
     )
     assert tex <= 2 * rig, (tex, rig)
+
+
+_HANDLES = """
+from workbench.methods.handles.presets import default_face_handles
+model.handles.set(default_face_handles(model))
+model.handles.prepare()
+vp.tool = "sculpt"
+_k = next(i for i, n in enumerate(model.handles.names) if n.startswith("mouth_L"))
+_v = int(model.handles.vertices[_k])
+_d = np.linalg.norm(model.vertices - model.vertices[_v], axis=1)
+vp.probe_ids = np.argsort(_d)[:60]
+print(json.dumps({"index": _k, "vertex": _v, "n": len(model.handles)}))
+"""
+
+
+def test_handle_drag_sends_offsets_and_the_gpu_matches_the_kernel(open_notebook):
+    nb = _open(open_notebook)
+    vp = nb.viewport(0)
+    size = float(nb.kernel_eval(_SIZE))
+    info = nb.kernel_eval(_HANDLES, timeout=120)
+    page = nb.page
+    page.wait_for_function(
+        "(n) => JSON.parse(document.querySelector('.fwb-viewport').getAttribute('data-handles')"
+        " || '[]').length === n",
+        arg=info["n"],
+    )
+    wait_until("GPU mode", lambda: vp.get_attribute("data-gpu"), lambda v: v == "1")
+    start = np.array(vp.evaluate("e => e.fwbHandles()"), float).reshape(-1, 3)[info["index"]]
+    assert start[2] == 1, "the mouth-corner marker is behind the camera"
+    clip = clip_around(np.array([start, start + np.array([40.0, -32.0, 0.0])]), pad=50)
+    page.mouse.move(5, 5)
+    before = nb.screenshot("gpu_drag_before", clip=clip)
+    sent0 = nb.kernel_eval("print(json.dumps(len(vp.gpu_payload)))")
+    frame = nb.frame()
+    page.mouse.move(float(start[0]), float(start[1]))
+    page.mouse.down()
+    page.mouse.move(float(start[0]) + 30, float(start[1]) - 24, steps=12)
+    page.mouse.up()
+    nb.wait_frame_after(0, frame)
+    wait_until(
+        "the drag to end in the kernel",
+        lambda: nb.kernel_eval("print(json.dumps(vp.dragging or model.interacting))"),
+        lambda v: v is False,
+    )
+    _wait_version(nb, _kernel_version(nb))
+    page.mouse.move(5, 5)
+    payload = nb.kernel_eval("print(json.dumps(list(vp.gpu_payload)))")[sent0:]
+    assert payload, "the drag sent no parameter messages"
+    assert max(payload) <= 2048, f"a drag update sent {max(payload)} bytes"
+    offsets = np.array(nb.kernel_eval("print(json.dumps(model.handles.offsets.tolist()))"))
+    assert np.linalg.norm(offsets[info["index"]]) > 0
+    after = nb.screenshot("gpu_drag_after", clip=clip)
+    changed = pixel_change(before, after)
+    assert changed > 0.03, f"only {changed:.1%} of the pixels around the mouth corner changed"
+    _assert_gpu_equals_kernel(nb, size)
+    # the vertex is drawn where the mouse let go
+    moved_to = nb.project([info["vertex"]])[0]
+    assert np.linalg.norm(moved_to[:2] - (start[:2] + np.array([30.0, -24.0]))) < 3.0, moved_to
+
+
+_TIMELINE = """
+from widgets.timeline import TimelineWidget
+model.timeline.set_fps(30)
+for _t, _w in ((0.0, 0.0), (0.5, 1.0), (3.5, 1.0), (4.0, 0.0)):
+    model.set_weight("jawOpen", _w)
+    model.timeline.key_weights(_t, ["jawOpen"], interpolation="linear")
+model.set_time(0.0)
+tl = TimelineWidget(model)
+display(tl)
+"""
+
+
+def test_playback_runs_in_the_browser_and_ends_on_the_kernels_frame(open_notebook):
+    nb = _open(open_notebook)
+    vp = nb.viewport(0)
+    size = float(nb.kernel_eval(_SIZE))
+    ids = nb.kernel_eval(_PROBE)
+    nb.kernel_eval(_TIMELINE)
+    wait_until("GPU mode", lambda: vp.get_attribute("data-gpu"), lambda v: v == "1")
+    clip = clip_around(nb.project(ids), pad=60)
+    before = nb.screenshot("gpu_play_before", clip=clip)
+    calls0 = nb.kernel_eval("print(json.dumps(vp.sync.gpu.updates_sent['params']))")
+    nb.kernel_eval("tl.play(loop=False)")
+    wait_until("the browser to play", lambda: vp.get_attribute("data-clip-playing"), lambda v: v == "1")
+    # the jaw is held open from 0.5 to 3.5 s: pixels differ from the closed mouth
+    wait_until(
+        "the clip past 0.6 s",
+        lambda: float(vp.get_attribute("data-clip-time") or 0),
+        lambda t: t >= 0.6,
+        timeout=30,
+    )
+    mid = nb.screenshot("gpu_play_mid", clip=clip)
+    t_mid = float(vp.get_attribute("data-clip-time") or 0)
+    assert t_mid < 3.4, f"the screenshot came too late ({t_mid} s)"
+    wait_until(
+        "playback to end",
+        lambda: nb.kernel_eval("print(json.dumps(tl.playing))"),
+        lambda v: v is False,
+        timeout=30,
+    )
+    stats = nb.kernel_eval("print(json.dumps(tl.playback_stats))")
+    assert stats.get("browser") is True, stats
+    frames = int(vp.get_attribute("data-clip-frames") or 0)
+    assert frames >= 10, f"the browser drew only {frames} frames"
+    # while the browser played, the kernel sent no per-frame parameters
+    calls = nb.kernel_eval("print(json.dumps(vp.sync.gpu.updates_sent['params']))")
+    assert calls - calls0 <= 2, (calls0, calls)
+    assert pixel_change(before, mid) > 0.05
+    _wait_version(nb, _kernel_version(nb))
+    assert nb.kernel_eval("print(json.dumps(model.time))") == 4.0
+    _assert_gpu_equals_kernel(nb, size)
+    print(f"browser playback at 80k: {vp.get_attribute('data-clip-fps')} fps drawn, {frames} frames")
+
+
+def test_gpu_false_streams_vertex_rows_and_says_so(open_notebook):
+    nb = _open(open_notebook, gpu=False, res="base")
+    vp = nb.viewport(0)
+    wait_until("the note", lambda: vp.get_attribute("data-gpu-note") or "", lambda t: "stream" in t)
+    assert vp.locator(".fwb-gpu-note").is_visible()
+    assert vp.get_attribute("data-gpu") == "0"
+    ids = nb.kernel_eval(_PROBE)
+    clip = clip_around(nb.project(ids), pad=60)
+    before = nb.screenshot("stream_before", clip=clip)
+    sent0 = nb.kernel_eval("print(json.dumps(vp.updates_sent))")
+    frame = nb.frame()
+    nb.kernel_eval('model.set_weight("jawOpen", 0.8)')
+    nb.wait_frame_after(0, frame)
+    after = nb.screenshot("stream_after", clip=clip)
+    assert pixel_change(before, after) > 0.05
+    sent = nb.kernel_eval("print(json.dumps([vp.updates_sent, len(vp.gpu_payload)]))")
+    # vertex rows (a patch, or the whole buffer when jawOpen moves most of the 5k head)
+    assert sum(sent[0].values()) > sum(sent0.values()) and sent[1] == 0, (sent0, sent)
+    # and back to the GPU
+    nb.kernel_eval("vp.gpu = True")
+    wait_until("GPU mode", lambda: vp.get_attribute("data-gpu"), lambda v: v == "1")
+    assert vp.get_attribute("data-gpu-note") == ""
+
+
+def test_a_browser_without_float_targets_falls_back_with_a_note(open_notebook):
+    nb = open_notebook([_SETUP.format(res="base", gpu=True)], run=False)
+    # what a browser without WebGL2 float render targets reports (gpu_morph.js gpuUnsupported)
+    nb.page.evaluate("() => { globalThis.fwbDisableGpu = true; }")
+    nb.run_all()
+    nb.wait_viewports(1)
+    vp = nb.viewport(0)
+    wait_until("the note", lambda: vp.get_attribute("data-gpu-note") or "", lambda t: "unavailable" in t)
+    assert vp.locator(".fwb-gpu-note").is_visible()
+    wait_until(
+        "the kernel to stream",
+        lambda: nb.kernel_eval("print(json.dumps([vp.gpu_active, vp.gpu_unavailable]))"),
+        lambda v: v[0] is False and "fwbDisableGpu" in v[1],
+    )
+    sent0 = nb.kernel_eval("print(json.dumps(sum(vp.updates_sent.values())))")
+    frame = nb.frame()
+    nb.kernel_eval('model.set_weight("jawOpen", 0.5)')
+    nb.wait_frame_after(0, frame)
+    assert nb.kernel_eval("print(json.dumps(sum(vp.updates_sent.values())))") > sent0
+    assert nb.kernel_eval("print(json.dumps(len(vp.gpu_payload)))") == 0

@@ -19,6 +19,14 @@ fewer than :data:`FRAMES_IN_FLIGHT` frames are unanswered (waiting at most
 :data:`FRAME_ACK_TIMEOUT_S`). When no view answers at all (nothing displayed,
 a headless run), playback stops waiting after the first timeout. The achieved
 rate is shown in the status label and kept in the widget's ``playback_stats``.
+
+When every viewport of the model evaluates the rig on the GPU
+(:func:`widgets.viewport.gpu.clip_players`), playback runs in the browser
+instead: the viewports get the parameters of every frame once
+(``GpuSync.prepare_clip``) and play them from their own clock; the kernel only
+moves the timeline's playhead (the ``time`` trait) and, at the end or on Pause,
+sets the model to the frame shown (``model.set_time``, one exact update).
+``playback_stats["browser"]`` tells which ran.
 """
 
 from __future__ import annotations
@@ -33,6 +41,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from widgets.viewport.gpu import clip_players
 from workbench.model import ModelError
 
 if TYPE_CHECKING:
@@ -137,6 +146,9 @@ class Playback:
                 return self.stats(0, 0, fps, set_ms, 0.0, done_at)
             t_now = model.time
             media0 = t_now if start <= t_now < end - 0.5 / fps else start
+            players = clip_players(model)
+            if players and all(g.prepare_clip() for g in players):
+                return await self.run_in_browser(players, fps, start, end, media0)
             clock0 = time.perf_counter()
             next_f = 0
             while w.playing:
@@ -206,6 +218,50 @@ class Playback:
         finally:
             w.playing = False
 
+    async def run_in_browser(
+        self, players: list[Any], fps: float, start: float, end: float, media0: float
+    ) -> dict[str, Any]:
+        """Playback on the viewports' own clocks: the kernel moves the playhead only."""
+        w = self.widget
+        model = w.model
+        for g in players:
+            g.play(media0, end, w.loop)
+        clock0 = started = time.perf_counter()
+        last_status = started
+        ticks = 0
+        done_at: deque[float] = deque()
+        t_media = media0
+        try:
+            while w.playing:
+                now = time.perf_counter()
+                t_media = browser_time(media0, now - clock0, start, end, w.loop)
+                ticks += 1
+                w.time = t_media
+                done_at.append(now)
+                while done_at and now - done_at[0] > 1.0:
+                    done_at.popleft()
+                if now - last_status >= STATUS_PERIOD_S:
+                    last_status = now
+                    st = self.stats(ticks, 0, fps, deque(), now - started, done_at)
+                    w.playback_stats = {**st, "browser": True}
+                    w.status = f"playing in the browser at {fps:g} fps"
+                if not w.loop and t_media >= end:
+                    break
+                await asyncio.sleep(1.0 / fps)
+        finally:
+            for g in players:
+                g.stop()
+        # the frame shown, exactly, from the kernel (not an undo step)
+        t_final = min(max(start + round((t_media - start) * fps) / fps, start), end)
+        try:
+            model.set_time(t_final)
+        except ModelError:
+            pass  # a drag is open: it keeps its state
+        st = self.stats(ticks, 0, fps, deque(), time.perf_counter() - started, done_at)
+        w.playback_stats = {**st, "browser": True}
+        w.status = f"played in the browser at {fps:g} fps"
+        return w.playback_stats
+
     async def _wait_ack(self, seq: int, timeout: float) -> bool:
         """Wait until the front end acknowledged frame ``seq`` (False on timeout or pause)."""
         event = self._ack_event
@@ -247,3 +303,13 @@ class Playback:
             "seconds": seconds,
             "set_time_ms": float(np.median(set_ms)) if set_ms else 0.0,
         }
+
+
+def browser_time(media0: float, elapsed: float, start: float, end: float, loop: bool) -> float:
+    """Timeline time ``elapsed`` seconds after playing from ``media0`` (the browser's rule too)."""
+    t = media0 + elapsed
+    if t <= end:
+        return t
+    if not loop or not end > start:
+        return end
+    return start + (t - start) % (end - start)

@@ -41,6 +41,17 @@ Transfer protocol (added to :mod:`widgets.viewport.sync`'s):
   buffers ``[params f32, residual ids u32 (c), residual rows f32 (c*3)]`` per
   update: ``4 (k + 3 H_u + 16)`` bytes plus changed residual rows.
 
+Playback in the browser (:meth:`GpuSync.prepare_clip`, used by
+``widgets/timeline/playback.py``): the parameters of every frame of the timeline
+at its fps, ``_gpu_clip`` (f32, frames x (k + 3 H_u + 16)) with ``_gpu_clip_meta``
+``{"version", "frames", "fps", "start", "width"}``, uploaded when playback starts
+and the timeline changed since; then ``{"type": "gpu_play", "time", "loop",
+"end"}`` starts the browser's own clock and ``{"type": "gpu_stop"}`` stops it
+(the kernel then sets the final time once, which sends the exact parameters).
+Only when the residual is the same at sampled frames (no animated nonlinear
+layer): otherwise playback stays in the kernel, which then sends parameters
+and residual rows per frame.
+
 ``_gpu_mode`` is ``"gpu"`` while the kernel sends parameters and ``"stream"``
 while it streams vertex rows (``Viewport.gpu = False``, or a front end without
 WebGL2 float textures said ``gpu_unavailable``).
@@ -50,12 +61,26 @@ from __future__ import annotations
 
 import json
 import time
+import weakref
 from collections import deque
 from typing import Any
 
 import numpy as np
 
 from widgets.viewport.common import SPARSE_FRACTION, changed_rows, f32_bytes, u32_bytes
+from workbench.animation.family import head_matrix
+
+#: every GpuSync of a connected viewport (the timeline's playback looks for its model's)
+_SYNCS: weakref.WeakSet[GpuSync] = weakref.WeakSet()
+
+#: frames whose residual is checked before the browser plays a clip on its own
+CLIP_CHECK_FRAMES = 5
+
+
+def clip_players(model: Any) -> list[GpuSync]:
+    """The GPU viewports of ``model`` that can play its timeline in the browser now."""
+    return [g for g in list(_SYNCS) if g.model is model and g.sync.connected and g.active
+            and g.widget._gpu_mode == "gpu"]
 
 #: half floats for the deltas only when no vertex moves by more than this fraction of the
 #: face size (the neutral's bounding-box diagonal) through the rounding, at the largest
@@ -148,6 +173,11 @@ class GpuSync:
         self.payload: deque[int] = deque(maxlen=512)
         self.updates_sent = {"params": 0, "rig": 0, "basis": 0, "gain": 0, "residual_rows": 0}
         self.upload_ms: deque[float] = deque(maxlen=64)
+        self.clip_key: Any = None
+        self.clip_ok = False
+        #: why the last clip could not play in the browser ("" = it could)
+        self.clip_reason = ""
+        _SYNCS.add(self)
 
     @property
     def active(self) -> bool:
@@ -215,14 +245,7 @@ class GpuSync:
     # --------------------------------------------------------------- parameters
     def params(self, view: Any) -> np.ndarray:
         """f32: the k weights, the H_u x 3 offsets per basis column, the head matrix (column-major)."""
-        wv = view.weight_vector()
-        uH = np.zeros((self.hu, 3), np.float64)
-        h = self.model.handles.value
-        if self.hu and self.columns is not None and len(h) == self.columns.size:
-            np.add.at(uH, self.columns, np.asarray(h.offsets, np.float64))
-            uH /= np.maximum(np.bincount(self.columns, minlength=self.hu), 1)[:, None]
-        M = np.asarray(self.model.head_matrix(), np.float64)
-        return np.concatenate([wv, uH.reshape(-1), M.T.reshape(-1)]).astype("<f4")
+        return self.frame_params(view)
 
     def linear(self, view: Any) -> np.ndarray:
         """The kernel's float32 version of the part the GPU evaluates (before the head pose)."""
@@ -284,8 +307,73 @@ class GpuSync:
         self.updates_sent["params"] += 1
         self.updates_sent["residual_rows"] += int(ids.size)
 
+    # ------------------------------------------------------------------- playback
+    def frame_params(self, view: Any) -> np.ndarray:
+        """The parameters of a sampled view (weights, shell offsets, head pose)."""
+        wv = view.weight_vector()
+        uH = np.zeros((self.hu, 3), np.float64)
+        h = view.slot("handles")
+        if self.hu and self.columns is not None and len(h) == self.columns.size:
+            np.add.at(uH, self.columns, np.asarray(h.offsets, np.float64))
+            uH /= np.maximum(np.bincount(self.columns, minlength=self.hu), 1)[:, None]
+        M = head_matrix(view)
+        M = np.eye(4) if M is None else np.asarray(M, np.float64)
+        return np.concatenate([wv, uH.reshape(-1), M.T.reshape(-1)]).astype("<f4")
+
+    def prepare_clip(self) -> bool:
+        """Upload the timeline's per-frame parameters if they changed; True when the browser can play it."""
+        model, w = self.model, self.widget
+        with model.lock, self.sync.lock:
+            if not self.active or self.residual is None or self.gain is None:
+                self.clip_reason = "the view does not evaluate on the GPU"
+                return False
+            tl = model.timeline.value
+            view = model.view()
+            key = (id(tl), tl.fps, tl.start, tl.end, self.morph_key, self.basis_key, self.gain_key,
+                   view.version("weights"), view.version("handles"))
+            if key == self.clip_key:
+                return self.clip_ok
+            self.clip_key, self.clip_ok = key, False
+            fps, start, end = float(tl.fps), float(tl.start), float(tl.end)
+            if not (end > start and fps > 0):
+                self.clip_reason = "nothing to play"
+                return False
+            frames = int(np.floor((end - start) * fps + 1e-6)) + 1
+            times = start + np.arange(frames) / fps
+            # the browser adds the residual it has: only when no layer it leaves to the
+            # kernel is animated (sample a few frames)
+            tol = max(self.sync.tolerance, RESIDUAL_FLOOR * self.size)
+            for t in np.linspace(start, end, CLIP_CHECK_FRAMES):
+                ev = model.evaluation_at(float(t))
+                G = np.asarray(ev.blend, np.float32) - self.neutral
+                lin = self.neutral + self.gain[:, :1] * G
+                sh = ev.displacements.get("handles")
+                if sh is not None and self.hu:
+                    lin += self.gain[:, 1:] * sh
+                r = np.asarray(ev.mesh, np.float32) - lin
+                if np.abs(r - self.residual).max() > tol:
+                    self.clip_reason = f"a layer the GPU does not evaluate changes over time (t = {t:.2f} s)"
+                    return False
+            clip = np.stack([self.frame_params(model.view_at(float(t))) for t in times])
+            version = int(w._gpu_meta.get("clip", 0)) + 1
+            with w.hold_sync():
+                w._gpu_clip = clip.tobytes()
+                w._gpu_clip_meta = {"version": version, "frames": frames, "fps": fps,
+                                    "start": start, "width": int(clip.shape[1])}
+                self.set_meta(clip=version)
+            self.clip_ok, self.clip_reason = True, ""
+            return True
+
+    def play(self, time: float, end: float, loop: bool) -> None:
+        """Start the browser's clock at ``time`` (seconds of the timeline)."""
+        self.widget.send({"type": "gpu_play", "time": float(time), "end": float(end), "loop": bool(loop)})
+
+    def stop(self) -> None:
+        self.widget.send({"type": "gpu_stop"})
+
     def reset(self) -> None:
         """Forget what the front end has (a new topology, or back from streaming)."""
         self.morph_key = self.basis_key = self.gain_key = None
         self.gain = None
         self.residual = None
+        self.clip_key = None

@@ -217,6 +217,8 @@ class Viewport(anywidget.AnyWidget):
     _gpu_gain = t.Bytes(b"").tag(sync=True)
     _gpu_residual = t.Bytes(b"").tag(sync=True)
     _gpu_params = t.Bytes(b"").tag(sync=True)
+    _gpu_clip = t.Bytes(b"").tag(sync=True)
+    _gpu_clip_meta = t.Dict().tag(sync=True)
 
     def __init__(
         self,

@@ -52,7 +52,9 @@ export default {
     const onRig = () => { store.loadGpuRig(); store.notify(); };
     const onMsg = (content, buffers) => {
       if (!content) return;
-      if (content.type === "gpu_params") {
+      if (content.type === "gpu_play") store.playClip(content);
+      else if (content.type === "gpu_stop") store.stopClip();
+      else if (content.type === "gpu_params") {
         store.applyGpuParams(content, buffers || []);
         if (content.seq != null) for (const v of store.views) v.onAck(content);
       }

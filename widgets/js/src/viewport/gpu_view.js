@@ -36,6 +36,53 @@ export const gpuViewMethods = {
     this.model.on("change:_gpu_mode", this.onGpuTrait);
     this.reportGpu();
     this.updateGpuNote();
+    // Benchmark hook: ms per GPU evaluation (both passes) and per draw, synchronised by a
+    // one-pixel readback.
+    this.el.fwbGpuTime = (n = 10) => {
+      if (!this.gpuOn()) return null;
+      const px = new Float32Array(4);
+      const sync = () => this.renderer.readRenderTargetPixels(this.gpu.nrmRT, 0, 0, 1, 1, px);
+      sync();
+      let t0 = performance.now();
+      for (let i = 0; i < n; i++) { this.gpu.evaluate(); sync(); }
+      const evalMs = (performance.now() - t0) / n;
+      const gl = this.renderer.getContext();
+      const one = new Uint8Array(4);
+      t0 = performance.now();
+      for (let i = 0; i < n; i++) {
+        this.renderer.render(this.scene, this.camera);
+        gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, one);
+      }
+      const drawMs = (performance.now() - t0) / n;
+      this.gpu.drawUniforms.fwbGpu.value = false;
+      t0 = performance.now();
+      for (let i = 0; i < n; i++) {
+        this.renderer.render(this.scene, this.camera);
+        gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, one);
+      }
+      const cpuDrawMs = (performance.now() - t0) / n;
+      this.gpu.drawUniforms.fwbGpu.value = true;
+      const r = this.renderer;
+      t0 = performance.now();
+      for (let i = 0; i < n; i++) {
+        r.setRenderTarget(this.gpu.posRT); r.render(this.gpu.evalScene, this.gpu.quadCamera);
+        r.setRenderTarget(null); sync();
+      }
+      const morphMs = (performance.now() - t0) / n;
+      t0 = performance.now();
+      for (let i = 0; i < n; i++) {
+        r.setRenderTarget(this.gpu.nrmRT); r.render(this.gpu.normalScene, this.gpu.quadCamera);
+        r.setRenderTarget(null); sync();
+      }
+      const normalMs = (performance.now() - t0) / n;
+      return { evalMs, drawMs, cpuDrawMs, morphMs, normalMs, canvas: [r.domElement.width, r.domElement.height] };
+    };
+    // Test hook: what the GPU path evaluates now.
+    this.el.fwbGpuState = () => ({
+      on: this.gpuOn(), reason: this.gpuReason, params: Array.from(this.store.gpuParams || []),
+      evaluations: this.gpu ? this.gpu.evaluations : 0, playing: !!this.store.clipPlay,
+      textureBytes: this.gpu ? this.gpu.textureBytes() : 0,
+    });
   },
 
   // Python is in GPU mode but this view cannot follow: ask it to stream vertices.
@@ -51,6 +98,53 @@ export const gpuViewMethods = {
     if (this.gpu) this.gpu.drawUniforms.fwbGpu.value = false;
     this.reportGpu();
     this.updateGpuNote();
+    // Benchmark hook: ms per GPU evaluation (both passes) and per draw, synchronised by a
+    // one-pixel readback.
+    this.el.fwbGpuTime = (n = 10) => {
+      if (!this.gpuOn()) return null;
+      const px = new Float32Array(4);
+      const sync = () => this.renderer.readRenderTargetPixels(this.gpu.nrmRT, 0, 0, 1, 1, px);
+      sync();
+      let t0 = performance.now();
+      for (let i = 0; i < n; i++) { this.gpu.evaluate(); sync(); }
+      const evalMs = (performance.now() - t0) / n;
+      const gl = this.renderer.getContext();
+      const one = new Uint8Array(4);
+      t0 = performance.now();
+      for (let i = 0; i < n; i++) {
+        this.renderer.render(this.scene, this.camera);
+        gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, one);
+      }
+      const drawMs = (performance.now() - t0) / n;
+      this.gpu.drawUniforms.fwbGpu.value = false;
+      t0 = performance.now();
+      for (let i = 0; i < n; i++) {
+        this.renderer.render(this.scene, this.camera);
+        gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, one);
+      }
+      const cpuDrawMs = (performance.now() - t0) / n;
+      this.gpu.drawUniforms.fwbGpu.value = true;
+      const r = this.renderer;
+      t0 = performance.now();
+      for (let i = 0; i < n; i++) {
+        r.setRenderTarget(this.gpu.posRT); r.render(this.gpu.evalScene, this.gpu.quadCamera);
+        r.setRenderTarget(null); sync();
+      }
+      const morphMs = (performance.now() - t0) / n;
+      t0 = performance.now();
+      for (let i = 0; i < n; i++) {
+        r.setRenderTarget(this.gpu.nrmRT); r.render(this.gpu.normalScene, this.gpu.quadCamera);
+        r.setRenderTarget(null); sync();
+      }
+      const normalMs = (performance.now() - t0) / n;
+      return { evalMs, drawMs, cpuDrawMs, morphMs, normalMs, canvas: [r.domElement.width, r.domElement.height] };
+    };
+    // Test hook: what the GPU path evaluates now.
+    this.el.fwbGpuState = () => ({
+      on: this.gpuOn(), reason: this.gpuReason, params: Array.from(this.store.gpuParams || []),
+      evaluations: this.gpu ? this.gpu.evaluations : 0, playing: !!this.store.clipPlay,
+      textureBytes: this.gpu ? this.gpu.textureBytes() : 0,
+    });
   },
 
   updateGpuNote() {
@@ -85,6 +179,7 @@ export const gpuViewMethods = {
     this.el.setAttribute("data-gpu-texture-bytes", String(this.gpu.textureBytes()));
     this.el.setAttribute("data-gpu-evaluations", String(this.gpu.evaluations));
     this.gpuDrawn = true;
+    this.countClipFrame();
     if (this.needCpuPositions()) this.readBack();
     return true;
   },
@@ -128,7 +223,37 @@ export const gpuViewMethods = {
     return this.gpu.readPositions(new Float32Array(this.store.gpu.n * 3));
   },
 
+  // Playback in the browser (./gpu_clip.js): draw each new frame of the clip at once.
+  clipStarted() {
+    this.clipFrames = 0;
+    this.clipWall0 = performance.now();
+    this.el.setAttribute("data-clip-playing", "1");
+  },
+
+  clipFrame() {
+    this.geometryDirty = true;
+    if (this.pending) return; // a render is already due this frame
+    this.renderNow();
+  },
+
+  // A clip frame was evaluated (from gpuFrame): count it for data-clip-frames / -fps.
+  countClipFrame() {
+    const p = this.store.clipPlay;
+    if (!p) return;
+    this.clipFrames = (this.clipFrames || 0) + 1;
+    const secs = (performance.now() - this.clipWall0) / 1000;
+    this.el.setAttribute("data-clip-frames", String(this.clipFrames));
+    this.el.setAttribute("data-clip-fps", secs > 0 ? (this.clipFrames / secs).toFixed(2) : "0");
+    this.el.setAttribute("data-clip-time", String(p.time));
+  },
+
+  clipStopped() {
+    this.el.setAttribute("data-clip-playing", "0");
+  },
+
   disposeGpu() {
+    delete this.el.fwbGpuState;
+    delete this.el.fwbGpuTime;
     this.model.off("change:gpu", this.onGpuTrait);
     this.model.off("change:_gpu_mode", this.onGpuTrait);
     if (this.gpu) this.gpu.dispose();

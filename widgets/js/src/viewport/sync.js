@@ -16,6 +16,7 @@
 // in the same version sequence as patches; the views evaluate it (./gpu_morph.js) and read
 // positions back when they need them on the CPU (picking, markers).
 // A version gap (a missed update) asks Python for a full buffer: request_full / request_paint.
+import { clipMethods } from "./gpu_clip.js";
 import { padded, texRows } from "./gpu_morph.js";
 import { typed } from "./util.js";
 
@@ -240,3 +241,5 @@ export class Store {
     for (const v of this.views) v.geometryChanged();
   }
 }
+
+Object.assign(Store.prototype, clipMethods);

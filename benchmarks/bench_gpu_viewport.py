@@ -1,0 +1,133 @@
+"""The viewport on the GPU vs streaming vertex rows (issue 19), in a real browser.
+
+For each sample resolution it opens ``widgets.show_workbench`` (default handles,
+sculpt tool) in JupyterLab + Debian Chromium (software WebGL: SwiftShader) and
+measures both paths of the same viewport in the same run, ``Viewport.gpu = True``
+(the rig evaluated in the browser, :mod:`widgets.viewport.gpu`) and ``False``
+(today's streaming of evaluated vertex rows, the peer):
+
+* ``slider``: a click on the jawOpen slider's track -> the first render showing it;
+  ``python``: ``model.set_weight`` sent as an execute request -> the same render
+  (``bench_viewport_latency.measure``);
+* ``drag``: isolated handle-marker moves with the mouse -> the first render showing
+  each (``bench_drag_latency.measure``, step mode);
+* ``payload``: bytes of each geometry message the kernel sent during the slider
+  clicks / the drag (JSON + binary buffers, counted around ``Viewport.send``);
+* ``texture MB``: what the GPU path holds in textures and render targets
+  (``data-gpu-texture-bytes``) vs the rig's float32 vertex data (neutral + the
+  52 shapes' deltas + the shell basis, ``rig MB``);
+* ``eval ms`` / ``draw ms``: the GPU path's two passes and one draw of the scene,
+  synchronised by a one-pixel readback (``el.fwbGpuTime``).
+
+The machine is shared and noisy: compare the two paths within one run.
+
+Usage::
+
+    .venv/bin/python benchmarks/bench_gpu_viewport.py [--trials 12] [--resolutions 25k 100k 300k]
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+from typing import Any
+
+from bench_drag_latency import _SETUP as DRAG_SETUP
+from bench_drag_latency import measure as drag_measure
+from bench_viewport_latency import measure as slider_measure
+from browser_session import NotebookPage, chromium_missing, each_resolution
+
+_RECORD = """
+import json
+if "_SIZES" not in globals():
+    _SIZES = []
+    _orig_send = wb.viewport.send
+    def _send(content, buffers=None):
+        if isinstance(content, dict) and content.get("type") in ("patch", "gpu_params"):
+            _SIZES.append(len(json.dumps(content)) + sum(len(b) for b in buffers or []))
+        return _orig_send(content, buffers)
+    wb.viewport.send = _send
+_SIZES.clear()
+"""
+
+_RIG = """
+import json
+B, _c = model.handles.basis()
+print(json.dumps([model.n_vertices * 3 * 4 * (1 + len(model.shape_names)) + B.nbytes,
+                  int(model.n_vertices)]))
+"""
+
+
+def _med(xs: list[float]) -> float:
+    return statistics.median(xs) if xs else float("nan")
+
+
+def _pct(xs: list[float], q: float) -> float:
+    s = sorted(xs)
+    return s[min(len(s) - 1, round(q * (len(s) - 1)))] if s else float("nan")
+
+
+def _sizes(nb: NotebookPage) -> list[int]:
+    out = nb.kernel_eval("print(json.dumps(_SIZES)); _SIZES.clear()")
+    return out if out else []
+
+
+def measure(nb: NotebookPage, gpu: bool, trials: int) -> dict[str, Any]:
+    page = nb.page
+    vp = nb.viewport(0)
+    nb.kernel_eval(f"wb.viewport.gpu = {gpu}")
+    page.wait_for_function(
+        "(g) => document.querySelector('.fwb-viewport').getAttribute('data-gpu') === g",
+        arg="1" if gpu else "0", timeout=120000,
+    )
+    nb.kernel_eval(_RECORD)
+    out: dict[str, Any] = {}
+    res = slider_measure(nb, trials)
+    out["slider"] = res["slider jawOpen"][0]
+    out["python"] = res["python jawOpen"][0]
+    sizes = _sizes(nb)
+    out["slider_bytes"] = _med([float(s) for s in sizes])
+    d = drag_measure(nb, trials)
+    out["drag"] = d["step"][0]
+    out["drag_bytes"] = _med([float(s) for s in _sizes(nb)])
+    out["tex"] = float(vp.get_attribute("data-gpu-texture-bytes") or "nan") if gpu else float("nan")
+    t = vp.evaluate("e => e.fwbGpuTime ? e.fwbGpuTime(8) : null") if gpu else None
+    out["eval_ms"] = t["evalMs"] if t else float("nan")
+    out["draw_ms"] = t["drawMs"] if t else float("nan")
+    return out
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--trials", type=int, default=12)
+    ap.add_argument("--resolutions", nargs="+", default=["25k", "100k", "300k"])
+    args = ap.parse_args()
+    if chromium_missing():
+        return 2
+
+    def run(res: str, nb: NotebookPage) -> list[tuple[Any, ...]]:
+        rig, n = nb.kernel_eval(_RIG)
+        rows = []
+        for gpu in (True, False):
+            m = measure(nb, gpu, args.trials)
+            rows.append((res, n, "gpu" if gpu else "stream", m, rig))
+            nb.screenshot(f"{res}-{'gpu' if gpu else 'stream'}")
+        return rows
+
+    rows = each_resolution("gpu", args.resolutions, lambda res: DRAG_SETUP.replace("{res}", res), run)
+    print()
+    print("Viewport on the GPU vs streaming, input -> first render showing it (ms, median / p90)")
+    print("  bytes: median size of one geometry message (JSON + buffers) for a slider / drag update")
+    print(f"{'resolution':>10} {'vertices':>9} {'path':>6} {'slider':>13} {'python':>13} {'drag':>13} "
+          f"{'slider B':>9} {'drag B':>8} {'texture MB':>10} {'rig MB':>7} {'eval ms':>7} {'draw ms':>7}")  # fmt: skip
+    for res, n, path, m, rig in rows:
+        def mp(xs: list[float]) -> str:
+            return f"{_med(xs):5.1f} / {_pct(xs, 0.9):5.1f}"
+        print(f"{res:>10} {n:>9} {path:>6} {mp(m['slider']):>13} {mp(m['python']):>13} "
+              f"{mp(m['drag']):>13} {m['slider_bytes']:9.0f} {m['drag_bytes']:8.0f} "
+              f"{m['tex'] / 1e6:10.1f} {rig / 1e6:7.1f} {m['eval_ms']:7.1f} {m['draw_ms']:7.1f}")  # fmt: skip
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
