@@ -109,3 +109,34 @@ def test_clear_errors_for_what_is_missing(tmp_path: Path) -> None:
         assert model.enhance.database is None
     finally:
         wb.close()
+
+
+def test_retime_from_an_animation_file(tmp_path: Path) -> None:
+    """A take exported as .glb by the workbench itself is a retiming database like any imported one."""
+    from workbench.export import export
+
+    src = workbench.load_sample("head")
+    times = np.linspace(0.0, 2.0, 61)
+    ease = 0.5 - 0.5 * np.cos(np.pi * np.clip((times - 0.5) / 1.0, 0.0, 1.0))  # a slow-in slow-out smile
+    for t, e in zip(times, ease, strict=True):
+        src.set_weights({"mouthSmileLeft": 0.9 * e, "mouthSmileRight": 0.9 * e})
+        src.timeline.key_weights(float(t), ["mouthSmileLeft", "mouthSmileRight"], interpolation="linear")
+    (take,) = export(src, src.tracks, tmp_path / "take.glb")
+    model = workbench.load_sample("head")
+    for t, e in ((0.0, 0.0), (1.0, 0.9)):
+        model.set_weights({"mouthSmileLeft": e, "mouthSmileRight": e})
+        model.timeline.key_weights(t, ["mouthSmileLeft", "mouthSmileRight"])
+    wb = Workbench(model, height=240)
+    try:
+        p = wb.enhance
+        p.retime_source.value = "file"
+        assert p.retime_path.layout.display is None
+        p.retime_path.value = str(take)
+        p.selected_keys = lambda: [("weights/mouthSmileLeft", 0), ("weights/mouthSmileLeft", 1)]
+        res = p.retime_selected()
+        # the in-betweens follow the take's ease: slow at both ends
+        assert res.s[1] < 0.05 and res.s[-2] > 0.95
+        mid = len(res.s) // 2
+        assert abs(res.s[mid] - 0.5) < 0.1
+    finally:
+        wb.close()

@@ -12,8 +12,9 @@ Alembic, baked glTF, USD — by the file suffix).
 
 *Retime from performance*: pick two key times on the timeline, then key the
 in-betweens with the timing of the best-matching motion (§6.2;
-``model.enhance.retime``: one undo step) from the detailed performance or the
-Capture tab's tracked take, optionally *extended to the full matched motion*;
+``model.enhance.retime``: one undo step) from the detailed performance, the
+Capture tab's tracked take or an animation file (glTF, weights or Live Link
+Face CSV), optionally *extended to the full matched motion*;
 the plot after Fig. 7 shows linear, retimed and database curves of the shape
 that changes most.
 """
@@ -95,10 +96,14 @@ class EnhancePanel(ModelPanel):
                                   "Enhance every frame of the timeline at the database's resolution and write it "
                                   "(.glb .usdc .pc2 .mdd .obj .abc)", "film")
         self.retime_source = W.Dropdown(options=[("the detailed performance", "performance"),
-                                                 ("the Capture tab's take", "capture")],
+                                                 ("the Capture tab's take", "capture"),
+                                                 ("an animation file (.glb / .csv)", "file")],
                                         value="performance", description="from", layout=W.Layout(width="320px"),
                                         style={"description_width": "50px"})
         self.retime_source.add_class("fwb-enhance-retime-source")
+        self.retime_path = W.Text(placeholder="take.glb / take.csv (Live Link Face, weights)",
+                                  layout=W.Layout(width="320px"))
+        self.retime_path.add_class("fwb-enhance-retime-path")
         self.extend = W.Checkbox(value=False, description="extend to the full matched motion", indent=False)
         self.extend.add_class("fwb-enhance-extend")
         self.retime_button = button("Retime selected keys", "fwb-enhance-retime",
@@ -113,6 +118,7 @@ class EnhancePanel(ModelPanel):
         self.retime_button.on_click(g("retime from performance")(lambda _b: self.retime_selected()))
         self.preview.observe(g("enhanced preview")(self._on_preview_box), "value")
         self.source.observe(g("database source")(lambda _c: self.refresh()), "value")
+        self.retime_source.observe(g("retime source")(lambda _c: self.refresh()), "value")
         self.listen(model.events.enhancement, self.refresh, "enhance panel")
         self.children = [
             W.HTML("<b>Detail database</b>"),
@@ -121,7 +127,7 @@ class EnhancePanel(ModelPanel):
             self.progress, self.info, self.preview,
             W.HTML("<b>Bake</b>"), W.HBox([self.bake_path, self.bake_button]),
             W.HTML("<b>Retime from performance</b>"),
-            W.HBox([self.retime_source, self.extend]), self.retime_button, self.plot,
+            W.HBox([self.retime_source, self.extend]), self.retime_path, self.retime_button, self.plot,
         ]
         self.refresh()
 
@@ -199,6 +205,14 @@ class EnhancePanel(ModelPanel):
 
     # ------------------------------------------------------------------ retime
     def _takes(self) -> list[Any]:
+        if self.retime_source.value == "file":
+            from workbench.animation.importers import read_animation
+
+            text = str(self.retime_path.value).strip()
+            if not text:
+                raise ValueError("Retime: type the path of an animation (.glb/.gltf, or a weights / Live Link CSV)")
+            md = self.model.metadata
+            return [read_animation(Path(text), self.model.shape_names, up_axis=md.up_axis, front_axis=md.front_axis)]
         if self.retime_source.value == "capture":
             res = self.capture_result() if self.capture_result is not None else None
             if res is None:
@@ -251,5 +265,6 @@ class EnhancePanel(ModelPanel):
         self.save_button.disabled = db is None
         self.bake_button.disabled = db is None
         self.n_frames.disabled = self.source.value == "file"
+        self.retime_path.layout.display = None if self.retime_source.value == "file" else "none"
         self.path.placeholder = "database.npz (to load)" if self.source.value == "file" else "database.npz (to save)"
         self.build_button.description = "Load database" if self.source.value == "file" else "Build database"
