@@ -82,11 +82,14 @@ def measure(nb: NotebookPage, gpu: bool, trials: int) -> dict[str, Any]:
     )
     nb.kernel_eval(_RECORD)
     out: dict[str, Any] = {}
+    page.locator(".fwb-tabs .lm-TabBar-tab", has_text="Shapes").click()
+    nb.kernel_eval('wb.viewport.tool = "orbit"')
     res = slider_measure(nb, trials)
     out["slider"] = res["slider jawOpen"][0]
     out["python"] = res["python jawOpen"][0]
     sizes = _sizes(nb)
     out["slider_bytes"] = _med([float(s) for s in sizes])
+    nb.kernel_eval('wb.viewport.tool = "sculpt"')
     d = drag_measure(nb, trials)
     out["drag"] = d["step"][0]
     out["drag_bytes"] = _med([float(s) for s in _sizes(nb)])

@@ -88,8 +88,9 @@ def clip_players(model: Any) -> list[GpuSync]:
 HALF_TOLERANCE = 1e-6
 
 #: after an interaction, residual rows are re-sent when they changed by more than this
-#: fraction of the face size (float32 rounding of the two evaluation orders is ~1e-8)
-RESIDUAL_FLOOR = 1e-7
+#: fraction of the face size (float32 rounding of the two evaluation orders: ~1e-7), a tenth
+#: of the GPU = kernel tolerance
+RESIDUAL_FLOOR = 1e-6
 
 
 def morph_csr(deltas: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -184,8 +185,13 @@ class GpuSync:
         return bool(self.widget.gpu) and not self.unavailable
 
     # ------------------------------------------------------------------ the rig
-    def ensure_rig(self, view: Any) -> None:
-        """Send the neutral + deltas, the shell basis and the gains when they changed."""
+    def ensure_rig(self, view: Any, final: bool = True) -> None:
+        """Send the neutral + deltas, the shell basis and the gains when they changed.
+
+        Not ``final`` (mid-interaction, e.g. a paint stroke): the gains stay as they are
+        and the residual carries the difference, as sparse rows; the exact update after
+        the interaction sends them.
+        """
         model, w = self.model, self.widget
         n = model.n_vertices
         key = (view.version("shapes"), n, len(view.shape_names))
@@ -229,7 +235,7 @@ class GpuSync:
             self.upload_ms.append((time.perf_counter() - t0) * 1e3)
         gkey = (id(model.slot("regions")) if "regions" in view.slots else None,
                 id(model.slot("paint_layers")) if "paint_layers" in view.slots else None)
-        if gkey != self.gain_key:
+        if gkey != self.gain_key and (final or self.gain is None):
             gain = layer_gains(model)
             self.gain_key = gkey
             if self.gain is None or not np.array_equal(gain, self.gain):
@@ -262,7 +268,7 @@ class GpuSync:
         """Send the parameters (and changed residual rows); ``full``: every trait instead."""
         model, w = self.model, self.widget
         view = model.view()
-        self.ensure_rig(view)
+        self.ensure_rig(view, final=tolerance == 0)
         params = self.params(view)
         local = np.asarray(model.evaluate(posed=False), np.float32)
         residual = local - self.linear(view)

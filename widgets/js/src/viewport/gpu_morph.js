@@ -14,6 +14,7 @@ import * as THREE from "three";
 
 export const TEX_WIDTH = 4096;
 const MAX_HQ = 64; // ≤ 256 handles in the shell uniforms
+const MAX_KQ = 64; // ≤ 256 shapes in the weight uniforms
 
 const EVAL_FS = `
 precision highp float; precision highp int;
@@ -22,7 +23,7 @@ uniform sampler2D baseTex;
 uniform sampler2D gainTex;
 uniform usampler2D indexTex;
 uniform sampler2D entryTex;
-uniform sampler2D weightTex;
+uniform vec4 wts[${MAX_KQ}];
 uniform sampler2D basisTex;
 uniform vec4 uHx[${MAX_HQ}];
 uniform vec4 uHy[${MAX_HQ}];
@@ -43,7 +44,8 @@ void main() {
   int cnt = int(oc.y);
   for (int e = 0; e < cnt; e++) {
     vec4 d = texelFetch(entryTex, at(off + e), 0);
-    float w = texelFetch(weightTex, ivec2(int(d.w + 0.5), 0), 0).x;
+    int s = int(d.w + 0.5);
+    float w = wts[s >> 2][s & 3];
     blend += w * d.xyz;
   }
   vec3 shell = vec3(0.0);
@@ -129,11 +131,15 @@ export function gpuUnsupported(renderer, store) {
   const maxTex = gl.getParameter(gl.MAX_TEXTURE_SIZE);
   if (maxTex < TEX_WIDTH) return `the largest texture (${maxTex}) is smaller than ${TEX_WIDTH}`;
   if (gl.getParameter(gl.MAX_VERTEX_TEXTURE_IMAGE_UNITS) < 2) return "the vertex shader cannot read textures";
+  if (gl.getParameter(gl.MAX_FRAGMENT_UNIFORM_VECTORS) < MAX_KQ + 3 * MAX_HQ + 8) {
+    return "too few fragment uniforms";
+  }
   const g = store && store.gpu;
   if (g) {
     const rows = Math.max(g.entryRows || 1, g.basisRows || 1, texRows(g.n));
     if (rows > maxTex) return `the rig needs ${rows} texture rows, the largest texture has ${maxTex}`;
     if (g.hq > MAX_HQ) return `more than ${4 * MAX_HQ} shell handles`;
+    if (g.k > 4 * MAX_KQ) return `more than ${4 * MAX_KQ} shapes`;
   }
   return "";
 }
@@ -149,7 +155,8 @@ export class GpuMorph {
     this.dummyU = dummyU;
     this.evalUniforms = {
       baseTex: { value: dummyF }, gainTex: { value: dummyF }, indexTex: { value: dummyU },
-      entryTex: { value: dummyF }, weightTex: { value: dummyF }, basisTex: { value: dummyF },
+      entryTex: { value: dummyF }, basisTex: { value: dummyF },
+      wts: { value: Array.from({ length: MAX_KQ }, () => new THREE.Vector4()) },
       uHx: { value: Array.from({ length: MAX_HQ }, () => new THREE.Vector4()) },
       uHy: { value: Array.from({ length: MAX_HQ }, () => new THREE.Vector4()) },
       uHz: { value: Array.from({ length: MAX_HQ }, () => new THREE.Vector4()) },
@@ -230,15 +237,12 @@ export class GpuMorph {
     const P = store.gpuParams;
     const k = g.k;
     if (P && P.length >= k + 3 * g.hu + 16) {
-      const wdata = new Float32Array(Math.max(k, 1));
-      wdata.set(P.subarray(0, k));
-      if (T.weight && T.weight.image.width === wdata.length) {
-        T.weight.image.data.set(wdata);
-        T.weight.needsUpdate = true;
-      } else {
-        set("weight", dataTexture(wdata, 1, THREE.FloatType, wdata.length));
-      }
       const u = this.evalUniforms;
+      const wts = u.wts.value;
+      for (let j = 0; j < MAX_KQ; j++) {
+        const at = (q) => (4 * j + q < k ? P[4 * j + q] : 0);
+        wts[j].set(at(0), at(1), at(2), at(3));
+      }
       let any = false;
       for (let j = 0; j < g.hq; j++) {
         for (const [c, arr] of [[0, u.uHx.value], [1, u.uHy.value], [2, u.uHz.value]]) {
@@ -259,7 +263,6 @@ export class GpuMorph {
     u.gainTex.value = T.gain || this.dummyF;
     u.indexTex.value = T.index || this.dummyU;
     u.entryTex.value = T.entry || this.dummyF;
-    u.weightTex.value = T.weight || this.dummyF;
     u.basisTex.value = T.basis || this.dummyF;
     this.normalUniforms.adjIndexTex.value = T.adjIndex || this.dummyU;
     this.normalUniforms.adjTex.value = T.adj || this.dummyU;

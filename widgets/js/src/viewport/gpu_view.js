@@ -2,8 +2,8 @@
 // ./gpu_morph.js when Python sends parameters (_gpu_mode "gpu"), read positions back when
 // the CPU needs them (picking, markers, probes, the feature graph), and show a note when
 // the view falls back to vertices streamed from the kernel.
-import { isPlaying } from "../shared/playback.js";
 import { GpuMorph, gpuUnsupported, patchMaterial } from "./gpu_morph.js";
+import { typed } from "./util.js";
 
 export const gpuViewMethods = {
   initGpu() {
@@ -180,20 +180,27 @@ export const gpuViewMethods = {
     this.el.setAttribute("data-gpu-evaluations", String(this.gpu.evaluations));
     this.gpuDrawn = true;
     this.countClipFrame();
-    if (this.needCpuPositions()) this.readBack();
+    // the rows the CPU draws every frame, evaluated on the CPU (no readback stall)
+    this.store.evaluateRows(this.cpuRowIds());
     return true;
   },
 
-  // Does this frame need the positions on the CPU (markers, probes, overlays, tools)?
-  needCpuPositions() {
-    if (isPlaying(this.model.get("_scene"))) return false; // keep playback on the GPU
-    const probe = this.model.get("_probe_ids");
-    return !!(
-      (this.handleIds && this.handleIds.length) ||
-      (probe && probe.byteLength) ||
-      (this.featureGraph && this.featureGraph.edges && this.featureGraph.edges.length) ||
-      this.model.get("tool") !== "orbit"
-    );
+  // GPU path: make the CPU positions of vertex `ids` current (the CPU evaluates those rows).
+  cpuRows(ids) {
+    if (this.gpuDrawn && this.gpuOn()) this.store.evaluateRows(ids);
+  },
+
+  // Vertices whose positions the CPU needs every frame: markers, feature graph, probes.
+  cpuRowIds() {
+    const ids = [];
+    if (this.handleIds) for (const i of this.handleIds) ids.push(i);
+    const fg = this.featureGraph;
+    if (fg && fg.edges && fg.edges.length && this.model.get("feature_graph")) {
+      for (const i of fg.edges) ids.push(i);
+    }
+    const probe = typed(this.model.get("_probe_ids"), Uint32Array);
+    if (probe) for (const i of probe) ids.push(i);
+    return ids;
   },
 
   readBack() {

@@ -592,7 +592,7 @@ export class View {
   // ---- test hooks ---------------------------------------------------------------------
 
   project(ids) {
-    this.ensureCpuPositions();
+    this.cpuRows(ids); // GPU path: these rows evaluated on the CPU (./gpu_view.js)
     const P = this.store.positions;
     if (!P || !this.renderer) return [];
     const rect = this.renderer.domElement.getBoundingClientRect();

@@ -17,6 +17,7 @@
 // positions back when they need them on the CPU (picking, markers).
 // A version gap (a missed update) asks Python for a full buffer: request_full / request_paint.
 import { clipMethods } from "./gpu_clip.js";
+import { cpuRowMethods } from "./gpu_cpu.js";
 import { padded, texRows } from "./gpu_morph.js";
 import { typed } from "./util.js";
 
@@ -242,4 +243,4 @@ export class Store {
   }
 }
 
-Object.assign(Store.prototype, clipMethods);
+Object.assign(Store.prototype, clipMethods, cpuRowMethods);
