@@ -111,9 +111,9 @@ def test_encoding_reproduces_evaluate_at_with_every_layer(keyed_handles):
     m.register_layer(FunctionLayer("wobble", wobble))
     enc = MeshEncoding(m, m.tracks)
     kinds = {r.name: r.encoding for r in enc.layers}
-    # the wrinkles layer is there in every model; unfitted it is written as nothing
+    # the wrinkles and enhance layers are there in every model; unfitted / off they are written as nothing
     assert kinds == {"regions": "linear", "handles": "linear", "paint": "linear", "wrinkles": "inactive",
-                     "wobble": "baked"}
+                     "enhance": "inactive", "wobble": "baked"}
     assert enc.baked_layers == ("wobble",)
     # every layer really moves the face here (else the test would prove little)
     for name in ("regions", "handles", "paint", "wobble"):
@@ -197,7 +197,8 @@ def test_keyed_region_weights_are_baked_per_frame_and_reported(tmp_path):
     m.timeline.set(tl.add_key(region_track_name(0, r0), 2.0, [1.0, -0.5, 0.0], interpolation="linear"))
     enc = MeshEncoding(m, m.tracks)
     kinds = {r.name: r.encoding for r in enc.layers}
-    assert kinds == {"regions": "baked", "handles": "linear", "paint": "linear", "wrinkles": "inactive"}
+    assert kinds == {"regions": "baked", "handles": "linear", "paint": "linear", "wrinkles": "inactive",
+                     "enhance": "inactive"}
     assert enc.baked_layers == ("regions",)
     # the keyed region weights replace the static ones and vary over time
     d0, d2 = (m.layers_at(t, ["regions"])["regions"] for t in (0.0, 2.0))
@@ -345,4 +346,4 @@ def test_report_is_json_friendly(tmp_path):
     keyed(m)
     res = export(m, m.tracks, tmp_path / "f.glb")
     json.dumps([r.__dict__ for r in res.layers])
-    assert [r.name for r in res.layers] == ["regions", "handles", "paint", "wrinkles"]
+    assert [r.name for r in res.layers] == ["regions", "handles", "paint", "wrinkles", "enhance"]
