@@ -53,22 +53,40 @@ def _gpu_positions(nb: NotebookPage) -> np.ndarray | None:
     return None if out is None else np.asarray(out, np.float64).reshape(-1, 3)
 
 
-def _kernel_positions(nb: NotebookPage) -> np.ndarray:
-    b64 = nb.kernel_eval(
-        "import base64\n"
-        "print(json.dumps(base64.b64encode(np.ascontiguousarray(model.evaluate(), '<f4').tobytes()).decode()))"
-    )
+def _kernel_array(nb: NotebookPage, expr: str, dtype: str) -> np.ndarray:
+    """A kernel array through base64 (large JSON lists do not come back whole)."""
     import base64
 
-    return np.frombuffer(base64.b64decode(b64), "<f4").reshape(-1, 3).astype(np.float64)
+    b64 = nb.kernel_eval(
+        "import base64\n"
+        f"print(json.dumps(base64.b64encode(np.ascontiguousarray({expr}, '{dtype}').tobytes()).decode()))"
+    )
+    return np.frombuffer(base64.b64decode(b64), dtype).reshape(-1, 3)
 
 
-def _assert_gpu_equals_kernel(nb: NotebookPage, size: float) -> float:
+def _kernel_positions(nb: NotebookPage) -> np.ndarray:
+    return _kernel_array(nb, "model.evaluate()", "<f4").astype(np.float64)
+
+
+def _assert_gpu_equals_kernel(nb: NotebookPage, size: float, normals: bool = False) -> float:
     gpu = _gpu_positions(nb)
     assert gpu is not None, "the view does not evaluate on the GPU"
     ref = _kernel_positions(nb)
     err = float(np.abs(gpu - ref).max()) / size
     assert err <= 1e-5, f"GPU and kernel differ by {err:.2e} of the face size"
+    if normals:
+        # area-weighted vertex normals of the kernel's mesh (util.js computeNormals)
+        F = _kernel_array(nb, "model.faces", "<i4").astype(np.int64)
+        e = np.cross(ref[F[:, 1]] - ref[F[:, 0]], ref[F[:, 2]] - ref[F[:, 0]])
+        N = np.zeros_like(ref)
+        for j in range(3):
+            np.add.at(N, F[:, j], e)
+        N /= np.maximum(np.linalg.norm(N, axis=1, keepdims=True), 1e-30)
+        out = nb.viewport(0).evaluate("e => Array.from(e.fwbGpuNormals())")
+        G = np.asarray(out, np.float64).reshape(-1, 3)
+        used = np.linalg.norm(N, axis=1) > 0.5
+        cos = (G[used] * N[used]).sum(axis=1)
+        assert cos.min() > 0.9999, f"GPU normals off by up to {np.degrees(np.arccos(cos.min())):.2f} deg"
     return err
 
 
@@ -104,7 +122,7 @@ def test_slider_update_is_weights_only_and_the_gpu_matches_the_kernel(open_noteb
     payload = nb.kernel_eval("print(json.dumps(list(vp.gpu_payload)))")
     assert payload and max(payload[-1:]) <= 2048, payload
     assert vp.get_attribute("data-gpu-note") == ""
-    _assert_gpu_equals_kernel(nb, size)
+    _assert_gpu_equals_kernel(nb, size, normals=True)
     # texture memory: at most twice the rig's float32 vertex data (neutral + deltas + basis)
     tex = int(vp.get_attribute("data-gpu-texture-bytes"))
     rig = nb.kernel_eval(

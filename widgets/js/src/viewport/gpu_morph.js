@@ -6,7 +6,9 @@
 //      entries), B the shell basis (ceil(H/4) RGBA texels per vertex), w a k-texel row, u_H
 //      and M uniforms;
 //   2. normals: area-weighted, the sum of cross(p_b - p_i, p_c - p_i) over the faces (i, b, c)
-//      around vertex i (the same sum as util.js computeNormals).
+//      around vertex i (the same sum as util.js computeNormals), the faces walked as fans of
+//      neighbours (each neighbour fetched once; a new fan starts where the next face does not
+//      share an edge with the last).
 // The view's materials read both targets in the vertex shader by gl_VertexID (patchMaterial).
 // The rig arrays come from the Store (./sync.js, padded to the texture width once per model);
 // each view owns its textures, because each view has its own WebGL context.
@@ -74,11 +76,12 @@ void main() {
   vec3 nrm = vec3(0.0);
   int off = int(oc.x);
   int cnt = int(oc.y);
+  vec3 prev = vec3(0.0);
   for (int e = 0; e < cnt; e++) {
-    uvec2 bc = texelFetch(adjTex, at(off + e), 0).xy;
-    vec3 pb = texelFetch(posTex, at(int(bc.x)), 0).xyz;
-    vec3 pc = texelFetch(posTex, at(int(bc.y)), 0).xyz;
-    nrm += cross(pb - p, pc - p);
+    uvec2 nf = texelFetch(adjTex, at(off + e), 0).xy; // (neighbour, starts a new fan)
+    vec3 cur = texelFetch(posTex, at(int(nf.x)), 0).xyz - p;
+    if (nf.y == 0u) nrm += cross(prev, cur);
+    prev = cur;
   }
   float l = length(nrm);
   outColor = vec4(l > 0.0 ? nrm / l : nrm, 1.0);
@@ -302,6 +305,18 @@ export class GpuMorph {
     return out;
   }
 
+  // The evaluated normals (n*3) (a readback of the normal target; tests).
+  readNormals(out) {
+    const rows = this.nrmRT.height;
+    const buf = new Float32Array(TEX_WIDTH * rows * 4);
+    this.renderer.readRenderTargetPixels(this.nrmRT, 0, 0, TEX_WIDTH, rows, buf);
+    const n = Math.min(this.n, out.length / 3);
+    for (let i = 0; i < n; i++) {
+      out[3 * i] = buf[4 * i]; out[3 * i + 1] = buf[4 * i + 1]; out[3 * i + 2] = buf[4 * i + 2];
+    }
+    return out;
+  }
+
   // Bytes held in this view's textures and targets (the benchmark's texture memory).
   textureBytes() {
     let b = 0;
@@ -325,24 +340,55 @@ export class GpuMorph {
   }
 }
 
-// Per vertex i: (offset, count) into (b, c) pairs, one per face (i, b, c) in winding order.
+// Per vertex i: (offset, count) into (neighbour, new fan) entries: the faces (i, b, c) around
+// i in winding order, chained into fans b0 c0=b1 c1=b2 ... (a closed fan repeats its first
+// neighbour at the end); each face adds cross(b - i, c - i) in the normal pass.
 function faceFans(F, n) {
   const counts = new Uint32Array(n);
   for (let f = 0; f < F.length; f++) if (F[f] < n) counts[F[f]] += 1;
-  const index = new Uint32Array(n * 2);
-  let off = 0;
-  for (let i = 0; i < n; i++) { index[2 * i] = off; index[2 * i + 1] = counts[i]; off += counts[i]; }
+  const start = new Uint32Array(n + 1);
+  for (let i = 0; i < n; i++) start[i + 1] = start[i] + counts[i];
   const fill = new Uint32Array(n);
-  const pairs = new Uint32Array(off * 2);
+  const B = new Uint32Array(start[n]), C = new Uint32Array(start[n]);
   for (let f = 0; f < F.length; f += 3) {
     const a = F[f], b = F[f + 1], c = F[f + 2];
     if (a >= n || b >= n || c >= n) continue;
     for (const [i, j, k] of [[a, b, c], [b, c, a], [c, a, b]]) {
-      const at = index[2 * i] + fill[i]++;
-      pairs[2 * at] = j; pairs[2 * at + 1] = k;
+      const at = start[i] + fill[i]++;
+      B[at] = j; C[at] = k;
     }
   }
-  return { index: padded(index, 2), pairs: padded(pairs, 2) };
+  const index = new Uint32Array(n * 2);
+  const out = [];
+  const used = new Uint8Array(16);
+  for (let i = 0; i < n; i++) {
+    const s0 = start[i], m = fill[i];
+    index[2 * i] = out.length / 2;
+    const seen = m <= 16 ? used : new Uint8Array(m);
+    seen.fill(0, 0, m);
+    let left = m;
+    while (left > 0) {
+      // start a fan at a face whose b is no other face's c (an open fan's first face)
+      let f = -1;
+      for (let x = 0; x < m && f < 0; x++) {
+        if (seen[x]) continue;
+        let opens = true;
+        for (let y = 0; y < m; y++) if (!seen[y] && y !== x && C[s0 + y] === B[s0 + x]) { opens = false; break; }
+        if (opens) f = x;
+      }
+      if (f < 0) for (let x = 0; x < m; x++) if (!seen[x]) { f = x; break; }
+      out.push(B[s0 + f], 1);
+      while (f >= 0) {
+        seen[f] = 1; left -= 1;
+        const c = C[s0 + f];
+        out.push(c, 0);
+        f = -1;
+        for (let y = 0; y < m; y++) if (!seen[y] && B[s0 + y] === c) { f = y; break; }
+      }
+    }
+    index[2 * i + 1] = out.length / 2 - index[2 * i];
+  }
+  return { index: padded(index, 2), pairs: padded(Uint32Array.from(out), 2) };
 }
 
 // Let a view's material draw the GPU positions and normals (when drawUniforms.fwbGpu is on).

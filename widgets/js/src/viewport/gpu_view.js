@@ -77,6 +77,7 @@ export const gpuViewMethods = {
       const normalMs = (performance.now() - t0) / n;
       return { evalMs, drawMs, cpuDrawMs, morphMs, normalMs, canvas: [r.domElement.width, r.domElement.height] };
     };
+    this.el.fwbGpuNormals = () => this.gpuNormals();
     // Test hook: what the GPU path evaluates now.
     this.el.fwbGpuState = () => ({
       on: this.gpuOn(), reason: this.gpuReason, params: Array.from(this.store.gpuParams || []),
@@ -139,6 +140,7 @@ export const gpuViewMethods = {
       const normalMs = (performance.now() - t0) / n;
       return { evalMs, drawMs, cpuDrawMs, morphMs, normalMs, canvas: [r.domElement.width, r.domElement.height] };
     };
+    this.el.fwbGpuNormals = () => this.gpuNormals();
     // Test hook: what the GPU path evaluates now.
     this.el.fwbGpuState = () => ({
       on: this.gpuOn(), reason: this.gpuReason, params: Array.from(this.store.gpuParams || []),
@@ -258,9 +260,17 @@ export const gpuViewMethods = {
     this.el.setAttribute("data-clip-playing", "0");
   },
 
+  // Test hook: the GPU's normals (n*3), read back now.
+  gpuNormals() {
+    if (!this.gpuOn()) return null;
+    this.ensureCpuPositions();
+    return this.gpu.readNormals(new Float32Array(this.store.gpu.n * 3));
+  },
+
   disposeGpu() {
     delete this.el.fwbGpuState;
     delete this.el.fwbGpuTime;
+    delete this.el.fwbGpuNormals;
     this.model.off("change:gpu", this.onGpuTrait);
     this.model.off("change:_gpu_mode", this.onGpuTrait);
     if (this.gpu) this.gpu.dispose();
