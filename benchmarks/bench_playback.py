@@ -25,7 +25,12 @@ the mouth and brows), ticks *Loop*, presses **Play** with the mouse, waits
 * ``draft``: whether the viewport drew at half resolution while playing (it does
   on software WebGL, see ``softwareWebGL()`` in ``widgets/js/src/viewport.js``).
 
-Playback sends a frame only while fewer than ``FRAMES_IN_FLIGHT`` frames are
+Both viewport paths run in the same session (``--paths gpu stream``): ``gpu``
+(``Viewport.gpu = True``: the browser plays the timeline's per-frame parameters
+on its own clock, the kernel only moves the playhead, so ``kernel fps`` is 0)
+and ``stream`` (the kernel evaluates every frame and streams vertex rows).
+
+In the stream path, playback sends a frame only while fewer than ``FRAMES_IN_FLIGHT`` frames are
 not yet drawn by the browser (see ``widgets/timeline/``), so ``kernel fps``
 equals ``viewport fps`` when the browser is the bottleneck.
 
@@ -33,7 +38,7 @@ Then presses **Pause**. Prints one row per resolution and target fps.
 
 Usage::
 
-    .venv/bin/python benchmarks/bench_playback.py [--resolutions base 25k] [--fps 30 60] [--seconds 6]
+    .venv/bin/python benchmarks/bench_playback.py [--resolutions base 25k] [--fps 30 60] [--seconds 6] [--paths gpu stream]
 """
 
 from __future__ import annotations
@@ -85,9 +90,14 @@ def _median(xs: list[float]) -> float:
     return s[len(s) // 2] if s else float("nan")
 
 
-def measure(nb: NotebookPage, fps: float, warmup: float, seconds: float) -> dict[str, float]:
+def measure(nb: NotebookPage, fps: float, warmup: float, seconds: float, gpu: bool) -> dict[str, float]:
     page = nb.page
     root = page.locator(".fwb-timeline")
+    nb.kernel_eval(f"vp.gpu = {gpu}")
+    page.wait_for_function(
+        "(g) => document.querySelector('.fwb-viewport').getAttribute('data-gpu') === g",
+        arg="1" if gpu else "0", timeout=120000,
+    )
     nb.kernel_eval(
         f"model.timeline.set(model.tracks.replace(fps={fps}), 'bench fps'); model.set_time(0.0)"
     )
@@ -111,7 +121,7 @@ def measure(nb: NotebookPage, fps: float, warmup: float, seconds: float) -> dict
     n1, k1, d1 = nb.kernel_eval(_COUNTER)
     stats = nb.kernel_eval("import json; print(json.dumps(tl.playback_stats))")
     push = nb.kernel_eval("import json; print(json.dumps(list(vp.push_ms)))")
-    nb.screenshot(f"playing-{fps:g}")
+    nb.screenshot(f"playing-{fps:g}-{'gpu' if gpu else 'stream'}")
     # force: during playback the page never idles long enough for Playwright's
     # "element is stable" check, which is about animation, not about the button
     root.locator(".fwb-tl-pause").click(force=True)
@@ -129,6 +139,7 @@ def measure(nb: NotebookPage, fps: float, warmup: float, seconds: float) -> dict
         "push_ms": _median(push),
         "render_ms": _median(render_ms),
         "draft": draft,
+        "browser": bool(stats.get("browser")),
     }
 
 
@@ -138,6 +149,7 @@ def main() -> int:
     ap.add_argument("--fps", nargs="+", type=float, default=[30.0])
     ap.add_argument("--warmup", type=float, default=1.5)
     ap.add_argument("--seconds", type=float, default=6.0)
+    ap.add_argument("--paths", nargs="+", default=["gpu", "stream"], choices=["gpu", "stream"])
     args = ap.parse_args()
     if chromium_missing():
         return 2
@@ -149,7 +161,8 @@ def main() -> int:
         nb.viewport(0).evaluate("e => e.scrollIntoView({block: 'start'})")
         page.wait_for_timeout(500)
         n = nb.kernel_eval("import json; print(json.dumps(model.n_vertices))")
-        return [(res, n, fps, measure(nb, fps, args.warmup, args.seconds)) for fps in args.fps]
+        return [(res, n, fps, path, measure(nb, fps, args.warmup, args.seconds, path == "gpu"))
+                for fps in args.fps for path in args.paths]
 
     rows = each_resolution("playback", args.resolutions, lambda res: _SETUP.format(res=res), run)
 
@@ -157,11 +170,11 @@ def main() -> int:
     print(f"Timeline playback in JupyterLab + Chromium (software WebGL), {args.seconds:g} s "
           "per row after warm-up")  # fmt: skip
     print("  kernel fps: set_time calls/s; viewport fps: geometry frames the viewport rendered/s")
-    print(f"{'resolution':>10} {'vertices':>9} {'target':>7} {'kernel fps':>10} {'dropped':>8} "
+    print(f"{'resolution':>10} {'vertices':>9} {'path':>6} {'target':>7} {'kernel fps':>10} {'dropped':>8} "
           f"{'viewport fps':>12} {'renders/s':>9} {'set_time ms':>11} {'push ms':>8} "
           f"{'render ms':>9} {'page rAF/s':>10} {'draft':>5}")  # fmt: skip
-    for res, n, fps, m in rows:
-        print(f"{res:>10} {n:>9} {fps:7.0f} {m['kernel_fps']:10.1f} {m['dropped']:8.0%} "
+    for res, n, fps, path, m in rows:
+        print(f"{res:>10} {n:>9} {path:>6} {fps:7.0f} {m['kernel_fps']:10.1f} {m['dropped']:8.0%} "
               f"{m['viewport_fps']:12.1f} {m['renders']:9.1f} {m['set_time_ms']:11.2f} "
               f"{m['push_ms']:8.2f} {m['render_ms']:9.1f} {m['raf']:10.1f} "
               f"{'yes' if m['draft'] else 'no':>5}")  # fmt: skip
