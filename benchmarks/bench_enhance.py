@@ -36,7 +36,7 @@ truth, enhanced / input (median of the ratios), and the same for the detail
 band ``x − f(x)``; with the dense peer's weights too.
 
 Measured (2 shared cores, nice -n 5, BLAS on 1 thread — ``--blas-threads`` —, other work
-running, load ≈ 4; 2026-11-25):
+running; 2026-11-25). Run A, load ≈ 4 (before the CPU-time row was added):
 
 =============================================  ====================  ======================
                                                80k (79,673 v), D=66  318k (317,669 v), D=36
@@ -55,12 +55,19 @@ features per frame: ours / dense               7,488 / 1,425,024     29,979 / 5,
 paper, 500k, i7 + MOSEK (quoted)               ≈ 30 s
 =============================================  ====================  ======================
 
-Whole run 2.5 min (set-up at 318k: procedural frames 21 s, database build 40 s,
-dense peer's matrix 12 s, 821 MB). OSQP reaches the same eq. 3 objective as
+Run B, load ≈ 6 (the script as it is): total 0.370 / 1.360 s per frame at
+80k / 318k, **CPU time of the process 0.262 / 1.092 s**; blend 176 / 596 ms,
+reconstruct 122 / 416 ms, match 38 / 199 ms; matching peers: OSQP on the same
+region QPs 142 / 156 ms, dense QP 119 / 376 ms (AᵀA precomputed) and
+424 / 551 ms (formed per frame). Two runs at load ≈ 7 gave 2.9 and 3.1 s per
+frame at 318k (the database set-up was 2.4× slower too).
+
+Whole run A 2.5 min, run B 3.5 min (set-up at 318k in A: procedural frames
+21 s, database build 40 s, dense peer's matrix 12 s, 821 MB). OSQP reaches the same eq. 3 objective as
 ``simplex_lsq`` (relative difference ≤ 1e-9; the weights themselves may differ
 where the optimum is not unique, e.g. frames at rest). In the dense peer the
 time goes into the per-triangle features and the products with the 9m × D
-matrix; the OSQP solve itself is cheap (3–4 ms, 36–66 unknowns).
+matrix; the OSQP solve itself is cheap (3–8 ms, 36–66 unknowns).
 
 Validation at 80k (15 held-out frames, median of per-frame ratios enhanced /
 input): error 0.81 (0.123 vs 0.153 mm; lower in 12 of 15 frames), detail band
@@ -68,11 +75,10 @@ input): error 0.81 (0.123 vs 0.153 mm; lower in 12 of 15 frames), detail band
 dense peer's single set of weights for the whole face (uncompressed features):
 0.90 and 0.59 — the per-region match on compressed features is both faster and closer.
 
-The 318k target (≤ 1 s per frame) is met at the limit; blend (eq. 4 and the
-batched 3×3 products of the composition ``R H Rᵀ T``) and the reconstruction
-are 77 % of it, the matching 13 %. An earlier run (66-frame database at 318k,
-load ≈ 7 on the 2 cores) gave 3.06 s per frame (blend 1.78 s): on this shared
-machine the 318k figure moves by up to 3×.
+The 318k target (≤ 1 s per frame) is reached only at the limit: 1.01 s in the
+quietest run, CPU time 1.09 s in a busier one. Blend (eq. 4 and the batched
+3×3 products of the composition ``R H Rᵀ T``) and the reconstruction are
+~75 % of it, the matching 13 %.
 """
 
 from __future__ import annotations
@@ -229,11 +235,12 @@ def run(res: str, n_frames: int, validate: bool, n_db: int) -> dict[str, Any]:
     # ours: warm-up frame, then --frames frames
     db.enhance_result(inputs[-1:], correspondence=corr)
     idx = np.searchsorted(use, timed)
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     res_ours = db.enhance_result(inputs[idx], correspondence=corr)
     total = (time.perf_counter() - t0) / len(idx)
+    cpu = (time.process_time() - c0) / len(idx)  # this process's CPU time: what the other work on the cores does not inflate
     per_stage = {k: v / len(idx) for k, v in res_ours.seconds.items()}
-    print(f"  ours, {len(idx)} frames: {total:.3f} s/frame = "
+    print(f"  ours, {len(idx)} frames: {total:.3f} s/frame (CPU {cpu:.3f} s) = "
           + ", ".join(f"{k} {per_stage[k] * 1e3:.0f} ms" for k in STAGES), flush=True)
 
     # matching peers on the same frames (low bands computed once, outside the timings)
@@ -273,7 +280,7 @@ def run(res: str, n_frames: int, validate: bool, n_db: int) -> dict[str, Any]:
           f"({dense.A.shape[0]:,} × {dense.A.shape[1]}) vs ours {db.features_.shape[1] * 9:,} × {db.n_frames_}",
           flush=True)
     out: dict[str, Any] = {
-        "res": res, "n": len(V), "total": total, "stages": per_stage, "match_ours": float(np.mean(t_ours)),
+        "res": res, "n": len(V), "total": total, "cpu": cpu, "stages": per_stage, "match_ours": float(np.mean(t_ours)),
         "match_osqp_compressed": float(np.mean(t_sosqp)), "dense_form": float(np.mean(dense_form)),
         "dense_pre": sum(mean_pre.values()), "dense_parts": mean_pre, "features_ours": db.features_.shape[1] * 9,
         "features_dense": dense.A.shape[0], "build": t_build, "D": db.n_frames_,
@@ -324,7 +331,8 @@ def main() -> None:
                     n_db=args.database_frames or (36 if r == "300k" else 66)) for r in args.resolutions]
 
     heads = [f"{r['n'] / 1000:.0f}k ({r['n']:,} v), D={r['D']}" for r in rows]
-    table = [("total per frame (ours)", [f"{r['total']:.3f} s" for r in rows])]
+    table = [("total per frame (ours)", [f"{r['total']:.3f} s" for r in rows]),
+             ("  CPU time of this process", [f"{r['cpu']:.3f} s" for r in rows])]
     for k in STAGES:
         table.append((f"  {k}", [f"{r['stages'][k] * 1e3:.0f} ms" for r in rows]))
     table += [
