@@ -162,3 +162,13 @@ def test_a_procedural_database_for_a_rig_with_other_names_and_units() -> None:
     rig.set_weights({"mouth_smile_L": 1.0, "mouth_smile_R": 1.0, "cheek_squint_L": 0.5, "cheek_squint_R": 0.5})
     d = rig.layer_displacement("enhance")
     assert 0.02 < np.abs(d).max() < 1.0  # 0.2–10 mm in cm
+
+
+def test_the_mesh_below_a_layer_is_evaluated_without_it(model: workbench.FaceModel) -> None:
+    model.set_weights(SMILE)
+    plain = np.array(model.evaluate())
+    model.enhance.set_preview(True)
+    np.testing.assert_array_equal(model.evaluation_at(0.0, below="enhance").mesh, plain)
+    assert model.evaluation_at(0.0, below="enhance").displacements.get("enhance") is None
+    with pytest.raises(KeyError, match="no layer named 'nope'"):
+        model.evaluation_at(0.0, below="nope")

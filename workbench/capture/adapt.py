@@ -70,7 +70,6 @@ Shapes: ``n`` vertices, ``k`` shapes, ``K = n_basis``; constraint matrices
 
 from __future__ import annotations
 
-import contextlib
 import math
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -82,6 +81,7 @@ import scipy.sparse.linalg as spla
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
+from workbench._blas import one_blas_thread
 from workbench.capture.result import TrackError
 from workbench.geometry.operators import cotangent_laplacian, mass_matrix
 from workbench.geometry.sparse_cholesky import SparseSPDSolver
@@ -740,7 +740,7 @@ class AdaptiveModel:
         """
         xv = self._check_x(x)
         AS, cv = self._local_rows(A, c)
-        with _one_blas_thread():
+        with one_blas_thread():
             return self._update(AS, cv, xv)
 
     def update_planes(self, rows: ArrayLike, normals: ArrayLike, targets: ArrayLike, x: ArrayLike) -> AdaptiveModel:
@@ -757,7 +757,7 @@ class AdaptiveModel:
         """
         xv = self._check_x(x)
         AS, cv = self._plane_rows(rows, normals, targets)
-        with _one_blas_thread():  # small dense blocks: threads only wait for busy cores
+        with one_blas_thread():  # small dense blocks: threads only wait for busy cores
             return self._update(AS, cv, xv)
 
     def _plane_rows(self, rows: ArrayLike, normals: ArrayLike, targets: ArrayLike) -> tuple[
@@ -793,13 +793,13 @@ class AdaptiveModel:
         c : (m,) float
         """
         AS, cv = self._local_rows(A, c)
-        with _one_blas_thread():
+        with one_blas_thread():
             return self._fit_neutral(AS, cv)
 
     def fit_neutral_planes(self, rows: ArrayLike, normals: ArrayLike, targets: ArrayLike) -> AdaptiveModel:
         """:meth:`fit_neutral` with point-to-plane rows at constraint vertices (see :meth:`update_planes`)."""
         AS, cv = self._plane_rows(rows, normals, targets)
-        with _one_blas_thread():
+        with one_blas_thread():
             return self._fit_neutral(AS, cv)
 
     def _fit_neutral(self, AS: sp.csr_matrix, cv: NDArray[np.float64]) -> AdaptiveModel:
@@ -870,7 +870,7 @@ class AdaptiveModel:
         if isinstance(sweeps, bool) or not isinstance(sweeps, int | np.integer) or sweeps < 1:
             raise ValueError(f"sweeps must be a positive integer, got {sweeps!r}")
         todo = [bk for bk in range(len(self._names) + 1) if not self.saturated_[bk] and (bk, bk) in self._M]
-        with _one_blas_thread():
+        with one_blas_thread():
             self._gauss_seidel(todo, int(sweeps))
         self._refresh()
         return self
@@ -906,27 +906,9 @@ def _spd_solve(A: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.flo
     and a threaded BLAS whose threads wait for busy cores). These blocks are far too
     small to gain from threads: every public method that solves them (update,
     update_planes, fit_neutral, fit_neutral_planes, refine) holds BLAS to one thread
-    with :func:`_one_blas_thread` once, around all its work.
+    with :func:`workbench._blas.one_blas_thread` once, around all its work.
     """
     return sla.cho_solve(sla.cho_factor(A, check_finite=False), b, check_finite=False)
-
-
-def _one_blas_thread() -> Any:
-    """A context holding BLAS to one thread (threadpoolctl when installed, else nothing)."""
-    global _LIMITER
-    if _LIMITER is None:
-        try:
-            from threadpoolctl import ThreadpoolController
-
-            _LIMITER = ThreadpoolController()
-        except ImportError:  # pragma: no cover - threadpoolctl is optional
-            _LIMITER = False
-    if _LIMITER is False:
-        return contextlib.nullcontext()
-    return _LIMITER.limit(limits=1, user_api="blas")
-
-
-_LIMITER: Any = None
 
 
 def adaptive_model(adapt: Any, model: Any, vertex_ids: ArrayLike, progress: Callable[[float, str], Any] | None = None,

@@ -158,10 +158,13 @@ class Evaluator:
             M = self._head(view)
             return np.array(out) if M is None else posed_points(out, M)
 
-    def evaluation_at(self, time: float, timeline: Any = None) -> Evaluation:
-        """The whole :class:`Evaluation` (mesh without head pose, each layer's displacement) at ``time``."""
+    def evaluation_at(self, time: float, timeline: Any = None, *, below: str | None = None) -> Evaluation:
+        """The whole :class:`Evaluation` (mesh without head pose, each layer's displacement) at ``time``.
+
+        ``below``: stop before the layer of that name (the mesh it would get; later layers do not run).
+        """
         with self._lock:
-            return self.pipeline.run(self.view_at(time, timeline), cache=False)
+            return self.pipeline.run(self.view_at(time, timeline), cache=False, below=below)
 
     def layers_at(
         self, time: float, names: Iterable[str], timeline: Any = None

@@ -273,12 +273,16 @@ class Pipeline:
         self._cache.clear()
         self._alone.clear()
 
-    def run(self, view: StateView, cache: bool = True) -> Evaluation:
+    def run(self, view: StateView, cache: bool = True, below: str | None = None) -> Evaluation:
         """Evaluate ``view``: blend, then every layer on the mesh below it.
 
         ``cache`` (the live state only) reuses stages whose inputs' versions
-        are unchanged. Returned arrays are read-only.
+        are unchanged. ``below``: stop before the layer of that name (its
+        input is then the returned mesh; it and the later layers do not run).
+        Returned arrays are read-only.
         """
+        if below is not None and below not in self.names:
+            raise KeyError(f"no layer named {below!r}; layers are {self.names}")
         key: Any = ("blend", view.version("shapes"), view.version("weights"),
                     *(view.version(r) for r in _families.weight_product_reads()))
         hit = self._cache.get(-1) if cache else None
@@ -292,6 +296,8 @@ class Pipeline:
         shown: dict[str, NDArray[np.float32] | None] = {}
         inputs: dict[str, NDArray[np.float32]] = {}
         for i, layer in enumerate(self._layers):
+            if layer.name == below:
+                break
             inputs[layer.name] = mesh
             reads = layer.reads
             own = None if reads is None else (layer.name, *(view.version(r) for r in reads))

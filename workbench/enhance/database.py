@@ -24,7 +24,7 @@ What §5 needs is served by :meth:`PerformanceDatabase.lowpass`,
 :meth:`~PerformanceDatabase.encode`, :meth:`~PerformanceDatabase.compose` and
 :meth:`~PerformanceDatabase.reconstruct` (the Poisson solve, factored once on
 ``f(d0)``). The matching of eq. 2–3 (:meth:`~PerformanceDatabase.match`,
-convex weights per region by :func:`~workbench.enhance.matching.simplex_lsq`)
+convex weights per region by :class:`~workbench.enhance.matching.SimplexLSQ`, factored once)
 and the blending of eq. 4 (:meth:`~PerformanceDatabase.blend_detail`) are here
 too; :meth:`~PerformanceDatabase.enhance` chains them per input frame
 (:mod:`workbench.enhance.spatial`).
@@ -56,7 +56,7 @@ from workbench.enhance.gradients import (
     local_frames,
     rigid_align,
 )
-from workbench.enhance.matching import simplex_lsq
+from workbench.enhance.matching import SimplexLSQ
 from workbench.enhance.patches import face_patches, grow_patches
 from workbench.enhance.spatial import Correspondence, EnhanceResult, Progress, enhance_frames
 from workbench.geometry.sparse_cholesky import Backend
@@ -307,6 +307,7 @@ class PerformanceDatabase:
         Dt = self.features_.reshape(self.n_frames_, -1)  # (D, 9P)
         om = np.repeat(self.region_patch_weights_, 9, axis=1)  # (R, 9P)
         self.region_gram_ = np.einsum("ik,rk,jk->rij", Dt, om, Dt)
+        self._matchers = [SimplexLSQ(g) for g in self.region_gram_]
 
     def _detail(self, low: NDArray[np.float64], detailed: NDArray[np.float64]) -> NDArray[np.float32]:
         T = deformation_gradients(low, self.faces_, detailed)
@@ -398,13 +399,10 @@ class PerformanceDatabase:
         Dt = self.features_.reshape(self.n_frames_, -1)  # (D, 9P)
         om = np.repeat(self.region_patch_weights_, 9, axis=1)  # (R, 9P)
         rhs = (om * a) @ Dt.T  # (R, D)
-        return np.stack([simplex_lsq(self.region_gram_[r], rhs[r]) for r in range(len(rhs))])
+        return np.stack([self._matchers[r].solve(rhs[r]) for r in range(len(rhs))])
 
-    def blend_detail(self, weights: ArrayLike) -> NDArray[np.float64]:
-        """Detail ``b^h`` (m, 3, 3) blended from per-region weights (R, D) by eq. 4.
-
-        Triangles outside every region (all ``ω = 0``) take the regions' mean.
-        """
+    def detail_coefficients(self, weights: ArrayLike) -> tuple[NDArray[np.float32], NDArray[np.int64]]:
+        """Eq. 4's per-triangle weight of each active frame, (m, k) float32, and the active frames (k,)."""
         W = np.asarray(weights, np.float64)
         R, D = len(self.region_names_), self.n_frames_
         if W.shape != (R, D):
@@ -413,8 +411,25 @@ class PerformanceDatabase:
         tot = om.sum(axis=0)
         om = np.where(tot > 0, om / np.where(tot > 0, tot, 1.0), 1.0 / R)  # (R, m)
         active = np.flatnonzero(W.max(axis=0) > 1e-6)
-        C = (om.T @ W[:, active]).astype(np.float32)  # (m, k)
-        out = np.zeros((len(om[0]), 3, 3), np.float32)
+        return (om.T @ W[:, active]).astype(np.float32), active.astype(np.int64)
+
+    def blend_compose(self, weights: ArrayLike, low: ArrayLike) -> NDArray[np.float64]:
+        """:meth:`compose` of :meth:`blend_detail`, fused per triangle with numba when it is installed."""
+        from workbench.enhance.kernels import NUMBA, blend_compose
+
+        if not NUMBA:
+            return self.compose(self.blend_detail(weights), low)
+        C, active = self.detail_coefficients(weights)
+        y = np.asarray(low, np.float64)
+        return blend_compose(C, active, self.detail_, local_frames(y, self.faces_), self.low_gradients(y))
+
+    def blend_detail(self, weights: ArrayLike) -> NDArray[np.float64]:
+        """Detail ``b^h`` (m, 3, 3) blended from per-region weights (R, D) by eq. 4.
+
+        Triangles outside every region (all ``ω = 0``) take the regions' mean.
+        """
+        C, active = self.detail_coefficients(weights)
+        out = np.zeros((C.shape[0], 3, 3), np.float32)
         for j, i in enumerate(active):  # k is small (the convex weights are sparse): one axpy per frame
             out += C[:, j, None, None] * self.detail_[i]
         return out.astype(np.float64)

@@ -177,11 +177,7 @@ class EnhanceFacet:
         for i, ti in enumerate(t):
             if i % 8 == 0:
                 say(0.2 * i / t.size, f"evaluating frame {i + 1} of {t.size}")
-            ev = m.evaluation_at(float(ti))
-            below = np.asarray(ev.mesh, np.float64)
-            shown = ev.displacements.get("enhance")
-            if shown is not None:
-                below = below - shown
+            below = np.asarray(m.evaluation_at(float(ti), below="enhance").mesh, np.float64)
             M = head_matrix(m.view_at(float(ti)))
             frames[i] = below if M is None else posed_points(below.astype(np.float32), M)
         result = st.database.enhance_result(

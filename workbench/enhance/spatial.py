@@ -38,6 +38,7 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 
+from workbench._blas import one_blas_thread
 from workbench.enhance.errors import DatabaseError
 
 if TYPE_CHECKING:
@@ -102,7 +103,9 @@ class Correspondence:
 
         This is how the sample head's resolutions are made (:func:`workbench.load_sample`):
         ``25k`` → ``100k`` is one level, ``25k`` → ``300k`` two. The first ``n_vertices``
-        rows of a subdivided mesh are the input's own vertices (the restriction).
+        rows of a subdivided mesh belong to the input's vertices (moved by the
+        subdivision's smoothing, so the restriction carries displacements, which is
+        how the preview layer uses it, not positions).
         """
         from workbench.geometry.subdivision import loop_subdivision
 
@@ -227,6 +230,15 @@ def enhance_frames(
     secs["correspondence"] = time.perf_counter() - t0
     out = np.empty_like(inputs)
     weights = np.empty((T, len(db.region_names_), db.n_frames_))
+    with one_blas_thread():  # the D×D matching and 3×3 work gain nothing from threads
+        _enhance_each(db, inputs, out, weights, secs, say)
+    say(1.0, f"enhanced {T} frames")
+    return EnhanceResult(out, weights, inputs, secs)
+
+
+def _enhance_each(db: PerformanceDatabase, inputs: NDArray[np.float64], out: NDArray[np.float64],
+                  weights: NDArray[np.float64], secs: dict[str, float], say: Progress) -> None:
+    T = inputs.shape[0]
     for i in range(T):
         if i % 4 == 0:
             say(i / T, f"enhancing frame {i + 1} of {T}")
@@ -235,7 +247,7 @@ def enhance_frames(
         t1 = time.perf_counter()
         weights[i] = db.match(low)
         t2 = time.perf_counter()
-        J = db.compose(db.blend_detail(weights[i]), low)
+        J = db.blend_compose(weights[i], low)
         t3 = time.perf_counter()
         X = db.reconstruct(J, low)
         X += db.place_pieces(X, low)
@@ -245,5 +257,3 @@ def enhance_frames(
         secs["match"] += t2 - t1
         secs["blend"] += t3 - t2
         secs["reconstruct"] += t4 - t3
-    say(1.0, f"enhanced {T} frames")
-    return EnhanceResult(out, weights, inputs, secs)
