@@ -226,7 +226,7 @@ def test_enhance_step(tmp_path, client):
     frames = np.stack([head.evaluate_at(float(t), tl) for t in tl.frame_times()])
     database = PerformanceDatabase.load(tmp_path / "db.npz")
     want = database.enhance(frames) * head.metadata.metres_per_unit
-    np.testing.assert_allclose(got, want, atol=1e-6, rtol=0)
+    np.testing.assert_allclose(got, want, atol=1e-5, rtol=0)  # 10 µm: BLAS threads differ (worker: 1)
 
 
 def test_a_killed_worker_loses_nothing(tmp_path):
