@@ -202,8 +202,9 @@ class Workbench(W.VBox):
         )
         self.status = W.HTML()
         self.status.add_class("fwb-wb-status")
+        # the Enhance tab's Enhanced preview box, shown over the viewport too (one widget, two views)
         top = W.HBox(
-            [self.undo_button, self.redo_button, self.wireframe, self.status],
+            [self.undo_button, self.redo_button, self.wireframe, self.enhance.preview, self.status],
             layout=W.Layout(width="100%", align_items="center", grid_gap="6px"),
         )
         top.add_class("fwb-topbar")

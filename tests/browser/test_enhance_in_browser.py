@@ -3,7 +3,7 @@
 The workbench opens on the 5k sample head with a smile keyed at 0.5 s. With
 the mouse: open the Enhance tab, press *Build database* (the procedural
 performance one subdivision finer: a progress bar, then the database line),
-tick *Enhanced preview* (the detail appears on the face: pixels around the
+tick *Enhanced preview* in the top bar over the viewport (the detail appears on the face: pixels around the
 mouth and eyes change, the kernel's layer is on), press *Undo* in the top bar
 (the box unticks, the pixels go back), redo from Python, then *Bake enhanced
 take* to a .pc2 (the status names the frames and s/frame; the file holds every
@@ -52,8 +52,10 @@ def test_build_preview_undo_and_bake_with_the_mouse(open_notebook) -> None:
     nb.wait_viewports(1)
     page.locator(".fwb-workbench").evaluate("e => e.scrollIntoView({block: 'start'})")
     page.locator(".fwb-tabs .lm-TabBar-tab", has_text="Enhance").click()
-    box = page.locator(".fwb-enhance-preview input")
-    assert box.is_disabled()  # no database yet
+    # the Enhanced preview box sits in the top bar over the viewport (and in the Enhance tab: one widget)
+    box = page.locator(".fwb-topbar .fwb-enhance-preview input")
+    tab_box = page.locator(".fwb-tabs .fwb-enhance-preview input")
+    assert box.is_disabled() and tab_box.is_disabled()  # no database yet
 
     # ---- Build database: progress, then the database line
     page.locator(".fwb-enhance-build").click()
@@ -70,6 +72,7 @@ def test_build_preview_undo_and_bake_with_the_mouse(open_notebook) -> None:
     box.click()
     st = wait_until("the preview", lambda: _state(nb), lambda s: s["preview"])
     assert st["box"] and st["shown"] > 1e-3 and st["undo"][-1] == "Enhanced preview on", st
+    wait_until("the tab's view of the box", tab_box.is_checked, bool)
     nb.wait_frame_after(0, frame)
     page.mouse.move(5, 5)
     enhanced = wait_until("the enhanced pixels", lambda: nb.canvas_shot("enhanced"),
