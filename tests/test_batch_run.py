@@ -201,32 +201,39 @@ def test_track_and_transfer_rig_steps(tmp_path, client):
 
 
 def test_enhance_step(tmp_path, client):
-    from workbench.enhance import PerformanceDatabase
+    """A database one Loop subdivision finer than the character: the frames come out at its resolution."""
+    from workbench.enhance import Correspondence, PerformanceDatabase
     from workbench.export.pointcache import PC2_HEADER
 
     head = small_head()
-    frames = np.stack([head.evaluate_at(0.0) + 0.001 * i for i in range(3)])
-    PerformanceDatabase.from_frames(head.vertices, head.faces, frames,
+    corr = Correspondence.loop(head.faces, head.n_vertices, 1)
+    frames = corr(np.stack([head.evaluate_at(0.0) + 0.001 * i for i in range(3)]).astype(np.float64))
+    fine_faces = np.asarray(workbench_loop_faces(head), np.int64)
+    PerformanceDatabase.from_frames(frames[0], fine_faces, frames,
                                     metres_per_unit=head.metadata.metres_per_unit).save(tmp_path / "db.npz")
     job = make_project(tmp_path, characters=1, takes=1, formats=("glb",),
                        extra_steps='[[steps]]\nkind = "enhance"\ndatabase = "db.npz"\n')
     report = _run(job, client)
     outcome = report.by_label()["char0/take0/01-enhance"]
-    if not hasattr(PerformanceDatabase, "enhance"):  # spatial enhancement (§5) not built yet
-        assert outcome.status == "failed" and "PerformanceDatabase.enhance is not available" in outcome.error
-        return
     assert outcome.status == "done", outcome.error
     (pc2,) = outcome.outputs
     assert pc2.endswith("char0/take0.enhanced.pc2")
+    n_fine = frames.shape[1]
     header = np.fromfile(pc2, PC2_HEADER, count=1)[0]
-    assert (header["signature"], header["points"], header["samples"]) == (b"POINTCACHE2", head.n_vertices, 31)
-    got = np.fromfile(pc2, "<f4", offset=32).reshape(31, head.n_vertices, 3)
+    assert (header["signature"], header["points"], header["samples"]) == (b"POINTCACHE2", n_fine, 31)
+    got = np.fromfile(pc2, "<f4", offset=32).reshape(31, n_fine, 3)
     # the same as calling the database directly on the take's frames (metres in the file)
     tl = Timeline.from_json(report.by_label()["char0/take0/00-export"].timeline)
-    frames = np.stack([head.evaluate_at(float(t), tl) for t in tl.frame_times()])
+    takes = np.stack([head.evaluate_at(float(t), tl) for t in tl.frame_times()]).astype(np.float64)
     database = PerformanceDatabase.load(tmp_path / "db.npz")
-    want = database.enhance(frames) * head.metadata.metres_per_unit
+    want = database.enhance(takes, correspondence=corr) * head.metadata.metres_per_unit
     np.testing.assert_allclose(got, want, atol=1e-5, rtol=0)  # 10 µm: BLAS threads differ (worker: 1)
+
+
+def workbench_loop_faces(model):
+    from workbench.geometry.subdivision import loop_subdivision
+
+    return loop_subdivision(model.faces, model.n_vertices, 1)[1]
 
 
 def test_a_killed_worker_loses_nothing(tmp_path):

@@ -12,7 +12,9 @@ The steps call the existing core APIs:
   :func:`workbench.capture.track`, then ``model.capture.apply(result)``;
 * ``transfer_rig`` — :class:`workbench.rigging.RigTransfer` (template → character), as ``workbench rig``;
 * ``retime`` — ``model.enhance.retime(t0, t1, takes)``;
-* ``enhance`` — ``PerformanceDatabase.load(path).enhance(frames)``, written as a PC2 point cache;
+* ``enhance`` — ``PerformanceDatabase.load(path).enhance(frames)`` through the correspondence from the
+  character's mesh (the same, a Loop subdivision, or closest points), written as a PC2 point cache at the
+  database's resolution;
 * ``export`` — :func:`workbench.export.export` for each format, to ``<output>/<character>/<take>.<ext>``.
 
 A take that no ``track`` step reads is imported as an animation
@@ -227,28 +229,25 @@ def _step_retime(c: _Context) -> list[Path]:
 
 
 def _step_enhance(c: _Context) -> list[Path]:
-    from workbench.export import atomic_path
-    from workbench.export.pointcache import PC2_HEADER
+    from workbench.enhance.bake import EnhancedTake
+    from workbench.enhance.facet import default_correspondence
 
     database = _performance_database(c.spec.options["database"])
-    if not hasattr(database, "enhance"):
-        raise NotImplementedError("PerformanceDatabase.enhance is not available in this workbench version "
-                                  "(spatial enhancement, Bermano et al. 2014 §5, is not built yet)")
     tl = c.animation()
-    times = tl.frame_times()
-    frames = np.stack([c.model.evaluate_at(float(t), tl) for t in times])
-    c.log.info("enhancing %d frames of %d vertices", len(times), c.model.n_vertices)
-    detailed = np.asarray(database.enhance(frames), np.float32) * np.float32(c.model.metadata.metres_per_unit)
+    times = np.asarray(tl.frame_times(), np.float64)
+    frames = np.stack([c.model.evaluate_at(float(t), tl) for t in times]).astype(np.float64)
+    # the character's mesh → the database's: the same mesh, a Loop subdivision of it, or closest points
+    corr = default_correspondence(c.model, database)
+    c.log.info("enhancing %d frames of %d vertices (%s correspondence to %d vertices)", len(times),
+               c.model.n_vertices, corr.kind, database.neutral_.shape[0])
+    res = database.enhance_result(frames, correspondence=corr)
+    md = c.model.metadata
+    take = EnhancedTake(res.frames, times, database.faces_, res.weights, tl.fps, md.metres_per_unit, md,
+                        c.spec.character)
     path = c.spec.output_path("enhanced.pc2")
     path.parent.mkdir(parents=True, exist_ok=True)
     _remove_stale_temporaries(path)
-    header = np.zeros((), PC2_HEADER)
-    header["signature"], header["version"] = b"POINTCACHE2\0", 1
-    header["points"], header["samples"] = detailed.shape[1], detailed.shape[0]
-    header["start_frame"], header["sample_rate"] = tl.start * tl.fps, 1.0
-    with atomic_path(path) as tmp, open(tmp, "wb") as fh:
-        fh.write(header.tobytes() + detailed.astype("<f4").tobytes())
-    return [path]
+    return list(take.export(path))
 
 
 def _step_export(c: _Context) -> list[Path]:
