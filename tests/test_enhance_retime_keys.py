@@ -84,3 +84,22 @@ def test_a_tracked_take_and_bad_input(takes) -> None:
         model.enhance.retime(0.0, 1.0, [np.zeros((10, 3))])
     with pytest.raises(ModelError, match="the same"):
         model.enhance.retime(2.0, 3.0, db)
+
+
+def test_mesh_space_takes_time_the_keys_like_their_weights(takes) -> None:
+    """Point caches of the same takes (the blend of their weights) retime the keys the same way."""
+    names, weight_takes = takes
+    model = workbench.load_sample("head")
+    j = names.index("jawOpen")
+    deltas = np.stack([s.delta for s in model.shapes]).astype(np.float64)
+    caches = [np.asarray(model.vertices) + np.einsum("tk,kvc->tvc", W, deltas) for W in weight_takes[:2]]
+    for t, w in ((0.0, 0.0), (1.0, 0.9)):
+        model.set_weights({"jawOpen": w})
+        model.timeline.key_weights(t, ["jawOpen"])
+    res = model.enhance.retime(0.0, 1.0, caches)
+    u = np.linspace(0, 1, len(res.s))
+    assert np.abs(res.s - _ease(u)).max() < np.abs(u - _ease(u)).max() / 2  # follows the ease, not the line
+    played = model.tracks.weight_matrix(names, u)[:, j]
+    np.testing.assert_allclose(played, 0.9 * res.s, atol=1e-6)
+    with pytest.raises(ModelError, match="must be \\(40, 5084, 3\\) on the model's mesh"):
+        model.enhance.retime(0.0, 1.0, [caches[0][:, :10]])

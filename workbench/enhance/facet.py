@@ -91,6 +91,19 @@ def default_correspondence(model: FaceState, database: PerformanceDatabase) -> C
     return Correspondence.from_surface(V, F, d0, database.faces_)
 
 
+def mesh_takes(database: Any, n_vertices: int) -> list[NDArray[np.float64]] | None:
+    """(T_i, n, 3) point-cache takes on the model's mesh, or None when the database is weight takes."""
+    items = [database] if isinstance(database, np.ndarray) else list(database) if isinstance(database, (list, tuple)) else []
+    arrays = [np.asarray(x) for x in items if isinstance(x, np.ndarray)]
+    if not arrays or len(arrays) != len(items) or any(x.ndim != 3 for x in arrays):
+        return None
+    for i, x in enumerate(arrays):
+        if x.shape[1:] != (n_vertices, 3):
+            raise ModelError(f"retime: database[{i}] must be ({x.shape[0]}, {n_vertices}, 3) on the model's mesh, "
+                             f"got {x.shape}")
+    return [x.astype(np.float64) for x in arrays]
+
+
 class EnhanceFacet:
     """Performance enhancement on one model (see the module docstring); keeps nothing of its own."""
 
@@ -197,7 +210,8 @@ class EnhanceFacet:
         t0, t1 : float
             Seconds, ``t0 < t1`` (usually two keys).
         database : sequence of takes
-            See :func:`weight_takes`.
+            Weight takes (see :func:`weight_takes`), or point caches (T_i, n, 3) on the
+            model's mesh (mesh space: the faces shown at ``t0`` and ``t1`` are matched).
         n_frames : int, optional
             In-betweens including both ends; default one per frame of the timeline's fps.
         extend : bool
@@ -221,7 +235,16 @@ class EnhanceFacet:
         changed = np.flatnonzero(np.abs(W[1] - W[0]) > 1e-9)
         if changed.size == 0:
             raise ModelError(f"retime: the weights at {a:g} s and {b:g} s are the same: nothing to retime")
-        res = retime(weight_takes(database, names), W[0], W[1], n, extend=extend)
+        meshes = mesh_takes(database, m.n_vertices)
+        if meshes is not None:
+            # mesh space: the keys are the faces shown at t0 and t1 (model space), the takes point caches
+            ends = [np.asarray(m.evaluation_at(t).mesh, np.float64) for t in (a, b)]
+            found = retime(meshes, ends[0], ends[1], n, extend=extend)
+            s = found.s
+            frames = W[0][None, :] + s[:, None] * (W[1] - W[0])[None, :]
+            res = RetimeResult(s, frames, found.matched, found.error, found.span, found.times)
+        else:
+            res = retime(weight_takes(database, names), W[0], W[1], n, extend=extend)
         times = np.linspace(a, b, n)[1:-1]
         new = tl
         for j in changed:
