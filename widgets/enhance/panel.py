@@ -14,7 +14,7 @@ Alembic, baked glTF, USD — by the file suffix).
 in-betweens with the timing of the best-matching motion (§6.2;
 ``model.enhance.retime``: one undo step) from the detailed performance, the
 Capture tab's tracked take or an animation file (glTF, weights or Live Link
-Face CSV), optionally *extended to the full matched motion*;
+Face CSV; an Alembic point cache on this face's mesh is matched in mesh space), optionally *extended to the full matched motion*;
 the plot after Fig. 7 shows linear, retimed and database curves of the shape
 that changes most.
 """
@@ -97,11 +97,11 @@ class EnhancePanel(ModelPanel):
                                   "(.glb .usdc .pc2 .mdd .obj .abc)", "film")
         self.retime_source = W.Dropdown(options=[("the detailed performance", "performance"),
                                                  ("the Capture tab's take", "capture"),
-                                                 ("an animation file (.glb / .csv)", "file")],
+                                                 ("an animation file (.glb / .csv / .abc)", "file")],
                                         value="performance", description="from", layout=W.Layout(width="320px"),
                                         style={"description_width": "50px"})
         self.retime_source.add_class("fwb-enhance-retime-source")
-        self.retime_path = W.Text(placeholder="take.glb / take.csv (Live Link Face, weights)",
+        self.retime_path = W.Text(placeholder="take.glb / take.csv (Live Link Face, weights) / take.abc (point cache)",
                                   layout=W.Layout(width="320px"))
         self.retime_path.add_class("fwb-enhance-retime-path")
         self.extend = W.Checkbox(value=False, description="extend to the full matched motion", indent=False)
@@ -211,8 +211,18 @@ class EnhancePanel(ModelPanel):
             text = str(self.retime_path.value).strip()
             if not text:
                 raise ValueError("Retime: type the path of an animation (.glb/.gltf, or a weights / Live Link CSV)")
+            p = Path(text)
+            if p.suffix.lower() == ".abc":  # a point cache: mesh space (its frames on this face's mesh)
+                from workbench.core.shapes import UNIT_TO_METRES
+                from workbench.io.alembic import read_alembic
+
+                face = read_alembic(p)
+                if face.frames is None:
+                    raise ValueError(f"Retime: {p.name} holds no animated frames")
+                scale = UNIT_TO_METRES[face.units] / self.model.metadata.metres_per_unit if face.units else 1.0
+                return [np.asarray(face.frames.positions, np.float64) * scale]
             md = self.model.metadata
-            return [read_animation(Path(text), self.model.shape_names, up_axis=md.up_axis, front_axis=md.front_axis)]
+            return [read_animation(p, self.model.shape_names, up_axis=md.up_axis, front_axis=md.front_axis)]
         if self.retime_source.value == "capture":
             res = self.capture_result() if self.capture_result is not None else None
             if res is None:
@@ -224,7 +234,7 @@ class EnhancePanel(ModelPanel):
 
     def retime_selected(self) -> Any:
         """Retime between the two selected key times (one undo step); draws the Fig. 7 plot."""
-        from workbench.enhance.facet import weight_takes
+        from workbench.enhance.facet import mesh_takes, weight_takes
 
         keys = list(self.selected_keys() if self.selected_keys is not None else [])
         tracks = self.model.slot("tracks").tracks
@@ -239,8 +249,10 @@ class EnhancePanel(ModelPanel):
         derived = set(self.model.shape_tools.correctives)
         names = [n for n in self.model.shape_names if n not in derived]
         j = int(np.argmax(np.abs(res.frames[-1] - res.frames[0])))
-        self.plot.value = retime_plot_png(res, weight_takes(takes, names), times[0], times[1], shape=j,
-                                          name=names[j], extended=extend)
+        meshes = mesh_takes(takes, self.model.n_vertices)
+        # the database motion's progress along its chord is drawn; point caches are flattened to vectors
+        seqs = [x.reshape(len(x), -1) for x in meshes] if meshes is not None else weight_takes(takes, names)
+        self.plot.value = retime_plot_png(res, seqs, times[0], times[1], shape=j, name=names[j], extended=extend)
         self.plot.layout.display = None
         self.progress.finish(f"retimed {times[0]:g}–{times[1]:g} s from frames {res.matched[1]}–{res.matched[2]} "
                              f"(undo: one step)")
