@@ -6,7 +6,9 @@ measures both paths of the same viewport in the same run, ``Viewport.gpu = True`
 (the rig evaluated in the browser, :mod:`widgets.viewport.gpu`) and ``False``
 (today's streaming of evaluated vertex rows, the peer):
 
-* ``slider``: a click on the jawOpen slider's track -> the first render showing it;
+* ``slider``: a click on the jawOpen slider's track -> the first frame showing it, drawn:
+  each render with new geometry ends with a one-pixel readback, so the time includes the
+  GPU's (SwiftShader's) work, not only issuing the WebGL calls (``--no-sync``: issuing only);
   ``python``: ``model.set_weight`` sent as an execute request -> the same render
   (``bench_viewport_latency.measure``);
 * ``drag``: isolated handle-marker moves with the mouse -> the first render showing
@@ -50,6 +52,9 @@ if "_SIZES" not in globals():
 _SIZES.clear()
 """
 
+#: --no-sync: frame times when the render's WebGL calls return (the older benchmarks' rule)
+SYNC = True
+
 _RIG = """
 import json
 B, _c = model.handles.basis()
@@ -81,6 +86,9 @@ def measure(nb: NotebookPage, gpu: bool, trials: int) -> dict[str, Any]:
         arg="1" if gpu else "0", timeout=120000,
     )
     nb.kernel_eval(_RECORD)
+    # frame times once the GPU has drawn the frame (a one-pixel readback after each render
+    # with new geometry): WebGL calls return before SwiftShader has drawn anything
+    page.evaluate(f"() => {{ globalThis.fwbSyncFrames = {'true' if SYNC else 'false'}; }}")
     out: dict[str, Any] = {}
     page.locator(".fwb-tabs .lm-TabBar-tab", has_text="Shapes").click()
     nb.kernel_eval('wb.viewport.tool = "orbit"')
@@ -104,7 +112,10 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--trials", type=int, default=12)
     ap.add_argument("--resolutions", nargs="+", default=["25k", "100k", "300k"])
+    ap.add_argument("--no-sync", action="store_true", help="do not wait for the GPU to draw each frame")
     args = ap.parse_args()
+    global SYNC
+    SYNC = not args.no_sync
     if chromium_missing():
         return 2
 

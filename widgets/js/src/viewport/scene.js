@@ -560,6 +560,8 @@ export class View {
     }
     if (this.featureGraph) this.featureGraph.beforeRender(); // feature-graph overlay
     this.renderer.render(this.scene, this.camera);
+    // Benchmarks: wait until the GPU has drawn it (WebGL returns before SwiftShader draws)
+    if (newGeometry && globalThis.fwbSyncFrames) this.renderer.getContext().readPixels(0, 0, 1, 1, 6408, 5121, new Uint8Array(4));
     this.renders += 1;
     const el = this.el;
     el.setAttribute("data-render-count", String(this.renders));
