@@ -53,8 +53,11 @@ layer): otherwise playback stays in the kernel, which then sends parameters
 and residual rows per frame.
 
 ``_gpu_mode`` is ``"gpu"`` while the kernel sends parameters and ``"stream"``
-while it streams vertex rows (``Viewport.gpu = False``, or a front end without
-WebGL2 float textures said ``gpu_unavailable``).
+while it streams vertex rows. The kernel starts streaming and switches when a
+view says ``{"type": "gpu_ready"}`` (it has WebGL2 float render targets); it
+streams again for ``Viewport.gpu = False`` or when any view says
+``{"type": "gpu_unavailable", "reason"}``. A viewport that no browser shows
+(kernel-only use, tests) never uploads the rig.
 """
 
 from __future__ import annotations
@@ -158,6 +161,8 @@ class GpuSync:
         self.model = sync.model
         #: why the front end cannot evaluate on the GPU ("" = it can, or has not said)
         self.unavailable = ""
+        #: a view said it can evaluate the rig ("gpu_ready")
+        self.ready = False
         V = np.asarray(self.model.vertices, np.float64)
         self.size = float(np.linalg.norm(np.ptp(V, axis=0))) if V.size else 1.0
         self.neutral = np.asarray(V, np.float32)
@@ -182,7 +187,7 @@ class GpuSync:
 
     @property
     def active(self) -> bool:
-        return bool(self.widget.gpu) and not self.unavailable
+        return bool(self.widget.gpu) and self.ready and not self.unavailable
 
     # ------------------------------------------------------------------ the rig
     def ensure_rig(self, view: Any, final: bool = True) -> None:

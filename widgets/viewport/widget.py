@@ -637,10 +637,17 @@ class Viewport(anywidget.AnyWidget):
         kind = content.get("type")
         if kind in ("handle", "paint"):
             self.gestures.on_message(kind, content)
+        elif kind == "gpu_ready":
+            # a view can evaluate the rig: upload it, then send parameters only
+            if not self.sync.gpu.ready:
+                self.sync.gpu.ready = True
+                self.errors.guard("Viewport resync")(self.sync.push_geometry)(force_full=True)
         elif kind == "gpu_unavailable":
             # a view cannot evaluate the rig: stream vertex rows to every view of this widget
+            was = self.sync.gpu.active
             self.sync.gpu.unavailable = str(content.get("reason") or "unavailable")
-            self.errors.guard("Viewport resync")(self.sync.push_geometry)(force_full=True)
+            if was:
+                self.errors.guard("Viewport resync")(self.sync.push_geometry)(force_full=True)
         elif kind == "request_full":
             self.errors.guard("Viewport resync")(self.sync.push_geometry)(force_full=True)
         elif kind == "request_paint":

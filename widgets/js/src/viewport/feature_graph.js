@@ -145,6 +145,7 @@ export class FeatureGraphOverlay {
     const s = this.view.store;
     const F = this.edges.length / 2;
     if (this.edgesDirty || this.seenPositions !== s.positionsVersion) {
+      if (this.edgesDirty && this.view.cpuRows) this.view.cpuRows(this.edges); // GPU path
       const P = s.positions;
       const n = P.length / 3;
       if (this.ends.length !== F * 6) this.ends = new Float32Array(F * 6);

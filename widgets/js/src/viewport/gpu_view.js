@@ -86,9 +86,15 @@ export const gpuViewMethods = {
     });
   },
 
-  // Python is in GPU mode but this view cannot follow: ask it to stream vertices.
+  // Tell Python whether this view can evaluate the rig: "gpu_ready" switches it from
+  // streaming vertex rows to parameters; "gpu_unavailable" keeps every view of the widget
+  // (or switches them back) on streaming.
   reportGpu() {
-    if (this.gpuReason && this.model.get("_gpu_mode") === "gpu" && !this.gpuReported) {
+    if (!this.model.get("gpu")) return;
+    if (!this.gpuReason && !this.gpuReadySent) {
+      this.gpuReadySent = true;
+      this.model.send({ type: "gpu_ready" });
+    } else if (this.gpuReason && !this.gpuReported) {
       this.gpuReported = true;
       this.model.send({ type: "gpu_unavailable", reason: this.gpuReason });
     }
@@ -189,7 +195,7 @@ export const gpuViewMethods = {
 
   // GPU path: make the CPU positions of vertex `ids` current (the CPU evaluates those rows).
   cpuRows(ids) {
-    if (this.gpuDrawn && this.gpuOn()) this.store.evaluateRows(ids);
+    if (this.gpuDrawn && this.gpu && this.gpuOn()) this.store.evaluateRows(ids);
   },
 
   // Vertices whose positions the CPU needs every frame: markers, feature graph, probes.

@@ -20,6 +20,7 @@ export const markerMethods = {
     }
     if (this.hover >= ids.length) this.hover = -1;
     this.handlesDirty = true;
+    if (this.cpuRows) this.cpuRows(ids); // GPU path: the new markers' rows (./gpu_view.js)
   },
 
   markerRadius() {
