@@ -146,11 +146,12 @@ class Viewport(anywidget.AnyWidget):
     overlay_point_px : float
         Their size in CSS pixels.
     gpu : bool
-        Evaluate the rig in the browser (default): the kernel uploads the neutral,
-        the shapes' deltas and the shell basis once and then sends only weights,
-        handle offsets, the head pose and the rows of layers the GPU does not
-        evaluate (:mod:`widgets.viewport.gpu`). ``False`` (or a browser without
-        WebGL2 float textures) streams evaluated vertex rows, with a note in the view.
+        Evaluate the rig in the browser (default), once a view says it can: the
+        kernel uploads the neutral, the shapes' deltas and the shell basis once
+        and then sends only weights, handle offsets, the head pose and the rows
+        of layers the GPU does not evaluate (:mod:`widgets.viewport.gpu`).
+        ``False`` (or a browser without WebGL2 float textures) streams evaluated
+        vertex rows, with a note in the view.
     camera_group : str
         Viewports with the same non-empty group orbit and zoom together in the
         browser (the same side of the face at the same relative size, whatever
