@@ -75,10 +75,15 @@ input): error 0.81 (0.123 vs 0.153 mm; lower in 12 of 15 frames), detail band
 dense peer's single set of weights for the whole face (uncompressed features):
 0.90 and 0.59 — the per-region match on compressed features is both faster and closer.
 
-The 318k target (≤ 1 s per frame) is reached only at the limit: 1.01 s in the
-quietest run, CPU time 1.09 s in a busier one. Blend (eq. 4 and the batched
-3×3 products of the composition ``R H Rᵀ T``) and the reconstruction are
-~75 % of it, the matching 13 %.
+Run C, after blend + composition were fused per triangle in numba, the matching
+factored once per region and BLAS held to one thread around the frame loop, on
+a quiet machine (load ≈ 1, ``--no-validation``): total 0.204 / 0.896 s per
+frame at 80k / 318k (CPU 0.224 / 0.944 s); filter 20 / 93 ms, match 27 / 126 ms,
+blend + compose 86 / 408 ms, reconstruct 70 / 264 ms; matching peers: OSQP on
+the same region QPs 69 / 155 ms, dense QP 56 / 179 ms (AᵀA precomputed) and
+193 / 378 ms (formed per frame). The 318k target (≤ 1 s per frame) is met with
+a 10 % margin when the cores are free; the remaining blend time is the
+low-frequency frames and gradients (numpy) around the fused kernel.
 """
 
 from __future__ import annotations
