@@ -18,10 +18,14 @@ export const TEX_WIDTH = 4096;
 const MAX_HQ = 64; // ≤ 256 handles in the shell uniforms
 const MAX_KQ = 64; // ≤ 256 shapes in the weight uniforms
 
-const EVAL_FS = `
-precision highp float; precision highp int;
+// precision and the texel address of item i, shared by both passes
+const PREAMBLE = `precision highp float; precision highp int;
 precision highp sampler2D; precision highp usampler2D;
-uniform sampler2D baseTex;
+ivec2 at(int i) { return ivec2(i % ${TEX_WIDTH}, i / ${TEX_WIDTH}); }
+`;
+
+const EVAL_FS = `
+${PREAMBLE}uniform sampler2D baseTex;
 uniform sampler2D gainTex;
 uniform usampler2D indexTex;
 uniform sampler2D entryTex;
@@ -34,7 +38,6 @@ uniform int hq;
 uniform mat4 head;
 uniform int n;
 out vec4 outColor;
-ivec2 at(int i) { return ivec2(i % ${TEX_WIDTH}, i / ${TEX_WIDTH}); }
 void main() {
   int v = int(gl_FragCoord.y) * ${TEX_WIDTH} + int(gl_FragCoord.x);
   if (v >= n) { outColor = vec4(0.0); return; }
@@ -60,14 +63,11 @@ void main() {
 }`;
 
 const NORMAL_FS = `
-precision highp float; precision highp int;
-precision highp sampler2D; precision highp usampler2D;
-uniform sampler2D posTex;
+${PREAMBLE}uniform sampler2D posTex;
 uniform usampler2D adjIndexTex;
 uniform usampler2D adjTex;
 uniform int n;
 out vec4 outColor;
-ivec2 at(int i) { return ivec2(i % ${TEX_WIDTH}, i / ${TEX_WIDTH}); }
 void main() {
   int v = int(gl_FragCoord.y) * ${TEX_WIDTH} + int(gl_FragCoord.x);
   if (v >= n) { outColor = vec4(0.0); return; }

@@ -36,6 +36,11 @@ export const gpuViewMethods = {
     this.model.on("change:_gpu_mode", this.onGpuTrait);
     this.reportGpu();
     this.updateGpuNote();
+    this.installGpuHooks();
+  },
+
+  // Benchmark and test hooks on the element (installed once).
+  installGpuHooks() {
     // Benchmark hook: ms per GPU evaluation (both passes) and per draw, synchronised by a
     // one-pixel readback.
     this.el.fwbGpuTime = (n = 10) => {
@@ -105,54 +110,6 @@ export const gpuViewMethods = {
     if (this.gpu) this.gpu.drawUniforms.fwbGpu.value = false;
     this.reportGpu();
     this.updateGpuNote();
-    // Benchmark hook: ms per GPU evaluation (both passes) and per draw, synchronised by a
-    // one-pixel readback.
-    this.el.fwbGpuTime = (n = 10) => {
-      if (!this.gpuOn()) return null;
-      const px = new Float32Array(4);
-      const sync = () => this.renderer.readRenderTargetPixels(this.gpu.nrmRT, 0, 0, 1, 1, px);
-      sync();
-      let t0 = performance.now();
-      for (let i = 0; i < n; i++) { this.gpu.evaluate(); sync(); }
-      const evalMs = (performance.now() - t0) / n;
-      const gl = this.renderer.getContext();
-      const one = new Uint8Array(4);
-      t0 = performance.now();
-      for (let i = 0; i < n; i++) {
-        this.renderer.render(this.scene, this.camera);
-        gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, one);
-      }
-      const drawMs = (performance.now() - t0) / n;
-      this.gpu.drawUniforms.fwbGpu.value = false;
-      t0 = performance.now();
-      for (let i = 0; i < n; i++) {
-        this.renderer.render(this.scene, this.camera);
-        gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, one);
-      }
-      const cpuDrawMs = (performance.now() - t0) / n;
-      this.gpu.drawUniforms.fwbGpu.value = true;
-      const r = this.renderer;
-      t0 = performance.now();
-      for (let i = 0; i < n; i++) {
-        r.setRenderTarget(this.gpu.posRT); r.render(this.gpu.evalScene, this.gpu.quadCamera);
-        r.setRenderTarget(null); sync();
-      }
-      const morphMs = (performance.now() - t0) / n;
-      t0 = performance.now();
-      for (let i = 0; i < n; i++) {
-        r.setRenderTarget(this.gpu.nrmRT); r.render(this.gpu.normalScene, this.gpu.quadCamera);
-        r.setRenderTarget(null); sync();
-      }
-      const normalMs = (performance.now() - t0) / n;
-      return { evalMs, drawMs, cpuDrawMs, morphMs, normalMs, canvas: [r.domElement.width, r.domElement.height] };
-    };
-    this.el.fwbGpuNormals = () => this.gpuNormals();
-    // Test hook: what the GPU path evaluates now.
-    this.el.fwbGpuState = () => ({
-      on: this.gpuOn(), reason: this.gpuReason, params: Array.from(this.store.gpuParams || []),
-      evaluations: this.gpu ? this.gpu.evaluations : 0, playing: !!this.store.clipPlay,
-      textureBytes: this.gpu ? this.gpu.textureBytes() : 0,
-    });
   },
 
   updateGpuNote() {
