@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from capture_takes import marker_visible_shapes
+from capture_takes import marker_visible_shapes, warped_actor
 from scipy.spatial.transform import Rotation
 
 from workbench.capture import TrackError, TrackResult, synthetic_performance, track
@@ -159,19 +159,9 @@ def test_l1_is_sparser_than_l2_at_no_worse_error(head, take):
 def test_markers_of_a_face_that_is_not_the_template(head, seen):
     """The actor is the sample head smoothly warped (other proportions, a longer nose and chin: markers up
     to 9 mm off the rig's neutral); a calibration take of the actor at rest gives ``neutral``."""
-    from workbench.rigging.synthetic import SmoothWarp
-
     perf = synthetic_performance(head, 120, seed=6, noise=0.005, shapes=seen)
-    V = head.vertices
-    lo, hi = V.min(0), V.max(0)
-    size = float(np.linalg.norm(hi - lo))
-    centre = 0.5 * (lo + hi)
-    warp = SmoothWarp(
-        centres=centre + np.array([[0.0, -0.3, 0.6], [0.0, 0.2, 0.9]]),
-        radii=np.array([0.25, 0.15]) * size,
-        amplitudes=np.array([[0.0, -0.01, 0.015], [0.0, 0.0, 0.02]]) * size,
-        scale=np.array([1.03, 0.98, 1.01]),
-    )
+    warp = warped_actor(head)
+    centre = 0.5 * (head.vertices.min(0) + head.vertices.max(0))
     space = ExpressionSpace.from_model(head)
     ids = perf.marker_ids
     rng = np.random.default_rng(7)

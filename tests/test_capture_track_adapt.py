@@ -4,11 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from capture_takes import marker_visible_shapes
+from capture_takes import marker_visible_shapes, warped_actor
 
 from workbench.capture import AdaptiveModel, TrackError, synthetic_performance, track
 from workbench.capture.rig import ExpressionSpace
-from workbench.rigging.synthetic import SmoothWarp
 from workbench.samples import load_sample
 
 #: a small spectral basis keeps the test fast (the default is 50)
@@ -26,16 +25,8 @@ def actor_take(head):
     space = ExpressionSpace.from_model(head)
     seen = marker_visible_shapes(head)
     perf = synthetic_performance(head, 60, seed=6, noise=0.005, shapes=seen)
-    V = head.vertices
-    lo, hi = V.min(0), V.max(0)
-    size = float(np.linalg.norm(hi - lo))
-    centre = 0.5 * (lo + hi)
-    warp = SmoothWarp(
-        centres=centre + np.array([[0.0, -0.3, 0.6], [0.0, 0.2, 0.9]]),
-        radii=np.array([0.25, 0.15]) * size,
-        amplitudes=np.array([[0.0, -0.01, 0.015], [0.0, 0.0, 0.02]]) * size,
-        scale=np.array([1.03, 0.98, 1.01]),
-    )
+    warp = warped_actor(head)
+    centre = 0.5 * (head.vertices.min(0) + head.vertices.max(0))
     ids = perf.marker_ids
     rng = np.random.default_rng(7)
 
