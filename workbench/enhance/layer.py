@@ -24,12 +24,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from workbench.core.shapes import ModelError
-from workbench.enhance.spatial import Correspondence
 
 if TYPE_CHECKING:
     from workbench.core.pipeline import StateView
     from workbench.core.state import FaceState
     from workbench.enhance.database import PerformanceDatabase
+    from workbench.enhance.spatial import Correspondence
 
 __all__ = ["EnhanceLayer", "EnhancementState", "check_state"]
 
@@ -106,6 +106,5 @@ class EnhanceLayer:
         assert st.database is not None and st.correspondence is not None
         corr = st.correspondence
         with self._lock:
-            mapped = corr(np.asarray(below, np.float64)[None])
-            enhanced = st.database.enhance(mapped, correspondence=Correspondence.identity(corr.n_out))
-        return corr.restrict(enhanced[0] - mapped[0]).astype(np.float32)
+            res = st.database.enhance_result(np.asarray(below, np.float64)[None], correspondence=corr)
+        return corr.restrict(res.frames[0] - res.inputs[0]).astype(np.float32)
