@@ -6,7 +6,12 @@ measures both paths of the same viewport in the same run, ``Viewport.gpu = True`
 (the rig evaluated in the browser, :mod:`widgets.viewport.gpu`) and ``False``
 (today's streaming of evaluated vertex rows, the peer):
 
-* ``slider``: a click on the jawOpen slider's track -> the first frame showing it, drawn:
+* first pixels: the same inputs -> the first frame showing them at all, a
+  fast-interaction draft (``Viewport.fast_interaction``: a simplified face evaluated
+  on the GPU at its own vertices, drawn while parameters change when the view's full
+  frame is slow) or the full frame; sliders move the face in the page before the
+  kernel answers (``Viewport.follow_sliders``);
+* ``slider``: a click on the jawOpen slider's track -> the first full-detail frame showing it, drawn:
   each render with new geometry ends with a one-pixel readback, so the time includes the
   GPU's (SwiftShader's) work, not only issuing the WebGL calls (``--no-sync``: issuing only);
   ``python``: ``model.set_weight`` sent as an execute request -> the same render
@@ -34,6 +39,8 @@ import argparse
 import statistics
 from typing import Any
 
+import bench_drag_latency
+import bench_viewport_latency
 from bench_drag_latency import _SETUP as DRAG_SETUP
 from bench_drag_latency import measure as drag_measure
 from bench_viewport_latency import measure as slider_measure
@@ -72,6 +79,11 @@ def _pct(xs: list[float], q: float) -> float:
     return s[min(len(s) - 1, round(q * (len(s) - 1)))] if s else float("nan")
 
 
+def _mp(xs: list[float]) -> str:
+    """median / p90"""
+    return f"{_med(xs):5.1f} / {_pct(xs, 0.9):5.1f}"
+
+
 def _sizes(nb: NotebookPage) -> list[int]:
     out = nb.kernel_eval("print(json.dumps(_SIZES)); _SIZES.clear()")
     return out if out else []
@@ -95,11 +107,16 @@ def measure(nb: NotebookPage, gpu: bool, trials: int) -> dict[str, Any]:
     res = slider_measure(nb, trials)
     out["slider"] = res["slider jawOpen"][0]
     out["python"] = res["python jawOpen"][0]
+    out["slider_first"] = bench_viewport_latency.FIRST_MS["slider jawOpen"]
+    out["python_first"] = bench_viewport_latency.FIRST_MS["python jawOpen"]
     sizes = _sizes(nb)
     out["slider_bytes"] = _med([float(s) for s in sizes])
     nb.kernel_eval('wb.viewport.tool = "sculpt"')
     d = drag_measure(nb, trials)
     out["drag"] = d["step"][0]
+    out["drag_first"] = list(bench_drag_latency.FIRST_MS)
+    out["draft_tris"] = int(vp.get_attribute("data-draft-triangles") or 0)
+    out["full_ms"] = float(vp.get_attribute("data-full-frame-ms") or "nan")
     out["drag_bytes"] = _med([float(s) for s in _sizes(nb)])
     out["tex"] = float(vp.get_attribute("data-gpu-texture-bytes") or "nan") if gpu else float("nan")
     t = vp.evaluate("e => e.fwbGpuTime ? e.fwbGpuTime(8) : null") if gpu else None
@@ -130,15 +147,22 @@ def main() -> int:
 
     rows = each_resolution("gpu", args.resolutions, lambda res: DRAG_SETUP.replace("{res}", res), run)
     print()
-    print("Viewport on the GPU vs streaming, input -> first render showing it (ms, median / p90)")
+    print("Fast interaction (GPU path): input -> first pixels, a draft of the face or the full")
+    print("  frame, whichever came first (ms, median / p90); full ms: the view's calibration of")
+    print("  one full evaluation + draw; the full mesh follows each burst of changes (table below)")
+    print(f"{'resolution':>10} {'vertices':>9} {'path':>6} {'slider':>13} {'python':>13} {'drag':>13} "
+          f"{'draft tris':>10} {'full ms':>7}")  # fmt: skip
+    for res, n, path, m, _rig in rows:
+        print(f"{res:>10} {n:>9} {path:>6} {_mp(m['slider_first']):>13} {_mp(m['python_first']):>13} "
+              f"{_mp(m['drag_first']):>13} {m['draft_tris']:>10} {m['full_ms']:7.1f}")  # fmt: skip
+    print()
+    print("Viewport on the GPU vs streaming, input -> first full-detail render showing it (ms, median / p90)")
     print("  bytes: median size of one geometry message (JSON + buffers) for a slider / drag update")
     print(f"{'resolution':>10} {'vertices':>9} {'path':>6} {'slider':>13} {'python':>13} {'drag':>13} "
           f"{'slider B':>9} {'drag B':>8} {'texture MB':>10} {'rig MB':>7} {'eval ms':>7} {'draw ms':>7}")  # fmt: skip
     for res, n, path, m, rig in rows:
-        def mp(xs: list[float]) -> str:
-            return f"{_med(xs):5.1f} / {_pct(xs, 0.9):5.1f}"
-        print(f"{res:>10} {n:>9} {path:>6} {mp(m['slider']):>13} {mp(m['python']):>13} "
-              f"{mp(m['drag']):>13} {m['slider_bytes']:9.0f} {m['drag_bytes']:8.0f} "
+        print(f"{res:>10} {n:>9} {path:>6} {_mp(m['slider']):>13} {_mp(m['python']):>13} "
+              f"{_mp(m['drag']):>13} {m['slider_bytes']:9.0f} {m['drag_bytes']:8.0f} "
               f"{m['tex'] / 1e6:10.1f} {rig / 1e6:7.1f} {m['eval_ms']:7.1f} {m['draw_ms']:7.1f}")  # fmt: skip
     return 0
 

@@ -11,7 +11,9 @@ the mouth and brows), ticks *Loop*, presses **Play** with the mouse, waits
 * ``dropped``: frames the playback task skipped because the previous one was late
   (share of the frames due);
 * ``viewport fps``: geometry updates the viewport rendered per second
-  (its ``data-frame`` hook, read in the page) — what a user sees move;
+  (its ``data-frame`` + ``data-draft-frame`` hooks, read in the page: a view whose
+  full frame is slow draws fast-interaction drafts while the clip plays) — what a
+  user sees move;
 * ``renders/s``: all viewport renders (``data-render-count``; includes renders
   without new geometry);
 * ``set_time ms`` / ``push ms``: kernel median per frame for ``set_time``
@@ -80,7 +82,9 @@ _PAGE_COUNTERS = """() => {
     const tick = () => { window.__fwbRaf++; requestAnimationFrame(tick); };
     requestAnimationFrame(tick);
   }
-  return [Number(e.getAttribute('data-frame')), Number(e.getAttribute('data-render-count')),
+  // full-detail frames + fast-interaction drafts (a slow view drafts while a clip plays)
+  return [Number(e.getAttribute('data-frame')) + Number(e.getAttribute('data-draft-frame') || 0),
+          Number(e.getAttribute('data-render-count')),
           performance.now(), window.__fwbRaf];
 }"""
 

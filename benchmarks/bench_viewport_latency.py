@@ -33,8 +33,22 @@ _HOOK = """() => {
   if (window.__fwbHook) return;
   window.__fwbHook = true;
   window.__fwbT0 = null;
+  window.__fwbDraftT = [];
   document.addEventListener('pointerdown', () => { window.__fwbT0 = performance.now(); }, true);
+  // the fast-interaction drafts (widgets/js/src/viewport/gpu_draft.js): data-frame counts
+  // full-detail frames only, so the first pixels are the first draft's, if any
+  const e = document.querySelector('.fwb-viewport');
+  new MutationObserver(() => window.__fwbDraftT.push(Number(e.getAttribute('data-draft-frame-time'))))
+    .observe(e, {attributes: true, attributeFilter: ['data-draft-frame-time']});
 }"""
+
+#: per trial of the last measure(): input -> first pixels (a draft or the full frame), ms
+FIRST_MS: dict[str, list[float]] = {}
+
+
+def _first_pixels(nb: NotebookPage, t0: float, full: float) -> float:
+    drafts = [t for t in nb.page.evaluate("() => window.__fwbDraftT.splice(0)") if t >= t0]
+    return min([full, *drafts]) - t0
 
 _PY_TRIGGER = """async ([code]) => {
   const kernel = window.jupyterapp.shell.currentWidget.sessionContext.session.kernel;
@@ -64,12 +78,15 @@ def _pct(values: list[float], q: float) -> float:
 
 def _python_trials(nb: NotebookPage, shape: str, trials: int) -> list[float]:
     out = []
+    first = FIRST_MS.setdefault(f"python {shape}", [])
     for i in range(trials):
         prev = nb.frame(0)
         value = 0.1 + 0.8 * ((i * 7) % 10) / 10
+        nb.page.evaluate("() => window.__fwbDraftT.splice(0)")
         t0 = float(nb.page.evaluate(_PY_TRIGGER, [f'model.set_weight("{shape}", {value:.3f})']))
         t1 = _frame_time_after(nb, prev)
         out.append(t1 - t0)
+        first.append(_first_pixels(nb, t0, t1))
         nb.page.wait_for_timeout(120)
     return out
 
@@ -97,16 +114,20 @@ def measure(
     push_ms()
     RENDER_MS.clear()
     WAIT_MS.clear()
+    FIRST_MS.clear()
     lat = []
+    first = FIRST_MS.setdefault("slider jawOpen", [])
     for i in range(trials):
         box = track.bounding_box()
         assert box is not None
         f = fractions[i % len(fractions)]
         prev = nb.frame(0)
+        page.evaluate("() => window.__fwbDraftT.splice(0)")
         page.mouse.click(box["x"] + f * box["width"], box["y"] + box["height"] / 2)
         t1 = _frame_time_after(nb, prev)
         t0 = float(page.evaluate("() => window.__fwbT0"))
         lat.append(t1 - t0)
+        first.append(_first_pixels(nb, t0, t1))
         # noUiSlider animates a tap for ~300 ms and drops a tap made meanwhile
         page.wait_for_timeout(500)
     time.sleep(0.8)  # let the slider interaction close

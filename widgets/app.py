@@ -119,6 +119,9 @@ class Workbench(W.VBox):
         self.panel = ExpressionPanel(
             model, errors=self.errors, max_height=f"{max(height - 200, 240)}px"
         )
+        # the page plays the shape sliders at once (GPU path), before the kernel answers
+        self.viewport.follow_sliders(self.panel.sliders)
+        self.panel.observe(lambda _ch: self.viewport.follow_sliders(self.panel.sliders), "sliders_version")
         # under the sliders: split / mirror / correctives, following the last slider touched
         self.shape_tools = ShapeToolsPanel(
             model,

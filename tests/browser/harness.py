@@ -102,6 +102,9 @@ class LabServer:
             # autosave/recovery files of test kernels stay in this server's temp dirs
             WORKBENCH_RECOVERY_DIR=str(self.base / "recovery"),
         )
+        # notebooks/workbench.ipynb opens the 25k head by default; the tests that drive it
+        # check features on the 5k one (test_run_command checks the default, not via this)
+        env.setdefault("WORKBENCH_RESOLUTION", "base")
         cmd = [
             sys.executable, "-m", "jupyterlab",
             "--no-browser",

@@ -37,8 +37,8 @@ print(json.dumps([int(i) for i in _ids]))
 _SIZE = "print(json.dumps(float(np.linalg.norm(np.ptp(model.vertices, axis=0)))))"
 
 
-def _open(open_notebook, gpu: bool = True, res: str = RESOLUTION) -> NotebookPage:
-    nb = open_notebook([_SETUP.format(res=res, gpu=gpu)])
+def _open(open_notebook, gpu: bool = True, res: str = RESOLUTION, more: str = "") -> NotebookPage:
+    nb = open_notebook([_SETUP.format(res=res, gpu=gpu) + more])  # `more`: displayed under the view
     nb.page.evaluate(
         "() => { const s = window.jupyterapp.shell; if (!s.leftCollapsed) s.collapseLeft(); }"
     )
@@ -144,19 +144,27 @@ print(json.dumps({"index": _k, "vertex": _v, "n": len(model.handles)}))
 """
 
 
-def test_handle_drag_sends_offsets_and_the_gpu_matches_the_kernel(open_notebook):
-    nb = _open(open_notebook)
+def _default_handles(nb: NotebookPage) -> tuple[dict, np.ndarray]:
+    """Set the default handles and wait until the view draws them on the GPU.
+
+    Returns the handle ``info`` and the mouth-corner marker's page ``(x, y, in_front)``.
+    """
     vp = nb.viewport(0)
-    size = float(nb.kernel_eval(_SIZE))
     info = nb.kernel_eval(_HANDLES, timeout=120)
-    page = nb.page
-    page.wait_for_function(
+    nb.page.wait_for_function(
         "(n) => JSON.parse(document.querySelector('.fwb-viewport').getAttribute('data-handles')"
         " || '[]').length === n",
         arg=info["n"],
     )
     wait_until("GPU mode", lambda: vp.get_attribute("data-gpu"), lambda v: v == "1")
-    start = np.array(vp.evaluate("e => e.fwbHandles()"), float).reshape(-1, 3)[info["index"]]
+    return info, np.array(vp.evaluate("e => e.fwbHandles()"), float).reshape(-1, 3)[info["index"]]
+
+
+def test_handle_drag_sends_offsets_and_the_gpu_matches_the_kernel(open_notebook):
+    nb = _open(open_notebook)
+    size = float(nb.kernel_eval(_SIZE))
+    page = nb.page
+    info, start = _default_handles(nb)
     assert start[2] == 1, "the mouth-corner marker is behind the camera"
     clip = clip_around(np.array([start, start + np.array([40.0, -32.0, 0.0])]), pad=50)
     page.mouse.move(5, 5)
@@ -287,3 +295,143 @@ def test_a_browser_without_float_targets_falls_back_with_a_note(open_notebook):
     nb.wait_frame_after(0, frame)
     assert nb.kernel_eval("print(json.dumps(sum(vp.updates_sent.values())))") > sent0
     assert nb.kernel_eval("print(json.dumps(len(vp.gpu_payload)))") == 0
+
+
+_BUSY_SLIDER = """
+import time, ipywidgets as W
+slider = W.FloatSlider(min=0, max=1, step=0.01, value=0, description="jawOpen")
+slider.add_class("fwb-test-slider")
+_slept = []
+def _on_slider(ch):
+    if not _slept:  # a busy kernel: the page must not wait for it
+        _slept.append(1)
+        time.sleep(4.0)
+    model.set_weight("jawOpen", ch["new"])
+slider.observe(_on_slider, "value")
+vp.follow_sliders({"jawOpen": slider})
+display(slider)
+"""
+
+
+def test_a_followed_slider_moves_the_face_before_the_kernel_answers(open_notebook):
+    nb = _open(open_notebook, res="25k", more=_BUSY_SLIDER)
+    vp = nb.viewport(0)
+    wait_until("GPU mode", lambda: vp.get_attribute("data-gpu"), lambda v: v == "1", timeout=60)
+    size = float(nb.kernel_eval(_SIZE))
+    ids = nb.kernel_eval(_PROBE)
+    track = nb.page.locator(".fwb-test-slider .noUi-base")
+    track.wait_for()
+    clip = clip_around(nb.project(ids), pad=60)
+    before = nb.screenshot("local_slider_before", clip=clip)
+    frame, version = nb.frame(), int(vp.get_attribute("data-version"))
+    box = track.bounding_box()
+    nb.page.mouse.click(box["x"] + 0.8 * box["width"], box["y"] + box["height"] / 2)
+    # the page draws the new weight itself while the kernel sleeps in the slider's handler
+    nb.wait_frame_after(0, frame, timeout=3.5)
+    assert int(vp.get_attribute("data-version")) == version, "the frame came from the kernel"
+    after = nb.screenshot("local_slider_after", clip=clip)
+    changed = pixel_change(before, after)
+    assert changed > 0.05, f"only {changed:.1%} of the mouth pixels changed"
+    # then the kernel answers, and its evaluation is what the GPU shows
+    wait_until(
+        "the kernel to take the slider's value",
+        lambda: nb.kernel_eval('print(json.dumps(model.weights["jawOpen"]))'),
+        lambda w: abs(w - 0.8) < 0.02,
+        timeout=60,
+    )
+    _wait_version(nb, _kernel_version(nb))
+    _assert_gpu_equals_kernel(nb, size)
+
+
+_CANVAS_LOG = """() => {
+  const e = document.querySelector('.fwb-viewport');
+  window.__shots = {};
+  new MutationObserver(() => {
+    const d = e.getAttribute('data-detail');
+    if (d && !(d in window.__shots)) window.__shots[d] = e.querySelector('canvas').toDataURL();
+  }).observe(e, {attributes: true, attributeFilter: ['data-render-count']});
+  return e.querySelector('canvas').toDataURL();
+}"""
+
+
+def _png(url: str) -> np.ndarray:
+    import base64
+    import io
+
+    from PIL import Image
+
+    return np.asarray(Image.open(io.BytesIO(base64.b64decode(url.split(",", 1)[1]))).convert("RGB"))
+
+
+def test_fast_interaction_draws_a_draft_then_the_full_face(open_notebook):
+    nb = _open(open_notebook, res="25k")
+    vp = nb.viewport(0)
+    wait_until("GPU mode", lambda: vp.get_attribute("data-gpu"), lambda v: v == "1", timeout=60)
+    size = float(nb.kernel_eval(_SIZE))
+    nb.kernel_eval('vp.fast_interaction = "on"; model.set_weight("jawOpen", 0.1)')
+    wait_until("the draft to be built", lambda: vp.get_attribute("data-draft-triangles"), bool)
+    tris, faces = int(vp.get_attribute("data-draft-triangles")), int(vp.get_attribute("data-face-count"))
+    assert 1000 < tris < faces / 2, (tris, faces)
+    before = _png(nb.page.evaluate(_CANVAS_LOG))
+    frame, drafts = nb.frame(), int(vp.get_attribute("data-draft-frame") or 0)
+    nb.kernel_eval('model.set_weight("jawOpen", 0.9)')
+    nb.wait_frame_after(0, frame)
+    assert int(vp.get_attribute("data-draft-frame")) > drafts
+    assert vp.get_attribute("data-detail") == "full"
+    shots = nb.page.evaluate("() => window.__shots")
+    assert set(shots) == {"draft", "full"}, set(shots)
+    draft, full = _png(shots["draft"]), _png(shots["full"])
+    moved = pixel_change(before, full)
+    assert moved > 0.01, f"the jaw moved only {moved:.1%} of the canvas"
+    # the draft shows the new pose: far closer to the full frame than the old pose was
+    assert pixel_change(draft, full, threshold=40) < 0.25 * moved, (pixel_change(draft, full, 40), moved)
+    _assert_gpu_equals_kernel(nb, size, normals=True)  # read back after a draft: full evaluation
+    # "off": the full mesh every time
+    nb.kernel_eval('vp.fast_interaction = "off"')
+    frame, drafts = nb.frame(), int(vp.get_attribute("data-draft-frame"))
+    nb.kernel_eval('model.set_weight("jawOpen", 0.4)')
+    nb.wait_frame_after(0, frame)
+    assert int(vp.get_attribute("data-draft-frame")) == drafts
+
+
+_BUSY = """() => {
+  const kernel = window.jupyterapp.shell.currentWidget.sessionContext.session.kernel;
+  kernel.requestExecute({code: "import time; time.sleep(6)", silent: true, store_history: false});
+}"""
+
+
+def test_a_handle_drag_moves_the_face_before_the_kernel_answers(open_notebook):
+    nb = _open(open_notebook, res="25k")
+    vp = nb.viewport(0)
+    page = nb.page
+    size = float(nb.kernel_eval(_SIZE))
+    info, start = _default_handles(nb)
+    clip = clip_around(np.array([start, start + np.array([30.0, -24.0, 0.0])]), pad=50)
+    page.mouse.move(5, 5)
+    before = nb.screenshot("predicted_drag_before", clip=clip)
+    frame, version = nb.frame(), int(vp.get_attribute("data-version"))
+    page.evaluate(_BUSY)  # another cell keeps the kernel busy for 6 s
+    page.mouse.move(float(start[0]), float(start[1]))
+    page.mouse.down()
+    page.mouse.move(float(start[0]) + 30, float(start[1]) - 24, steps=6)
+    # the page moves the face itself: a frame before the kernel has said anything
+    nb.wait_frame_after(0, frame, timeout=4.0)
+    assert int(vp.get_attribute("data-version")) == version, "the frame came from the kernel"
+    moved = pixel_change(before, nb.screenshot("predicted_drag_moved", clip=clip))
+    assert moved > 0.03, f"only {moved:.1%} of the pixels around the mouth corner changed"
+    # the handle's vertex is drawn under the pointer
+    at = nb.project([info["vertex"]])[0]
+    assert np.linalg.norm(at[:2] - (start[:2] + np.array([30.0, -24.0]))) < 3.0, at
+    page.mouse.up()
+    # then the kernel takes the drag, and the GPU shows exactly its evaluation
+    wait_until(
+        "the drag to end in the kernel",
+        lambda: nb.kernel_eval("print(json.dumps(vp.dragging or model.interacting))", timeout=30),
+        lambda v: v is False,
+    )
+    offsets = np.array(nb.kernel_eval("print(json.dumps(model.handles.offsets.tolist()))"))
+    assert np.linalg.norm(offsets[info["index"]]) > 0
+    _wait_version(nb, _kernel_version(nb))
+    _assert_gpu_equals_kernel(nb, size)
+    at = nb.project([info["vertex"]])[0]
+    assert np.linalg.norm(at[:2] - (start[:2] + np.array([30.0, -24.0]))) < 3.0, at

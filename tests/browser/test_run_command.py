@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from harness import ARTIFACTS, NotebookPage, _free_port
+from harness import ARTIFACTS, NotebookPage, _free_port, wait_until
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -41,6 +41,7 @@ def run_command(tmp_path: Path) -> Iterator[tuple[subprocess.Popen[bytes], str, 
         JUPYTER_PLATFORM_DIRS="1",
         WORKBENCH_RECOVERY_DIR=str(tmp_path / "recovery"),
     )
+    env.pop("WORKBENCH_RESOLUTION", None)  # the notebook's own default, as a new user gets it
     with open(log, "wb") as fh:
         proc = subprocess.Popen(
             ["bash", str(REPO / ".ci" / "workbench"), "run"], stdout=fh, stderr=subprocess.STDOUT, env=env
@@ -138,7 +139,9 @@ def test_run_command_opens_the_workbench_notebook(keep_notebook, run_command, br
         page.locator(".lm-Menu-itemLabel", has_text="Run All Cells").first.click()
         nb = NotebookPage(page, None, out, "run_command")  # type: ignore[arg-type]
         nb.wait_viewports(1, timeout=300)
-        assert nb.viewport().get_attribute("data-vertex-count") == "5084"
+        # the notebook's default: the 25k sample head (20,051 vertices), rig on the GPU
+        assert nb.viewport().get_attribute("data-vertex-count") == "20051"
+        wait_until("GPU evaluation", lambda: nb.viewport().get_attribute("data-gpu"), lambda v: v == "1")
         assert nb.viewport().get_attribute("data-error") in (None, "")
         page.locator(".fwb-workbench").evaluate("e => e.scrollIntoView({block: 'start'})")
         page.wait_for_timeout(300)

@@ -119,11 +119,16 @@ class ExpressionPanel(ModelPanel):
     ----------
     selected : str
         Name of the last slider the user moved ("" before any).
+    sliders_version : int
+        Bumps whenever the sliders are rebuilt (new shapes): a viewport following
+        them (:meth:`Viewport.follow_sliders`) links the new ones.
     badges : dict[str, ipywidgets.HTML]
         The "= A × B" badge of each corrective's slider.
     """
 
     selected = traitlets.Unicode("")
+    #: bumps whenever the sliders are rebuilt (a viewport following them re-links)
+    sliders_version = traitlets.Int(0)
 
     def __init__(
         self,
@@ -203,6 +208,7 @@ class ExpressionPanel(ModelPanel):
         self.body.children = children
         self._on_correctives()
         self._on_search()
+        self.sliders_version += 1
 
     def _make_cell(self, shape: Any, value: float) -> W.Widget:
         name = shape.name

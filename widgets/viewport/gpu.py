@@ -52,6 +52,16 @@ Only when the residual is the same at sampled frames (no animated nonlinear
 layer): otherwise playback stays in the kernel, which then sends parameters
 and residual rows per frame.
 
+The page moves the face before the kernel answers (``gpu_local.js``): the shape
+sliders a view follows (``Viewport.follow_sliders``, trait ``weight_sliders``)
+and handle drags change the parameters in the page at once; ``_gpu_meta`` gives
+it the shapes' order (``names``), the rules of the played weights (``local``:
+muted shapes, correctives as products of their drivers, :func:`local_weight_rules`)
+and the basis column of each handle (``columns``). The kernel's parameters
+follow and win. While parameters change, a view whose full frame is slow draws
+a simplified face evaluated at its own vertices (``gpu_draft.js``,
+``Viewport.fast_interaction``) and the full mesh once the changes pause.
+
 ``_gpu_mode`` is ``"gpu"`` while the kernel sends parameters and ``"stream"``
 while it streams vertex rows. The kernel starts streaming and switches when a
 view says ``{"type": "gpu_ready"}`` (it has WebGL2 float render targets); it
@@ -72,6 +82,7 @@ import numpy as np
 
 from widgets.viewport.common import SPARSE_FRACTION, changed_rows, f32_bytes, u32_bytes
 from workbench.animation.family import head_matrix
+from workbench.core.families import weight_products
 
 #: every GpuSync of a connected viewport (the timeline's playback looks for its model's)
 _SYNCS: weakref.WeakSet[GpuSync] = weakref.WeakSet()
@@ -126,6 +137,25 @@ def half_ok(entries: np.ndarray, max_weight: float, size: float) -> bool:
         return False
     err = np.abs(xyz.astype(np.float16).astype(np.float32) - xyz).max()
     return bool(err * max(max_weight, 1.0) <= HALF_TOLERANCE * size)
+
+
+def local_weight_rules(view: Any) -> dict[str, Any]:
+    """How the page turns slider values into played weights (``gpu_local.js``).
+
+    ``{"mute": [shape index], "products": [[shape, [driver indices], lo, hi]]}``: a
+    muted shape plays 0, a derived shape the product of its drivers clamped to its
+    slider range (:func:`workbench.core.families.derive_weights`).
+    """
+    names = list(view.shape_names)
+    index = {nm: i for i, nm in enumerate(names)}
+    shapes = list(view.shapes)
+    products = []
+    for name, drivers in weight_products(view.slots).items():
+        if name in index and all(d in index for d in drivers):
+            s = shapes[index[name]]
+            products.append([index[name], [index[d] for d in drivers],
+                             float(s.slider_min), float(s.slider_max)])
+    return {"mute": [i for i, s in enumerate(shapes) if s.mute], "products": sorted(products)}
 
 
 def layer_gains(model: Any) -> np.ndarray:
@@ -214,10 +244,14 @@ class GpuSync:
                 w._gpu_morph_entries = data
                 self.morph_key = key
                 self.set_meta(half=half, nnz=int(entries.shape[0]), k=self.k, n=n,
+                              names=list(view.shape_names),
                               morph=int(w._gpu_meta.get("morph", 0)) + 1)
             self.residual = None  # re-sent whole below
             self.updates_sent["rig"] += 1
             self.upload_ms.append((time.perf_counter() - t0) * 1e3)
+        local = local_weight_rules(view)
+        if local != w._gpu_meta.get("local"):
+            self.set_meta(local=local)
         h = model.handles.value
         bkey = (h.vertices.tobytes(), tuple(model.handles.stiffness)) if len(h) else None
         if bkey != self.basis_key:
@@ -235,7 +269,8 @@ class GpuSync:
             with w.hold_sync():
                 w._gpu_basis = basis
                 self.basis_key = bkey
-                self.set_meta(hu=self.hu, basis=int(w._gpu_meta.get("basis", 0)) + 1)
+                self.set_meta(hu=self.hu, basis=int(w._gpu_meta.get("basis", 0)) + 1,
+                              columns=[] if self.columns is None else self.columns.tolist())
             self.updates_sent["basis"] += 1
             self.upload_ms.append((time.perf_counter() - t0) * 1e3)
         gkey = (id(model.slot("regions")) if "regions" in view.slots else None,

@@ -70,19 +70,19 @@ from widgets.viewport.common import (
     scene_key,
     u32_bytes,
 )
-from widgets.viewport.gestures import Gesture, GestureDispatcher, vertex_ids
+from widgets.viewport.gesture_api import GestureAPI
+from widgets.viewport.gestures import GestureDispatcher
+from widgets.viewport.overlays import OverlayAPI
 from widgets.viewport.sync import SceneSync
 from widgets.viewport.tools import (
     HandleDrag,
-    HookedDrag,
-    HookedStroke,
     PaintStroke,
     add_handle,
     remove_handle,
 )
 
 
-class Viewport(anywidget.AnyWidget):
+class Viewport(GestureAPI, OverlayAPI, anywidget.AnyWidget):
     """Interactive three.js view of a FaceModel (smooth shading, orbit/zoom/pan).
 
     Parameters
@@ -152,6 +152,13 @@ class Viewport(anywidget.AnyWidget):
         of layers the GPU does not evaluate (:mod:`widgets.viewport.gpu`).
         ``False`` (or a browser without WebGL2 float textures) streams evaluated
         vertex rows, with a note in the view.
+    fast_interaction : {"auto", "on", "off"}
+        While the rig's parameters change (a slider moves, a handle is dragged,
+        a clip plays), draw a simplified copy of the face evaluated on the GPU at
+        its own vertices, and the full mesh once the changes pause (~0.14 s), as
+        Maya's Fast Interaction does. ``"auto"`` (default): only in a view whose
+        full frame measured slower than 30 ms (software WebGL at tens of
+        thousands of vertices); ``"on"``: always; ``"off"``: never. GPU path only.
     camera_group : str
         Viewports with the same non-empty group orbit and zoom together in the
         browser (the same side of the face at the same relative size, whatever
@@ -209,6 +216,10 @@ class Viewport(anywidget.AnyWidget):
     overlay_point_px = t.Float(6.0).tag(sync=True)
     # GPU evaluation (widgets.viewport.gpu): the rig once, then parameters per update
     gpu = t.Bool(True).tag(sync=True)
+    fast_interaction = t.Enum(["auto", "on", "off"], "auto").tag(sync=True)
+    weight_sliders = t.Dict(value_trait=t.Instance(ipywidgets.Widget)).tag(
+        sync=True, **ipywidgets.widget_serialization
+    )
     _gpu_mode = t.Unicode("stream").tag(sync=True)
     _gpu_meta = t.Dict().tag(sync=True)
     _gpu_neutral = t.Bytes(b"").tag(sync=True)
@@ -340,40 +351,6 @@ class Viewport(anywidget.AnyWidget):
     def probe_ids(self, value: Any) -> None:
         self._probe_ids = u32_bytes(as_ids(value, self._model.n_vertices, "probe_ids"))
 
-    @property
-    def overlay_points(self) -> np.ndarray:
-        """(p, 3) float32: the free points drawn over the face (finite ones only)."""
-        return np.frombuffer(self._overlay_points, dtype="<f4").reshape(-1, 3).copy()
-
-    def set_overlay_points(self, points: Any, colors: Any = None) -> int:
-        """Draw free points over the face (None or empty: none); returns how many are drawn.
-
-        ``points`` (p, 3) in model units; rows with NaN (an occluded marker) are
-        not drawn. ``colors``: one sRGB colour (3,) or one per point (p, 3), in
-        [0, 1]; default green.
-        """
-        if points is None:
-            P = np.zeros((0, 3), np.float32)
-        else:
-            P = np.asarray(points, dtype=np.float64)
-            if P.ndim != 2 or P.shape[1] != 3:
-                raise ValueError(f"Viewport.set_overlay_points: points must be (p, 3), got {P.shape}")
-        keep = np.isfinite(P).all(axis=1)
-        C = b""
-        if colors is not None:
-            c = np.asarray(colors, dtype=np.float64)
-            if c.shape == (3,):
-                c = np.broadcast_to(c, P.shape)
-            if c.shape != P.shape or not np.isfinite(c).all():
-                raise ValueError(
-                    f"Viewport.set_overlay_points: colors must be (3,) or {P.shape} in [0, 1], got {c.shape}"
-                )
-            C = (np.clip(c[keep], 0.0, 1.0) * 255 + 0.5).astype(np.uint8).tobytes()
-        with self.hold_sync():
-            self._overlay_points = f32_bytes(P[keep])
-            self._overlay_colors = C
-        return int(keep.sum())
-
     def set_component_visible(self, name: str, visible: bool) -> None:
         """Show or hide one component (e.g. ``"eyelashes_left"``)."""
         if name not in self._model.component_names:
@@ -463,127 +440,6 @@ class Viewport(anywidget.AnyWidget):
                 self.sync.connected = False
         super().close()
 
-    # ------------------------------------------------------------ gestures (API)
-    # Thin calls into widgets.viewport.gestures: what the front end's messages do.
-
-    def begin_drag(self, index: int, vertex: int | None = None) -> None:
-        """Start dragging model handle ``index`` (the front end's "start" message).
-
-        Opens the interaction "Drag handle <name>"; an open gesture, and every
-        interaction other widgets hold open (a slider burst), is ended first.
-        """
-        self.gestures.start(HandleDrag(self, index, vertex))
-
-    def drag_to(self, position: Any) -> float:
-        """Move the dragged handle's vertex to ``position`` (3,) in model space.
-
-        The handle offset is ``position - model.blended()[vertex]`` (the edit sits
-        on top of the blend); with :attr:`symmetric` the mirror handle follows.
-        Returns the kernel time in ms (rank-1 update + evaluate + send); 0 without a drag.
-        """
-        p = np.asarray(position, dtype=np.float64).reshape(-1)
-        if p.shape != (3,) or not np.isfinite(p).all():
-            raise ValueError(
-                f"Viewport.drag_to: position must be 3 finite numbers, got {position!r}"
-            )
-        g = self.gestures.current(HandleDrag)
-        return 0.0 if g is None else self.gestures.update(g, {"model_position": p})
-
-    def end_drag(self) -> None:
-        """End the open handle drag (one undo step); no-op without one."""
-        self.gestures.finish(HandleDrag)
-
-    def begin_stroke(self, expression: str | None = None) -> None:
-        """Start a paint stroke of ``expression`` (default :attr:`paint_expression`).
-
-        Opens the interaction "Paint <expression>"; an open gesture, and every
-        interaction other widgets hold open, is ended first.
-        """
-        self.gestures.start(PaintStroke(self, expression))
-
-    def paint_at(self, vertices: Any) -> float:
-        """Brush dabs at vertex ids ``vertices`` (int or sequence) within the open stroke.
-
-        One overlay + geometry update is sent after the last dab. Returns the
-        kernel time in ms (dabs + updates); 0 without an open stroke.
-        """
-        ids = vertex_ids(vertices, self._model.n_vertices, "Viewport.paint_at")
-        g = self.gestures.current(PaintStroke)
-        return 0.0 if g is None else self.gestures.update(g, {"vertices": ids})
-
-    def end_stroke(self) -> None:
-        """End the open paint stroke (one undo step); no-op without one."""
-        self.gestures.finish(PaintStroke)
-
-    def cancel_gesture(self) -> None:
-        """Cancel the open gesture: its edits are put back, no undo step."""
-        self.gestures.cancel()
-
-    def set_stroke_handler(self, handler: Any, target: str = "") -> None:
-        """Send paint strokes to ``handler`` instead of the model's paint layers (None: back).
-
-        ``handler`` has ``begin()``, ``dab(vertices)``, ``end()``, ``cancel()``
-        and optionally ``overlay() -> (n,) float or None`` (drawn as the paint
-        overlay while it is set). ``target`` describes what a stroke does (the
-        front end paints on a press only when it, or :attr:`paint_expression`,
-        is set). An open stroke of the previous handler is cancelled; an open
-        paint stroke is ended.
-        """
-        if handler is not None and not str(target):
-            raise ValueError("Viewport.set_stroke_handler: describe the stroke's target")
-        g = self.gestures.active
-        if isinstance(g, HookedStroke) and g.handler is not handler:
-            self.gestures.cancel(HookedStroke)
-        if handler is not None:
-            self.gestures.finish(PaintStroke)
-        self.stroke_handler = handler
-        self.stroke_target = str(target) if handler is not None else ""
-        overlay = getattr(handler, "overlay", None) if handler is not None else None
-        self.sync.overlay_source = overlay if overlay is not None else (
-            (lambda: None) if handler is not None else None
-        )
-        # the overlay's source changed: send the difference to what the front end has
-        if self._connected:
-            self.errors.guard("Viewport paint overlay")(self.sync.sync_paint)()
-
-    def _handle_gesture(self, content: Mapping[str, Any]) -> Gesture:
-        v = content.get("vertex")
-        index, vertex = int(content["index"]), None if v is None else int(v)
-        if self.drag_handler is not None:
-            return HookedDrag(self, self.drag_handler, index, vertex)
-        return HandleDrag(self, index, vertex)
-
-    def _paint_gesture(self, content: Mapping[str, Any]) -> Gesture:
-        if self.stroke_handler is not None:
-            return HookedStroke(self, self.stroke_handler, self.stroke_target)
-        return PaintStroke(self)
-
-    def _unposed(self, position: Any) -> Any:
-        """A point picked on the shown mesh, in model space.
-
-        The view draws :meth:`FaceModel.evaluate`, which applies the keyed head pose
-        last; handle offsets and region pins live before it, so a pointer position
-        is mapped back with the inverse rigid transform (a no-op without a pose).
-        """
-        M = self._model.head_matrix()
-        if np.array_equal(M, np.eye(4)):
-            return position
-        p = np.asarray(position, dtype=np.float64).reshape(-1)
-        if p.shape != (3,):
-            raise ValueError(f"Viewport: a position must be 3 numbers, got {position!r}")
-        return np.linalg.solve(M, np.append(p, 1.0))[:3]
-
-    def _resolve_handle(self, index: int, vertex: int | None) -> int | None:
-        """The model handle ``index`` if it sits on ``vertex``, else the handle on ``vertex``."""
-        verts = self._model.handles.vertices
-        if 0 <= index < verts.size and (vertex is None or int(verts[index]) == vertex):
-            return int(index)
-        if vertex is not None:
-            hits = np.flatnonzero(verts == vertex)
-            if hits.size:
-                return int(hits[0])
-        return None
-
     @property
     def gpu_active(self) -> bool:
         """True while updates go to the browser as rig parameters (:mod:`widgets.viewport.gpu`)."""
@@ -598,6 +454,16 @@ class Viewport(anywidget.AnyWidget):
     def gpu_payload(self) -> Any:
         """Bytes of each parameter message sent (JSON + buffers), newest last."""
         return self.sync.gpu.payload
+
+    def follow_sliders(self, sliders: Mapping[str, Any]) -> None:
+        """Let the page play these shape sliders itself (GPU path), before the kernel answers.
+
+        ``sliders`` maps shape names to slider widgets whose ``value`` is the shape's
+        weight (the Shapes tab's). A slider moved in the page then changes the weight
+        the browser evaluates at once; the kernel's answer (the exact parameters and
+        any wrinkle rows) follows and wins. Call again when the sliders are rebuilt.
+        """
+        self.weight_sliders = dict(sliders)
 
     @t.observe("gpu")
     def _on_gpu(self, change: Any) -> None:
@@ -706,55 +572,6 @@ class Viewport(anywidget.AnyWidget):
 
     def _sync_paint(self, *_args: Any) -> None:
         self.sync.sync_paint()
-
-    # ------------------------------------------------------- feature graph overlay
-    # Pose-space wrinkles (Bickel et al. 2008 §5.1): the edges between handles on
-    # which strain is measured, coloured by strain. The viewport does not know about
-    # wrinkle layers; widgets.WrinklePanel feeds it.
-
-    @property
-    def feature_updates_sent(self) -> int:
-        """Strain updates sent (tests, benchmarks)."""
-        return self.sync.feature_updates_sent
-
-    @property
-    def feature_edges(self) -> np.ndarray:
-        """(F, 2) uint32 vertex ids of the drawn feature-graph edges (empty: none)."""
-        return np.frombuffer(self._feature_edges, dtype="<u4").reshape(-1, 2).copy()
-
-    @property
-    def feature_strain(self) -> np.ndarray:
-        """(F,) float32 strain of each edge as last sent to the front end."""
-        return np.frombuffer(self._feature_strain, dtype="<f4").copy()
-
-    def set_feature_graph(self, vertex_pairs: Any) -> None:
-        """Draw line segments between vertex pairs (F, 2) (None or empty: no graph).
-
-        Resets the strain to zero (every edge grey) until :meth:`set_feature_strain`.
-        """
-        n = self._model.n_vertices
-        pairs = np.zeros((0, 2), np.int64) if vertex_pairs is None else np.asarray(vertex_pairs)
-        pairs = pairs.astype(np.int64).reshape(-1, 2)
-        if pairs.size and (pairs.min() < 0 or pairs.max() >= n):
-            raise ValueError(f"Viewport.set_feature_graph: vertex ids must be in 0..{n - 1}")
-        self.sync.set_feature_graph(pairs)
-
-    def set_feature_strain(self, strain: Any) -> bool:
-        """Colour the edges by ``strain`` (F,): relative stretch ``(l - l0) / l0``.
-
-        Sent only when some edge changed by more than
-        :data:`~widgets.viewport.common.STRAIN_TOLERANCE` (or returned to exactly
-        zero) and the overlay is shown; returns True when an update was sent.
-        """
-        f = np.asarray(strain, dtype=np.float32).reshape(-1)
-        count = len(self._feature_edges) // 8
-        if f.size != count:
-            raise ValueError(
-                f"Viewport.set_feature_strain: expected {count} values (one per edge), got {f.size}"
-            )
-        if not np.isfinite(f).all():
-            raise ValueError("Viewport.set_feature_strain: strain contains NaN/inf")
-        return self.sync.set_feature_strain(f)
 
     @t.observe("feature_graph")
     def _on_feature_graph_shown(self, change: Any) -> None:

@@ -47,6 +47,7 @@ export default {
     store.model = model;
     store.loadFull();
     store.loadPaintFull();
+    store.initLocal(); // shape sliders move the face in the page first (./viewport/gpu_local.js)
     const onFull = () => store.loadFull();
     const onPaintFull = () => store.loadPaintFull();
     const onRig = () => { store.loadGpuRig(); store.notify(); };
@@ -80,6 +81,7 @@ export default {
       model.off("change:_paint_version", onPaintFull);
       model.off("change:_gpu_meta", onRig);
       model.off("msg:custom", onMsg);
+      store.disposeLocal();
       STORES.delete(model.get("_uid"));
     };
   },

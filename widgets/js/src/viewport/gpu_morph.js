@@ -37,10 +37,14 @@ uniform vec4 uHz[${MAX_HQ}];
 uniform int hq;
 uniform mat4 head;
 uniform int n;
+uniform usampler2D idTex;
+uniform bool useIds;
 out vec4 outColor;
 void main() {
-  int v = int(gl_FragCoord.y) * ${TEX_WIDTH} + int(gl_FragCoord.x);
-  if (v >= n) { outColor = vec4(0.0); return; }
+  int t = int(gl_FragCoord.y) * ${TEX_WIDTH} + int(gl_FragCoord.x);
+  if (t >= n) { outColor = vec4(0.0); return; }
+  // texel t holds vertex v: the same for the whole mesh, a subset for the draft (./gpu_draft.js)
+  int v = useIds ? int(texelFetch(idTex, at(t), 0).x) : t;
   vec4 base = texelFetch(baseTex, at(v), 0);
   vec2 g = texelFetch(gainTex, at(v), 0).xy;
   uvec2 oc = texelFetch(indexTex, at(v), 0).xy;
@@ -90,6 +94,11 @@ void main() {
 const QUAD_VS = `
 in vec3 position;
 void main() { gl_Position = vec4(position.xy, 0.0, 1.0); }`;
+
+const RT_OPTIONS = {
+  type: THREE.FloatType, format: THREE.RGBAFormat, depthBuffer: false,
+  minFilter: THREE.NearestFilter, magFilter: THREE.NearestFilter, generateMipmaps: false,
+};
 
 // rows of a TEX_WIDTH-wide texture holding `count` texels
 export function texRows(count) {
@@ -164,6 +173,7 @@ export class GpuMorph {
       uHy: { value: Array.from({ length: MAX_HQ }, () => new THREE.Vector4()) },
       uHz: { value: Array.from({ length: MAX_HQ }, () => new THREE.Vector4()) },
       hq: { value: 0 }, head: { value: new THREE.Matrix4() }, n: { value: 0 },
+      idTex: { value: dummyU }, useIds: { value: false },
     };
     this.normalUniforms = {
       posTex: { value: dummyF }, adjIndexTex: { value: dummyU }, adjTex: { value: dummyU }, n: { value: 0 },
@@ -186,6 +196,8 @@ export class GpuMorph {
     this.drawUniforms = { fwbPos: { value: dummyF }, fwbNrm: { value: dummyF }, fwbGpu: { value: false } };
     this.posRT = null;
     this.nrmRT = null;
+    this.draft = null; // the draft's vertex ids, fans and targets (setDraft)
+    this.draftUniforms = { fwbPos: { value: dummyF }, fwbNrm: { value: dummyF }, fwbGpu: { value: true } };
     this.n = 0;
     this.evaluations = 0;
   }
@@ -204,17 +216,11 @@ export class GpuMorph {
       set("entry", dataTexture(g.entries, 4, g.half ? THREE.HalfFloatType : THREE.FloatType));
       this.seen.morph = g.morphVersion;
       this.n = g.n;
-      this.evalUniforms.n.value = g.n;
-      this.normalUniforms.n.value = g.n;
       const rows = texRows(g.n);
       if (!this.posRT || this.posRT.height !== rows) {
         if (this.posRT) { this.posRT.dispose(); this.nrmRT.dispose(); }
-        const opts = {
-          type: THREE.FloatType, format: THREE.RGBAFormat, depthBuffer: false,
-          minFilter: THREE.NearestFilter, magFilter: THREE.NearestFilter, generateMipmaps: false,
-        };
-        this.posRT = new THREE.WebGLRenderTarget(TEX_WIDTH, rows, opts);
-        this.nrmRT = new THREE.WebGLRenderTarget(TEX_WIDTH, rows, opts);
+        this.posRT = new THREE.WebGLRenderTarget(TEX_WIDTH, rows, RT_OPTIONS);
+        this.nrmRT = new THREE.WebGLRenderTarget(TEX_WIDTH, rows, RT_OPTIONS);
       }
     }
     if (this.seen.base !== g.baseVersion) {
@@ -267,27 +273,71 @@ export class GpuMorph {
     u.indexTex.value = T.index || this.dummyU;
     u.entryTex.value = T.entry || this.dummyF;
     u.basisTex.value = T.basis || this.dummyF;
-    this.normalUniforms.adjIndexTex.value = T.adjIndex || this.dummyU;
-    this.normalUniforms.adjTex.value = T.adj || this.dummyU;
     return !!(T.base && T.gain && T.index && T.entry && this.posRT);
   }
 
   // Run both passes; the materials then draw the result.
   evaluate() {
+    this.passes(this.posRT, this.nrmRT, this.n, null, this.textures.adjIndex, this.textures.adj);
+    this.drawUniforms.fwbPos.value = this.posRT.texture;
+    this.drawUniforms.fwbNrm.value = this.nrmRT.texture;
+    this.evaluations += 1;
+  }
+
+  // Both passes for the draft's vertices only (texel t = vertex draft.ids[t]); its own
+  // fans give its normals. The draft mesh (./gpu_draft.js) reads draftUniforms.
+  evaluateDraft() {
+    const d = this.draft;
+    this.passes(d.posRT, d.nrmRT, d.m, d.ids, d.adjIndex, d.adj);
+    this.draftUniforms.fwbPos.value = d.posRT.texture;
+    this.draftUniforms.fwbNrm.value = d.nrmRT.texture;
+    this.draftEvaluations = (this.draftEvaluations || 0) + 1;
+  }
+
+  passes(posRT, nrmRT, count, ids, adjIndex, adj) {
     const r = this.renderer;
     const prev = r.getRenderTarget();
     const clear = r.autoClear;
     r.autoClear = false;
-    r.setRenderTarget(this.posRT);
+    const eu = this.evalUniforms, nu = this.normalUniforms;
+    eu.n.value = count;
+    eu.useIds.value = !!ids;
+    eu.idTex.value = ids || this.dummyU;
+    r.setRenderTarget(posRT);
     r.render(this.evalScene, this.quadCamera);
-    this.normalUniforms.posTex.value = this.posRT.texture;
-    r.setRenderTarget(this.nrmRT);
+    nu.n.value = count;
+    nu.posTex.value = posRT.texture;
+    nu.adjIndexTex.value = adjIndex || this.dummyU;
+    nu.adjTex.value = adj || this.dummyU;
+    r.setRenderTarget(nrmRT);
     r.render(this.normalScene, this.quadCamera);
     r.setRenderTarget(prev);
     r.autoClear = clear;
-    this.drawUniforms.fwbPos.value = this.posRT.texture;
-    this.drawUniforms.fwbNrm.value = this.nrmRT.texture;
-    this.evaluations += 1;
+  }
+
+  // The draft (./gpu_draft.js): `ids` (m) the vertices it keeps, `faces` its triangles in
+  // draft numbering (0..m-1). Null drops it.
+  setDraft(ids, faces) {
+    this.dropDraft();
+    if (!ids) return;
+    const m = ids.length;
+    const { index, pairs } = faceFans(faces, m);
+    const rows = texRows(m);
+    this.draft = {
+      m, faces,
+      ids: dataTexture(padded(ids, 1), 1, THREE.UnsignedIntType),
+      adjIndex: dataTexture(index, 2, THREE.UnsignedIntType),
+      adj: dataTexture(pairs, 2, THREE.UnsignedIntType),
+      posRT: new THREE.WebGLRenderTarget(TEX_WIDTH, rows, RT_OPTIONS),
+      nrmRT: new THREE.WebGLRenderTarget(TEX_WIDTH, rows, RT_OPTIONS),
+    };
+  }
+
+  dropDraft() {
+    const d = this.draft;
+    if (!d) return;
+    for (const t of [d.ids, d.adjIndex, d.adj, d.posRT, d.nrmRT]) t.dispose();
+    this.draft = null;
   }
 
   // The evaluated positions (n*3) (a readback of the position target).
@@ -325,6 +375,8 @@ export class GpuMorph {
       if (t) b += t.image.width * t.image.height * (bpp[t.internalFormat] || 16);
     }
     if (this.posRT) b += 2 * this.posRT.width * this.posRT.height * 16;
+    const d = this.draft;
+    if (d) b += d.ids.image.width * d.ids.image.height * 4 + 8 * d.adjIndex.image.width * (d.adjIndex.image.height + d.adj.image.height) + 2 * d.posRT.width * d.posRT.height * 16;
     return b;
   }
 
@@ -334,6 +386,7 @@ export class GpuMorph {
     this.dummyF.dispose();
     this.dummyU.dispose();
     if (this.posRT) { this.posRT.dispose(); this.nrmRT.dispose(); }
+    this.dropDraft();
     this.evalMesh.geometry.dispose();
     this.evalMesh.material.dispose();
     this.normalMesh.material.dispose();

@@ -2,10 +2,13 @@
 // ./gpu_morph.js when Python sends parameters (_gpu_mode "gpu"), read positions back when
 // the CPU needs them (picking, markers, probes, the feature graph), and show a note when
 // the view falls back to vertices streamed from the kernel.
+import { draftViewMethods } from "./gpu_draft.js";
 import { GpuMorph, gpuUnsupported, patchMaterial } from "./gpu_morph.js";
 import { typed } from "./util.js";
 
 export const gpuViewMethods = {
+  ...draftViewMethods,
+
   initGpu() {
     this.gpu = null;
     this.gpuReason = "";
@@ -37,6 +40,7 @@ export const gpuViewMethods = {
     this.reportGpu();
     this.updateGpuNote();
     this.installGpuHooks();
+    this.initDraft();
   },
 
   // Benchmark and test hooks on the element (installed once).
@@ -131,14 +135,25 @@ export const gpuViewMethods = {
     const on = this.gpuOn();
     if (this.gpu) this.gpu.drawUniforms.fwbGpu.value = on;
     this.el.setAttribute("data-gpu", on ? "1" : "0");
+    if (this.lastDetail === "draft" && !on) this.showDetail("full"); // back to streaming
     if (!on) return false;
     const again = gpuUnsupported(this.renderer, this.store); // the rig may outgrow the textures
-    if (again) { this.failGpu(again); return false; }
+    if (again) { this.failGpu(again); this.showDetail("full"); return false; }
     try {
       if (!this.gpu.sync(this.store)) return false;
-      this.gpu.evaluate();
+      this.lastFrameDraft = this.draftWanted();
+      if (this.lastFrameDraft) {
+        this.drawDraft(); // ./gpu_draft.js: the full mesh follows when the changes pause
+      } else {
+        this.gpu.evaluate();
+        this.fullStale = false;
+        this.forceFull = false;
+        this.showDetail("full");
+        if (this.fullFrameMs === null) setTimeout(() => { if (this.gpuOn()) this.calibrate(); }, 0);
+      }
     } catch (err) {
       this.failGpu(`GPU evaluation failed: ${err}`);
+      this.showDetail("full");
       return false;
     }
     this.el.setAttribute("data-gpu-texture-bytes", String(this.gpu.textureBytes()));
@@ -171,6 +186,7 @@ export const gpuViewMethods = {
   readBack() {
     const s = this.store;
     if (!this.positionAttr) return;
+    this.ensureFullEvaluated(); // after a draft frame
     this.gpu.readPositions(this.positionAttr.array);
     if (s.positions && s.positions.length === this.positionAttr.array.length) s.positions.set(this.positionAttr.array);
     this.positionAttr.needsUpdate = true;
@@ -203,9 +219,43 @@ export const gpuViewMethods = {
   },
 
   clipFrame() {
+    this.paramsChanged();
+  },
+
+  // A handle drag moved (./tools.js): move the face in the page before the kernel answers
+  // (./gpu_local.js predictDrag; the kernel's parameters follow and win).
+  predictDrag(d) {
+    if (!this.gpuOn() || !this.gpuDrawn) return;
+    const mirror = this.model.get("symmetric") && this.handleMirror ? this.handleMirror[d.index] : -1;
+    if (this.store.predictDrag(d, mirror)) for (const v of this.store.views) v.paramsChanged();
+  },
+
+  // New parameters from the page itself (a clip frame, a slider: ./gpu_local.js): draw now.
+  // At once unless the GPU still draws the last frame (then at the next display frame):
+  // software WebGL queues frames, and a queue is latency.
+  paramsChanged() {
     this.geometryDirty = true;
     if (this.pending) return; // a render is already due this frame
-    this.renderNow();
+    if (this.gpuBusy()) this.requestRender();
+    else this.renderNow();
+  },
+
+  gpuBusy() {
+    const f = this.frameFence;
+    if (!f) return false;
+    const gl = this.renderer.getContext();
+    if (gl.getSyncParameter(f, gl.SYNC_STATUS) !== gl.SIGNALED) return true;
+    gl.deleteSync(f);
+    this.frameFence = null;
+    return false;
+  },
+
+  // After a GPU frame: a fence the next page-driven frame waits for (gpuBusy).
+  fenceFrame() {
+    const gl = this.renderer.getContext();
+    if (this.frameFence) gl.deleteSync(this.frameFence);
+    this.frameFence = gl.fenceSync(gl.SYNC_GPU_COMMANDS_COMPLETE, 0);
+    gl.flush();
   },
 
   // A clip frame was evaluated (from gpuFrame): count it for data-clip-frames / -fps.
@@ -227,6 +277,7 @@ export const gpuViewMethods = {
   gpuNormals() {
     if (!this.gpuOn()) return null;
     this.ensureCpuPositions();
+    this.ensureFullEvaluated();
     return this.gpu.readNormals(new Float32Array(this.store.gpu.n * 3));
   },
 
@@ -236,6 +287,8 @@ export const gpuViewMethods = {
     delete this.el.fwbGpuNormals;
     this.model.off("change:gpu", this.onGpuTrait);
     this.model.off("change:_gpu_mode", this.onGpuTrait);
+    this.disposeDraft();
+    if (this.frameFence) this.renderer.getContext().deleteSync(this.frameFence);
     if (this.gpu) this.gpu.dispose();
   },
 };

@@ -325,6 +325,7 @@ export class View {
       faces = new Uint32Array(keep);
     }
     this.geometry.setIndex(new THREE.BufferAttribute(faces, 1));
+    this.indexVersion = (this.indexVersion || 0) + 1; // the draft follows (./gpu_draft.js)
   }
 
   updateColors() {
@@ -386,7 +387,7 @@ export class View {
   }
 
   updateWireframe() {
-    if (this.wire) this.wire.visible = !!this.model.get("wireframe");
+    if (this.wire) this.wire.visible = !!this.model.get("wireframe") && this.lastDetail !== "draft";
   }
 
   updateError() {
@@ -560,12 +561,18 @@ export class View {
     }
     if (this.featureGraph) this.featureGraph.beforeRender(); // feature-graph overlay
     this.renderer.render(this.scene, this.camera);
+    if (newGeometry && this.gpuDrawn && this.gpuOn()) this.fenceFrame();
     // Benchmarks: wait until the GPU has drawn it (WebGL returns before SwiftShader draws)
     if (newGeometry && globalThis.fwbSyncFrames) this.renderer.getContext().readPixels(0, 0, 1, 1, 6408, 5121, new Uint8Array(4));
     this.renders += 1;
     const el = this.el;
     el.setAttribute("data-render-count", String(this.renders));
-    if (newGeometry) {
+    if (newGeometry && this.lastFrameDraft) {
+      // a draft (./gpu_draft.js): data-frame waits for the full mesh
+      this.lastFrameDraft = false;
+      el.setAttribute("data-draft-frame", String(this.draftFrames));
+      el.setAttribute("data-draft-frame-time", String(performance.now()));
+    } else if (newGeometry) {
       this.frame += 1;
       el.setAttribute("data-frame", String(this.frame));
       el.setAttribute("data-version", String(this.store.version));

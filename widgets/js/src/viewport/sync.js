@@ -18,6 +18,7 @@
 // A version gap (a missed update) asks Python for a full buffer: request_full / request_paint.
 import { clipMethods } from "./gpu_clip.js";
 import { cpuRowMethods } from "./gpu_cpu.js";
+import { localWeightMethods } from "./gpu_local.js";
 import { padded, texRows } from "./gpu_morph.js";
 import { typed } from "./util.js";
 
@@ -106,6 +107,7 @@ export class Store {
     const g = this.gpu;
     const P = typed(this.model.get("_gpu_params"), Float32Array);
     this.gpuParams = P ? new Float32Array(P) : null;
+    this.reconcileLocal();
     const R = typed(this.model.get("_gpu_residual"), Float32Array);
     if (g && R && R.length === g.n * 3) {
       g.residual = new Float32Array(R);
@@ -130,6 +132,7 @@ export class Store {
     }
     this.gpuMode = true;
     this.gpuParams = new Float32Array(typed(buffers[0], Float32Array));
+    this.reconcileLocal(); // sliders the kernel has not answered yet stay as the page has them
     const ids = typed(buffers[1], Uint32Array);
     const rows = typed(buffers[2], Float32Array);
     const g = this.gpu;
@@ -243,4 +246,4 @@ export class Store {
   }
 }
 
-Object.assign(Store.prototype, clipMethods, cpuRowMethods);
+Object.assign(Store.prototype, clipMethods, cpuRowMethods, localWeightMethods);

@@ -81,6 +81,7 @@ export class SculptTool {
       const hit = view.rayPlane(e.clientX, e.clientY, d.plane);
       if (!hit) return;
       d.target.copy(hit).add(d.grab);
+      view.predictDrag?.(d); // GPU path: the face follows at once (./gpu_view.js)
       // No render here: the geometry update of this move redraws the marker at its
       // target (a render per pointer event doubled the GPU work of software WebGL
       // and slowed the kernel's round trip on 2 cores); see View.onAck for moves that
@@ -142,6 +143,7 @@ export class SculptTool {
       plane,
       grab: p0.clone().sub(hit), // keeps the marker from jumping to the pointer
       target: p0.clone(),
+      origin: p0.clone(), // where the marker was (the page's prediction: ./gpu_local.js)
       pointerId: e.pointerId,
     };
     view.hover = -1;
@@ -164,6 +166,7 @@ export class SculptTool {
       if (hit) d.target.copy(hit).add(d.grab);
     }
     if (cancel) this.client.cancel(); else this.client.end();
+    view.store.endLocalDrag();
     capture(view, d.pointerId, false);
     this.stopped();
   }
