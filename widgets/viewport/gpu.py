@@ -53,7 +53,7 @@ layer): otherwise playback stays in the kernel, which then sends parameters
 and residual rows per frame.
 
 The page moves the face before the kernel answers (``gpu_local.js``): the shape
-sliders a view follows (``Viewport.follow_sliders``, trait ``weight_sliders``)
+sliders a view follows (``Viewport.follow_sliders``, trait ``_weight_slider_ids``)
 and handle drags change the parameters in the page at once; ``_gpu_meta`` gives
 it the shapes' order (``names``), the rules of the played weights (``local``:
 muted shapes, correctives as products of their drivers, :func:`local_weight_rules`)

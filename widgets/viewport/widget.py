@@ -217,9 +217,9 @@ class Viewport(GestureAPI, OverlayAPI, anywidget.AnyWidget):
     # GPU evaluation (widgets.viewport.gpu): the rig once, then parameters per update
     gpu = t.Bool(True).tag(sync=True)
     fast_interaction = t.Enum(["auto", "on", "off"], "auto").tag(sync=True)
-    weight_sliders = t.Dict(value_trait=t.Instance(ipywidgets.Widget)).tag(
-        sync=True, **ipywidgets.widget_serialization
-    )
+    #: shape name -> slider model id (plain ids, not widget references: the page looks
+    #: the sliders up when it needs them, so the viewport never waits for their models)
+    _weight_slider_ids = t.Dict(value_trait=t.Unicode()).tag(sync=True)
     _gpu_mode = t.Unicode("stream").tag(sync=True)
     _gpu_meta = t.Dict().tag(sync=True)
     _gpu_neutral = t.Bytes(b"").tag(sync=True)
@@ -270,6 +270,8 @@ class Viewport(GestureAPI, OverlayAPI, anywidget.AnyWidget):
         #: receives marker drags instead of the model's handles (a plain attribute:
         #: RegionsPanel sets its pin drag, region brush or seed picker here)
         self.drag_handler: Any = None
+        #: the shape sliders the page plays itself (follow_sliders)
+        self.weight_sliders: dict[str, Any] = {}
         #: receives surface clicks and marker Alt-clicks instead of the model's handles: an
         #: object with ``pick(vertex)`` and optionally ``remove(index, vertex)`` (the Rig
         #: tab's landmark picker); ``None`` = add / remove model handles
@@ -464,6 +466,7 @@ class Viewport(GestureAPI, OverlayAPI, anywidget.AnyWidget):
         any wrinkle rows) follows and wins. Call again when the sliders are rebuilt.
         """
         self.weight_sliders = dict(sliders)
+        self._weight_slider_ids = {str(k): str(w.model_id) for k, w in self.weight_sliders.items()}
 
     @t.observe("gpu")
     def _on_gpu(self, change: Any) -> None:

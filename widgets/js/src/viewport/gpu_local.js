@@ -1,6 +1,6 @@
 // Sliders move the face in the browser first (GPU path): the shape sliders Python links to
-// the viewport (Viewport.follow_sliders, trait weight_sliders: shape name -> slider widget)
-// are watched here, in the page, and a moved slider's weight goes straight into the
+// the viewport (Viewport.follow_sliders; trait _weight_slider_ids: shape name -> model id)
+// (by model id: _weight_slider_ids) are watched here, in the page, and a moved slider's weight goes straight into the
 // parameters the views evaluate — no round trip through the kernel before the first pixels.
 // The kernel still gets the value (the slider's own comm message) and answers with its
 // parameters (and wrinkle rows); those win as soon as they show the slider's value, and a
@@ -25,26 +25,29 @@ export const localWeightMethods = {
     this.local = new Map(); // shape index -> { value, t }
     this.sliderModels = [];
     this.onWeightSliders = () => this.followSliders();
-    this.model.on("change:weight_sliders", this.onWeightSliders);
+    this.model.on("change:_weight_slider_ids", this.onWeightSliders);
     this.followSliders();
   },
 
   followSliders() {
     for (const [m, fn] of this.sliderModels) m.off("change:value", fn);
     this.sliderModels = [];
-    const refs = this.model.get("weight_sliders") || {};
+    const ids = this.model.get("_weight_slider_ids") || {};
     const manager = this.model.widget_manager;
     if (!manager) return;
     const token = (this.sliderToken = (this.sliderToken || 0) + 1);
-    for (const [name, ref] of Object.entries(refs)) {
-      const id = String(ref).replace(/^IPY_MODEL_/, "");
+    // a slider's model may not exist in the page yet (models load in any order): retry
+    const follow = (name, id, tries) => {
       Promise.resolve(manager.get_model(id)).then((m) => {
         if (!m || token !== this.sliderToken) return;
         const fn = () => this.localWeight(name, Number(m.get("value")));
         m.on("change:value", fn);
         this.sliderModels.push([m, fn]);
-      }).catch(() => { /* a slider closed meanwhile */ });
-    }
+      }).catch(() => {
+        if (tries > 0 && token === this.sliderToken) setTimeout(() => follow(name, id, tries - 1), 500);
+      });
+    };
+    for (const [name, id] of Object.entries(ids)) follow(name, String(id), 20);
   },
 
   // A slider moved in the page: play it now.
@@ -153,6 +156,6 @@ export const localWeightMethods = {
   disposeLocal() {
     for (const [m, fn] of this.sliderModels || []) m.off("change:value", fn);
     this.sliderModels = [];
-    this.model.off("change:weight_sliders", this.onWeightSliders);
+    this.model.off("change:_weight_slider_ids", this.onWeightSliders);
   },
 };
