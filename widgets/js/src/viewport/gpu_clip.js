@@ -40,8 +40,7 @@ export const clipMethods = {
         p.frame = f;
         p.time = c.start + f / c.fps;
         this.gpuParams = c.data.slice(f * c.width, (f + 1) * c.width);
-        this.positionsVersion += 1;
-        for (const v of this.views) v.clipFrame?.();
+        this.pageParamsChanged(); // ./gpu_local.js
       }
       p.raf = requestAnimationFrame(tick);
     };

@@ -1,6 +1,6 @@
 // Sliders move the face in the browser first (GPU path): the shape sliders Python links to
 // the viewport (Viewport.follow_sliders; trait _weight_slider_ids: shape name -> model id)
-// (by model id: _weight_slider_ids) are watched here, in the page, and a moved slider's weight goes straight into the
+// are watched here, in the page, and a moved slider's weight goes straight into the
 // parameters the views evaluate — no round trip through the kernel before the first pixels.
 // The kernel still gets the value (the slider's own comm message) and answers with its
 // parameters (and wrinkle rows); those win as soon as they show the slider's value, and a
@@ -62,23 +62,30 @@ export const localWeightMethods = {
     if (products.some((r) => r[0] === s)) return; // a derived shape plays its drivers' product
     this.local.set(s, { value, t: performance.now() });
     this.applyLocal(this.gpuParams);
+    this.pageParamsChanged();
+  },
+
+  // The page changed the parameters itself (a slider, a drag, a clip frame): every view
+  // draws them now, no kernel message involved.
+  pageParamsChanged() {
     this.positionsVersion += 1;
     this.lastUpdateTime = performance.now();
     for (const v of this.views) v.paramsChanged?.();
   },
 
   // A handle drag moved the pointer: `d` the view's drag (index, origin, target), `mirror`
-  // the handle it mirrors when the drag is symmetric (or -1). False: not predicted here.
+  // the handle it mirrors when the drag is symmetric (or -1). Not predicted (left to the
+  // kernel) outside GPU mode or when the handle shares its basis column.
   predictDrag(d, mirror) {
     const g = this.gpu;
     const P = this.gpuParams;
     const cols = (this.model.get("_gpu_meta") || {}).columns || [];
-    if (!this.gpuMode || !g || !P || this.clipPlay || cols.length <= d.index) return false;
+    if (!this.gpuMode || !g || !P || this.clipPlay || cols.length <= d.index) return;
     const share = (c) => cols.filter((x) => x === c).length;
     const col = cols[d.index];
     const colM = mirror >= 0 && mirror < cols.length ? cols[mirror] : -1;
     // a column shared by several handles holds their mean: leave that to the kernel
-    if (share(col) !== 1 || (colM >= 0 && (colM === col || share(colM) !== 1))) return false;
+    if (share(col) !== 1 || (colM >= 0 && (colM === col || share(colM) !== 1))) return;
     const at = (c) => g.k + 3 * c;
     if (!d.local) {
       const M = new THREE.Matrix4().fromArray(P, g.k + 3 * g.hu);
@@ -92,9 +99,7 @@ export const localWeightMethods = {
     const u = d.target.clone().sub(L.p0).applyMatrix3(L.toModel).add(L.u0);
     this.localHandle = { col, u: u.toArray(), colM, t: performance.now(), ending: false };
     this.applyLocalHandle(P);
-    this.positionsVersion += 1;
-    this.lastUpdateTime = performance.now();
-    return true;
+    this.pageParamsChanged();
   },
 
   // The drag ended: the kernel's next parameters are final.
@@ -123,29 +128,28 @@ export const localWeightMethods = {
     }
     if (!this.local || !this.local.size || !P) return;
     const now = performance.now();
-    const eff = this.effectiveLocal();
+    const { eff } = this.localRules();
     for (const [s, e] of this.local) {
       if (Math.abs(P[s] - eff.get(s)) < 1e-6 || now - e.t > LOCAL_MS) this.local.delete(s);
     }
     if (this.local.size) this.applyLocal(P);
   },
 
-  // shape index -> the weight it plays for its local slider value
-  effectiveLocal() {
-    const meta = this.model.get("_gpu_meta") || {};
-    const mute = new Set((meta.local && meta.local.mute) || []);
-    const out = new Map();
-    for (const [s, e] of this.local) out.set(s, mute.has(s) ? 0 : e.value);
-    return out;
+  // The kernel's rules ({mute: Set of shape indices, products}) and, per locally moved
+  // shape, the weight it plays for its slider value.
+  localRules() {
+    const local = (this.model.get("_gpu_meta") || {}).local || {};
+    const mute = new Set(local.mute || []);
+    const eff = new Map();
+    for (const [s, e] of this.local) eff.set(s, mute.has(s) ? 0 : e.value);
+    return { mute, products: local.products || [], eff };
   },
 
   applyLocal(P) {
     if (!this.local.size) return;
-    const meta = this.model.get("_gpu_meta") || {};
-    const mute = new Set((meta.local && meta.local.mute) || []);
-    const eff = this.effectiveLocal();
+    const { mute, products, eff } = this.localRules();
     for (const [s, w] of eff) P[s] = w;
-    for (const [s, drivers, lo, hi] of (meta.local && meta.local.products) || []) {
+    for (const [s, drivers, lo, hi] of products) {
       if (!drivers.some((d) => eff.has(d))) continue;
       let w = 1;
       for (const d of drivers) w *= mute.has(d) ? 0 : (eff.has(d) ? eff.get(d) : P[d]);

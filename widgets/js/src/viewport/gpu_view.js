@@ -218,19 +218,16 @@ export const gpuViewMethods = {
     this.el.setAttribute("data-clip-playing", "1");
   },
 
-  clipFrame() {
-    this.paramsChanged();
-  },
-
   // A handle drag moved (./tools.js): move the face in the page before the kernel answers
   // (./gpu_local.js predictDrag; the kernel's parameters follow and win).
   predictDrag(d) {
     if (!this.gpuOn() || !this.gpuDrawn) return;
     const mirror = this.model.get("symmetric") && this.handleMirror ? this.handleMirror[d.index] : -1;
-    if (this.store.predictDrag(d, mirror)) for (const v of this.store.views) v.paramsChanged();
+    this.store.predictDrag(d, mirror);
   },
 
-  // New parameters from the page itself (a clip frame, a slider: ./gpu_local.js): draw now.
+  // New parameters from the page itself (Store.pageParamsChanged: a clip frame, a slider, a
+  // drag): draw now.
   // At once unless the GPU still draws the last frame (then at the next display frame):
   // software WebGL queues frames, and a queue is latency.
   paramsChanged() {
