@@ -359,10 +359,31 @@ class NotebookPage:
         return box  # type: ignore[no-any-return]
 
     # ---- pixels
-    def screenshot(self, name: str, clip: dict[str, float] | None = None) -> np.ndarray:
-        """Save ``test-artifacts/<test>/<name>.png``; return (h, w, 3) uint8 pixels."""
+    def wait_full_detail(self, timeout: float = 30.0) -> None:
+        """Wait until no viewport shows a fast-interaction draft.
+
+        On a slow machine (software WebGL under load) a view draws a simplified face while
+        parameters change and the full mesh ~0.14 s after the last change
+        (widgets/js/src/viewport/gpu_draft.js); pictures compare full-detail frames.
+        """
+        self.page.wait_for_function(
+            """() => Array.from(document.querySelectorAll('.fwb-viewport'))
+                 .every(e => e.getAttribute('data-detail') !== 'draft')""",
+            timeout=timeout * 1000,
+        )
+
+    def screenshot(
+        self, name: str, clip: dict[str, float] | None = None, full_detail: bool = True
+    ) -> np.ndarray:
+        """Save ``test-artifacts/<test>/<name>.png``; return (h, w, 3) uint8 pixels.
+
+        ``full_detail``: first wait until every view shows full detail (not a draft);
+        False for a picture taken while a clip plays (it drafts until it stops).
+        """
         from PIL import Image
 
+        if full_detail:
+            self.wait_full_detail()
         self.artifacts.mkdir(parents=True, exist_ok=True)
         path = self.artifacts / f"{name}.png"
         png = self.page.screenshot(path=str(path), clip=clip)

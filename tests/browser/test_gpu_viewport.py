@@ -228,7 +228,7 @@ def test_playback_runs_in_the_browser_and_ends_on_the_kernels_frame(open_noteboo
         lambda t: t >= 0.6,
         timeout=30,
     )
-    mid = nb.screenshot("gpu_play_mid", clip=clip)
+    mid = nb.screenshot("gpu_play_mid", clip=clip, full_detail=False)  # drafts while playing
     t_mid = float(vp.get_attribute("data-clip-time") or 0)
     assert t_mid < 7.4, f"the screenshot came too late ({t_mid} s)"
     wait_until(
@@ -435,3 +435,41 @@ def test_a_handle_drag_moves_the_face_before_the_kernel_answers(open_notebook):
     _assert_gpu_equals_kernel(nb, size)
     at = nb.project([info["vertex"]])[0]
     assert np.linalg.norm(at[:2] - (start[:2] + np.array([30.0, -24.0]))) < 3.0, at
+
+
+# The kernel sends parameters (a message, version v + 2) and then the full update they
+# follow (state, v + 1) in the opposite order: what the page sees when the widget manager
+# is still decoding a full update as the next message arrives (it decodes state updates
+# asynchronously, custom messages fire at once).
+_OVERTAKE = """
+_v = vp._version
+vp._trait_values["_version"] = _v + 1
+model.set_weight("eyeBlinkLeft", 0.7)
+assert vp._version == _v + 2
+vp._trait_values["_version"] = _v
+vp._version = _v + 1
+vp._trait_values["_version"] = _v + 2
+print(json.dumps(_v + 2))
+"""
+
+
+def test_parameters_that_overtake_their_full_update_wait_for_it(open_notebook):
+    nb = _open(open_notebook, res="base")
+    vp = nb.viewport(0)
+    wait_until("GPU mode", lambda: vp.get_attribute("data-gpu"), lambda v: v == "1", timeout=60)
+    size = float(nb.kernel_eval(_SIZE))
+    fulls = nb.kernel_eval("print(json.dumps(vp.sync.updates_sent['full']))")
+    version = nb.kernel_eval(_OVERTAKE)
+    _wait_version(nb, version)
+    assert vp.get_attribute("data-gpu") == "1"
+    _assert_gpu_equals_kernel(nb, size)
+    # no full buffer was asked for: the held parameters were applied after the full update
+    assert nb.kernel_eval("print(json.dumps(vp.sync.updates_sent['full']))") == fulls
+    # a real gap (a message never sent) still ends in a full update, after a short wait
+    nb.kernel_eval('vp._trait_values["_version"] += 1\nmodel.set_weight("eyeBlinkLeft", 0.2)')
+    wait_until("the full update a gap asks for",
+               lambda: nb.kernel_eval("print(json.dumps(vp.sync.updates_sent['full']))"),
+               lambda n: n == fulls + 1, timeout=30)
+    _wait_version(nb, _kernel_version(nb))
+    assert vp.get_attribute("data-gpu") == "1"
+    _assert_gpu_equals_kernel(nb, size)

@@ -237,7 +237,7 @@ def test_scrub_drag_key_and_play(open_notebook):
              return s.size >= 3 ? Array.from(s) : false; }""",
         polling="raf",
     ).json_value()
-    nb.screenshot("playing")
+    nb.screenshot("playing", full_detail=False)  # a playing clip drafts
     root.locator(".fwb-tl-pause").click()
     _wait_py(nb, "tl.playing", lambda v: not v, timeout=10)
     stats = _py(nb, "tl.playback_stats")

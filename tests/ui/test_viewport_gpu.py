@@ -103,3 +103,92 @@ def test_the_workbench_links_its_shape_sliders_and_relinks_new_ones() -> None:
         assert wb.viewport.weight_sliders["fix"] is wb.panel.sliders["fix"]
     finally:
         wb.close()
+
+
+def _record_states(vp) -> list[set[str]]:
+    """The trait names of every state message the widget sends from now on."""
+    sent: list[set[str]] = []
+    send_state = vp.send_state
+
+    def record(key=None):
+        sent.append({key} if isinstance(key, str) else set(vp.keys if key is None else key))
+        return send_state(key)
+
+    vp.send_state = record
+    return sent
+
+
+@pytest.mark.parametrize("gpu", [False, True])
+def test_a_full_update_sends_what_python_kept_silently(gpu: bool) -> None:
+    """Patches keep ``_positions`` (streaming) or ``_gpu_params`` (GPU) current in Python
+    only; a full update of the same value must still reach the page, which would
+    otherwise read its own stale copy of the trait (a picture from before the patches)."""
+    from widgets import Viewport
+
+    m = workbench.load_sample("head")
+    vp = Viewport(m, height=200, gpu=gpu)
+    try:
+        if gpu:
+            vp._on_frontend_msg(vp, {"type": "gpu_ready"}, [])
+            assert vp._gpu_mode == "gpu"
+        messages: list[dict] = []
+        vp.send = lambda content, buffers=None: messages.append(content)  # patches / parameters
+        m.set_weight("eyeBlinkLeft", 0.6)  # a small change: a message, the trait kept silently
+        assert [c["type"] for c in messages] == ["gpu_params" if gpu else "patch"]
+        silent = "_gpu_params" if gpu else "_positions"
+        sent = _record_states(vp)
+        vp._on_frontend_msg(vp, {"type": "request_full", "have": 0}, [])  # the page lost track
+        assert any(silent in keys and "_version" in keys for keys in sent), sent
+        if gpu:
+            assert any("_gpu_residual" in keys for keys in sent), sent
+    finally:
+        vp.close()
+
+
+def test_assign_synced_sends_an_equal_value_and_keeps_it_on_error() -> None:
+    import ipywidgets as W
+    import traitlets
+
+    from widgets.viewport.common import assign_synced, store_silently
+
+    class Probe(W.DOMWidget):
+        data = traitlets.Bytes(b"").tag(sync=True)
+        count = traitlets.Int(0).tag(sync=True)
+
+    w = Probe()
+    sent = _record_states(w)
+    store_silently(w, data=b"abc")
+    assert sent == [] and w.data == b"abc"
+    with w.hold_sync():
+        w.data = b"abc"  # plain assignment of an equal value: nothing to send
+    assert all("data" not in keys for keys in sent)
+    sent.clear()
+    with w.hold_sync():
+        assign_synced(w, data=b"abc", count=1)
+    assert sent == [{"data", "count"}] and w.data == b"abc" and w.count == 1
+    with pytest.raises(traitlets.TraitError):
+        assign_synced(w, count="not a number")
+    assert w.count == 1
+    w.close()
+
+
+def test_a_resync_with_the_rig_sends_the_rig_again() -> None:
+    """``request_full`` with ``rig``: the page missed the switch to GPU mode (it has no rig),
+    so the full update carries the rig and the mode again, equal values or not."""
+    from widgets import Viewport
+
+    m = workbench.load_sample("head")
+    vp = Viewport(m, height=200, gpu=True)
+    try:
+        vp._on_frontend_msg(vp, {"type": "gpu_ready"}, [])
+        rig = {"_gpu_neutral", "_gpu_morph_index", "_gpu_morph_entries", "_gpu_gain", "_gpu_meta"}
+        sent = _record_states(vp)
+        vp._on_frontend_msg(vp, {"type": "request_full", "have": 0}, [])
+        assert not rig & set().union(*sent), sent  # a plain resync: parameters, not the rig
+        sent.clear()
+        vp._on_frontend_msg(vp, {"type": "request_full", "have": 0, "rig": True}, [])
+        keys = set().union(*sent)
+        assert rig <= keys and {"_gpu_mode", "_gpu_params", "_gpu_residual", "_version"} <= keys, keys
+        assert vp._gpu_mode == "gpu"
+    finally:
+        vp.close()

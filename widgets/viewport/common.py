@@ -178,3 +178,34 @@ def changed_rows(new: np.ndarray, old: np.ndarray, tolerance: float) -> np.ndarr
         mask |= new[:, 1] != old[:, 1]
         mask |= new[:, 2] != old[:, 2]
     return np.flatnonzero(mask)
+
+
+# ------------------------------------------------------------------ silent traits
+# A trait the page gets changes of as messages (patches, GPU parameters) is kept current
+# in Python without syncing it (store_silently): a reloaded page reads it whole. Python's
+# value is then newer than the page's copy of the trait, and traitlets does not send an
+# assignment of an equal value: a full update must go through assign_synced, or the page
+# would read its stale copy (a picture from before the patches).
+_UNSENT = object()
+
+
+def store_silently(widget: Any, **values: Any) -> None:
+    """Keep these traits current in Python only (the page got the change as a message)."""
+    for name, value in values.items():
+        widget._trait_values[name] = value
+
+
+def assign_synced(widget: Any, **values: Any) -> None:
+    """Assign traits so that every one reaches the page, equal to Python's value or not.
+
+    Call inside ``widget.hold_sync()`` to send them with the rest of a full update in one
+    message.
+    """
+    for name, value in values.items():
+        old = widget._trait_values.get(name, _UNSENT)
+        widget._trait_values[name] = _UNSENT  # any value is a change from this
+        try:
+            setattr(widget, name, value)
+        except Exception:
+            widget._trait_values[name] = old
+            raise

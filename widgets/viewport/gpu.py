@@ -80,7 +80,14 @@ from typing import Any
 
 import numpy as np
 
-from widgets.viewport.common import SPARSE_FRACTION, changed_rows, f32_bytes, u32_bytes
+from widgets.viewport.common import (
+    SPARSE_FRACTION,
+    assign_synced,
+    changed_rows,
+    f32_bytes,
+    store_silently,
+    u32_bytes,
+)
 from workbench.animation.family import head_matrix
 from workbench.core.families import weight_products
 
@@ -239,9 +246,8 @@ class GpuSync:
             self.neutral = np.asarray(view.vertices32, np.float32)
             self.k = len(view.shape_names)
             with w.hold_sync():
-                w._gpu_neutral = f32_bytes(self.neutral)
-                w._gpu_morph_index = u32_bytes(index)
-                w._gpu_morph_entries = data
+                assign_synced(w, _gpu_neutral=f32_bytes(self.neutral), _gpu_morph_index=u32_bytes(index),
+                              _gpu_morph_entries=data)
                 self.morph_key = key
                 self.set_meta(half=half, nnz=int(entries.shape[0]), k=self.k, n=n,
                               names=list(view.shape_names),
@@ -267,7 +273,7 @@ class GpuSync:
                 P[:, : self.hu] = B
                 basis = P.tobytes()
             with w.hold_sync():
-                w._gpu_basis = basis
+                assign_synced(w, _gpu_basis=basis)
                 self.basis_key = bkey
                 self.set_meta(hu=self.hu, basis=int(w._gpu_meta.get("basis", 0)) + 1,
                               columns=[] if self.columns is None else self.columns.tolist())
@@ -281,7 +287,7 @@ class GpuSync:
             if self.gain is None or not np.array_equal(gain, self.gain):
                 self.gain = gain
                 with w.hold_sync():
-                    w._gpu_gain = f32_bytes(gain)
+                    assign_synced(w, _gpu_gain=f32_bytes(gain))
                     self.set_meta(gain=int(w._gpu_meta.get("gain", 0)) + 1)
                 self.updates_sent["gain"] += 1
 
@@ -317,8 +323,7 @@ class GpuSync:
             self.residual = residual.copy()
             version = w._version + 1
             with w.hold_sync():
-                w._gpu_residual = f32_bytes(residual)
-                w._gpu_params = params.tobytes()
+                assign_synced(w, _gpu_residual=f32_bytes(residual), _gpu_params=params.tobytes())
                 w._gpu_mode = "gpu"
                 w._version = version
             self.residual_stale = False
@@ -329,19 +334,17 @@ class GpuSync:
             # e.g. regions switched on: the whole residual, once, as a trait
             self.residual = residual.copy()
             with w.hold_sync():
-                w._gpu_residual = f32_bytes(residual)
-                w._gpu_params = params.tobytes()
+                assign_synced(w, _gpu_residual=f32_bytes(residual), _gpu_params=params.tobytes())
                 w._version = w._version + 1
             return
         self.residual[ids] = rows
         version = w._version + 1
-        w._trait_values["_version"] = version
-        w._trait_values["_gpu_params"] = params.tobytes()
+        store_silently(w, _version=version, _gpu_params=params.tobytes())
         if ids.size:
             self.residual_stale = True
         if tolerance == 0 and self.residual_stale:
             # silent: a reloaded page gets the current residual (not mid-drag: 1 MB at 80k)
-            w._trait_values["_gpu_residual"] = f32_bytes(self.residual)
+            store_silently(w, _gpu_residual=f32_bytes(self.residual))
             self.residual_stale = False
         content: dict[str, Any] = {"type": "gpu_params", "version": version, "count": int(ids.size),
                                    "k": self.k, "hu": self.hu}

@@ -50,9 +50,11 @@ from widgets.viewport.common import (
     DRAG_TOLERANCE,
     SPARSE_FRACTION,
     STRAIN_TOLERANCE,
+    assign_synced,
     changed_rows,
     f32_bytes,
     neutral_bounds,
+    store_silently,
     u32_bytes,
 )
 from widgets.viewport.gpu import GpuSync
@@ -182,7 +184,7 @@ class SceneSync:
                 return
             self.last[changed] = pos[changed]
             version = w._version + 1
-            w._trait_values["_version"] = version
+            store_silently(w, _version=version)
             if tolerance == 0:
                 self.store_positions_silently()
             else:
@@ -195,11 +197,19 @@ class SceneSync:
             w.send(content, buffers=[u32_bytes(changed), f32_bytes(pos[changed])])
             self.updates_sent["patch"] += 1
 
+    def resync(self, rig: bool = False) -> None:
+        """The page lost track: send the full state (``rig``: the GPU rig too, which the page
+        lacks when it missed the update that switched it to GPU mode)."""
+        with self.model.lock, self.lock:
+            if rig:
+                self.gpu.reset()
+            self.push_geometry(force_full=True)
+
     def store_positions_silently(self) -> None:
         # Silent update: a page reload must get the current full buffer, but
         # syncing it would send the full buffer that patches avoid.
         assert self.last is not None
-        self.widget._trait_values["_positions"] = f32_bytes(self.last)
+        store_silently(self.widget, _positions=f32_bytes(self.last))
         self.positions_stale = False
 
     def send_full(self, pos: np.ndarray, faces: np.ndarray | None) -> None:
@@ -222,8 +232,7 @@ class SceneSync:
                 w._neutral_bounds = neutral_bounds(model)
                 w._faces = u32_bytes(faces.reshape(-1))
                 w._topology = w._topology + 1
-            w._positions = f32_bytes(pos)
-            w._version = w._version + 1
+            assign_synced(w, _positions=f32_bytes(pos), _version=w._version + 1)
         self.updates_sent["full"] += 1
 
     # ------------------------------------------------------------- paint overlay
@@ -263,8 +272,7 @@ class SceneSync:
             last[changed] = weights[changed]
             version = w._paint_version + 1
             # Silent: a reloaded page gets the current weights without a full sync here.
-            w._trait_values["_paint_version"] = version
-            w._trait_values["_paint_weights"] = f32_bytes(last)
+            store_silently(w, _paint_version=version, _paint_weights=f32_bytes(last))
             w.send(
                 {"type": "paint_patch", "version": version, "count": int(changed.size)},
                 buffers=[u32_bytes(changed), f32_bytes(weights[changed])],
@@ -276,8 +284,8 @@ class SceneSync:
         self.paint_last = None if weights is None else np.array(weights, dtype=np.float32)
         self.paint_last_ref = weights
         with w.hold_sync():
-            w._paint_weights = b"" if weights is None else f32_bytes(weights)
-            w._paint_version = w._paint_version + 1
+            assign_synced(w, _paint_weights=b"" if weights is None else f32_bytes(weights),
+                          _paint_version=w._paint_version + 1)
         self.paint_updates_sent["full"] += 1
 
     def resend_paint(self) -> None:

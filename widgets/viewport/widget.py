@@ -519,7 +519,7 @@ class Viewport(GestureAPI, OverlayAPI, anywidget.AnyWidget):
             if was:
                 self.errors.guard("Viewport resync")(self.sync.push_geometry)(force_full=True)
         elif kind == "request_full":
-            self.errors.guard("Viewport resync")(self.sync.push_geometry)(force_full=True)
+            self.errors.guard("Viewport resync")(self.sync.resync)(rig=bool(content.get("rig")))
         elif kind == "request_paint":
             self.errors.guard("Viewport paint resync")(self.sync.resend_paint)()
         elif kind == "add_handle":

@@ -51,6 +51,7 @@ export default {
     const onFull = () => store.loadFull();
     const onPaintFull = () => store.loadPaintFull();
     const onRig = () => { store.loadGpuRig(); store.notify(); };
+    const onParamsTrait = () => store.gpuParamsTraitChanged();
     const onMsg = (content, buffers) => {
       if (!content) return;
       if (content.type === "gpu_play") store.playClip(content);
@@ -74,12 +75,14 @@ export default {
     model.on("change:_topology", onFull);
     model.on("change:_paint_version", onPaintFull);
     model.on("change:_gpu_meta", onRig);
+    model.on("change:_gpu_params", onParamsTrait);
     model.on("msg:custom", onMsg);
     return () => {
       model.off("change:_version", onFull);
       model.off("change:_topology", onFull);
       model.off("change:_paint_version", onPaintFull);
       model.off("change:_gpu_meta", onRig);
+      model.off("change:_gpu_params", onParamsTrait);
       model.off("msg:custom", onMsg);
       store.disposeLocal();
       STORES.delete(model.get("_uid"));

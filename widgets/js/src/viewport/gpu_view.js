@@ -91,7 +91,7 @@ export const gpuViewMethods = {
     this.el.fwbGpuState = () => ({
       on: this.gpuOn(), reason: this.gpuReason, params: Array.from(this.store.gpuParams || []),
       evaluations: this.gpu ? this.gpu.evaluations : 0, playing: !!this.store.clipPlay,
-      textureBytes: this.gpu ? this.gpu.textureBytes() : 0,
+      textureBytes: this.gpu ? this.gpu.textureBytes() : 0, missing: this.store.gpuMissing(),
     });
   },
 

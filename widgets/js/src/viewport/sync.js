@@ -15,12 +15,18 @@
 //               (k weights, hu*3 shell offsets, 16 head matrix), residual ids u32, rows f32]
 // in the same version sequence as patches; the views evaluate it (./gpu_morph.js) and read
 // positions back when they need them on the CPU (picking, markers).
-// A version gap (a missed update) asks Python for a full buffer: request_full / request_paint.
+// Ordering: the widget manager decodes state updates asynchronously (a promise chain) but
+// fires custom messages at once, so a message can arrive before the full update Python sent
+// just before it. A message ahead of the version we have waits (held) until the full
+// update brings us to the version before it; only a gap that lasts GAP_MS (a really
+// missed update) asks Python for a full buffer: request_full / request_paint.
 import { clipMethods } from "./gpu_clip.js";
 import { cpuRowMethods } from "./gpu_cpu.js";
 import { localWeightMethods } from "./gpu_local.js";
 import { padded, texRows } from "./gpu_morph.js";
 import { typed } from "./util.js";
+
+const GAP_MS = 1000;
 
 export class Store {
   constructor(model) {
@@ -40,6 +46,8 @@ export class Store {
     this.gpuParams = null; // Float32Array: weights, shell offsets, head matrix
     this.gpuMode = false; // Python sends parameters instead of vertex rows
     this.meta = {};
+    this.held = []; // geometry messages ahead of our version: [content, buffers]
+    this.gapTimer = null;
   }
 
   // The rig traits (on load and whenever _gpu_meta changes): only the parts whose version moved.
@@ -117,17 +125,25 @@ export class Store {
 
   // Is the GPU state complete and consistent with the positions / faces we have?
   gpuReady() {
+    return !this.gpuMissing();
+  }
+
+  // What the GPU path lacks ("" when ready): the test hook's diagnosis (fwbGpuState).
+  gpuMissing() {
     const g = this.gpu;
-    return !!(this.gpuMode && g && g.index && g.base && g.gain && this.gpuParams &&
-      this.positions && this.positions.length === g.n * 3 &&
-      this.gpuParams.length >= g.k + 3 * g.hu + 16);
+    if (!this.gpuMode) return "mode";
+    if (!g) return "rig";
+    if (!g.index || !g.base || !g.gain) return "rig textures";
+    if (!this.gpuParams) return "parameters";
+    if (!this.positions || this.positions.length !== g.n * 3) return "vertex count";
+    if (this.gpuParams.length < g.k + 3 * g.hu + 16) return "parameter count";
+    return "";
   }
 
   applyGpuParams(content, buffers) {
-    if (!this.positions) return;
     if (content.version <= this.version) return;
-    if (content.version !== this.version + 1 || !this.gpu) {
-      this.model.send({ type: "request_full", have: this.version });
+    if (content.version !== this.version + 1 || !this.gpu || !this.positions) {
+      this.hold(content, buffers);
       return;
     }
     this.gpuMode = true;
@@ -211,15 +227,52 @@ export class Store {
     this.positionsVersion += 1;
     this.loadGpuFull();
     this.notify();
+    this.replayHeld();
+  }
+
+  // Python changes _gpu_params only in GPU mode, after the rig: a page that sees it change
+  // without either missed the update that switched it (seen once in ~20 runs of a browser
+  // test: the model showed the later update but not the switch). Ask for all of it, once
+  // per version.
+  gpuParamsTraitChanged() {
+    const m = this.model;
+    if (m.get("_gpu_mode") === "gpu" && (m.get("_gpu_meta") || {}).n) return;
+    if (this.rigAsked === m.get("_version")) return;
+    this.rigAsked = m.get("_version");
+    m.send({ type: "request_full", have: this.version, rig: true });
+  }
+
+  // A geometry message (gpu_params / patch) ahead of our version: keep it for the full
+  // update it overtook; ask Python for a full buffer if none comes.
+  hold(content, buffers) {
+    this.held.push([content, buffers]);
+    if (!this.gapTimer) {
+      this.gapTimer = setTimeout(() => {
+        this.gapTimer = null;
+        if (!this.held.length) return;
+        this.held = [];
+        this.model.send({ type: "request_full", have: this.version, rig: !this.gpu });
+      }, GAP_MS);
+    }
+  }
+
+  // Apply the held messages that follow our version now (in order), drop older ones.
+  replayHeld() {
+    if (!this.held.length) return;
+    const held = this.held.sort((a, b) => a[0].version - b[0].version);
+    this.held = [];
+    for (const [content, buffers] of held) {
+      if (content.version <= this.version) continue;
+      if (content.type === "gpu_params") this.applyGpuParams(content, buffers);
+      else this.applyPatch(content, buffers); // a later gap holds it again
+    }
+    if (!this.held.length) { clearTimeout(this.gapTimer); this.gapTimer = null; }
   }
 
   applyPatch(content, buffers) {
-    if (!this.positions) return;
     if (content.version <= this.version) return; // stale (already in a newer full state)
-    if (content.version !== this.version + 1) {
-      // A gap means we missed an update (e.g. reload race): ask Python for a full buffer.
-      // This is the only kernel message the viewport ever sends, and only on error.
-      this.model.send({ type: "request_full", have: this.version });
+    if (content.version !== this.version + 1 || !this.positions) {
+      this.hold(content, buffers); // a full update still being decoded, or a missed one
       return;
     }
     const ids = typed(buffers[0], Uint32Array);
