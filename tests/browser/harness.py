@@ -262,8 +262,9 @@ class NotebookPage:
     def run_all(self, timeout: float = 180.0, lost_after: float = 15.0) -> dict[str, Any]:
         """Run every cell; wait until all ran and the kernel is idle; fail on errors.
 
-        Raises :class:`LostCellReply` when a cell's reply is missing for ``lost_after``
-        seconds while later cells finished and the kernel idles.
+        Raises :class:`LostCellReply` when, for ``lost_after`` seconds, the kernel idles
+        and nothing moves while a cell has no reply (later cells finished, or cells are
+        still queued).
         """
         # Fire and poll: the command's promise settles only when every cell has run, and a
         # page.evaluate awaiting it has no timeout (a lost reply hung a CI run for 40 min).
@@ -273,6 +274,7 @@ class NotebookPage:
         deadline = time.monotonic() + timeout
         st: dict[str, Any] | None = None
         stalled_since: float | None = None
+        stalled_counts: list[Any] | None = None
         while time.monotonic() < deadline:
             st = self.state()
             if st and st["errors"]:
@@ -284,19 +286,24 @@ class NotebookPage:
                 and all(c is not None for c in st["counts"])
             ):
                 return st
-            # a cell without a count while a LATER cell has one and the kernel idles
+            # a cell without a count while a LATER cell has one and the kernel idles, or
+            # cells still queued while the kernel idles and nothing moves (their replies
+            # were lost: seen once in CI, counts [1, None, None] for 180 s)
             lost = bool(
                 st
                 and st["kernel"] == "idle"
-                and any(
-                    c is None and any(d is not None for d in st["counts"][i + 1 :])
-                    for i, c in enumerate(st["counts"])
+                and (
+                    any(
+                        c is None and any(d is not None for d in st["counts"][i + 1 :])
+                        for i, c in enumerate(st["counts"])
+                    )
+                    or st["pending"] > 0
                 )
             )
             if not lost:
                 stalled_since = None
-            elif stalled_since is None:
-                stalled_since = time.monotonic()
+            elif stalled_since is None or stalled_counts != st["counts"]:  # type: ignore[index]
+                stalled_since, stalled_counts = time.monotonic(), st["counts"]  # type: ignore[index]
             elif time.monotonic() - stalled_since > lost_after:
                 raise LostCellReply(f"notebook {self.name}: a cell reply never arrived: {st}")
             time.sleep(0.2)
