@@ -1,12 +1,35 @@
-"""Shared fixtures for the core tests: tiny hand-checkable models."""
+"""Shared fixtures for the core tests: tiny hand-checkable models.
+
+Every test run has the UI-thread guard on (``WORKBENCH_UI_THREAD_GUARD``, see
+``widgets/_threading.py``): a widget changed off the UI thread raises, and a
+test after which the guard recorded any violation fails.
+"""
 
 from __future__ import annotations
+
+import os
+import sys
+
+os.environ.setdefault("WORKBENCH_UI_THREAD_GUARD", "1")
 
 import numpy as np
 import pytest
 from grid_meshes import grid_polygons
 
 from workbench.model import BlendShape, FaceModel
+
+
+@pytest.fixture(autouse=True)
+def _widgets_stay_on_the_ui_thread():
+    """Fail a test after which a widget was changed, or a comm message sent, off the UI thread."""
+    guard = sys.modules.get("widgets._threading")
+    before = len(guard.thread_violations) if guard is not None else 0
+    yield
+    guard = sys.modules.get("widgets._threading")
+    if guard is not None and len(guard.thread_violations) > before:
+        found = guard.thread_violations[before:]
+        del guard.thread_violations[before:]
+        pytest.fail(f"widgets changed off the UI thread: {found}")
 
 
 @pytest.fixture

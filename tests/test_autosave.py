@@ -100,3 +100,75 @@ def test_save_errors_are_reported_not_raised(tiny_model: FaceModel, tmp_path: Pa
     saver.close()
     with pytest.raises(ValueError, match="plain file stem"):
         Autosaver(tiny_model, "a/b", folder=tmp_path)
+
+
+class _ManualScheduler:
+    """A scheduler whose timers fire when the test says (as a kernel's loop, on the test's thread)."""
+
+    def __init__(self) -> None:
+        self.timers: list[list] = []
+        self.delivered: list = []
+
+    def call_later(self, delay, callback):
+        entry = [delay, callback, False]
+        self.timers.append(entry)
+
+        class _Handle:
+            def cancel(self) -> None:
+                entry[2] = True
+
+        return _Handle()
+
+    def call_soon_threadsafe(self, callback) -> None:
+        self.delivered.append(callback)
+
+    def fire(self) -> None:
+        due, self.timers = self.timers, []
+        for _delay, callback, cancelled in due:
+            if not cancelled:
+                callback()
+
+    def run_delivered(self) -> None:
+        due, self.delivered = self.delivered, []
+        for callback in due:
+            callback()
+
+
+def test_snapshot_is_taken_when_the_timer_fires_and_later_edits_do_not_reach_it(
+    tiny_model: FaceModel, tmp_path: Path
+) -> None:
+    import threading
+
+    from workbench.fileformat import load_model
+
+    sched = _ManualScheduler()
+    states: list[tuple[str, threading.Thread]] = []
+    saver = Autosaver(tiny_model, "snap", delay=1.0, folder=tmp_path, scheduler=sched)
+    saver.changed.connect(lambda st: states.append((st, threading.current_thread())))
+    tiny_model.set_weight("up", 0.25)
+    tiny_model.set_weight("up", 0.5)
+    assert len([t for t in sched.timers if not t[2]]) == 1  # debounced: one live timer
+    sched.fire()  # the snapshot is taken here, on this thread
+    tiny_model.set_weight("up", 0.9)  # an edit after the snapshot: not in this save
+    saver.wait(10)
+    assert saver.state == "pending" and saver.saves == 0  # the result is not delivered yet
+    sched.run_delivered()  # the writer handed its result back to the scheduler's thread
+    assert saver.state == "saved" and saver.saves == 1
+    assert all(th is threading.current_thread() for _st, th in states)
+    assert load_model(saver.path).weights["up"] == pytest.approx(0.5)
+    saver.close()
+
+
+def test_a_drag_in_progress_postpones_the_snapshot(tiny_model: FaceModel, tmp_path: Path) -> None:
+    sched = _ManualScheduler()
+    saver = Autosaver(tiny_model, "later", delay=1.0, folder=tmp_path, scheduler=sched)
+    tiny_model.set_weight("up", 0.2)
+    token = tiny_model.begin_interaction("drag")
+    sched.fire()
+    assert saver._writing is None and len(sched.timers) == 1  # re-armed, nothing written
+    tiny_model.end_interaction(token)
+    sched.fire()
+    saver.wait(10)
+    sched.run_delivered()
+    assert saver.state == "saved"
+    saver.close()

@@ -1,39 +1,46 @@
-"""Error reporting and thread helpers shared by the notebook widgets.
+"""The UI thread: error reporting, event-loop timers, slider bursts, and a guard.
 
-Widget callbacks run in places where an exception is easy to lose: psygnal
-callbacks fired by a model edit made on another thread, ipywidgets ``observe``
-handlers called while the kernel processes a comm message (possibly on a
-kernel *subshell* thread, see ``widgets/jupyter_settings/overrides.json``),
-and ``threading.Timer`` callbacks. :class:`ErrorSink` catches them and appends
-the traceback to an ``ipywidgets.Output`` (via ``append_stderr``, which works
-from any thread, unlike ``with output:`` that depends on the current cell) and
-to the ``widgets`` logger.
+ipywidgets keeps per-widget state with no lock (``hold_sync``,
+``_states_to_send``, ``_property_lock``) and expects every trait change and
+comm message on the kernel's main thread, the thread whose asyncio loop
+handles the comm messages (``widgets/jupyter_settings/overrides.json`` keeps
+JupyterLab from sending them over a subshell thread). Everything here keeps
+the widgets on that one *UI thread*, as napari keeps Qt on its main thread:
 
-:class:`InteractionGrouper` turns a stream of slider updates into one
-:meth:`workbench.FaceModel.interaction` (one undo step): ipywidgets does not
-tell Python when a slider drag ends, so the interaction ends after a short
-idle time. Hand-written because neither ipywidgets nor psygnal offers an
-"idle timeout around a context manager".
+* :class:`UiTimer` / :func:`ui_loop`: timers on the kernel's event loop
+  (``loop.call_later``), never ``threading.Timer``; :func:`call_on_ui_thread`
+  hands a worker's result back with ``call_soon_threadsafe``.
+* :func:`install_thread_guard`: a debug guard (``WORKBENCH_UI_THREAD_GUARD=1``,
+  on in every test run) that raises, and records, when a widget trait is set
+  or a comm message is sent off the UI thread.
+* :class:`ErrorSink`: widget callbacks' exceptions go to an
+  ``ipywidgets.Output`` (``append_stderr``) and the ``widgets`` logger.
+* :class:`InteractionGrouper`: a slider drag is one
+  :meth:`workbench.FaceModel.interaction` (one undo step). The page says when
+  it ends: the viewport's front end reports a pointer press and release on a
+  slider (:func:`slider_pointer`), sent only after the page has sent every
+  value it set. An idle timer ends a burst only where no page reported a
+  press (a keyboard nudge, a slider shown without a viewport), and a long one
+  covers a page that vanished mid-drag.
+* :func:`close_interactions`: ends every interaction widgets hold open on a
+  model before a discrete edit (Key, Import, a drag's start, undo ...), so the
+  edit is an undo step of its own.
 
-:func:`close_interactions` ends every interaction that widgets hold open on a
-model before a discrete edit (Key, Import, a drag's start, undo ...). Pointer
-gestures (``widgets.viewport.gestures``) and slider bursts hold an interaction
-*token* (``model.begin_interaction(label, on_close=...)``), so this is
-``model.close_interaction()``: the model ends the open one (one undo step) and
-tells its owner through ``on_close``. Without it such an edit made within the
-idle time of a slider drag would join the drag's interaction and share its undo
-step ("Drag jawOpen" swallowing "Key 1 weights"), and ``set_time`` / ``undo``,
-which refuse to run inside an interaction, would fail.
+Hand-written because neither ipywidgets nor psygnal offers a thread guard or
+"an idle timeout around a context manager" on the kernel's loop.
 """
 
 from __future__ import annotations
 
+import asyncio
 import functools
 import logging
+import os
 import threading
 import traceback
 import weakref
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from typing import Any, TypeVar
 
 import ipywidgets
@@ -41,6 +48,149 @@ import ipywidgets
 log = logging.getLogger("widgets")
 
 F = TypeVar("F", bound=Callable[..., Any])
+
+#: the thread that owns the widgets (the kernel's main thread)
+_ui_thread: threading.Thread = threading.main_thread()
+#: the UI thread's running event loop, remembered when first seen running there
+_ui_loop: asyncio.AbstractEventLoop | None = None
+
+
+def on_ui_thread() -> bool:
+    """True on the thread that owns the widgets (the kernel's main thread)."""
+    return threading.current_thread() is _ui_thread
+
+
+@contextmanager
+def ui_thread_is(thread: threading.Thread) -> Iterator[None]:
+    """Treat ``thread`` as the UI thread inside the block (a test running its own loop there)."""
+    global _ui_thread, _ui_loop
+    saved = _ui_thread, _ui_loop
+    _ui_thread, _ui_loop = thread, None
+    try:
+        yield
+    finally:
+        _ui_thread, _ui_loop = saved
+
+
+def ui_loop() -> asyncio.AbstractEventLoop | None:
+    """The UI thread's running event loop (the kernel's), or None where none runs (a script).
+
+    Remembered the first time it is seen running on the UI thread (any widget
+    built in a notebook cell or comm handler), so a worker thread can hand
+    work back to it.
+    """
+    global _ui_loop
+    if on_ui_thread():
+        try:
+            loop = asyncio.get_running_loop()
+        except RuntimeError:
+            loop = None
+        if loop is not None:
+            _ui_loop = loop
+            return loop
+    known = _ui_loop
+    if known is not None and known.is_running() and not known.is_closed():
+        return known
+    return None
+
+
+def call_on_ui_thread(fn: Callable[[], Any]) -> None:
+    """Run ``fn`` on the UI thread: now if this is it, else through the loop's ``call_soon_threadsafe``.
+
+    With no loop known (a script without an event loop) ``fn`` runs here.
+    """
+    if on_ui_thread():
+        fn()
+        return
+    loop = ui_loop()
+    if loop is None:
+        fn()
+    else:
+        loop.call_soon_threadsafe(fn)
+
+
+class UiTimer:
+    """A one-shot timer on the UI thread's event loop; :meth:`cancel` stops it.
+
+    Created on the UI thread (widget callbacks are). Where no event loop runs
+    (a script, a unit test) nothing is scheduled (:attr:`armed` is False): the
+    owner's explicit ``flush``/``close`` ends what the timer would have.
+    """
+
+    def __init__(self, delay: float, callback: Callable[[], None]) -> None:
+        loop = ui_loop()
+        self._handle: asyncio.TimerHandle | None = (
+            loop.call_later(max(float(delay), 0.0), callback) if loop is not None else None
+        )
+
+    @property
+    def armed(self) -> bool:
+        return self._handle is not None and not self._handle.cancelled()
+
+    def cancel(self) -> None:
+        if self._handle is not None:
+            self._handle.cancel()
+            self._handle = None
+
+
+class UiScheduler:
+    """A :class:`workbench.autosave.Scheduler` for notebooks: timers on the kernel's loop, results on the UI thread."""
+
+    def call_later(self, delay: float, callback: Callable[[], Any], /) -> UiTimer:
+        return UiTimer(delay, callback)
+
+    def call_soon_threadsafe(self, callback: Callable[[], Any], /) -> None:
+        call_on_ui_thread(callback)
+
+
+# ------------------------------------------------------------------ the guard
+#: what the guard caught (one line each); tests assert it stays empty
+thread_violations: list[str] = []
+_guard_installed = False
+
+
+class UiThreadError(RuntimeError):
+    """A widget was changed, or a comm message sent, off the UI thread."""
+
+
+def _check_thread(what: str) -> None:
+    if on_ui_thread():
+        return
+    text = f"{what} on thread {threading.current_thread().name!r}, not the UI thread"
+    thread_violations.append(text)
+    raise UiThreadError(text)
+
+
+def install_thread_guard() -> None:
+    """Raise :class:`UiThreadError` when a widget trait changes or a comm message goes out off the UI thread.
+
+    A debug aid, on when ``WORKBENCH_UI_THREAD_GUARD=1`` (every test run sets
+    it, the browser tests for their kernels too). Each violation is also kept
+    in :data:`thread_violations`, since callbacks may swallow the exception.
+    """
+    global _guard_installed
+    if _guard_installed:
+        return
+    _guard_installed = True
+    widget = ipywidgets.Widget
+    notify, send = widget.notify_change, widget._send
+
+    @functools.wraps(notify)
+    def notify_change(self: Any, change: Any) -> Any:
+        _check_thread(f"{type(self).__name__}.{change.get('name', '?')} set")
+        return notify(self, change)
+
+    @functools.wraps(send)
+    def _send(self: Any, msg: Any, buffers: Any = None) -> Any:
+        _check_thread(f"{type(self).__name__} comm message {msg.get('method', '?')!r} sent")
+        return send(self, msg, buffers)
+
+    widget.notify_change = notify_change
+    widget._send = _send
+
+
+if os.environ.get("WORKBENCH_UI_THREAD_GUARD", "") not in ("", "0"):
+    install_thread_guard()
 
 
 class ErrorSink:
@@ -97,85 +247,124 @@ def close_interactions(model: Any, *, bursts_only: bool = False) -> None:
 
     Call before a discrete edit (a key, an import, undo, the start of a drag),
     so the edit is an undo step of its own instead of joining a slider drag
-    whose idle timer has not fired yet. The open token interaction is closed
-    with ``model.close_interaction()`` (its owner is told through ``on_close``).
+    still held. The open token interaction is closed with
+    ``model.close_interaction()`` (its owner is told through ``on_close``).
     ``bursts_only``: only a slider burst (an :class:`InteractionGrouper`'s);
     pointer drags stay open.
     """
-    token = getattr(model, "interaction_token", None)
-    if token is not None and (not bursts_only or token in _burst_tokens):
-        model.close_interaction()
+    close = getattr(model, "close_interaction", None)  # a rig session has no interactions
+    if close is not None:
+        close(kind="burst" if bursts_only else None)
 
 
-#: tokens of the open slider bursts (``close_interactions(bursts_only=True)`` closes only these)
-_burst_tokens: weakref.WeakSet[Any] = weakref.WeakSet()
+class SliderPointer:
+    """What the page said about the pointer on a slider: pressed, or released.
+
+    The viewport's front end watches pointer presses on any ipywidgets slider
+    of its page and sends ``slider_pointer`` messages (down / up); the up is
+    sent only once the page has sent every widget state it had buffered, so
+    the slider's last value reaches the kernel before it. ``up`` ends every
+    open slider burst: a drag is one undo step because the page says when it
+    ends.
+    """
+
+    def __init__(self) -> None:
+        self.held = False
+        #: presses and releases reported (tests, diagnostics)
+        self.presses = 0
+        self.releases = 0
+        self._groupers: weakref.WeakSet[InteractionGrouper] = weakref.WeakSet()
+
+    def down(self) -> None:
+        self.held = True
+        self.presses += 1
+        for g in list(self._groupers):
+            g._rearm()
+
+    def up(self) -> None:
+        self.held = False
+        self.releases += 1
+        for g in list(self._groupers):
+            g.flush()
+
+
+#: the one slider pointer of this kernel (a kernel's pages share the person's pointer)
+slider_pointer = SliderPointer()
 
 
 class InteractionGrouper:
-    """Wraps bursts of edits in one model interaction (an interaction token).
+    """Wraps one slider drag's stream of edits in one model interaction (a ``"burst"`` token).
 
-    The first :meth:`touch` opens ``model.begin_interaction(label)``; every
-    further touch within ``idle_s`` seconds extends it; ``idle_s`` after the last
-    touch a timer thread ends it, which records ONE undo step and emits the
-    final events. :meth:`flush` ends it at once (before undo/redo, reset,
-    closing); :func:`close_interactions` (any other widget's edit of the model)
-    closes it through the model, which calls back :meth:`_closed`. A new burst
-    first closes another panel's burst. While a pointer drag is open the
-    touch joins it (a slider update during a drag is the model's echo, not
-    the user's edit) and no burst is opened.
+    The first :meth:`touch` opens ``model.begin_interaction(label, kind="burst")``;
+    the burst ends when the page reports the pointer's release on the slider
+    (:data:`slider_pointer`), when another slider is touched, at :meth:`flush`
+    (before undo/redo, reset, closing) or when another widget's edit closes it
+    (:func:`close_interactions`, which calls back :meth:`_closed`). Timers, on
+    the kernel's event loop, only cover what the page cannot say: ``idle_s``
+    after the last touch when no press was reported (a keyboard nudge, a slider
+    shown without a viewport), ``watchdog_s`` while the pointer is held (a page
+    that vanished mid-drag). While a pointer drag is open a touch joins it (a
+    slider update during a drag is the model's echo) and no burst is opened.
 
     Parameters
     ----------
     model : FaceModel
     idle_s : float
-        Idle time that ends the burst. Slider updates of one drag arrive every
-        16-100 ms in a normal browser, but gaps of up to 0.23 s were measured in
-        headless Chromium with software WebGL on 2 busy cores; 0.5 s keeps such a
-        drag one step while still closing it before a person reaches for Undo
-        (and the panel's Undo button closes it at once anyway). Holding the mouse
-        still for longer than this mid-drag starts a new step.
+        Idle time that ends a burst no page reported a press for. 0.5 s keeps a
+        keyboard-repeat run one step and ends it before a person reaches for
+        Undo (whose button closes it at once anyway).
     errors : ErrorSink
+    watchdog_s : float
+        Idle time that ends a burst while the page says the pointer is held.
     """
 
-    def __init__(self, model: Any, idle_s: float = 0.5, errors: ErrorSink | None = None) -> None:
+    def __init__(
+        self,
+        model: Any,
+        idle_s: float = 0.5,
+        errors: ErrorSink | None = None,
+        watchdog_s: float = 30.0,
+    ) -> None:
         self.model = model
         self.idle_s = float(idle_s)
+        self.watchdog_s = float(watchdog_s)
         self.errors = errors or ErrorSink()
-        self._lock = threading.RLock()
         self._token: Any = None
         self._label = ""
-        self._timer: threading.Timer | None = None
+        self._timer: UiTimer | None = None
+        slider_pointer._groupers.add(self)
 
     @property
     def active(self) -> bool:
         return self._token is not None
 
     def touch(self, label: str) -> None:
-        """Open the burst if needed and restart the idle timer.
+        """Open the burst if needed and restart its timer.
 
         A different label (another slider) ends the current burst first, so
         each slider drag is its own undo step.
         """
-        with self._lock:
-            if self._token is not None and label != self._label:
-                self._end_locked()
-            if self._token is None:
-                model = self.model
-                # another panel's burst ends first; a pointer drag stays open
-                close_interactions(model, bursts_only=True)
-                with model.lock:
-                    if model.interacting:
-                        return  # joins the open drag (no timer: nothing of ours to end)
-                    token = model.begin_interaction(label, on_close=self._closed)
-                    _burst_tokens.add(token)
-                self._token, self._label = token, label
-            if self._timer is not None:
-                self._timer.cancel()
-            self._timer = threading.Timer(self.idle_s, self._on_idle)
-            self._timer.daemon = True
-            self._timer.start()
+        if self._token is not None and label != self._label:
+            self._end()
+        if self._token is None:
+            model = self.model
+            # another panel's burst ends first; a pointer drag stays open
+            close_interactions(model, bursts_only=True)
+            if model.interacting:
+                return  # joins the open drag (no timer: nothing of ours to end)
+            self._token = model.begin_interaction(label, on_close=self._closed, kind="burst")
+            self._label = label
+        self._rearm()
 
-    def _on_idle(self) -> None:
+    def _rearm(self) -> None:
+        if self._token is None:
+            return
+        if self._timer is not None:
+            self._timer.cancel()
+        delay = self.watchdog_s if slider_pointer.held else self.idle_s
+        self._timer = UiTimer(delay, self._on_timer)
+
+    def _on_timer(self) -> None:
         try:
             self.flush()
         except Exception as exc:
@@ -183,24 +372,19 @@ class InteractionGrouper:
 
     def flush(self) -> None:
         """End the open burst now (no-op if none)."""
-        with self._lock:
-            self._end_locked()
+        self._end()
 
     def _closed(self) -> None:
         # the model closed our burst (close_interactions before another edit)
-        with self._lock:
-            if self._timer is not None:
-                self._timer.cancel()
-                self._timer = None
-            self._token = None
+        if self._timer is not None:
+            self._timer.cancel()
+            self._timer = None
+        self._token = None
 
-    def _end_locked(self) -> None:
+    def _end(self) -> None:
         if self._timer is not None:
             self._timer.cancel()
             self._timer = None
         token, self._token = self._token, None
-        if token is not None:
-            # Model lock first: the same order as edits (model lock, then events).
-            with self.model.lock:
-                if self.model.interaction_token == token:
-                    self.model.end_interaction(token)
+        if token is not None and self.model.interaction_token == token:
+            self.model.end_interaction(token)

@@ -14,7 +14,7 @@ from typing import Any
 import ipywidgets as W
 import traitlets
 
-from widgets._threading import ErrorSink, close_interactions
+from widgets._threading import ErrorSink, UiScheduler, close_interactions
 from widgets.capture import CapturePanel
 from widgets.enhance import EnhancePanel
 from widgets.gallery import ExpressionGallery
@@ -216,8 +216,9 @@ class Workbench(W.VBox):
         if autosave is not None:
             from workbench.autosave import Autosaver
 
+            # timer and snapshot on the kernel's loop, state changes back on the UI thread
             self.autosaver = Autosaver(
-                model, autosave, delay=autosave_delay, folder=autosave_folder
+                model, autosave, delay=autosave_delay, folder=autosave_folder, scheduler=UiScheduler()
             )
             self._cb_autosave = g("Workbench autosave status")(self._on_autosave)
             self.autosaver.changed.connect(self._cb_autosave)

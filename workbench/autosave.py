@@ -13,8 +13,16 @@ After a kernel crash or restart the owner process is gone, so
 discard) removes both files. Nothing the user did is lost beyond the last
 ``delay`` seconds.
 
+Threads: the debounce timer and the snapshot run on the *scheduler's*
+thread, the writing on a writer thread of its own. A notebook passes the
+kernel's event loop as the scheduler (``Workbench`` does), so the snapshot is
+taken on the UI thread between edits and the state changes (``changed``) are
+delivered there too, while the slow part (hashing, zip, fsync) never blocks
+the user. Without a scheduler (a script) a ``threading.Timer`` snapshots under
+the model's lock.
+
 Written here because it is glue between our model's events and our file
-format; the timer is the standard library's.
+format; the timer is the standard library's or the event loop's.
 """
 
 from __future__ import annotations
@@ -23,13 +31,15 @@ import json
 import os
 import threading
 import time
+from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, Protocol
 
 from psygnal import Signal
 
-from workbench.fileformat import read_manifest, save_model
+from workbench.fileformat import read_manifest, save_model, snapshot_model, write_snapshot
 
 if TYPE_CHECKING:
     from workbench.model import FaceModel
@@ -77,6 +87,31 @@ class Recoverable:
         )
 
 
+class Cancellable(Protocol):
+    def cancel(self) -> object: ...
+
+
+class Scheduler(Protocol):
+    """Where autosave's timer and state changes run: an asyncio loop fits (``call_later``, ``call_soon_threadsafe``)."""
+
+    def call_later(self, delay: float, callback: Callable[[], Any], /) -> Cancellable: ...
+
+    def call_soon_threadsafe(self, callback: Callable[[], Any], /) -> object: ...
+
+
+class ThreadScheduler:
+    """The scheduler of a script: ``threading.Timer``; state changes delivered on the writer thread."""
+
+    def call_later(self, delay: float, callback: Callable[[], Any], /) -> Cancellable:
+        timer = threading.Timer(delay, callback)
+        timer.daemon = True
+        timer.start()
+        return timer
+
+    def call_soon_threadsafe(self, callback: Callable[[], Any], /) -> None:
+        callback()
+
+
 class Autosaver:
     """Debounced atomic autosave of ``model`` under ``name``.
 
@@ -89,6 +124,10 @@ class Autosaver:
         Seconds of quiet after the last edit before saving.
     folder : path, optional
         Default :func:`recovery_dir`.
+    scheduler : Scheduler, optional
+        Runs the timer, the snapshot and the ``changed`` signal (a notebook: the
+        kernel's event loop, so all three happen on the UI thread). Default
+        :class:`ThreadScheduler`.
 
     Attributes
     ----------
@@ -97,12 +136,19 @@ class Autosaver:
     last_saved : float or None
         ``time.time()`` of the last successful save.
     changed : psygnal.Signal(str)
-        Emitted with the new state.
+        Emitted with the new state, on the scheduler's thread.
     """
 
     changed = Signal(str)
 
-    def __init__(self, model: FaceModel, name: str, delay: float = 2.0, folder: str | Path | None = None) -> None:
+    def __init__(
+        self,
+        model: FaceModel,
+        name: str,
+        delay: float = 2.0,
+        folder: str | Path | None = None,
+        scheduler: Scheduler | None = None,
+    ) -> None:
         if not name or any(c in name for c in "/\\\0"):
             raise ValueError(f"autosave name must be a plain file stem, got {name!r}")
         if delay < 0:
@@ -114,11 +160,14 @@ class Autosaver:
         self.folder.mkdir(parents=True, exist_ok=True)
         self.path = self.folder / f"{name}{_SUFFIX}"
         self.owner_path = self.folder / f"{name}{_SUFFIX}.owner"
+        self.scheduler: Scheduler = scheduler if scheduler is not None else ThreadScheduler()
         self.state = "idle"
         self.last_saved: float | None = None
         self.saves = 0
-        self._timer: threading.Timer | None = None
-        self._lock = threading.Lock()
+        self._timer: Cancellable | None = None
+        self._lock = threading.Lock()  # the timer handle and the writer (ThreadScheduler: two threads)
+        self._writer: ThreadPoolExecutor | None = None
+        self._writing: Future[None] | None = None
         self._closed = False
         model.events.history.connect(self._on_edit)
         model.events.tracks.connect(self._on_edit)
@@ -136,43 +185,79 @@ class Autosaver:
         self.state = state
         self.changed.emit(state)
 
-    def _on_edit(self, *_: object) -> None:
+    def _schedule(self) -> None:
         with self._lock:
             if self._closed:
                 return
             if self._timer is not None:
                 self._timer.cancel()
-            self._timer = threading.Timer(self.delay, self.save_now)
-            self._timer.daemon = True
-            self._timer.start()
+            self._timer = self.scheduler.call_later(self.delay, self._due)
+
+    def _on_edit(self, *_: object) -> None:
+        self._schedule()
         self._set_state("pending")
 
-    def save_now(self) -> None:
-        """Save immediately (also what the timer calls). Errors go to ``state``, never raised.
+    def _due(self) -> None:
+        """The timer fired (on the scheduler's thread): snapshot now, write on the writer thread."""
+        with self._lock:
+            self._timer = None
+            if self._closed:
+                return
+        if self.model.interacting:  # mid-drag: try again when it settles
+            self._schedule()
+            return
+        try:
+            snapshot = snapshot_model(self.model)
+        except Exception as exc:  # report, keep running: autosave must not break editing
+            self._set_state(f"error: {exc}")
+            return
+        with self._lock:
+            if self._closed:
+                return
+            if self._writer is None:
+                self._writer = ThreadPoolExecutor(1, thread_name_prefix="autosave-writer")
+            self._writing = self._writer.submit(self._write, snapshot)
 
-        Lock order is always model lock first, then ours (edits hold the model
-        lock when they notify us), so the two can never deadlock.
-        """
-        with self.model.lock:
-            with self._lock:
-                if self._closed:
-                    return
+    def _write(self, snapshot: Any) -> None:
+        try:
+            write_snapshot(snapshot, self.path)
+            self._write_owner()
+        except Exception as exc:
+            error = f"error: {exc}"
+        else:
+            error = ""
+        self.scheduler.call_soon_threadsafe(lambda: self._written(error))
+
+    def _written(self, error: str) -> None:
+        if not error:
+            self.last_saved = time.time()
+            self.saves += 1
+        if not self._closed:
+            self._set_state(error or "saved")
+
+    def save_now(self) -> None:
+        """Save immediately on this thread. Errors go to ``state``, never raised."""
+        with self._lock:
+            if self._closed:
+                return
+            if self._timer is not None:
+                self._timer.cancel()
                 self._timer = None
-                if self.model.interacting:  # mid-drag: try again when it settles
-                    self._timer = threading.Timer(self.delay, self.save_now)
-                    self._timer.daemon = True
-                    self._timer.start()
-                    return
-                try:
-                    save_model(self.model, self.path)
-                    self._write_owner()
-                except Exception as exc:  # report, keep running: autosave must not break editing
-                    error = f"error: {exc}"
-                else:
-                    error = ""
-                    self.last_saved = time.time()
-                    self.saves += 1
-        self._set_state(error or "saved")
+        self.wait()
+        try:
+            save_model(self.model, self.path)
+            self._write_owner()
+        except Exception as exc:  # report, keep running: autosave must not break editing
+            error = f"error: {exc}"
+        else:
+            error = ""
+        self._written(error)
+
+    def wait(self, timeout: float | None = None) -> None:
+        """Wait until a write in progress is on disk."""
+        writing = self._writing
+        if writing is not None:
+            writing.result(timeout)
 
     def close(self, discard: bool = False) -> None:
         """Stop watching; ``discard=True`` also deletes the recovery file (a clean exit)."""
@@ -181,6 +266,9 @@ class Autosaver:
             if self._timer is not None:
                 self._timer.cancel()
                 self._timer = None
+            writer, self._writer = self._writer, None
+        if writer is not None:
+            writer.shutdown(wait=True)  # a write in progress finishes before the files go
         self.model.events.history.disconnect(self._on_edit)
         self.model.events.tracks.disconnect(self._on_edit)
         if discard:

@@ -84,6 +84,7 @@ import time
 import zipfile
 import zlib
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -188,13 +189,30 @@ def remove_stale_temporaries(path: str | os.PathLike[str]) -> list[Path]:
     return removed
 
 
+@dataclass(frozen=True)
+class ModelSnapshot:
+    """Everything a save writes, taken at one instant: the manifest and each array as ``.npy`` bytes.
+
+    :func:`snapshot_model` takes it on the thread that edits the model (under its
+    lock); :func:`write_snapshot` writes it from any thread (autosave writes on
+    its own thread while the user goes on editing).
+    """
+
+    manifest: dict[str, Any]
+    #: array name -> (.npy bytes, dtype string, shape)
+    payloads: dict[str, tuple[bytes, str, list[int]]]
+
+
 def save_model(model: FaceState, path: str | os.PathLike[str]) -> Path:
     """Write ``model`` to ``path`` atomically (temp file + fsync + rename).
 
     Returns the path written. The suffix ``.fwb`` is recommended, not enforced.
     """
+    return write_snapshot(snapshot_model(model), path)
 
-    path = Path(path)
+
+def snapshot_model(model: FaceState) -> ModelSnapshot:
+    """The model as a save would write it, now (arrays serialised, so later edits cannot reach it)."""
     with model.lock:
         arrays = _container_arrays(model)
         manifest: dict[str, Any] = {
@@ -224,15 +242,24 @@ def save_model(model: FaceState, path: str | os.PathLike[str]) -> Path:
             entries, part_arrays = part.save(model)
             manifest.update(entries)
             arrays.update(part_arrays)
-        manifest["arrays"] = {}
+        payloads = {name: (_npy_bytes(a), a.dtype.str, list(a.shape)) for name, a in arrays.items()}
+        # a deep copy: the families' entries may share lists with the live model
+        manifest = json.loads(json.dumps(manifest))
+    return ModelSnapshot(manifest, payloads)
+
+
+def write_snapshot(snapshot: ModelSnapshot, path: str | os.PathLike[str]) -> Path:
+    """Write a :class:`ModelSnapshot` to ``path`` atomically (temp file + fsync + rename); any thread."""
+    path = Path(path)
+    manifest = dict(snapshot.manifest)
+    manifest["arrays"] = {}
     payloads = {}
-    for name, a in arrays.items():
-        data = _npy_bytes(a)
+    for name, (data, dtype, shape) in snapshot.payloads.items():
         payloads[name] = data
         manifest["arrays"][name] = {
             "file": f"arrays/{name}.npy",
-            "dtype": a.dtype.str,
-            "shape": list(a.shape),
+            "dtype": dtype,
+            "shape": shape,
             "sha256": _sha256(data),
         }
     path.parent.mkdir(parents=True, exist_ok=True)

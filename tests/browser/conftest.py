@@ -38,6 +38,7 @@ from harness import (
     ARTIFACTS,
     CHROMIUM,
     CHROMIUM_ARGS,
+    HEALTH,
     LabServer,
     LostCellReply,
     NotebookPage,
@@ -125,6 +126,8 @@ def open_notebook(
             for f in (lab.base / "recovery").glob("*"):
                 f.unlink()
         for attempt in (1, 2):
+            if attempt == 2:
+                HEALTH["reopens"] += 1
             name = f"t_{uuid.uuid4().hex[:10]}.ipynb"
             target = lab.root / name
             if isinstance(source, list):
@@ -161,6 +164,12 @@ def open_notebook(
 
     yield _open
 
+    problems: list[str] = []
+    for context, nb in opened:
+        if not context.pages or nb.page.is_closed():
+            continue
+        with contextlib.suppress(Exception):
+            problems += nb.health_problems()
     for context, nb in opened:
         if nb.console:
             nb.artifacts.mkdir(parents=True, exist_ok=True)
@@ -168,3 +177,14 @@ def open_notebook(
         with contextlib.suppress(Exception):
             context.close()
     lab.shutdown_kernels(lab.kernel_ids() - before)
+    if problems:
+        pytest.fail("the page and the kernel fell out of step: " + "; ".join(problems))
+
+
+def pytest_terminal_summary(terminalreporter: Any) -> None:
+    if any(HEALTH.values()) or HEALTH["checked"]:
+        terminalreporter.write_line(
+            "browser health: "
+            + ", ".join(f"{k} {v}" for k, v in HEALTH.items())
+            + " (all but 'checked' must be 0)"
+        )

@@ -101,6 +101,8 @@ class LabServer:
             VTK_DEFAULT_OPENGL_WINDOW="vtkEGLRenderWindow",
             # autosave/recovery files of test kernels stay in this server's temp dirs
             WORKBENCH_RECOVERY_DIR=str(self.base / "recovery"),
+            # kernels raise, and record, any widget change off their UI thread (HEALTH)
+            WORKBENCH_UI_THREAD_GUARD="1",
         )
         # notebooks/workbench.ipynb opens the 25k head by default; the tests that drive it
         # check features on the 5k one (test_run_command checks the default, not via this)
@@ -234,6 +236,20 @@ _JS_NOTEBOOK_STATE = """
 """
 
 
+#: what the session's browser tests saw go wrong between page and kernel (printed at the end;
+#: every count but "checked" must stay 0): notebooks reopened after a lost cell reply, full
+#: updates a page asked for, widget changes off the kernel's UI thread
+HEALTH = {"checked": 0, "reopens": 0, "resyncs": 0, "thread_violations": 0}
+
+_JS_RESYNCS = "() => (globalThis.fwbResyncs || []).map((r) => r.why)"
+
+_PY_VIOLATIONS = """
+import sys, json
+_g = sys.modules.get("widgets._threading")
+print(json.dumps(list(_g.thread_violations) if _g else []))
+"""
+
+
 class NotebookPage:
     """One notebook open in JupyterLab in a fresh browser context."""
 
@@ -242,9 +258,27 @@ class NotebookPage:
         self.lab = lab
         self.artifacts = artifacts
         self.name = name
+        #: full updates this test makes the page ask for on purpose
+        self.expected_resyncs = 0
         self.console: list[str] = []
         page.on("console", lambda m: self.console.append(f"{m.type}: {m.text}"))
         page.on("pageerror", lambda e: self.console.append(f"pageerror: {e}"))
+
+    # ---- health: nothing repaired, nothing off the UI thread
+    def health_problems(self) -> list[str]:
+        """What went wrong between this page and its kernel (empty when all is well); counted in HEALTH."""
+        HEALTH["checked"] += 1
+        problems = []
+        resyncs = self.page.evaluate(_JS_RESYNCS)
+        unexpected = len(resyncs) - self.expected_resyncs
+        if unexpected > 0:
+            HEALTH["resyncs"] += unexpected
+            problems.append(f"{self.name}: the page asked for {len(resyncs)} full updates ({resyncs})")
+        violations = self.kernel_eval(_PY_VIOLATIONS, timeout=30)
+        if violations:
+            HEALTH["thread_violations"] += len(violations)
+            problems.append(f"{self.name}: widgets changed off the UI thread: {violations[:3]}")
+        return problems
 
     # ---- notebook / kernel
     def state(self) -> dict[str, Any] | None:

@@ -7,11 +7,15 @@ shared error Output and the autosaver. Runs on the sample head (5k vertices).
 
 from __future__ import annotations
 
+import asyncio
+import concurrent.futures
 import os
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -19,7 +23,8 @@ pytest.importorskip("anywidget")
 
 import widgets
 from widgets import TAB_TITLES, RecoveryPrompt, Workbench, recovery_prompt
-from workbench import load_sample
+from widgets._threading import ui_thread_is
+from workbench import load, load_sample
 from workbench.autosave import Autosaver, find_recoverable
 
 pytestmark = pytest.mark.ui
@@ -149,31 +154,77 @@ def test_callback_errors_show_in_the_shared_output(wb: Workbench, monkeypatch) -
     assert "[undo]" in text and "undo exploded" in text
 
 
+def _in_a_kernel_like_loop(main) -> Any:
+    """``asyncio.run(main())`` on a fresh thread that is the UI thread meanwhile (a kernel's main thread)."""
+
+    def run() -> Any:
+        with ui_thread_is(threading.current_thread()):
+            return asyncio.run(main())
+
+    with concurrent.futures.ThreadPoolExecutor(1) as pool:
+        return pool.submit(run).result(timeout=60)
+
+
+async def _until(pred, timeout: float = 10.0) -> None:
+    end = time.monotonic() + timeout
+    while not pred():
+        if time.monotonic() > end:
+            raise AssertionError("condition not reached in time")
+        await asyncio.sleep(0.01)
+
+
 def test_autosave_state_in_status_line_and_close_stops_it(tmp_path: Path) -> None:
+    # timer and snapshot on the kernel's loop, the write on its own thread, every state
+    # change (and so the status line) back on the UI thread
     model = load_sample("head")
-    wb = Workbench(model, autosave="wbtest", autosave_delay=0.0, autosave_folder=tmp_path)
-    assert isinstance(wb.autosaver, Autosaver)
-    assert "autosave: no edits yet" in wb.status.value
-    model.set_weight("jawOpen", 0.4)
-    _wait(lambda: wb.autosaver.state == "saved")
-    _wait(lambda: "autosave: saved " in wb.status.value)
-    assert (tmp_path / "wbtest.recovery.fwb").is_file()
-    saver = wb.autosaver
-    wb.close()
-    assert saver._closed
-    saves = saver.saves
-    model.set_weight("jawOpen", 0.1)
-    time.sleep(0.1)
-    assert saver.saves == saves and saver.state == "saved"
+    threads: dict[str, Any] = {}
+
+    async def main():
+        wb = Workbench(model, autosave="wbtest", autosave_delay=0.0, autosave_folder=tmp_path)
+        assert isinstance(wb.autosaver, Autosaver)
+        assert "autosave: no edits yet" in wb.status.value
+        wb.autosaver.changed.connect(lambda st: threads.setdefault(st, threading.current_thread()))
+        model.set_weight("jawOpen", 0.4)
+        await _until(lambda: wb.autosaver.state == "saved")
+        await _until(lambda: "autosave: saved " in wb.status.value)
+        assert (tmp_path / "wbtest.recovery.fwb").is_file()
+        saver = wb.autosaver
+        wb.close()
+        assert saver._closed
+        saves = saver.saves
+        model.set_weight("jawOpen", 0.1)
+        await asyncio.sleep(0.1)
+        assert saver.saves == saves and saver.state == "saved"
+        return threading.current_thread()
+
+    ui_thread = _in_a_kernel_like_loop(main)
+    assert threads["pending"] is ui_thread and threads["saved"] is ui_thread
+    assert load(tmp_path / "wbtest.recovery.fwb").weights["jawOpen"] == pytest.approx(0.4)
 
 
 def test_close_with_discard_removes_the_recovery_file(tmp_path: Path) -> None:
     model = load_sample("head")
-    wb = Workbench(model, autosave="gone", autosave_delay=0.0, autosave_folder=tmp_path)
-    model.set_weight("jawOpen", 0.4)
-    _wait(lambda: wb.autosaver.state == "saved")
-    wb.close(discard_autosave=True)
+
+    async def main():
+        wb = Workbench(model, autosave="gone", autosave_delay=0.0, autosave_folder=tmp_path)
+        model.set_weight("jawOpen", 0.4)
+        await _until(lambda: wb.autosaver.state == "saved")
+        wb.close(discard_autosave=True)
+
+    _in_a_kernel_like_loop(main)
     assert not (tmp_path / "gone.recovery.fwb").exists()
+
+
+def test_without_an_event_loop_autosave_waits_for_save_now(tmp_path: Path) -> None:
+    # a script has no kernel loop: nothing saves behind its back, save_now() does it
+    model = load_sample("head")
+    wb = Workbench(model, autosave="script", autosave_delay=0.0, autosave_folder=tmp_path)
+    model.set_weight("jawOpen", 0.4)
+    time.sleep(0.1)
+    assert wb.autosaver.state == "pending" and wb.autosaver.saves == 0
+    wb.autosaver.save_now()
+    assert wb.autosaver.state == "saved" and "autosave: saved " in wb.status.value
+    wb.close()
 
 
 # ---------------------------------------------------------------- recovery prompt

@@ -21,7 +21,6 @@ repeat:
 from __future__ import annotations
 
 import contextlib
-import threading
 from collections.abc import Callable, Iterable
 from typing import Any, TypeVar
 
@@ -86,7 +85,6 @@ class ModelPanel(W.VBox):
         self.errors = errors if isinstance(errors, ErrorSink) else ErrorSink(errors, on_error)
         self._before_edit: list[Callable[[], Any]] = list(before_edit)
         self._teardown = contextlib.ExitStack()
-        self._teardown_lock = threading.Lock()
         self._connected = True
         super().__init__(**box)
 
@@ -137,11 +135,10 @@ class ModelPanel(W.VBox):
         """
         if not getattr(self, "_connected", False):  # closed, or __init__ never got that far
             return
-        with self._teardown_lock:
-            if not self._connected:
-                return
-            self._connected = False
-            stack, self._teardown = self._teardown, contextlib.ExitStack()
+        if not self._connected:
+            return
+        self._connected = False
+        stack, self._teardown = self._teardown, contextlib.ExitStack()
         stack.close()
 
     def close(self) -> None:

@@ -8,10 +8,12 @@ reset / undo / redo buttons call the model.
 
 Undo granularity: ipywidgets sends a stream of value updates while a slider is
 dragged (``continuous_update=True``, needed for a live preview) and never says
-when the drag ended. The panel therefore wraps each burst in
-``model.interaction("Drag <name>")`` and ends it after 0.5 s without updates
-(:class:`widgets._threading.InteractionGrouper`): one drag = one undo step,
-and the viewport sees cheap ``deformed(False)`` events while it lasts. Undo,
+when the drag ended. The panel therefore wraps each burst in one interaction
+"Drag <name>" (:class:`widgets._threading.InteractionGrouper`), which ends
+when the page reports the pointer's release on the slider (the viewport's
+front end does, for every slider of its page), or 0.5 s after the last
+update where no page reported a press (a keyboard nudge): one drag = one undo
+step, and the viewport sees cheap ``deformed(False)`` events while it lasts. Undo,
 redo, reset and mute end an open burst first, and so does any other widget's
 edit of the model (a timeline key, an import, a handle drag:
 :func:`widgets._threading.close_interactions`), so an edit made within the
@@ -21,7 +23,7 @@ The panel never keeps weights of its own: slider values follow
 ``model.events.weights`` / ``weights_changing``, so edits from Python cells or
 from another panel move the sliders. An update from the model sets a slider to
 the model's value, and the slider handler ignores values equal to the model's,
-which breaks the feedback loop without a (thread-unsafe) "updating" flag. The
+which breaks the feedback loop without an "updating" flag. The
 browser's slider snaps a value it is sent to its 0.01 step and sends the
 snapped value back — possibly after the model has moved on (a playing
 timeline, a tracked take: weights off the grid). So each slider also remembers

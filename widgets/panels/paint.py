@@ -34,7 +34,6 @@ no widget library offers expression painting.
 from __future__ import annotations
 
 import math
-import threading
 from collections.abc import Callable, Iterable
 from typing import Any
 
@@ -113,7 +112,6 @@ class PaintPanel(ModelPanel):
             self._before_edit += [viewport.end_stroke, viewport.end_drag]
         self.grouper = InteractionGrouper(model, errors=self.errors)
         self._before_edit.append(self.grouper.flush)
-        self._status_lock = threading.Lock()
         self._own_gallery = gallery is None
         units = str(getattr(model.metadata, "units", "") or "units")
         H = face_height(model)
@@ -407,27 +405,26 @@ class PaintPanel(ModelPanel):
         self._update_status()
 
     def _update_status(self, note: str = "") -> None:
-        with self._status_lock:
-            model = self._model
-            mix = model.paint
-            parts = []
-            if len(mix):
-                n = max(model.n_vertices, 1)
-                cover = ", ".join(
-                    f"{name} ({np.count_nonzero(w) / n:.0%})" for name, w in mix.items()
-                )
-                parts.append(f"painted: {cover}")
-            else:
-                parts.append("nothing painted")
-            st = getattr(self.viewport, "last_stroke", None) or {}
-            if st:
-                ups = st["updates_per_s"]
-                rate = f", {ups:.0f} updates/s" if math.isfinite(ups) else ""
-                parts.append(
-                    f"last stroke <i>{st['expression']}</i>: {st['dabs']} dabs, "
-                    f"{st['median_dab_ms']:.1f} ms per dab, {st['median_ms']:.1f} ms per update"
-                    f"{rate}"
-                )
-            if note:
-                parts.append(note)
-            self.status.value = " · ".join(parts)
+        model = self._model
+        mix = model.paint
+        parts = []
+        if len(mix):
+            n = max(model.n_vertices, 1)
+            cover = ", ".join(
+                f"{name} ({np.count_nonzero(w) / n:.0%})" for name, w in mix.items()
+            )
+            parts.append(f"painted: {cover}")
+        else:
+            parts.append("nothing painted")
+        st = getattr(self.viewport, "last_stroke", None) or {}
+        if st:
+            ups = st["updates_per_s"]
+            rate = f", {ups:.0f} updates/s" if math.isfinite(ups) else ""
+            parts.append(
+                f"last stroke <i>{st['expression']}</i>: {st['dabs']} dabs, "
+                f"{st['median_dab_ms']:.1f} ms per dab, {st['median_ms']:.1f} ms per update"
+                f"{rate}"
+            )
+        if note:
+            parts.append(note)
+        self.status.value = " · ".join(parts)

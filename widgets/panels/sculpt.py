@@ -21,7 +21,6 @@ its public methods and follows ``model.events``.
 from __future__ import annotations
 
 import math
-import threading
 import time
 from collections.abc import Callable, Iterable
 from typing import Any
@@ -79,7 +78,6 @@ class SculptPanel(ModelPanel):
         if viewport is not None:
             self._before_edit.append(viewport.end_drag)
         self._syncing = False  # True while model -> UI updates set the stiffness sliders
-        self._status_lock = threading.Lock()
         self._last_status_t = 0.0
 
         self.default_button = button(
@@ -250,23 +248,22 @@ class SculptPanel(ModelPanel):
             )
 
     def _update_status(self, note: str = "") -> None:
-        with self._status_lock:
-            self._last_status_t = time.monotonic()
-            h = self._model.handles
-            parts = [f"<b>{len(h)}</b> handles"]
-            vp = self.viewport
-            drag = getattr(vp, "last_drag", None) or {}
-            if vp is not None and vp.dragging and vp.drag_ms:
-                parts.append(f"dragging: {vp.drag_ms[-1]:.1f} ms per update")
-            elif drag:
-                ups = drag["updates_per_s"]
-                fps = f"{ups:.0f} updates/s" if math.isfinite(ups) else ""
-                parts.append(
-                    f"last drag <i>{drag['name']}</i>: {drag['last_ms']:.1f} ms per update "
-                    f"(median {drag['median_ms']:.1f}), {drag['moves']} updates, {fps}"
-                )
-            elif not len(h):
-                parts.append("press <i>Default handles</i> or Shift-click the face")
-            if note:
-                parts.append(note)
-            self.status.value = " · ".join(parts)
+        self._last_status_t = time.monotonic()
+        h = self._model.handles
+        parts = [f"<b>{len(h)}</b> handles"]
+        vp = self.viewport
+        drag = getattr(vp, "last_drag", None) or {}
+        if vp is not None and vp.dragging and vp.drag_ms:
+            parts.append(f"dragging: {vp.drag_ms[-1]:.1f} ms per update")
+        elif drag:
+            ups = drag["updates_per_s"]
+            fps = f"{ups:.0f} updates/s" if math.isfinite(ups) else ""
+            parts.append(
+                f"last drag <i>{drag['name']}</i>: {drag['last_ms']:.1f} ms per update "
+                f"(median {drag['median_ms']:.1f}), {drag['moves']} updates, {fps}"
+            )
+        elif not len(h):
+            parts.append("press <i>Default handles</i> or Shift-click the face")
+        if note:
+            parts.append(note)
+        self.status.value = " · ".join(parts)

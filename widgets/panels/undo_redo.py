@@ -9,7 +9,6 @@ refuses to undo inside one); an exception from it goes to the error sink under
 
 from __future__ import annotations
 
-import threading
 from collections.abc import Callable
 from typing import Any
 
@@ -63,7 +62,6 @@ class UndoRedoButtons:
         g = self.errors.guard
         self.undo_button.on_click(g("undo")(lambda _b: on_undo()))
         self.redo_button.on_click(g("redo")(lambda _b: on_redo()))
-        self._lock = threading.Lock()
         self._on_history = g(f"{where} history")(self.refresh)
         model.events.history.connect(self._on_history)
         self._connected = True
@@ -84,7 +82,6 @@ class UndoRedoButtons:
 
     def close(self) -> None:
         """Stop following the history (idempotent); the buttons stay as they are."""
-        with self._lock:
-            connected, self._connected = self._connected, False
+        connected, self._connected = self._connected, False
         if connected:
             self.model.events.history.disconnect(self._on_history)

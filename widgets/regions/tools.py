@@ -21,7 +21,6 @@ closed) is ended by the viewport's gesture watchdog.
 
 from __future__ import annotations
 
-import threading
 import time
 from collections import deque
 from collections.abc import Callable
@@ -72,7 +71,6 @@ class RegionDragHandler:
         #: called with a dict of stats after every drag that was kept
         self.listeners: list[Callable[[dict[str, Any]], Any]] = []
         self.last_drag: dict[str, Any] = {}
-        self._lock = threading.RLock()
         self._drag: Any = None  # the open RegionDrag
         self._ms: list[float] = []
 
@@ -89,51 +87,47 @@ class RegionDragHandler:
         RegionError / ModelError
             No regions yet, or the pin lies in the background of the shown level.
         """
-        with self._lock:
-            self.end()
-            pins = np.asarray(self.pins(), dtype=np.int64).reshape(-1)
-            if vertex is None:
-                if not 0 <= index < pins.size:
-                    raise ValueError(f"RegionDragHandler.begin: no pin {index} (have {pins.size})")
-                vertex = int(pins[index])
-            self._ms = []
-            self._drag = self.model.regions.begin_drag(
-                int(vertex), pins=pins, damping=self.damping, hold_others=self.hold_others,
-                regularization=self.regularization, on_close=self._closed_elsewhere,
-            )  # fmt: skip
+        self.end()
+        pins = np.asarray(self.pins(), dtype=np.int64).reshape(-1)
+        if vertex is None:
+            if not 0 <= index < pins.size:
+                raise ValueError(f"RegionDragHandler.begin: no pin {index} (have {pins.size})")
+            vertex = int(pins[index])
+        self._ms = []
+        self._drag = self.model.regions.begin_drag(
+            int(vertex), pins=pins, damping=self.damping, hold_others=self.hold_others,
+            regularization=self.regularization, on_close=self._closed_elsewhere,
+        )  # fmt: skip
 
     def move(self, index: int, position: Any) -> float:
         """Solve for the pointer at ``position`` (3,) model space; returns ms (0 without a drag)."""
         p = _position(position, "RegionDragHandler.move")
-        with self._lock:
-            d = self._drag
-            if d is None or not d.open:
-                return 0.0
-            t0 = time.perf_counter()
-            d.move(p)
-            ms = (time.perf_counter() - t0) * 1e3
-            self.solve_ms.append(d.solve_ms[-1])
-            self.move_ms.append(ms)
-            self._ms.append(ms)
-            return ms
+        d = self._drag
+        if d is None or not d.open:
+            return 0.0
+        t0 = time.perf_counter()
+        d.move(p)
+        ms = (time.perf_counter() - t0) * 1e3
+        self.solve_ms.append(d.solve_ms[-1])
+        self.move_ms.append(ms)
+        self._ms.append(ms)
+        return ms
 
     def end(self) -> None:
         """End the open drag (one undo step); no-op without one."""
-        with self._lock:
-            d, self._drag = self._drag, None
-            if d is None:
-                return
-            stats = d.end()
-            ms = self._ms
-            self.last_drag = {**stats, "median_ms": float(np.median(ms)) if ms else float("nan")}
+        d, self._drag = self._drag, None
+        if d is None:
+            return
+        stats = d.end()
+        ms = self._ms
+        self.last_drag = {**stats, "median_ms": float(np.median(ms)) if ms else float("nan")}
         _listeners(self.listeners, self.last_drag)
 
     def cancel(self) -> None:
         """Cancel the open drag: the weights as at the press, no undo step."""
-        with self._lock:
-            d, self._drag = self._drag, None
-            if d is not None:
-                d.cancel()
+        d, self._drag = self._drag, None
+        if d is not None:
+            d.cancel()
 
     def _closed_elsewhere(self) -> None:
         # another widget's edit closed the drag's interaction, keeping its edits
@@ -169,7 +163,6 @@ class RegionBrushHandler:
         self.listeners: list[Callable[[dict[str, Any]], Any]] = []
         self.last_stroke: dict[str, Any] = {}
         self.last_error = ""
-        self._lock = threading.RLock()
         self._stroke: Any = None  # the open RegionStroke
 
     @property
@@ -201,43 +194,39 @@ class RegionBrushHandler:
         """Start a stroke at marker ``index`` (vertex ``vertex``) and dab there."""
         if vertex is None:
             raise ValueError("region brush: the press needs the marker's vertex")
-        with self._lock:
-            self.end()
-            tgt = self.target()
-            if tgt is None or not self.model.regions.segmented:
-                raise ValueError("region brush: find regions and select a region first")
-            self._stroke = self.model.regions.begin_paint(
-                tgt[0], tgt[1], radius=self.radius, erase=self.erase, on_close=self._closed_elsewhere
-            )
-            self.dab(int(vertex))
+        self.end()
+        tgt = self.target()
+        if tgt is None or not self.model.regions.segmented:
+            raise ValueError("region brush: find regions and select a region first")
+        self._stroke = self.model.regions.begin_paint(
+            tgt[0], tgt[1], radius=self.radius, erase=self.erase, on_close=self._closed_elsewhere
+        )
+        self.dab(int(vertex))
 
     def move(self, index: int, position: Any) -> float:
         """Move the brush to the skin vertex nearest ``position`` (3,); returns ms."""
         p = _position(position, "RegionBrushHandler.move")
-        with self._lock:
-            st = self._stroke
-            if st is None or not st.open:
-                return 0.0
-            t0 = time.perf_counter()
-            st.move(p)
-            self.last_error = st.last_error
-            return (time.perf_counter() - t0) * 1e3
+        st = self._stroke
+        if st is None or not st.open:
+            return 0.0
+        t0 = time.perf_counter()
+        st.move(p)
+        self.last_error = st.last_error
+        return (time.perf_counter() - t0) * 1e3
 
     def end(self) -> None:
         """End the open stroke (one undo step); no-op without one."""
-        with self._lock:
-            st, self._stroke = self._stroke, None
-            if st is None:
-                return
-            self.last_stroke = st.end()
+        st, self._stroke = self._stroke, None
+        if st is None:
+            return
+        self.last_stroke = st.end()
         _listeners(self.listeners, self.last_stroke)
 
     def cancel(self) -> None:
         """Cancel the open stroke: the regions as at the press, no undo step."""
-        with self._lock:
-            st, self._stroke = self._stroke, None
-            if st is not None:
-                st.cancel()
+        st, self._stroke = self._stroke, None
+        if st is not None:
+            st.cancel()
 
     def _closed_elsewhere(self) -> None:
         self.end()

@@ -204,6 +204,9 @@ class LandmarkPicker(ModelPanel):
 
     def _on_list(self, change: dict[str, Any]) -> None:
         idx = change["new"]
+        # refresh() setting the list's options moves its index too: not the person's choice
+        if getattr(self, "_refreshing", False):
+            return
         if idx is not None and idx != self._selected:
             self.select(int(idx))
 
@@ -220,9 +223,13 @@ class LandmarkPicker(ModelPanel):
             vp.handles = [*ids, pend] if pend is not None else ids
             vp.selected_handle = len(ids) if pend is not None else self._selected
         names = [f"{i + 1}. template {a} \u2194 face {b}" for i, (a, b) in enumerate(lm)]
-        with self.pairs.hold_trait_notifications():
-            self.pairs.options = names
-            self.pairs.index = self._selected if self._selected >= 0 else None
+        self._refreshing = True
+        try:
+            with self.pairs.hold_trait_notifications():
+                self.pairs.options = names
+                self.pairs.index = self._selected if self._selected >= 0 else None
+        finally:
+            self._refreshing = False
         if self.pending["template"] is not None:
             hint = "Now click the same point on <b>your face</b>."
         elif self.pending["target"] is not None:

@@ -32,9 +32,7 @@ sets the model to the frame shown (``model.set_time``, one exact update).
 from __future__ import annotations
 
 import asyncio
-import concurrent.futures
 import math
-import threading
 import time
 from collections import deque
 from typing import TYPE_CHECKING, Any
@@ -71,57 +69,35 @@ class Playback:
         self.frame_seq = 0  # the last "frame" message sent
         self.ack_seq = 0  # the newest frame the front end answered
         self._ack_event: asyncio.Event | None = None
-        self._ack_loop: asyncio.AbstractEventLoop | None = None
-        self.task: Any = None
-        self._lock = threading.RLock()
-        try:
-            # the kernel's loop, for playback started from a non-loop thread
-            self._loop: asyncio.AbstractEventLoop | None = asyncio.get_running_loop()
-        except RuntimeError:
-            self._loop = None
+        self.task: asyncio.Task[dict[str, Any]] | None = None
 
-    def start(self) -> Any:
-        """Start the task (or return the running one): see ``TimelineWidget.play``."""
+    def start(self) -> asyncio.Task[dict[str, Any]]:
+        """Start the task on the running loop (or return the running one): see ``TimelineWidget.play``.
+
+        Playback lives on the kernel's event loop, on the UI thread, like every
+        widget change it makes; where no loop runs (a plain script) there is
+        nothing to play on, and a clear error says how to run one.
+        """
         w = self.widget
-        with self._lock:
-            if self.task is not None and not self.task.done():
-                return self.task
-            w.playing = True
-            try:
-                running = asyncio.get_running_loop()
-            except RuntimeError:
-                running = None
-            if running is not None:
-                self.task = running.create_task(self.run())
-            elif self._loop is not None and self._loop.is_running():
-                self.task = asyncio.run_coroutine_threadsafe(self.run(), self._loop)
-            else:
-                fut: concurrent.futures.Future[dict[str, Any]] = concurrent.futures.Future()
-
-                def runner() -> None:
-                    try:
-                        fut.set_result(asyncio.run(self.run()))
-                    except BaseException as exc:  # handed to the future
-                        fut.set_exception(exc)
-
-                threading.Thread(target=runner, name="timeline-playback", daemon=True).start()
-                self.task = fut
+        if self.task is not None and not self.task.done():
             return self.task
+        try:
+            running = asyncio.get_running_loop()
+        except RuntimeError:
+            raise RuntimeError(
+                "TimelineWidget.play() needs a running event loop (a notebook kernel has one); "
+                "in a script, run it inside one: asyncio.run(main()) with "
+                "'await widget.play(loop=False)' in main()"
+            ) from None
+        w.playing = True
+        self.task = running.create_task(self.run())
+        return self.task
 
     def on_ack(self, seq: int) -> None:
-        """The front end drew frame ``seq`` (any thread)."""
+        """The front end drew frame ``seq`` (its message arrives on the UI thread)."""
         self.ack_seq = max(self.ack_seq, seq)
-        loop, event = self._ack_loop, self._ack_event
-        if loop is None or event is None:
-            return
-        try:
-            same_thread = asyncio.get_running_loop() is loop
-        except RuntimeError:
-            same_thread = False
-        if same_thread:
-            event.set()
-        elif not loop.is_closed():
-            loop.call_soon_threadsafe(event.set)
+        if self._ack_event is not None:
+            self._ack_event.set()
 
     async def run(self) -> dict[str, Any]:
         w = self.widget
@@ -131,7 +107,6 @@ class Playback:
         done_at: deque[float] = deque()
         started = time.perf_counter()
         last_status = started
-        self._ack_loop = asyncio.get_running_loop()
         self._ack_event = asyncio.Event()
         # None: no front end has acknowledged a frame of this run yet
         acks_seen: bool | None = None

@@ -255,9 +255,9 @@ class TimelineWidget(anywidget.AnyWidget):
         """Start kernel-side playback from the playhead; return its task.
 
         In a notebook ``await widget.play(loop=False)`` plays the range once and
-        returns :attr:`playback_stats`. Called where no asyncio loop runs (a plain
-        script), playback runs on a daemon thread and a
-        :class:`concurrent.futures.Future` is returned.
+        returns :attr:`playback_stats`. Playback runs on the kernel's event loop
+        (the UI thread); called where no loop runs (a plain script) it raises
+        ``RuntimeError`` saying how to run one.
         """
         if loop is not None:
             self.loop = bool(loop)

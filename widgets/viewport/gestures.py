@@ -35,14 +35,13 @@ keeps at most one gesture open and ends an abandoned one (watchdog).
 
 from __future__ import annotations
 
-import threading
 import time
 from collections.abc import Callable, Mapping
 from typing import Any, ClassVar
 
 import numpy as np
 
-from widgets._threading import close_interactions
+from widgets._threading import UiTimer, close_interactions
 from widgets.viewport.common import MAX_DABS_PER_MESSAGE
 
 #: A gesture with no message from the front end for this long is ended (the page was
@@ -205,10 +204,9 @@ class GestureDispatcher:
         self.viewport = viewport
         self.factories = dict(factories)
         self.ack_extra = dict(ack_extra or {})
-        self.lock = threading.RLock()
         self.active: Gesture | None = None
         self.watchdog_s = DRAG_WATCHDOG_S
-        self._watchdog: threading.Timer | None = None
+        self._watchdog: UiTimer | None = None
         self._last_msg = 0.0
         #: messages refused as stale (a closed gesture's, or another press's)
         self.refused = 0
@@ -217,17 +215,16 @@ class GestureDispatcher:
     def start(self, gesture: Gesture, content: Mapping[str, Any] | None = None) -> float:
         """Close any open gesture and every other interaction, then begin ``gesture``."""
         close_interactions(self.viewport.model)
-        with self.lock:
-            self.finish()
-            gesture.on_closed_elsewhere = self._closed_elsewhere
-            self.active = gesture
-            try:
-                ms = gesture.begin(content or {})
-            except BaseException:
-                self._retire(gesture)
-                raise
-            self._arm_watchdog()
-            return ms
+        self.finish()
+        gesture.on_closed_elsewhere = self._closed_elsewhere
+        self.active = gesture
+        try:
+            ms = gesture.begin(content or {})
+        except BaseException:
+            self._retire(gesture)
+            raise
+        self._arm_watchdog()
+        return ms
 
     def current(self, cls: type[Gesture] | tuple[type[Gesture], ...] = Gesture) -> Any:
         """The open gesture if it is a ``cls``, else None."""
@@ -235,49 +232,45 @@ class GestureDispatcher:
         return g if isinstance(g, cls) and g.open else None
 
     def update(self, gesture: Gesture, content: Mapping[str, Any]) -> float:
-        with self.lock:
-            if gesture is not self.active:
-                return 0.0
-            try:
-                ms = gesture.update(content)
-            except GestureStopped:
-                self.abort()
-                self._send_cancel(gesture.kind, gesture.gid)
-                return 0.0
-            self._arm_watchdog()
-            return ms
+        if gesture is not self.active:
+            return 0.0
+        try:
+            ms = gesture.update(content)
+        except GestureStopped:
+            self.abort()
+            self._send_cancel(gesture.kind, gesture.gid)
+            return 0.0
+        self._arm_watchdog()
+        return ms
 
     def finish(self, cls: type[Gesture] | tuple[type[Gesture], ...] = Gesture) -> None:
         """End the open gesture if it is a ``cls`` (one undo step); no-op otherwise."""
-        with self.lock:
-            g = self.active
-            if g is None or not isinstance(g, cls):
-                return
-            try:
-                g.end(None)
-            finally:
-                self._retire(g)
+        g = self.active
+        if g is None or not isinstance(g, cls):
+            return
+        try:
+            g.end(None)
+        finally:
+            self._retire(g)
 
     def cancel(self, cls: type[Gesture] | tuple[type[Gesture], ...] = Gesture) -> None:
         """Cancel the open gesture if it is a ``cls`` (its edits put back)."""
-        with self.lock:
-            g = self.active
-            if g is None or not isinstance(g, cls):
-                return
-            try:
-                g.cancel()
-            finally:
-                self._retire(g)
+        g = self.active
+        if g is None or not isinstance(g, cls):
+            return
+        try:
+            g.cancel()
+        finally:
+            self._retire(g)
 
     def abort(self) -> None:
-        with self.lock:
-            g = self.active
-            if g is None:
-                return
-            try:
-                g.abort()
-            finally:
-                self._retire(g)
+        g = self.active
+        if g is None:
+            return
+        try:
+            g.abort()
+        finally:
+            self._retire(g)
 
     # ------------------------------------------------------------------ messages
     def on_message(self, kind: str, content: Mapping[str, Any]) -> None:
@@ -286,31 +279,30 @@ class GestureDispatcher:
         ms, stale = 0.0, False
         vp = self.viewport
         try:
-            with self.lock:
-                g = self.active
-                if phase == "start":
-                    new = self.factories[kind](content)
-                    new.gid = content.get("gesture")
-                    with vp.sync.patching(content.get("seq")):
-                        ms = self.start(new, content)
-                elif g is None or g.kind != kind or not self._same_press(g, content):
-                    stale = phase in ("move", "end", "cancel")
-                    if stale:
-                        self.refused += 1
-                elif not g.live:
-                    stale = True
+            g = self.active
+            if phase == "start":
+                new = self.factories[kind](content)
+                new.gid = content.get("gesture")
+                with vp.sync.patching(content.get("seq")):
+                    ms = self.start(new, content)
+            elif g is None or g.kind != kind or not self._same_press(g, content):
+                stale = phase in ("move", "end", "cancel")
+                if stale:
                     self.refused += 1
+            elif not g.live:
+                stale = True
+                self.refused += 1
+                self._retire(g)
+            elif phase == "move":
+                with vp.sync.patching(content.get("seq")):
+                    ms = self.update(g, content)
+            elif phase == "end":
+                try:
+                    ms = g.end(content)
+                finally:
                     self._retire(g)
-                elif phase == "move":
-                    with vp.sync.patching(content.get("seq")):
-                        ms = self.update(g, content)
-                elif phase == "end":
-                    try:
-                        ms = g.end(content)
-                    finally:
-                        self._retire(g)
-                elif phase == "cancel":
-                    self.cancel()
+            elif phase == "cancel":
+                self.cancel()
         except GestureStopped:
             self.abort()
             self._send_cancel(kind, content.get("gesture"))
@@ -344,11 +336,10 @@ class GestureDispatcher:
     # ------------------------------------------------------------------ internals
     def _retire(self, g: Gesture) -> None:
         """``g`` is closed: forget it, stop the watchdog, report its stats (once)."""
-        with self.lock:
-            if g is not self.active:
-                return
-            self.active = None
-            self._cancel_watchdog()
+        if g is not self.active:
+            return
+        self.active = None
+        self._cancel_watchdog()
         g.finished()
 
     def _closed_elsewhere(self, g: Gesture) -> None:
@@ -366,8 +357,8 @@ class GestureDispatcher:
         self.viewport.send(msg)
 
     def _arm_watchdog(self) -> None:
-        # One timer per gesture, not per message: starting a thread per move cost up to
-        # 100 ms on 2 cores busy with software WebGL. It re-arms itself for the time left.
+        # One timer per gesture, not per message (an event-loop timer on the UI thread):
+        # it re-arms itself for the time left.
         self._last_msg = time.monotonic()
         if self._watchdog is None:
             self._start_watchdog(self.watchdog_s)
@@ -378,22 +369,19 @@ class GestureDispatcher:
             self._watchdog = None
 
     def _start_watchdog(self, delay: float) -> None:
-        self._watchdog = threading.Timer(delay, self._on_watchdog)
-        self._watchdog.daemon = True
-        self._watchdog.start()
+        self._watchdog = UiTimer(delay, self._on_watchdog)
 
     def _on_watchdog(self) -> None:
         try:
-            with self.lock:
-                if self.active is None:
-                    self._watchdog = None
-                    return
-                idle = time.monotonic() - self._last_msg
-                if idle < self.watchdog_s:
-                    self._start_watchdog(self.watchdog_s - idle)
-                    return
+            if self.active is None:
                 self._watchdog = None
-                self.finish()
+                return
+            idle = time.monotonic() - self._last_msg
+            if idle < self.watchdog_s:
+                self._start_watchdog(self.watchdog_s - idle)
+                return
+            self._watchdog = None
+            self.finish()
         except Exception as exc:
             self.viewport.errors.report("ending an abandoned drag or stroke", exc)
 

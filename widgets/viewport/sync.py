@@ -37,7 +37,6 @@ sent after the last edit.
 
 from __future__ import annotations
 
-import threading
 import time
 from collections import deque
 from collections.abc import Iterator
@@ -74,8 +73,6 @@ class SceneSync:
     def __init__(self, widget: Any, model: Any) -> None:
         self.widget = widget
         self.model = model
-        #: one update at a time, even when edits arrive from several threads
-        self.lock = threading.RLock()
         self.connected = False
         self.last: np.ndarray | None = None  # what the front end has, (n, 3) float32
         self.last_faces: np.ndarray | None = None
@@ -142,8 +139,8 @@ class SceneSync:
 
     def push_geometry(self, force_full: bool, tolerance: float = 0.0) -> None:
         model, w = self.model, self.widget
-        # Model lock: read a consistent evaluate(); own lock: one update at a time.
-        with model.lock, self.lock:
+        # Model lock: read a consistent evaluate() (the UI thread makes updates one at a time).
+        with model.lock:
             if not self.connected:
                 return
             pos = np.asarray(model.evaluate(), dtype=np.float32)
@@ -200,7 +197,7 @@ class SceneSync:
     def resync(self, rig: bool = False) -> None:
         """The page lost track: send the full state (``rig``: the GPU rig too, which the page
         lacks when it missed the update that switched it to GPU mode)."""
-        with self.model.lock, self.lock:
+        with self.model.lock:
             if rig:
                 self.gpu.reset()
             self.push_geometry(force_full=True)
@@ -242,7 +239,7 @@ class SceneSync:
             self._pending = True
             return
         model, w = self.model, self.widget
-        with model.lock, self.lock:
+        with model.lock:
             if not self.connected:
                 return
             weights: np.ndarray | None
@@ -290,7 +287,7 @@ class SceneSync:
 
     def resend_paint(self) -> None:
         """The front end lost track of the overlay: send it whole."""
-        with self.model.lock, self.lock:
+        with self.model.lock:
             self.paint_last = None
         self.sync_paint()
 
@@ -316,29 +313,27 @@ class SceneSync:
         w = self.widget
         edges = u32_bytes(pairs.reshape(-1))
         zero = np.zeros(pairs.shape[0], np.float32)
-        with self.lock:
-            self.strain_pending = None
-            self.strain_sent = zero
-            with w.hold_sync():
-                if edges != w._feature_edges:
-                    w._feature_edges = edges
-                w._feature_strain = f32_bytes(zero)
+        self.strain_pending = None
+        self.strain_sent = zero
+        with w.hold_sync():
+            if edges != w._feature_edges:
+                w._feature_edges = edges
+            w._feature_strain = f32_bytes(zero)
 
     def set_feature_strain(self, f: np.ndarray) -> bool:
         """Send strain (F,) if visible and some edge changed enough; True when sent."""
         w = self.widget
-        with self.lock:
-            if not w.feature_graph:
-                self.strain_pending = f.copy()
+        if not w.feature_graph:
+            self.strain_pending = f.copy()
+            return False
+        self.strain_pending = None
+        last = self.strain_sent
+        if last is not None and last.shape == f.shape:
+            moved = bool(f.size) and float(np.abs(f - last).max()) > STRAIN_TOLERANCE
+            settled = not f.any() and bool(last.any())
+            if not (moved or settled):
                 return False
-            self.strain_pending = None
-            last = self.strain_sent
-            if last is not None and last.shape == f.shape:
-                moved = bool(f.size) and float(np.abs(f - last).max()) > STRAIN_TOLERANCE
-                settled = not f.any() and bool(last.any())
-                if not (moved or settled):
-                    return False
-            self.strain_sent = f.copy()
-            w._feature_strain = f32_bytes(f)
-            self.feature_updates_sent += 1
-            return True
+        self.strain_sent = f.copy()
+        w._feature_strain = f32_bytes(f)
+        self.feature_updates_sent += 1
+        return True

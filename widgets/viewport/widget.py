@@ -57,7 +57,7 @@ import ipywidgets
 import numpy as np
 import traitlets as t
 
-from widgets._threading import ErrorSink
+from widgets._threading import ErrorSink, slider_pointer
 from widgets.viewport.common import (
     BRUSH_MODES,
     FALLOFFS,
@@ -251,6 +251,9 @@ class Viewport(GestureAPI, OverlayAPI, anywidget.AnyWidget):
         self.sync = SceneSync(self, model)
         #: comm messages received from the front end (tests assert orbit sends none)
         self.frontend_msg_count = 0
+        #: full updates the page asked for, with its reason ("gap": a version it never got,
+        #: "rig": GPU parameters without the rig); the browser tests require none
+        self.resyncs: list[str] = []
         #: kernel-side ms per handle move (move_handle: rank-1 update + evaluate + send)
         self.drag_ms: deque[float] = deque(maxlen=512)
         #: the geometry-send part of the last drag_ms entries
@@ -518,7 +521,15 @@ class Viewport(GestureAPI, OverlayAPI, anywidget.AnyWidget):
             self.sync.gpu.unavailable = str(content.get("reason") or "unavailable")
             if was:
                 self.errors.guard("Viewport resync")(self.sync.push_geometry)(force_full=True)
+        elif kind == "slider_pointer":
+            # the page's pointer pressed / released a slider (sent after its last value)
+            if content.get("phase") == "down":
+                slider_pointer.down()
+            else:
+                self.errors.guard("end of slider drag")(slider_pointer.up)()
         elif kind == "request_full":
+            # a protocol step, not a repair: the page saw a gap in versions it could not fill
+            self.resyncs.append(str(content.get("why") or "gap"))
             self.errors.guard("Viewport resync")(self.sync.resync)(rig=bool(content.get("rig")))
         elif kind == "request_paint":
             self.errors.guard("Viewport paint resync")(self.sync.resend_paint)()

@@ -36,7 +36,6 @@ from __future__ import annotations
 
 import html
 import math
-import threading
 import time
 from collections.abc import Callable, Iterable, Mapping
 from typing import Any
@@ -132,7 +131,6 @@ class WrinklePanel(ModelPanel):
         self.viewport = viewport
         if viewport is not None:
             self._before_edit.append(viewport.end_drag)
-        self._lock = threading.RLock()
         self._sculptor: Any = None
         self._sculptor_shapes: Any = None
         self._seen: Any = None  # the pose space the cards show
@@ -241,12 +239,11 @@ class WrinklePanel(ModelPanel):
 
     def sculptor(self) -> Any:
         """The procedural sculptor of the model (rebuilt when the shapes changed)."""
-        with self._lock:
-            shapes = self._model.shapes
-            if self._sculptor is None or self._sculptor_shapes is not shapes:
-                self._sculptor = _sculptor_class()(self._model)
-                self._sculptor_shapes = shapes
-            return self._sculptor
+        shapes = self._model.shapes
+        if self._sculptor is None or self._sculptor_shapes is not shapes:
+            self._sculptor = _sculptor_class()(self._model)
+            self._sculptor_shapes = shapes
+        return self._sculptor
 
     # ------------------------------------------------------- actions (UI -> model)
     def _require_fit(self, what: str) -> Any:
@@ -518,9 +515,8 @@ class WrinklePanel(ModelPanel):
         self._sync_controls()
         if self.eraser is not None and self.eraser.example not in w.example_names:
             self.stop_erasing()
-        with self._lock:
-            self._seen = w.pose_space
-            self._cards.update()
+        self._seen = w.pose_space
+        self._cards.update()
         names = list(w.example_names)
         current = self.example.value
         self.example.options = names

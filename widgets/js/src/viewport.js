@@ -22,6 +22,7 @@
 import { FeatureGraphOverlay } from "./viewport/feature_graph.js";
 import { PointOverlay } from "./viewport/point_overlay.js";
 import { View } from "./viewport/scene.js";
+import { watchSliderPointer } from "./viewport/slider_pointer.js";
 import { Store } from "./viewport/sync.js";
 
 // ---------------------------------------------------------------------------------------
@@ -48,6 +49,7 @@ export default {
     store.loadFull();
     store.loadPaintFull();
     store.initLocal(); // shape sliders move the face in the page first (./viewport/gpu_local.js)
+    const unwatchSliders = watchSliderPointer(model); // the page says when a slider drag ends
     const onFull = () => store.loadFull();
     const onPaintFull = () => store.loadPaintFull();
     const onRig = () => { store.loadGpuRig(); store.notify(); };
@@ -84,6 +86,7 @@ export default {
       model.off("change:_gpu_meta", onRig);
       model.off("change:_gpu_params", onParamsTrait);
       model.off("msg:custom", onMsg);
+      unwatchSliders();
       store.disposeLocal();
       STORES.delete(model.get("_uid"));
     };

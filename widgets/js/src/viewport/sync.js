@@ -239,7 +239,7 @@ export class Store {
     if (m.get("_gpu_mode") === "gpu" && (m.get("_gpu_meta") || {}).n) return;
     if (this.rigAsked === m.get("_version")) return;
     this.rigAsked = m.get("_version");
-    m.send({ type: "request_full", have: this.version, rig: true });
+    this.requestFull("rig", true);
   }
 
   // A geometry message (gpu_params / patch) ahead of our version: keep it for the full
@@ -251,9 +251,17 @@ export class Store {
         this.gapTimer = null;
         if (!this.held.length) return;
         this.held = [];
-        this.model.send({ type: "request_full", have: this.version, rig: !this.gpu });
+        this.requestFull("gap", !this.gpu);
       }, GAP_MS);
     }
+  }
+
+  // Ask Python for everything (a protocol step for a real gap, counted: the browser tests read
+  // globalThis.fwbResyncs and require none).
+  requestFull(why, rig) {
+    const g = globalThis;
+    (g.fwbResyncs = g.fwbResyncs || []).push({ why, have: this.version, at: performance.now() });
+    this.model.send({ type: "request_full", have: this.version, rig, why });
   }
 
   // Apply the held messages that follow our version now (in order), drop older ones.

@@ -1,0 +1,164 @@
+"""One UI thread: timers on the kernel's loop, the page ends slider drags, a guard catches the rest.
+
+``widgets/_threading.py``. The tests that need a running loop run it on a fresh
+thread they declare the UI thread (``ui_thread_is``), as a kernel runs its loop
+on its main thread (the session's Playwright fixture keeps a loop registered on
+this process's main thread).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import concurrent.futures
+import threading
+import time
+from typing import Any
+
+import ipywidgets as W
+import pytest
+
+import widgets._threading as ui
+from widgets import ExpressionPanel, TimelineWidget, Viewport
+from widgets._threading import (
+    InteractionGrouper,
+    UiThreadError,
+    UiTimer,
+    slider_pointer,
+    ui_loop,
+    ui_thread_is,
+)
+
+
+def on_a_kernel_like_thread(main: Any) -> Any:
+    """Run ``asyncio.run(main())`` on a new thread that is the UI thread meanwhile."""
+
+    def run() -> Any:
+        with ui_thread_is(threading.current_thread()):
+            return asyncio.run(main())
+
+    with concurrent.futures.ThreadPoolExecutor(1) as pool:
+        return pool.submit(run).result(timeout=60)
+
+
+@pytest.fixture(autouse=True)
+def _pointer_released():
+    yield
+    slider_pointer.held = False
+
+
+def test_timer_fires_on_the_ui_thread_and_cancel_stops_it() -> None:
+    async def main():
+        fired: list[Any] = []
+        t = UiTimer(0.01, lambda: fired.append(threading.current_thread()))
+        cancelled = UiTimer(0.01, lambda: fired.append("cancelled"))
+        assert t.armed and cancelled.armed
+        cancelled.cancel()
+        await asyncio.sleep(0.1)
+        return fired, threading.current_thread(), ui_loop() is asyncio.get_running_loop()
+
+    fired, ui_thread, same_loop = on_a_kernel_like_thread(main)
+    assert fired == [ui_thread] and same_loop
+
+
+def test_without_a_loop_nothing_is_scheduled() -> None:
+    fired = []
+    t = UiTimer(0.0, lambda: fired.append(1))
+    assert not t.armed
+    time.sleep(0.05)
+    assert fired == []
+
+
+def test_guard_raises_and_records_a_widget_changed_off_the_ui_thread() -> None:
+    slider = W.FloatSlider()
+    n = len(ui.thread_violations)
+
+    def off_thread() -> None:
+        slider.value = 0.5
+
+    with concurrent.futures.ThreadPoolExecutor(1) as pool:
+        with pytest.raises(UiThreadError, match=r"FloatSlider\.value set on thread"):
+            pool.submit(off_thread).result()
+    assert len(ui.thread_violations) == n + 1
+    del ui.thread_violations[n:]  # seen and expected: the autouse check must not fail this test
+    slider.value = 0.25  # the UI thread may
+    assert slider.value == 0.25
+
+
+def test_a_slider_drag_is_one_undo_step_ended_by_the_pages_release(tiny_model) -> None:
+    m = tiny_model
+
+    async def main():
+        g = InteractionGrouper(m, idle_s=0.05)
+        slider_pointer.down()
+        for k in range(5):
+            g.touch("Drag up")
+            m.set_weight("up", 0.1 * (k + 1))
+            await asyncio.sleep(0.08)  # late messages: longer than the idle time
+        held = g.active and m.interacting
+        slider_pointer.up()
+        return held, g.active
+
+    held, still_open = on_a_kernel_like_thread(main)
+    assert held and not still_open
+    assert m.history.undo_labels[-1:] == ["Drag up"] and len(m.history.undo_labels) == 1
+    assert m.weights["up"] == pytest.approx(0.5)
+
+
+def test_without_a_press_the_idle_timer_ends_the_burst(tiny_model) -> None:
+    m = tiny_model
+
+    async def main():
+        g = InteractionGrouper(m, idle_s=0.05)
+        g.touch("Drag up")  # e.g. an arrow key on the slider
+        m.set_weight("up", 0.3)
+        opened = m.interacting
+        await asyncio.sleep(0.2)
+        return opened, m.interacting
+
+    opened, still = on_a_kernel_like_thread(main)
+    assert opened and not still and m.history.undo_labels == ["Drag up"]
+
+
+def test_a_page_that_vanished_mid_drag_is_covered_by_the_watchdog(tiny_model) -> None:
+    m = tiny_model
+
+    async def main():
+        g = InteractionGrouper(m, idle_s=0.01, watchdog_s=0.15)
+        slider_pointer.down()
+        g.touch("Drag up")
+        m.set_weight("up", 0.3)
+        await asyncio.sleep(0.05)
+        mid = m.interacting  # held: the short idle time does not end it
+        await asyncio.sleep(0.3)
+        return mid, m.interacting
+
+    mid, after = on_a_kernel_like_thread(main)
+    assert mid and not after and m.history.undo_labels == ["Drag up"]
+
+
+def test_viewport_message_releases_the_expression_panels_drag(tiny_model) -> None:
+    m = tiny_model
+    vp = Viewport(m)
+    panel = ExpressionPanel(m, idle_s=30.0)
+    vp._on_frontend_msg(vp, {"type": "slider_pointer", "phase": "down"}, [])
+    for v in (0.2, 0.4, 0.6):
+        panel.sliders["up"].value = v
+    assert m.interacting and m.history.undo_labels == []
+    vp._on_frontend_msg(vp, {"type": "slider_pointer", "phase": "up"}, [])
+    assert not m.interacting and m.history.undo_labels == ["Drag up"]
+    assert m.weights["up"] == pytest.approx(0.6)
+    panel.close()
+    vp.close()
+
+
+def test_playback_needs_the_kernels_loop(tiny_model) -> None:
+    w = TimelineWidget(tiny_model)
+
+    def script() -> None:
+        w.play()
+
+    with concurrent.futures.ThreadPoolExecutor(1) as pool:
+        with pytest.raises(RuntimeError, match="needs a running event loop"):
+            pool.submit(script).result()
+    assert not w.playing
+    w.close()
