@@ -157,7 +157,10 @@ def _wait_py(nb: NotebookPage, expr: str, pred, timeout: float = 15.0) -> Any:
         if pred(value):
             return value
         time.sleep(0.15)
-    raise AssertionError(f"{expr} never satisfied the condition; last value {value!r}")
+    raise AssertionError(
+        f"{expr} never satisfied the condition; last value {value!r} "
+        f"(timeline status {_py(nb, 'tl.status')!r}, error {_py(nb, 'tl._error')!r})"
+    )
 
 
 def _drag(nb: NotebookPage, x0: float, y0: float, x1: float, y1: float, steps: int = 12) -> None:

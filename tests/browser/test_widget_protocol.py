@@ -8,6 +8,9 @@ Hand-checked on a tiny 3x3 grid model.
 
 from __future__ import annotations
 
+import asyncio
+import concurrent.futures
+import threading
 import time
 
 import numpy as np
@@ -17,6 +20,7 @@ pytest.importorskip("anywidget")
 pytest.importorskip("ipywidgets")
 
 import widgets
+from widgets._threading import ui_thread_is
 from widgets.panels.expressions import layout_rows
 from widgets.viewport import BUNDLE
 from workbench.core.polygons import Polygons
@@ -25,6 +29,17 @@ from workbench.model import BlendShape, FaceModel
 pytestmark = pytest.mark.skipif(
     not BUNDLE.exists(), reason="viewport bundle not built (npm --prefix widgets/js run build)"
 )
+
+
+def in_a_kernel_like_loop(main):
+    """``asyncio.run(main())`` on a fresh thread that is the UI thread meanwhile (a kernel's main thread)."""
+
+    def run():
+        with ui_thread_is(threading.current_thread()):
+            return asyncio.run(main())
+
+    with concurrent.futures.ThreadPoolExecutor(1) as pool:
+        return pool.submit(run).result(timeout=60)
 
 
 def _grid() -> FaceModel:
@@ -136,13 +151,18 @@ def test_panel_groups_pairs_left_first():
 
 def test_slider_burst_is_one_undo_step_and_model_edits_move_sliders():
     m = _grid()
-    panel = widgets.ExpressionPanel(m, idle_s=0.1)
-    for v in (0.1, 0.2, 0.3):  # what a drag sends
-        panel.sliders["jawOpen"].value = v
-    assert m.interacting and m.weights["jawOpen"] == pytest.approx(0.3)
-    deadline = time.monotonic() + 5
-    while m.interacting and time.monotonic() < deadline:
-        time.sleep(0.02)
+
+    async def drag():
+        panel = widgets.ExpressionPanel(m, idle_s=0.1)
+        for v in (0.1, 0.2, 0.3):  # what a keyboard nudge sends (no pointer press reported)
+            panel.sliders["jawOpen"].value = v
+        assert m.interacting and m.weights["jawOpen"] == pytest.approx(0.3)
+        deadline = time.monotonic() + 5
+        while m.interacting and time.monotonic() < deadline:
+            await asyncio.sleep(0.02)  # the idle timer runs on the kernel's loop
+        return panel
+
+    panel = in_a_kernel_like_loop(drag)
     assert m.history.undo_labels == ["Drag jawOpen"]
     assert not panel.undo_button.disabled and panel.redo_button.disabled
 
@@ -460,12 +480,17 @@ def test_paint_watchdog_ends_an_abandoned_stroke(monkeypatch):
 
     monkeypatch.setattr(vpmod, "DRAG_WATCHDOG_S", 0.2)
     m = _grid()
-    vp = widgets.Viewport(m, paint_expression="jawOpen")
-    vp._on_frontend_msg(vp, {"type": "paint", "phase": "start", "vertices": [4], "seq": 1}, [])
-    assert m.interacting
-    deadline = time.monotonic() + 5
-    while m.interacting and time.monotonic() < deadline:
-        time.sleep(0.05)
+
+    async def abandon():
+        vp = widgets.Viewport(m, paint_expression="jawOpen")
+        vp._on_frontend_msg(vp, {"type": "paint", "phase": "start", "vertices": [4], "seq": 1}, [])
+        assert m.interacting
+        deadline = time.monotonic() + 5
+        while m.interacting and time.monotonic() < deadline:
+            await asyncio.sleep(0.05)  # the watchdog runs on the kernel's loop
+        return vp
+
+    vp = in_a_kernel_like_loop(abandon)
     assert not m.interacting and not vp.painting
     assert m.history.undo_labels == ["Paint jawOpen"]
     vp.close()

@@ -372,7 +372,7 @@ class GpuSync:
     def prepare_clip(self) -> bool:
         """Upload the timeline's per-frame parameters if they changed; True when the browser can play it."""
         model, w = self.model, self.widget
-        with model.lock, self.sync.lock:
+        with model.lock:
             if not self.active or self.residual is None or self.gain is None:
                 self.clip_reason = "the view does not evaluate on the GPU"
                 return False
