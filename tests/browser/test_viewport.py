@@ -125,6 +125,8 @@ def test_drag_jaw_slider_changes_weight_and_mouth_pixels(open_notebook):
     ids = _prepare(nb)
     _scroll_to_workbench(nb, slider="jawOpen")
     undo_before = nb.kernel_eval("import json; print(json.dumps(model.history.undo_labels))")
+    pointer = "import json; from widgets._threading import slider_pointer as sp; print(json.dumps([sp.presses, sp.releases, sp.held]))"
+    presses0, releases0, _held = nb.kernel_eval(pointer)
     mouth = nb.project(ids)
     clip = clip_around(mouth, pad=40)
     before = nb.screenshot("mouth-before", clip=clip)
@@ -141,7 +143,11 @@ def test_drag_jaw_slider_changes_weight_and_mouth_pixels(open_notebook):
     nb.screenshot("page-after")
     changed = pixel_change(before, after)
     assert changed > 0.03, f"only {changed:.1%} of the mouth region changed"
-    # The whole drag is one undo step.
+    # The whole drag is one undo step, ended because the page said the pointer let go
+    # (while the page reports a press only a 30 s watchdog could end it).
+    presses, releases, held = nb.kernel_eval(pointer)
+    assert (presses, releases, held) == (presses0 + 1, releases0 + 1, False)
+    assert nb.kernel_eval("import json; print(json.dumps(model.interacting))") is False
     undo_after = nb.kernel_eval("import json; print(json.dumps(model.history.undo_labels))")
     assert undo_after == [*undo_before, "Drag jawOpen"]
     # The panel's undo button restores the weight and the view follows.
