@@ -226,6 +226,8 @@ export class View {
     // Test hook: screen (client) coordinates of vertex ids, [[x, y, inFront], ...].
     el.fwbProject = (ids) => this.project(ids);
     el.fwbHandles = () => this.handleScreenPositions();
+    // Test hook: the marker a press at page (x, y) would grab, or -1 (occluded, or none there).
+    el.fwbPickHandle = (x, y) => this.pickHandle(x, y, true);
     // Test hook: the brush cursor's centre in page coordinates, or null when hidden.
     el.fwbBrush = () => this.tools.paint.brushScreenPosition();
     // Test hook: the positions the GPU evaluated (read back), or null when not on the GPU.
@@ -667,6 +669,7 @@ export class View {
     delete this.el.fwbPaintStats;
     delete this.el.fwbBrush;
     delete this.el.fwbGpuPositions;
+    delete this.el.fwbPickHandle;
   }
 }
 

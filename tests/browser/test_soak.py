@@ -1,0 +1,282 @@
+"""Soak: random user actions with the mouse on the Workbench at 25k, two CPU hogs beside it.
+
+Issue #26's "no lost or stale view": after every action, once the page is idle,
+the positions the page drew (read back from the GPU evaluation) equal the
+kernel's ``model.evaluate()`` within 1e-5 of the face size, the shape sliders
+show the model's weights, and the undo depth is what the actions imply. The
+harness then also requires zero resyncs, zero reopened notebooks and zero
+widget changes off the UI thread (``conftest.open_notebook``).
+
+Actions, drawn with a fixed seed: shape-slider drags (Shapes tab), handle
+drags (Sculpt tab, the default handles), paint dabs (Paint tab, one picked
+expression), timeline scrubs, keys, play then pause, undo and redo with the
+top bar's buttons, and tab switches. ``WORKBENCH_SOAK_ACTIONS`` sets how many
+(the test command runs 40 to stay in CI's time; the issue's soak is 300:
+``WORKBENCH_SOAK_ACTIONS=300 .venv/bin/python -m pytest tests/browser/test_soak.py``).
+Region pins and the Enhanced preview are not among the actions yet (their set-up,
+automatic regions and a detail database, takes minutes at 25k).
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import os
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from typing import Any
+
+import numpy as np
+import pytest
+from harness import NotebookPage, wait_until
+from test_end_to_end import _pick, _tab
+from test_timeline import _hooks, _x_of
+from test_viewport import _drag_slider
+
+N_ACTIONS = int(os.environ.get("WORKBENCH_SOAK_ACTIONS", "40"))
+SEED = int(os.environ.get("WORKBENCH_SOAK_SEED", "26"))
+
+_SETUP = """
+import json, numpy as np, workbench
+from IPython.display import display
+from widgets import Workbench
+model = workbench.load_sample("head", resolution="25k")
+wb = Workbench(model)
+display(wb)
+SOAK_SLIDERS = {sliders!r}
+"""
+
+SLIDERS = ("jawOpen", "mouthSmileLeft", "browInnerUp", "eyeBlinkRight", "mouthFunnel", "cheekPuff")
+
+_KERNEL = """
+import base64, json, numpy as np
+_vp = wb.viewport
+print(json.dumps({
+    "version": int(_vp._version), "interacting": bool(model.interacting),
+    "undo": len(model.history.undo_labels), "redo": len(model.history.redo_labels),
+    "weights": {k: float(model.weights[k]) for k in SOAK_SLIDERS},
+    "positions": base64.b64encode(np.ascontiguousarray(model.evaluate(), "<f4").tobytes()).decode(),
+}))
+"""
+
+_PAGE = """
+(names) => {
+  const vp = document.querySelector('.fwb-viewport');
+  const p = vp.fwbGpuPositions ? vp.fwbGpuPositions() : null;
+  const readout = {};
+  for (const n of names) {
+    const r = document.querySelector(`.fwb-slider-${n} .widget-readout`);
+    readout[n] = r ? r.textContent : null;
+  }
+  return {version: Number(vp.getAttribute('data-version')), detail: vp.getAttribute('data-detail'),
+          gpu: vp.getAttribute('data-gpu'), positions: p ? Array.from(p) : null, readout};
+}
+"""
+
+
+@pytest.fixture
+def cpu_hogs() -> Iterator[None]:
+    """Two busy processes beside the browser and the kernel (ended by their pids)."""
+    hogs = [
+        subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(2)
+    ]
+    try:
+        yield
+    finally:
+        for p in hogs:
+            p.kill()
+            p.wait(timeout=10)
+
+
+def _kernel(nb: NotebookPage) -> dict[str, Any]:
+    st = nb.kernel_eval(_KERNEL, timeout=120)
+    st["positions"] = np.frombuffer(base64.b64decode(st["positions"]), "<f4").reshape(-1, 3)
+    return st  # type: ignore[no-any-return]
+
+
+def _page(nb: NotebookPage) -> dict[str, Any]:
+    st = nb.page.evaluate(_PAGE, list(SLIDERS))
+    if st["positions"] is not None:
+        st["positions"] = np.asarray(st["positions"], np.float64).reshape(-1, 3)
+    return st  # type: ignore[no-any-return]
+
+
+def _in_step(nb: NotebookPage, size: float, depth: int, what: str, timeout: float = 90.0) -> dict[str, Any]:
+    """Wait until page and kernel agree; then assert it. Returns the kernel's state."""
+    deadline = time.monotonic() + timeout
+    while True:
+        k = _kernel(nb)
+        p = _page(nb)
+        err = (
+            float(np.abs(p["positions"] - k["positions"]).max()) / size
+            if p["positions"] is not None and p["positions"].shape == k["positions"].shape
+            else np.inf
+        )
+        sliders_ok = all(
+            p["readout"][n] is not None and abs(float(p["readout"][n]) - k["weights"][n]) <= 0.0051
+            for n in SLIDERS
+        )
+        settled = (
+            not k["interacting"] and p["version"] == k["version"] and p["detail"] != "draft"
+        )
+        if settled and err <= 1e-5 and sliders_ok:
+            break
+        if time.monotonic() > deadline:
+            nb.screenshot(f"out-of-step-{what}")
+            raise AssertionError(
+                f"after {what}: page and kernel out of step: GPU - kernel {err:.2e} of the face size, "
+                f"versions page {p['version']} kernel {k['version']}, detail {p['detail']}, "
+                f"interacting {k['interacting']}, readouts {p['readout']} vs {k['weights']}"
+            )
+        time.sleep(0.2)
+    if k["undo"] != depth:
+        nb.screenshot(f"depth-{what}")
+        labels = nb.kernel_eval("print(json.dumps(model.history.undo_labels))")
+        raise AssertionError(f"after {what}: undo depth {k['undo']}, expected {depth} (last steps {labels})")
+    return k
+
+
+def test_random_actions_keep_page_and_kernel_in_step(open_notebook, cpu_hogs) -> None:
+    rng = np.random.default_rng(SEED)
+    nb = open_notebook([_SETUP.format(sliders=SLIDERS)])
+    page = nb.page
+    page.evaluate("() => { const s = window.jupyterapp.shell; if (!s.leftCollapsed) s.collapseLeft(); }")
+    nb.wait_viewports(1, timeout=180)
+    vp = nb.viewport(0)
+    wait_until("GPU mode", lambda: vp.get_attribute("data-gpu"), lambda v: v == "1", timeout=120)
+    size = float(nb.kernel_eval(
+        "print(json.dumps(float(np.linalg.norm(np.ptp(model.vertices, axis=0)))))"
+    ))
+    face = [int(i) for i in nb.kernel_eval(
+        "_d = sum(np.linalg.norm(model.shape(n).delta, axis=1) for n in "
+        "('jawOpen', 'mouthSmileLeft', 'browInnerUp'))\n"
+        "_skin = model.component_labels == model.component_names.index('skin')\n"
+        "print(json.dumps([int(i) for i in np.argsort(-_d * _skin)[:60]]))"
+    )]
+    # set-up steps a person takes once: default handles, an expression to paint
+    _tab(nb, "Sculpt", "sculpt")
+    page.locator(".fwb-default-handles").click()
+    wait_until("default handles", lambda: nb.kernel_eval(
+        "print(json.dumps(len(model.handles)))"), lambda n: n and n > 0, timeout=60)
+    _tab(nb, "Paint", "paint")
+    _pick(nb, "mouthSmileLeft")
+    depth = _in_step(nb, size, depth=int(nb.kernel_eval(
+        "print(json.dumps(len(model.history.undo_labels)))")), what="set-up")["undo"]
+    redo = 0
+    tab = "Paint"
+    done: list[str] = []
+
+    def goto(title: str, tool: str) -> None:
+        nonlocal tab
+        if tab != title:
+            _tab(nb, title, tool)
+            tab = title
+
+    def top() -> None:
+        page.locator(".fwb-workbench").evaluate("e => e.scrollIntoView({block: 'start'})")
+
+    for step in range(N_ACTIONS):
+        action = rng.choice(
+            ["slider", "handle", "paint", "scrub", "key", "play", "undo", "redo", "tab"],
+            p=[0.22, 0.14, 0.12, 0.12, 0.08, 0.06, 0.12, 0.08, 0.06],
+        )
+        what = f"#{step} {action}"
+        if action == "slider":
+            goto("Shapes", "orbit")
+            name = str(rng.choice(SLIDERS))
+            now = _kernel(nb)["weights"][name]
+            target = float(rng.uniform(0.05, 0.95))
+            if abs(target - now) < 0.15:
+                target = 0.95 if now < 0.5 else 0.05
+            page.locator(f".fwb-slider-{name}").evaluate("e => e.scrollIntoView({block: 'center'})")
+            _drag_slider(nb, name, target)
+            depth, redo, what = depth + 1, 0, f"{what} {name} -> {target:.2f}"
+        elif action == "handle":
+            goto("Sculpt", "sculpt")
+            top()
+            pts = np.array(vp.evaluate("e => e.fwbHandles()"), float).reshape(-1, 3)
+            box = vp.bounding_box()
+            inside = np.flatnonzero(
+                (pts[:, 2] == 1) & (pts[:, 0] > box["x"] + 20) & (pts[:, 0] < box["x"] + box["width"] - 20)
+                & (pts[:, 1] > box["y"] + 20) & (pts[:, 1] < box["y"] + box["height"] - 20)
+            )
+            # markers a press grabs (not hidden behind the surface, not under another one)
+            grabbable = [int(k) for k in inside
+                         if vp.evaluate("(e, p) => e.fwbPickHandle(p[0], p[1])", pts[k, :2].tolist()) == k]
+            if not grabbable:
+                continue
+            k = int(rng.choice(grabbable))
+            angle, length = rng.uniform(0, 2 * np.pi), rng.uniform(12, 30)  # a drag, not a click
+            dx, dy = length * np.cos(angle), length * np.sin(angle)
+            page.mouse.move(pts[k, 0], pts[k, 1])
+            page.mouse.down()
+            page.mouse.move(pts[k, 0] + dx, pts[k, 1] + dy, steps=10)
+            page.mouse.up()
+            depth, redo, what = depth + 1, 0, f"{what} handle {k}"
+        elif action == "paint":
+            goto("Paint", "paint")
+            top()
+            xy = nb.project(face)
+            box = vp.bounding_box()
+            seen = xy[(xy[:, 2] == 1) & (xy[:, 0] > box["x"]) & (xy[:, 0] < box["x"] + box["width"])
+                      & (xy[:, 1] > box["y"]) & (xy[:, 1] < box["y"] + box["height"])]
+            if not len(seen):
+                continue
+            a, b = seen[rng.integers(len(seen))], seen[rng.integers(len(seen))]
+            page.mouse.move(a[0], a[1])
+            page.mouse.down()
+            page.mouse.move(b[0] + 3, b[1] + 3, steps=6)
+            page.mouse.up()
+            depth, redo = depth + 1, 0
+        elif action == "scrub":
+            root = page.locator(".fwb-timeline")
+            root.scroll_into_view_if_needed()
+            h = _hooks(root)
+            t = float(rng.uniform(0.0, 2.0))
+            page.mouse.click(_x_of(h, t), h["ruler_y"])
+            what = f"{what} to {t:.2f} s"
+        elif action == "key":
+            root = page.locator(".fwb-timeline")
+            root.scroll_into_view_if_needed()
+            nb.kernel_eval("wb.timeline.status = ''")
+            root.locator(".fwb-tl-key").first.click()
+            # the status says what happened: keyed, or nothing to key (every weight 0)
+            status = wait_until("the key", lambda: nb.kernel_eval(
+                "print(json.dumps(wb.timeline.status))"), bool, timeout=30)
+            if status.startswith("keyed"):
+                depth, redo = depth + 1, 0
+            what = f"{what} ({status})"
+        elif action == "play":
+            root = page.locator(".fwb-timeline")
+            root.scroll_into_view_if_needed()
+            root.locator(".fwb-tl-play").click()
+            page.wait_for_timeout(int(rng.uniform(300, 1200)))
+            pause = root.locator(".fwb-tl-pause")
+            if pause.is_enabled():  # not when the range played out, or there was nothing to play
+                pause.click()
+            wait_until("paused", lambda: nb.kernel_eval("print(json.dumps(wb.timeline.playing))"),
+                       lambda v: v is False, timeout=30)
+        elif action == "undo":
+            top()
+            if depth == 0:
+                continue
+            page.locator(".fwb-wb-undo").click()
+            depth, redo = depth - 1, redo + 1
+        elif action == "redo":
+            top()
+            if redo == 0:
+                continue
+            page.locator(".fwb-wb-redo").click()
+            depth, redo = depth + 1, redo - 1
+        elif action == "tab":
+            title = str(rng.choice(["Shapes", "Sculpt", "Paint", "Export"]))
+            goto(title, {"Sculpt": "sculpt", "Paint": "paint"}.get(title, "orbit"))
+            what = f"{what} {title}"
+        done.append(what)
+        (nb.artifacts / "actions.json").parent.mkdir(parents=True, exist_ok=True)
+        (nb.artifacts / "actions.json").write_text(json.dumps(done, indent=1))
+        _in_step(nb, size, depth, what)
+    nb.screenshot("end")
+    assert len(done) >= N_ACTIONS // 2, done
