@@ -49,16 +49,9 @@ def _prepare(nb: NotebookPage, viewports: str = "[wb.viewport]") -> list[int]:
     nb.page.evaluate(
         "() => { const s = window.jupyterapp.shell; if (!s.leftCollapsed) s.collapseLeft(); }"
     )
-    try:
-        nb.wait_viewports(1)
-    except Exception:
-        # JupyterLab's widget manager sometimes renders an output before it registered
-        # the widget's model ("widget model not found" in the console, seen on a loaded
-        # machine): the view never comes. Run the cells once more.
-        if not any("model not found" in line for line in nb.console):
-            raise
-        nb.run_all()
-        nb.wait_viewports(1)
+    # No second run of the cells when a view never comes ("widget model not found" was seen
+    # while timer threads changed widgets): a missing view is a failure (issue #26).
+    nb.wait_viewports(1)
     ids = nb.kernel_eval(f"VIEWPORTS = {viewports}\n" + _PROBE_MOUTH)
     nb.page.wait_for_timeout(300)  # layout settles after the sidebar collapsed
     return ids  # type: ignore[no-any-return]
