@@ -2,7 +2,14 @@
 
 ``tests/data/main_v2/*.fwb`` were written by ``make_fixtures.py`` at commit
 2a588e5 together with what they evaluated to then; today's code must read every
-slot back and give the same vertices, bit for bit.
+slot back and give the same vertices, up to float32 rounding.
+
+Not bit for bit: the ``*.expected.npz`` numbers were computed on another machine,
+and numpy's SIMD kernels (AVX-512 / AVX2 / SSE, chosen at run time), OpenBLAS's
+kernels and the order of float32 sums differ between CPUs by an ulp here and there
+(an AMD EPYC with AVX2 differed from the machine that wrote them in 269 of 15,252
+values). Bit-for-bit equality is for identities within one run (evaluate ==
+evaluate_at == every exporter), tested elsewhere.
 """
 
 from __future__ import annotations
@@ -17,18 +24,37 @@ import workbench
 DATA = Path(__file__).parent / "data" / "main_v2"
 
 
+def assert_same_face(got: np.ndarray, want: np.ndarray, msg: str = "") -> None:
+    """``got`` is ``want`` up to a few float32 roundings of the face's coordinates.
+
+    The tolerance is absolute, 4 ulp of the largest stored coordinate (8.6 dm here: 3.8e-6
+    dm, 0.4 µm), and not relative per value: a vertex is a sum of float32 terms the size of
+    the face (neutral + weighted deltas, then the head pose rotates all three coordinates
+    together), so a coordinate near 0 carries the rounding of its 8 dm neighbours and a
+    per-value ulp or rtol bound would fail there. Any real change of the evaluation moves
+    vertices by far more than 0.4 µm.
+    """
+    assert got.dtype == want.dtype and got.shape == want.shape, msg
+    atol = 4 * float(np.spacing(np.abs(want).max()))
+    np.testing.assert_allclose(got, want, rtol=0, atol=atol, err_msg=msg)
+
+
 @pytest.mark.parametrize("name", ["handles", "regions_paint", "timeline"])
 def test_main_files_evaluate_as_they_did(name: str) -> None:
     model = workbench.load(DATA / f"{name}.fwb")
     want = np.load(DATA / f"{name}.expected.npz")
     if "evaluate" in want.files:
-        # the paint layer now takes its base from the mesh below it ((blend + regions) - neutral
-        # instead of (blend - neutral) + regions): float32 sums in another order, <= 2 ulp apart
-        np.testing.assert_array_max_ulp(model.evaluate(), want["evaluate"], maxulp=2)
-    for key in want.files:
-        if key.startswith("evaluate_at_"):
-            t = float(key.removeprefix("evaluate_at_"))
-            np.testing.assert_array_equal(model.evaluate_at(t), want[key], err_msg=f"t={t}")
+        # also absorbs today's order of the paint layer's float32 sums ((blend + regions) -
+        # neutral instead of (blend - neutral) + regions), <= 2 ulp from main's on one machine
+        assert_same_face(model.evaluate(), want["evaluate"])
+    times = [k for k in want.files if k.startswith("evaluate_at_")]
+    for key in times:
+        t = float(key.removeprefix("evaluate_at_"))
+        assert_same_face(model.evaluate_at(t), want[key], msg=f"t={t}")
+    if times:
+        # within this run the live state at the model's time is evaluate_at, bit for bit
+        model.set_time(1.5)
+        np.testing.assert_array_equal(model.evaluate(), model.evaluate_at(1.5))
 
 
 def test_main_files_keep_their_edits() -> None:
