@@ -103,6 +103,35 @@ def _page(nb: NotebookPage) -> dict[str, Any]:
     return st  # type: ignore[no-any-return]
 
 
+_DIAGNOSE = """
+import json, numpy as np
+_p = np.frombuffer(wb.viewport._gpu_params, "<f4")
+_r = np.frombuffer(wb.viewport._gpu_residual, "<f4")
+print(json.dumps({"params": _p.tolist(), "residual_len": int(_r.size),
+                  "names": list(model.shape_names), "time": model.time,
+                  "labels": model.history.undo_labels[-6:],
+                  "paint": {k: float(np.max(w)) for k, w in model.paint.items()},
+                  "components": list(model.component_names),
+                  "label_of": {str(i): model.component_names[int(model.component_labels[i])] for i in %s}}))
+"""
+
+
+def _diagnose(nb: NotebookPage, p: dict[str, Any], k: dict[str, Any], size: float) -> dict[str, Any]:
+    """Where page and kernel differ, and both sides' GPU parameters (for the artifacts)."""
+    err = np.abs(p["positions"] - k["positions"]).max(axis=1) / size
+    bad = np.flatnonzero(err > 1e-5)
+    worst = [int(i) for i in bad[np.argsort(-err[bad])][:10]]
+    kern = nb.kernel_eval(_DIAGNOSE % (worst,))
+    page = nb.viewport(0).evaluate("e => e.fwbGpuState()")
+    kp, pp = np.asarray(kern.pop("params")), np.asarray(page.get("params") or [])
+    diff = (
+        [[int(i), float(kp[i]), float(pp[i])] for i in np.flatnonzero(np.abs(kp - pp) > 1e-6)]
+        if kp.shape == pp.shape else f"shapes {kp.shape} vs {pp.shape}"
+    )
+    return {"n_bad": int(bad.size), "worst": worst, "worst_err": [float(err[i]) for i in worst],
+            "param_diff (index, kernel, page)": diff, "page_missing": page.get("missing"), **kern}
+
+
 def _in_step(nb: NotebookPage, size: float, depth: int, what: str, timeout: float = 90.0) -> dict[str, Any]:
     """Wait until page and kernel agree; then assert it. Returns the kernel's state."""
     deadline = time.monotonic() + timeout
@@ -125,6 +154,7 @@ def _in_step(nb: NotebookPage, size: float, depth: int, what: str, timeout: floa
             break
         if time.monotonic() > deadline:
             nb.screenshot(f"out-of-step-{what}")
+            (nb.artifacts / "out-of-step.json").write_text(json.dumps(_diagnose(nb, p, k, size), indent=1))
             raise AssertionError(
                 f"after {what}: page and kernel out of step: GPU - kernel {err:.2e} of the face size, "
                 f"versions page {p['version']} kernel {k['version']}, detail {p['detail']}, "
@@ -255,7 +285,7 @@ def test_random_actions_keep_page_and_kernel_in_step(open_notebook, cpu_hogs) ->
             page.wait_for_timeout(int(rng.uniform(300, 1200)))
             pause = root.locator(".fwb-tl-pause")
             if pause.is_enabled():  # not when the range played out, or there was nothing to play
-                pause.click()
+                pause.click(force=True)  # force: it may play out meanwhile (a disabled button ignores it)
             wait_until("paused", lambda: nb.kernel_eval("print(json.dumps(wb.timeline.playing))"),
                        lambda v: v is False, timeout=30)
         elif action == "undo":

@@ -4,7 +4,10 @@
 // parameters the views evaluate — no round trip through the kernel before the first pixels.
 // The kernel still gets the value (the slider's own comm message) and answers with its
 // parameters (and wrinkle rows); those win as soon as they show the slider's value, and a
-// value the kernel never confirms (it clamped or refused it) is dropped after LOCAL_MS.
+// value the kernel never confirms (it clamped or refused it) is dropped after LOCAL_MS, by a
+// timer when no further message comes. A slider value the kernel itself set (the model moved:
+// a scrub, undo, a Python edit) is no prediction: its exact weight is already in the
+// kernel's parameters, and the slider's snapped value must not override it.
 //
 // The weights are made effective as StateView.weight_vector makes them: a muted shape plays 0,
 // a derived (corrective) shape plays the product of its drivers clamped to its range
@@ -40,7 +43,14 @@ export const localWeightMethods = {
     const follow = (name, id, tries) => {
       Promise.resolve(manager.get_model(id)).then((m) => {
         if (!m || token !== this.sliderToken) return;
-        const fn = () => this.localWeight(name, Number(m.get("value")));
+        const fn = () => {
+          // a value the kernel set (ipywidgets' _state_lock holds the state it applies) is
+          // the kernel's own, exact weight: predicting it from the snapped slider value would
+          // override the kernel's parameters with a rounded one (a scrubbed timeline)
+          const lock = m._state_lock;
+          if (lock && Object.prototype.hasOwnProperty.call(lock, "value")) return;
+          this.localWeight(name, Number(m.get("value")));
+        };
         m.on("change:value", fn);
         this.sliderModels.push([m, fn]);
       }).catch(() => {
@@ -63,6 +73,24 @@ export const localWeightMethods = {
     this.local.set(s, { value, t: performance.now() });
     this.applyLocal(this.gpuParams);
     this.pageParamsChanged();
+    this.scheduleLocalExpiry();
+  },
+
+  // A prediction the kernel never confirms (it clamped or refused the value, or sent
+  // nothing more) ends after LOCAL_MS even when no further message comes: the view goes
+  // back to the kernel's last parameters.
+  scheduleLocalExpiry() {
+    if (this.localTimer) return;
+    this.localTimer = setTimeout(() => this.expireLocal(), LOCAL_MS + 50);
+  },
+
+  expireLocal() {
+    this.localTimer = null;
+    if (!this.kernelParams || this.clipPlay || !(this.local.size || this.localHandle)) return;
+    this.gpuParams = new Float32Array(this.kernelParams);
+    this.reconcileLocal(); // drops what expired, puts the rest back on top
+    this.pageParamsChanged();
+    if (this.local.size || this.localHandle) this.scheduleLocalExpiry();
   },
 
   // The page changed the parameters itself (a slider, a drag, a clip frame): every view
@@ -100,6 +128,7 @@ export const localWeightMethods = {
     this.localHandle = { col, u: u.toArray(), colM, t: performance.now(), ending: false };
     this.applyLocalHandle(P);
     this.pageParamsChanged();
+    this.scheduleLocalExpiry();
   },
 
   // The drag ended: the kernel's next parameters are final.
@@ -158,6 +187,8 @@ export const localWeightMethods = {
   },
 
   disposeLocal() {
+    clearTimeout(this.localTimer);
+    this.localTimer = null;
     for (const [m, fn] of this.sliderModels || []) m.off("change:value", fn);
     this.sliderModels = [];
     this.model.off("change:_weight_slider_ids", this.onWeightSliders);

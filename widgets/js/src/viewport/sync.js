@@ -43,7 +43,8 @@ export class Store {
     this.paintVersion = -1;
     this.seq = 0; // gesture message numbers, unique over the views of this model
     this.gpu = null; // the rig for GPU evaluation (loadGpuRig), or null
-    this.gpuParams = null; // Float32Array: weights, shell offsets, head matrix
+    this.gpuParams = null; // Float32Array: weights, shell offsets, head matrix (+ page predictions)
+    this.kernelParams = null; // the same as the kernel last sent them
     this.gpuMode = false; // Python sends parameters instead of vertex rows
     this.meta = {};
     this.held = []; // geometry messages ahead of our version: [content, buffers]
@@ -114,6 +115,7 @@ export class Store {
     this.loadGpuRig();
     const g = this.gpu;
     const P = typed(this.model.get("_gpu_params"), Float32Array);
+    this.kernelParams = P ? new Float32Array(P) : null; // the kernel's own, before predictions
     this.gpuParams = P ? new Float32Array(P) : null;
     this.reconcileLocal();
     const R = typed(this.model.get("_gpu_residual"), Float32Array);
@@ -147,7 +149,8 @@ export class Store {
       return;
     }
     this.gpuMode = true;
-    this.gpuParams = new Float32Array(typed(buffers[0], Float32Array));
+    this.kernelParams = new Float32Array(typed(buffers[0], Float32Array));
+    this.gpuParams = new Float32Array(this.kernelParams);
     this.reconcileLocal(); // sliders the kernel has not answered yet stay as the page has them
     const ids = typed(buffers[1], Uint32Array);
     const rows = typed(buffers[2], Float32Array);
