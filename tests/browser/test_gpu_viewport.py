@@ -343,6 +343,36 @@ def test_a_followed_slider_moves_the_face_before_the_kernel_answers(open_noteboo
     _assert_gpu_equals_kernel(nb, size)
 
 
+_FOLLOWED_SLIDER = """
+import ipywidgets as W
+slider = W.FloatSlider(min=0, max=1, step=0.01, value=0, description="jawOpen")
+slider.add_class("fwb-test-slider")
+def _to_slider(_w):  # the model moves the slider, as the Shapes tab does
+    slider.value = model.weights["jawOpen"]
+model.events.weights.connect(_to_slider)
+vp.follow_sliders({"jawOpen": slider})
+display(slider)
+"""
+
+
+def test_a_slider_the_kernel_moves_does_not_override_its_exact_weight(open_notebook):
+    # A scrub, undo or Python edit sets a weight off the slider's 0.01 grid; the slider (its
+    # value snapped by the browser) follows. The page must play the kernel's exact weight,
+    # not predict one from the snapped slider (a soak found the view 1.7e-4 of the face off).
+    nb = _open(open_notebook, res="25k", more=_FOLLOWED_SLIDER)
+    vp = nb.viewport(0)
+    wait_until("GPU mode", lambda: vp.get_attribute("data-gpu"), lambda v: v == "1", timeout=60)
+    size = float(nb.kernel_eval(_SIZE))
+    nb.page.locator(".fwb-test-slider .noUi-base").wait_for()
+    for w in (0.6269747, 0.3333333, 0.9051):
+        nb.kernel_eval(f'model.set_weight("jawOpen", {w})')
+        _wait_version(nb, _kernel_version(nb))
+        wait_until("the slider to follow", lambda: nb.page.locator(
+            ".fwb-test-slider .widget-readout").text_content(), lambda t, w=w: t == f"{w:.2f}")
+        nb.page.wait_for_timeout(100)
+        _assert_gpu_equals_kernel(nb, size)
+
+
 _CANVAS_LOG = """() => {
   const e = document.querySelector('.fwb-viewport');
   window.__shots = {};
