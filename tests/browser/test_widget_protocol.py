@@ -9,8 +9,6 @@ Hand-checked on a tiny 3x3 grid model.
 from __future__ import annotations
 
 import asyncio
-import concurrent.futures
-import threading
 import time
 
 import numpy as np
@@ -19,8 +17,9 @@ import pytest
 pytest.importorskip("anywidget")
 pytest.importorskip("ipywidgets")
 
+from kernel_loop import in_kernel_loop
+
 import widgets
-from widgets._threading import ui_thread_is
 from widgets.panels.expressions import layout_rows
 from widgets.viewport import BUNDLE
 from workbench.core.polygons import Polygons
@@ -29,17 +28,6 @@ from workbench.model import BlendShape, FaceModel
 pytestmark = pytest.mark.skipif(
     not BUNDLE.exists(), reason="viewport bundle not built (npm --prefix widgets/js run build)"
 )
-
-
-def in_a_kernel_like_loop(main):
-    """``asyncio.run(main())`` on a fresh thread that is the UI thread meanwhile (a kernel's main thread)."""
-
-    def run():
-        with ui_thread_is(threading.current_thread()):
-            return asyncio.run(main())
-
-    with concurrent.futures.ThreadPoolExecutor(1) as pool:
-        return pool.submit(run).result(timeout=60)
 
 
 def _grid() -> FaceModel:
@@ -162,7 +150,7 @@ def test_slider_burst_is_one_undo_step_and_model_edits_move_sliders():
             await asyncio.sleep(0.02)  # the idle timer runs on the kernel's loop
         return panel
 
-    panel = in_a_kernel_like_loop(drag)
+    panel = in_kernel_loop(drag)
     assert m.history.undo_labels == ["Drag jawOpen"]
     assert not panel.undo_button.disabled and panel.redo_button.disabled
 
@@ -490,7 +478,7 @@ def test_paint_watchdog_ends_an_abandoned_stroke(monkeypatch):
             await asyncio.sleep(0.05)  # the watchdog runs on the kernel's loop
         return vp
 
-    vp = in_a_kernel_like_loop(abandon)
+    vp = in_kernel_loop(abandon)
     assert not m.interacting and not vp.painting
     assert m.history.undo_labels == ["Paint jawOpen"]
     vp.close()

@@ -8,9 +8,7 @@ the state shipped back to the front end. Playback runs on a real asyncio loop.
 from __future__ import annotations
 
 import asyncio
-import concurrent.futures
 import itertools
-import threading
 
 import numpy as np
 import pytest
@@ -19,7 +17,8 @@ from workbench.core.pipeline import FunctionLayer
 
 pytest.importorskip("anywidget")
 
-from widgets._threading import ui_thread_is
+from kernel_loop import on_ui_thread
+
 from widgets.timeline import TimelineWidget, curve_samples, timeline_state, view_range
 from workbench.animation.tracks import Timeline
 
@@ -42,21 +41,6 @@ def keyed(tiny_model):
 def send(w, **content):
     w.handle_message(content)
     assert w._error == "", w._error
-
-
-def run_on_fresh_thread(fn, *args):
-    """Run ``fn(*args)`` on a new thread that is the UI thread meanwhile (as a kernel's main thread).
-
-    The session-wide Playwright fixture keeps an asyncio loop registered on the
-    main thread, so ``asyncio.run`` there would refuse to start.
-    """
-
-    def as_ui_thread():
-        with ui_thread_is(threading.current_thread()):
-            return fn(*args)
-
-    with concurrent.futures.ThreadPoolExecutor(max_workers=1) as pool:
-        return pool.submit(as_ui_thread).result(timeout=30)
 
 
 def test_state_lists_tracks_keys_and_tangents(keyed):
@@ -304,7 +288,7 @@ def test_playback_sets_times_and_stops_at_the_end(keyed):
         assert w.playing
         return await task
 
-    stats = run_on_fresh_thread(lambda: asyncio.run(main()))
+    stats = on_ui_thread(lambda: asyncio.run(main()))
     assert not w.playing
     assert keyed.time == 0.2
     assert seen[0] == 0.0 and seen[-1] == 0.2
@@ -327,7 +311,7 @@ def test_pause_stops_looping_playback(keyed):
         w.pause()
         await asyncio.wait_for(task, 5)
 
-    run_on_fresh_thread(lambda: asyncio.run(main()))
+    on_ui_thread(lambda: asyncio.run(main()))
     assert not w.playing
     n = len(seen)
     assert n >= 2
@@ -345,7 +329,7 @@ def test_slow_browser_gets_one_frame_at_a_time_and_frames_are_dropped(keyed):
         w.pause()
         await asyncio.wait_for(task, 5)
 
-    run_on_fresh_thread(lambda: asyncio.run(main()))
+    on_ui_thread(lambda: asyncio.run(main()))
     in_flight = 0
     for kind, _seq in log:
         in_flight += 1 if kind == "frame" else -1
@@ -366,7 +350,7 @@ def test_playback_without_any_view_stops_waiting_for_acks(keyed):
     async def main():
         return await asyncio.wait_for(w.play(loop=False), 5)
 
-    stats = run_on_fresh_thread(lambda: asyncio.run(main()))
+    stats = on_ui_thread(lambda: asyncio.run(main()))
     assert keyed.time == 0.3
     assert stats["frames"] >= 5  # only the first frame waited
 
@@ -619,7 +603,7 @@ def test_workbench_shares_its_palette_with_the_timeline_chips(renders):
         await asyncio.sleep(0)  # the app is shown; then the loop renders the palette
         return wb
 
-    wb = run_on_fresh_thread(asyncio.run, build_in_a_kernel_like_loop())
+    wb = on_ui_thread(asyncio.run, build_in_a_kernel_like_loop())
     try:
         assert wb._gallery is not None and wb.timeline.gallery is wb.gallery
         n = len(renders)

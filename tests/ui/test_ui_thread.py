@@ -1,9 +1,7 @@
 """One UI thread: timers on the kernel's loop, the page ends slider drags, a guard catches the rest.
 
-``widgets/_threading.py``. The tests that need a running loop run it on a fresh
-thread they declare the UI thread (``ui_thread_is``), as a kernel runs its loop
-on its main thread (the session's Playwright fixture keeps a loop registered on
-this process's main thread).
+``widgets/_threading.py``. The tests that need a running loop run it as a kernel
+does, on the UI thread (``tests/kernel_loop.py``).
 """
 
 from __future__ import annotations
@@ -16,6 +14,7 @@ from typing import Any
 
 import ipywidgets as W
 import pytest
+from kernel_loop import in_kernel_loop
 
 import widgets._threading as ui
 from widgets import ExpressionPanel, TimelineWidget, Viewport
@@ -25,19 +24,7 @@ from widgets._threading import (
     UiTimer,
     slider_pointer,
     ui_loop,
-    ui_thread_is,
 )
-
-
-def on_a_kernel_like_thread(main: Any) -> Any:
-    """Run ``asyncio.run(main())`` on a new thread that is the UI thread meanwhile."""
-
-    def run() -> Any:
-        with ui_thread_is(threading.current_thread()):
-            return asyncio.run(main())
-
-    with concurrent.futures.ThreadPoolExecutor(1) as pool:
-        return pool.submit(run).result(timeout=60)
 
 
 @pytest.fixture(autouse=True)
@@ -56,7 +43,7 @@ def test_timer_fires_on_the_ui_thread_and_cancel_stops_it() -> None:
         await asyncio.sleep(0.1)
         return fired, threading.current_thread(), ui_loop() is asyncio.get_running_loop()
 
-    fired, ui_thread, same_loop = on_a_kernel_like_thread(main)
+    fired, ui_thread, same_loop = in_kernel_loop(main)
     assert fired == [ui_thread] and same_loop
 
 
@@ -98,7 +85,7 @@ def test_a_slider_drag_is_one_undo_step_ended_by_the_pages_release(tiny_model) -
         slider_pointer.up()
         return held, g.active
 
-    held, still_open = on_a_kernel_like_thread(main)
+    held, still_open = in_kernel_loop(main)
     assert held and not still_open
     assert m.history.undo_labels[-1:] == ["Drag up"] and len(m.history.undo_labels) == 1
     assert m.weights["up"] == pytest.approx(0.5)
@@ -115,7 +102,7 @@ def test_without_a_press_the_idle_timer_ends_the_burst(tiny_model) -> None:
         await asyncio.sleep(0.2)
         return opened, m.interacting
 
-    opened, still = on_a_kernel_like_thread(main)
+    opened, still = in_kernel_loop(main)
     assert opened and not still and m.history.undo_labels == ["Drag up"]
 
 
@@ -132,7 +119,7 @@ def test_a_page_that_vanished_mid_drag_is_covered_by_the_watchdog(tiny_model) ->
         await asyncio.sleep(0.3)
         return mid, m.interacting
 
-    mid, after = on_a_kernel_like_thread(main)
+    mid, after = in_kernel_loop(main)
     assert mid and not after and m.history.undo_labels == ["Drag up"]
 
 

@@ -8,7 +8,6 @@ shared error Output and the autosaver. Runs on the sample head (5k vertices).
 from __future__ import annotations
 
 import asyncio
-import concurrent.futures
 import os
 import subprocess
 import sys
@@ -21,9 +20,10 @@ import pytest
 
 pytest.importorskip("anywidget")
 
+from kernel_loop import in_kernel_loop
+
 import widgets
 from widgets import TAB_TITLES, RecoveryPrompt, Workbench, recovery_prompt
-from widgets._threading import ui_thread_is
 from workbench import load, load_sample
 from workbench.autosave import Autosaver, find_recoverable
 
@@ -154,17 +154,6 @@ def test_callback_errors_show_in_the_shared_output(wb: Workbench, monkeypatch) -
     assert "[undo]" in text and "undo exploded" in text
 
 
-def _in_a_kernel_like_loop(main) -> Any:
-    """``asyncio.run(main())`` on a fresh thread that is the UI thread meanwhile (a kernel's main thread)."""
-
-    def run() -> Any:
-        with ui_thread_is(threading.current_thread()):
-            return asyncio.run(main())
-
-    with concurrent.futures.ThreadPoolExecutor(1) as pool:
-        return pool.submit(run).result(timeout=60)
-
-
 async def _until(pred, timeout: float = 10.0) -> None:
     end = time.monotonic() + timeout
     while not pred():
@@ -197,7 +186,7 @@ def test_autosave_state_in_status_line_and_close_stops_it(tmp_path: Path) -> Non
         assert saver.saves == saves and saver.state == "saved"
         return threading.current_thread()
 
-    ui_thread = _in_a_kernel_like_loop(main)
+    ui_thread = in_kernel_loop(main)
     assert threads["pending"] is ui_thread and threads["saved"] is ui_thread
     assert load(tmp_path / "wbtest.recovery.fwb").weights["jawOpen"] == pytest.approx(0.4)
 
@@ -211,7 +200,7 @@ def test_close_with_discard_removes_the_recovery_file(tmp_path: Path) -> None:
         await _until(lambda: wb.autosaver.state == "saved")
         wb.close(discard_autosave=True)
 
-    _in_a_kernel_like_loop(main)
+    in_kernel_loop(main)
     assert not (tmp_path / "gone.recovery.fwb").exists()
 
 
