@@ -39,6 +39,7 @@ from harness import (
     CHROMIUM,
     CHROMIUM_ARGS,
     HEALTH,
+    WATCH_WIDGET_RESTORE,
     LabServer,
     LostCellReply,
     NotebookPage,
@@ -137,6 +138,7 @@ def open_notebook(
             context = browser.new_context(
                 viewport={"width": viewport_size[0], "height": viewport_size[1]}
             )
+            context.add_init_script(WATCH_WIDGET_RESTORE)
             page = context.new_page()
             nb = NotebookPage(page, lab, artifacts_dir, name)
             opened.append((context, nb))
@@ -145,6 +147,7 @@ def open_notebook(
             try:
                 nb.wait_kernel_idle()
                 if run:
+                    nb.wait_widgets_restored()  # no cell before the widget manager's restore
                     nb.run_all()
             except LostCellReply as exc:
                 nb.screenshot(f"lost-cell-reply-{attempt}")

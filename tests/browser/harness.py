@@ -251,6 +251,34 @@ print(json.dumps(list(_g.thread_violations) if _g else []))
 """
 
 
+#: Added to every test page before JupyterLab loads: notes when the widget manager's restore
+#: from the kernel has been answered. On connecting to a kernel, the JupyterLab widget manager
+#: asks it for every live widget (a "request_states" control message, or comm_info_request on
+#: a kernel that has not imported ipywidgets) and builds models for those it does not know.
+#: Cells run before that answer arrives create widgets the answer also lists: the manager then
+#: builds some models twice in parallel, and a container can look up a child model before it
+#: is registered ("Error: widget model not found" in _make_model; the view never renders).
+#: That race is the widget manager's own (jupyter-widgets/ipywidgets PR #2570, PR #3549 and
+#: the analysis in jupyter-widgets/ipyleaflet PR #968): a person who runs a cell a moment
+#: after opening a notebook can meet it too. The tests start running cells once it is over.
+WATCH_WIDGET_RESTORE = """
+(() => {
+  const Native = window.WebSocket;
+  const text = new TextDecoder();
+  const seen = (data) => {
+    const s = typeof data === "string" ? data : text.decode(data);
+    if (s.includes('"comm_info_reply"') || s.includes('"update_states"')) window.__fwbWidgetsRestored = true;
+  };
+  window.WebSocket = class extends Native {
+    constructor(...args) {
+      super(...args);
+      this.addEventListener("message", (e) => { try { seen(e.data); } catch (err) { /* not ours */ } });
+    }
+  };
+})();
+"""
+
+
 class NotebookPage:
     """One notebook open in JupyterLab in a fresh browser context."""
 
@@ -295,6 +323,10 @@ class NotebookPage:
                    w.sessionContext.session.kernel.status === 'idle'); }""",
             timeout=timeout * 1000,
         )
+
+    def wait_widgets_restored(self, timeout: float = 30.0) -> None:
+        """Wait until the widget manager's restore from the kernel was answered (WATCH_WIDGET_RESTORE)."""
+        self.page.wait_for_function("() => window.__fwbWidgetsRestored === true", timeout=timeout * 1000)
 
     def run_all(self, timeout: float = 180.0, lost_after: float = 15.0) -> dict[str, Any]:
         """Run every cell; wait until all ran and the kernel is idle; fail on errors.

@@ -14,7 +14,7 @@ from typing import Any
 
 import ipywidgets as W
 import pytest
-from kernel_loop import in_kernel_loop
+from kernel_loop import in_kernel_loop, on_ui_thread
 
 import widgets._threading as ui
 from widgets import ExpressionPanel, TimelineWidget, Viewport
@@ -48,11 +48,15 @@ def test_timer_fires_on_the_ui_thread_and_cancel_stops_it() -> None:
 
 
 def test_without_a_loop_nothing_is_scheduled() -> None:
-    fired = []
-    t = UiTimer(0.0, lambda: fired.append(1))
-    assert not t.armed
-    time.sleep(0.05)
-    assert fired == []
+    # a UI thread with no event loop (a script); on_ui_thread: this process's main thread may
+    # hold the Playwright fixture's loop
+    def script() -> tuple[bool, list[int]]:
+        fired: list[int] = []
+        t = UiTimer(0.0, lambda: fired.append(1))
+        time.sleep(0.05)
+        return t.armed, fired
+
+    assert on_ui_thread(script) == (False, [])
 
 
 def test_guard_raises_and_records_a_widget_changed_off_the_ui_thread() -> None:

@@ -20,7 +20,7 @@ import pytest
 
 pytest.importorskip("anywidget")
 
-from kernel_loop import in_kernel_loop
+from kernel_loop import in_kernel_loop, on_ui_thread
 
 import widgets
 from widgets import TAB_TITLES, RecoveryPrompt, Workbench, recovery_prompt
@@ -206,14 +206,18 @@ def test_close_with_discard_removes_the_recovery_file(tmp_path: Path) -> None:
 
 def test_without_an_event_loop_autosave_waits_for_save_now(tmp_path: Path) -> None:
     # a script has no kernel loop: nothing saves behind its back, save_now() does it
-    model = load_sample("head")
-    wb = Workbench(model, autosave="script", autosave_delay=0.0, autosave_folder=tmp_path)
-    model.set_weight("jawOpen", 0.4)
-    time.sleep(0.1)
-    assert wb.autosaver.state == "pending" and wb.autosaver.saves == 0
-    wb.autosaver.save_now()
-    assert wb.autosaver.state == "saved" and "autosave: saved " in wb.status.value
-    wb.close()
+    # (on_ui_thread: this process's main thread may hold the Playwright fixture's loop)
+    def script() -> None:
+        model = load_sample("head")
+        wb = Workbench(model, autosave="script", autosave_delay=0.0, autosave_folder=tmp_path)
+        model.set_weight("jawOpen", 0.4)
+        time.sleep(0.1)
+        assert wb.autosaver.state == "pending" and wb.autosaver.saves == 0
+        wb.autosaver.save_now()
+        assert wb.autosaver.state == "saved" and "autosave: saved " in wb.status.value
+        wb.close()
+
+    on_ui_thread(script)
 
 
 # ---------------------------------------------------------------- recovery prompt
