@@ -39,7 +39,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 from psygnal import Signal
 
-from workbench.fileformat import read_manifest, save_model, snapshot_model, write_snapshot
+from workbench.fileformat import ModelSnapshot, read_manifest, snapshot_model, write_snapshot
 
 if TYPE_CHECKING:
     from workbench.model import FaceModel
@@ -218,15 +218,19 @@ class Autosaver:
                 self._writer = ThreadPoolExecutor(1, thread_name_prefix="autosave-writer")
             self._writing = self._writer.submit(self._write, snapshot)
 
-    def _write(self, snapshot: Any) -> None:
+    def _write(self, snapshot: ModelSnapshot) -> None:
+        """On the writer thread: write, then hand the outcome back to the scheduler's thread."""
+        error = self._store(snapshot)
+        self.scheduler.call_soon_threadsafe(lambda: self._written(error))
+
+    def _store(self, snapshot: ModelSnapshot) -> str:
+        """Write ``snapshot`` and the owner file; the error text ("" when saved), never raised."""
         try:
             write_snapshot(snapshot, self.path)
             self._write_owner()
-        except Exception as exc:
-            error = f"error: {exc}"
-        else:
-            error = ""
-        self.scheduler.call_soon_threadsafe(lambda: self._written(error))
+        except Exception as exc:  # report, keep running: autosave must not break editing
+            return f"error: {exc}"
+        return ""
 
     def _written(self, error: str) -> None:
         if not error:
@@ -245,12 +249,11 @@ class Autosaver:
                 self._timer = None
         self.wait()
         try:
-            save_model(self.model, self.path)
-            self._write_owner()
+            snapshot = snapshot_model(self.model)
         except Exception as exc:  # report, keep running: autosave must not break editing
             error = f"error: {exc}"
         else:
-            error = ""
+            error = self._store(snapshot)
         self._written(error)
 
     def wait(self, timeout: float | None = None) -> None:

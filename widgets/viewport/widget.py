@@ -528,7 +528,8 @@ class Viewport(GestureAPI, OverlayAPI, anywidget.AnyWidget):
             else:
                 self.errors.guard("end of slider drag")(slider_pointer.up)()
         elif kind == "request_full":
-            # a protocol step, not a repair: the page saw a gap in versions it could not fill
+            # a protocol step, not a repair: the page saw a version gap that lasted, or GPU
+            # parameters without their rig (content['why']); counted, the browser tests require none
             self.resyncs.append(str(content.get("why") or "gap"))
             self.errors.guard("Viewport resync")(self.sync.resync)(rig=bool(content.get("rig")))
         elif kind == "request_paint":
