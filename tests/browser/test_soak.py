@@ -8,13 +8,15 @@ harness then also requires zero resyncs, zero reopened notebooks and zero
 widget changes off the UI thread (``conftest.open_notebook``).
 
 Actions, drawn with a fixed seed: shape-slider drags (Shapes tab), handle
-drags (Sculpt tab, the default handles), paint dabs (Paint tab, one picked
-expression), timeline scrubs, keys, play then pause, undo and redo with the
-top bar's buttons, and tab switches. ``WORKBENCH_SOAK_ACTIONS`` sets how many
+drags (Sculpt tab, the default handles), region-pin drags (Regions tab, *Drag to
+sculpt*), paint dabs (Paint tab, one picked expression), the top bar's *Enhanced
+preview* on and off, timeline scrubs, keys, play then pause, undo and redo with
+the top bar's buttons, and tab switches. ``WORKBENCH_SOAK_ACTIONS`` sets how many
 (the test command runs 40 to stay in CI's time; the issue's soak is 300:
 ``WORKBENCH_SOAK_ACTIONS=300 .venv/bin/python -m pytest tests/browser/test_soak.py``).
-Region pins and the Enhanced preview are not among the actions yet (their set-up,
-automatic regions and a detail database, takes minutes at 25k).
+The set-up is what a person does once: default handles, *Find regions*, an
+expression to paint (with the mouse) and a detail database (a small procedural
+one on this mesh, from Python: the Enhance tab's build is its own browser test).
 """
 
 from __future__ import annotations
@@ -38,7 +40,7 @@ from test_viewport import _drag_slider
 N_ACTIONS = int(os.environ.get("WORKBENCH_SOAK_ACTIONS", "40"))
 SEED = int(os.environ.get("WORKBENCH_SOAK_SEED", "26"))
 
-_SETUP = """
+_SETUP = ("""
 import json, numpy as np, workbench
 from IPython.display import display
 from widgets import Workbench
@@ -46,7 +48,11 @@ model = workbench.load_sample("head", resolution="25k")
 wb = Workbench(model)
 display(wb)
 SOAK_SLIDERS = {sliders!r}
-"""
+""",
+    """
+from workbench.enhance.performance import procedural_database
+model.enhance.set_database(procedural_database(model, n_frames=12).database, source="soak")
+""")
 
 SLIDERS = ("jawOpen", "mouthSmileLeft", "browInnerUp", "eyeBlinkRight", "mouthFunnel", "cheekPuff")
 
@@ -170,7 +176,7 @@ def _in_step(nb: NotebookPage, size: float, depth: int, what: str, timeout: floa
 
 def test_random_actions_keep_page_and_kernel_in_step(open_notebook, cpu_hogs) -> None:
     rng = np.random.default_rng(SEED)
-    nb = open_notebook([_SETUP.format(sliders=SLIDERS)])
+    nb = open_notebook([_SETUP[0].format(sliders=SLIDERS), _SETUP[1]])
     page = nb.page
     page.evaluate("() => { const s = window.jupyterapp.shell; if (!s.leftCollapsed) s.collapseLeft(); }")
     nb.wait_viewports(1, timeout=180)
@@ -190,6 +196,10 @@ def test_random_actions_keep_page_and_kernel_in_step(open_notebook, cpu_hogs) ->
     page.locator(".fwb-default-handles").click()
     wait_until("default handles", lambda: nb.kernel_eval(
         "print(json.dumps(len(model.handles)))"), lambda n: n and n > 0, timeout=60)
+    _tab(nb, "Regions", "orbit")
+    page.locator(".fwb-find-regions").click()
+    wait_until("regions", lambda: nb.kernel_eval(
+        "print(json.dumps(model.regions.segmented))"), bool, timeout=120)
     _tab(nb, "Paint", "paint")
     _pick(nb, "mouthSmileLeft")
     depth = _in_step(nb, size, depth=int(nb.kernel_eval(
@@ -201,16 +211,41 @@ def test_random_actions_keep_page_and_kernel_in_step(open_notebook, cpu_hogs) ->
     def goto(title: str, tool: str) -> None:
         nonlocal tab
         if tab != title:
+            if title == "Regions" and nb.kernel_eval("print(json.dumps(wb.regions.drag_mode.value))"):
+                tool = "sculpt"  # its drag mode comes back on with the tab
             _tab(nb, title, tool)
             tab = title
 
     def top() -> None:
         page.locator(".fwb-workbench").evaluate("e => e.scrollIntoView({block: 'start'})")
 
+    def drag_a_marker() -> int | None:
+        """Drag one visible, grabbable marker 12-30 px in a random direction; its index or None."""
+        top()
+        pts = np.array(vp.evaluate("e => e.fwbHandles()"), float).reshape(-1, 3)
+        box = vp.bounding_box()
+        inside = np.flatnonzero(
+            (pts[:, 2] == 1) & (pts[:, 0] > box["x"] + 20) & (pts[:, 0] < box["x"] + box["width"] - 20)
+            & (pts[:, 1] > box["y"] + 20) & (pts[:, 1] < box["y"] + box["height"] - 20)
+        )
+        # markers a press grabs (not hidden behind the surface, not under another one)
+        grabbable = [int(k) for k in inside
+                     if vp.evaluate("(e, p) => e.fwbPickHandle(p[0], p[1])", pts[k, :2].tolist()) == k]
+        if not grabbable:
+            return None
+        k = int(rng.choice(grabbable))
+        angle, length = rng.uniform(0, 2 * np.pi), rng.uniform(12, 30)  # a drag, not a click
+        dx, dy = length * np.cos(angle), length * np.sin(angle)
+        page.mouse.move(pts[k, 0], pts[k, 1])
+        page.mouse.down()
+        page.mouse.move(pts[k, 0] + dx, pts[k, 1] + dy, steps=10)
+        page.mouse.up()
+        return k
+
     for step in range(N_ACTIONS):
         action = rng.choice(
-            ["slider", "handle", "paint", "scrub", "key", "play", "undo", "redo", "tab"],
-            p=[0.22, 0.14, 0.12, 0.12, 0.08, 0.06, 0.12, 0.08, 0.06],
+            ["slider", "handle", "pin", "paint", "enhance", "scrub", "key", "play", "undo", "redo", "tab"],
+            p=[0.18, 0.12, 0.08, 0.11, 0.05, 0.11, 0.07, 0.06, 0.11, 0.06, 0.05],
         )
         what = f"#{step} {action}"
         if action == "slider":
@@ -225,26 +260,23 @@ def test_random_actions_keep_page_and_kernel_in_step(open_notebook, cpu_hogs) ->
             depth, redo, what = depth + 1, 0, f"{what} {name} -> {target:.2f}"
         elif action == "handle":
             goto("Sculpt", "sculpt")
-            top()
-            pts = np.array(vp.evaluate("e => e.fwbHandles()"), float).reshape(-1, 3)
-            box = vp.bounding_box()
-            inside = np.flatnonzero(
-                (pts[:, 2] == 1) & (pts[:, 0] > box["x"] + 20) & (pts[:, 0] < box["x"] + box["width"] - 20)
-                & (pts[:, 1] > box["y"] + 20) & (pts[:, 1] < box["y"] + box["height"] - 20)
-            )
-            # markers a press grabs (not hidden behind the surface, not under another one)
-            grabbable = [int(k) for k in inside
-                         if vp.evaluate("(e, p) => e.fwbPickHandle(p[0], p[1])", pts[k, :2].tolist()) == k]
-            if not grabbable:
+            k = drag_a_marker()
+            if k is None:
                 continue
-            k = int(rng.choice(grabbable))
-            angle, length = rng.uniform(0, 2 * np.pi), rng.uniform(12, 30)  # a drag, not a click
-            dx, dy = length * np.cos(angle), length * np.sin(angle)
-            page.mouse.move(pts[k, 0], pts[k, 1])
-            page.mouse.down()
-            page.mouse.move(pts[k, 0] + dx, pts[k, 1] + dy, steps=10)
-            page.mouse.up()
             depth, redo, what = depth + 1, 0, f"{what} handle {k}"
+        elif action == "pin":
+            goto("Regions", "orbit")
+            if vp.get_attribute("data-tool") != "sculpt":  # drag mode stays on while the tab is shown
+                page.locator(".fwb-region-drag").click()
+                n_pins = nb.kernel_eval("print(json.dumps(len(wb.regions.pins)))")
+                page.wait_for_function(
+                    "(n) => { const v = document.querySelector('.fwb-viewport');"
+                    " return v.getAttribute('data-tool') === 'sculpt'"
+                    " && JSON.parse(v.getAttribute('data-handles') || '[]').length === n; }", arg=n_pins)
+            k = drag_a_marker()
+            if k is None:
+                continue
+            depth, redo, what = depth + 1, 0, f"{what} pin {k}"
         elif action == "paint":
             goto("Paint", "paint")
             top()
@@ -288,6 +320,14 @@ def test_random_actions_keep_page_and_kernel_in_step(open_notebook, cpu_hogs) ->
                 pause.click(force=True)  # force: it may play out meanwhile (a disabled button ignores it)
             wait_until("paused", lambda: nb.kernel_eval("print(json.dumps(wb.timeline.playing))"),
                        lambda v: v is False, timeout=30)
+        elif action == "enhance":
+            top()
+            box = page.locator(".fwb-topbar .fwb-enhance-preview input")
+            on = not box.is_checked()
+            box.click()
+            wait_until("the preview", lambda: nb.kernel_eval(
+                "print(json.dumps(model.enhance.preview))"), lambda v, on=on: v is on, timeout=60)
+            depth, redo, what = depth + 1, 0, f"{what} {'on' if on else 'off'}"
         elif action == "undo":
             top()
             if depth == 0:
@@ -301,7 +341,7 @@ def test_random_actions_keep_page_and_kernel_in_step(open_notebook, cpu_hogs) ->
             page.locator(".fwb-wb-redo").click()
             depth, redo = depth + 1, redo - 1
         elif action == "tab":
-            title = str(rng.choice(["Shapes", "Sculpt", "Paint", "Export"]))
+            title = str(rng.choice(["Shapes", "Sculpt", "Regions", "Paint", "Export"]))
             goto(title, {"Sculpt": "sculpt", "Paint": "paint"}.get(title, "orbit"))
             what = f"{what} {title}"
         done.append(what)
