@@ -1,35 +1,4 @@
-"""``ShapeToolsPanel``: split, mirror and corrective shapes, under the sliders of the Shapes tab.
-
-The notebook front of ``model.shape_tools``
-(:class:`workbench.methods.shapes.facet.ShapeToolsFacet`); every button is one
-call of the facet, so one undo step:
-
-* a **shape** dropdown: what Split, Mirror and Remove act on. It follows the
-  last slider touched in the :class:`~widgets.panels.expressions.ExpressionPanel`
-  given as ``sliders`` (its ``selected`` trait);
-* **Split L/R** with the width of the smooth band across the mirror plane
-  (model units; default :meth:`~ShapeToolsFacet.default_falloff`) and optional
-  names of the halves. While *Preview* is on (moving the band slider turns it
-  on) the viewport colours each vertex by the share each half would get
-  (orange = subject's left, blue = right, brighter where the shape moves),
-  through the public ``viewport.vertex_colors``; the previous colours come
-  back when the preview ends (a split, the toggle, leaving the tab, closing);
-* **Mirror →** into a target (default: the mirrored name, e.g.
-  ``mouthSmileLeft`` → ``mouthSmileRight``; an unsided shape flips in place);
-* **Mirror expression** (a saved one, ``model.expressions``) and **Mirror
-  paint** (a painted map, ``model.paint``), each with its target;
-* **correctives**: two driver dropdowns, a name and the source (an empty shape
-  to sculpt into, or the handle sculpt of the posed drivers), *Add
-  corrective*; *Set drivers* makes the selected shape a corrective of the two
-  drivers; *Remove corrective* (optionally keeping the shape). The sliders of
-  correctives are read-only in the ExpressionPanel, with a "= A × B" badge.
-
-Each action first ends every open interaction (:meth:`ModelPanel.flush`), then
-says what it did in the status line. A refusal (the facet raises
-``ModelError`` / ``ValueError`` / ``KeyError`` naming the argument) changes
-nothing; its message is shown in red in the status line and, as one plain line
-without a traceback, in the panel's error sink.
-"""
+"""Building the shape tools panel, and keeping its choices in step with the model."""
 
 from __future__ import annotations
 
@@ -38,50 +7,11 @@ from collections.abc import Callable, Iterable
 from typing import Any
 
 import ipywidgets as W
-import numpy as np
 
-from widgets.panels.base import ModelPanel, button
-
-__all__ = ["LEFT_COLOR", "RIGHT_COLOR", "ShapeToolsPanel", "split_preview_colors"]
-
-#: preview colours (sRGB) of the subject's left and right halves, and of vertices that do not move
-LEFT_COLOR = (0.98, 0.55, 0.18)
-RIGHT_COLOR = (0.22, 0.50, 0.98)
-_STILL = (0.80, 0.80, 0.80)
-#: how much of the side colour vertices the shape does not move still get
-_STILL_TINT = 0.35
+from widgets.panels.base import button
+from widgets.panels.shape_tools.actions import _ShapeActions
 
 _SOURCES = (("empty (sculpt it afterwards)", "empty"), ("from current sculpt (handles)", "handles"))
-_REFUSALS = (ValueError, KeyError)  # ModelError is a ValueError
-
-
-def split_preview_colors(left_share: Any, delta: Any = None) -> np.ndarray:
-    """(n, 3) float32 sRGB: :data:`LEFT_COLOR` / :data:`RIGHT_COLOR` mixed by ``left_share``.
-
-    Where ``delta`` ((n, 3), the shape being split) moves a vertex the colour is
-    full; elsewhere it is faded toward grey, so the band shows where it matters.
-    """
-    f = np.clip(np.asarray(left_share, np.float64).reshape(-1, 1), 0.0, 1.0)
-    side = f * np.asarray(LEFT_COLOR) + (1.0 - f) * np.asarray(RIGHT_COLOR)
-    strength = np.full((len(f), 1), 1.0)
-    if delta is not None:
-        mag = np.linalg.norm(np.asarray(delta, np.float64), axis=1)
-        top = float(mag.max()) if mag.size else 0.0
-        if top > 0.0:
-            strength = (
-                _STILL_TINT + (1.0 - _STILL_TINT) * np.clip(mag / (0.25 * top), 0.0, 1.0)[:, None]
-            )
-        else:
-            strength[:] = _STILL_TINT
-    out = strength * side + (1.0 - strength) * np.asarray(_STILL)
-    return out.astype(np.float32)
-
-
-def _message(exc: BaseException) -> str:
-    # str(KeyError("x")) is "'x'": the facet's KeyErrors carry a sentence
-    if isinstance(exc, KeyError) and exc.args:
-        return str(exc.args[0])
-    return str(exc)
 
 
 def _row(*children: W.Widget) -> W.HBox:
@@ -107,8 +37,8 @@ def _dropdown(cls: str, width: str = "170px", description: str = "") -> W.Dropdo
     return d
 
 
-class ShapeToolsPanel(ModelPanel):
-    """Split / mirror / corrective controls for a FaceModel (see the module docstring).
+class ShapeToolsPanel(_ShapeActions):
+    """Split / mirror / corrective controls for a FaceModel (see :mod:`widgets.panels.shape_tools`).
 
     Parameters
     ----------
@@ -334,22 +264,6 @@ class ShapeToolsPanel(ModelPanel):
         self._refresh_paint()
         self._update_symmetry()
 
-    # ------------------------------------------------------------ reading
-    @property
-    def selected(self) -> str | None:
-        """The shape the split / mirror / remove buttons act on."""
-        value = self.shape.value
-        return value if isinstance(value, str) else None
-
-    def select(self, name: str) -> None:
-        """Select shape ``name`` (ignored when the model has no such shape)."""
-        if name in self._model.shape_names:
-            self.shape.value = name
-
-    @property
-    def previewing(self) -> bool:
-        return self._previewing
-
     # ------------------------------------------------------------ model -> UI
     def _refresh_shapes(self) -> None:
         m = self._model
@@ -446,198 +360,3 @@ class ShapeToolsPanel(ModelPanel):
     def _on_drivers(self, _change: Any = None) -> None:
         a, b = self.driver_a.value, self.driver_b.value
         self.corrective_name.placeholder = f"{a}_{b}" if a and b else "name"
-
-    # ------------------------------------------------------------ split preview
-    def _on_preview(self, change: dict) -> None:
-        if change["new"]:
-            self.show_preview()
-        else:
-            self.end_preview()
-
-    def _on_falloff(self, _change: Any = None) -> None:
-        if self._previewing:
-            self._draw_preview()
-        else:
-            self.show_preview()  # adjusting the band shows it
-
-    def show_preview(self) -> None:
-        """Colour the viewport by the split's left share (keeps the current colours to give back)."""
-        vp = self.viewport
-        if vp is None:
-            return
-        if not self._previewing:
-            self._saved_colors = vp.vertex_colors
-            self._previewing = True
-        if not self.preview.value:
-            self.preview.value = True  # its observer comes back here and draws
-            return
-        self._draw_preview()
-
-    def _draw_preview(self) -> None:
-        vp = self.viewport
-        if vp is None or not self._previewing:
-            return
-        m = self._model
-        share = m.shape_tools.split_weights(float(self.falloff.value))
-        name = self.selected
-        delta = m.shape(name).delta if name is not None and name in m.shape_names else None
-        vp.vertex_colors = split_preview_colors(share, delta)
-
-    def end_preview(self) -> None:
-        """Stop the split preview: the viewport gets its previous colours back."""
-        if self._previewing:
-            self._previewing = False
-            if self.viewport is not None:
-                self.viewport.vertex_colors = self._saved_colors
-            self._saved_colors = None
-        if self.preview.value:
-            self.preview.value = False
-
-    # ------------------------------------------------------------ actions
-    def _run(self, what: str, action: Callable[[], str]) -> bool:
-        """Flush, run ``action`` (one facet call), show its message or the refusal."""
-        self.flush()
-        try:
-            message = action()
-        except _REFUSALS as exc:
-            text = _message(exc)
-            self.last_error = text
-            self.status.value = (
-                f"<span style='color:#b00'>{html.escape(what)} refused: {html.escape(text)}</span>"
-            )
-            sink = self.errors
-            sink.count += 1
-            sink.output.append_stderr(f"[Shape tools: {what}] {text}\n")
-            if sink.on_error is not None:
-                sink.on_error(f"Shape tools: {what}: {text}")
-            return False
-        self.last_error = ""
-        self.status.value = f"<span style='color:#333'>{html.escape(message)}</span>"
-        return True
-
-    def _need_shape(self, what: str) -> str:
-        name = self.selected
-        if name is None:
-            raise ValueError(f"{what}: pick a shape first")
-        return name
-
-    def do_split(self) -> bool:
-        """Split the selected shape into L/R halves (band = the slider, names = the fields)."""
-
-        def act() -> str:
-            name = self._need_shape("split")
-            falloff = float(self.falloff.value)
-            typed = (self.left_name.value.strip(), self.right_name.value.strip())
-            names = None
-            if any(typed):
-                from workbench.methods.shapes.split import split_names
-
-                default = split_names(name)
-                names = (typed[0] or default[0], typed[1] or default[1])
-            left, right = self._model.shape_tools.split(
-                name, falloff=falloff, names=names, keep=self.keep.value
-            )
-            self.end_preview()
-            self.left_name.value = self.right_name.value = ""
-            self.select(left)
-            kept = ", original kept" if self.keep.value else ""
-            return (
-                f"split {name} into {left} + {right} "
-                f"(band {falloff:.3g} {self._model.metadata.units}{kept})"
-            )
-
-        return self._run("Split", act)
-
-    def do_mirror(self) -> bool:
-        """Mirror the selected shape into the target field's shape."""
-
-        def act() -> str:
-            name = self._need_shape("mirror")
-            target = self.mirror_target.value.strip() or None
-            existed = target in self._model.shape_names
-            out = self._model.shape_tools.mirror(name, target=target)
-            sym = self._model.shape_tools.symmetry()
-            if out == name:
-                what = f"flipped {name} in place"
-            else:
-                what = f"mirrored {name} onto {out}" + (
-                    " (replaced)" if existed else " (new shape)"
-                )
-            return f"{what}; {100 * sym.unmatched_fraction:.1f} % of the vertices without a mirror partner"
-
-        return self._run("Mirror", act)
-
-    def do_mirror_expression(self) -> bool:
-        """Mirror the picked saved expression into the target field's name."""
-
-        def act() -> str:
-            name = self.expression.value
-            if not name:
-                raise ValueError(
-                    "mirror expression: no saved expression (model.expressions is empty)"
-                )
-            target = self.expression_target.value.strip() or None
-            new = self._model.shape_tools.mirror_expression(name, target=target)
-            return f"mirrored expression {name} into {new.name}"
-
-        return self._run("Mirror expression", act)
-
-    def do_mirror_paint(self) -> bool:
-        """Paint the mirror image of the picked painted map onto the target field's expression."""
-
-        def act() -> str:
-            name = self.painted.value
-            if not name:
-                raise ValueError("mirror paint: nothing is painted (model.paint is empty)")
-            target = self.paint_target.value.strip() or None
-            self._model.shape_tools.mirror_paint(name, target=target)
-            return f"mirrored the paint of {name} onto {target or name}"
-
-        return self._run("Mirror paint", act)
-
-    def _drivers(self) -> list[str]:
-        return [d for d in (self.driver_a.value, self.driver_b.value) if d]
-
-    def do_add_corrective(self) -> bool:
-        """Add a corrective of the two drivers (name field or ``A_B``; source: empty or the handles)."""
-
-        def act() -> str:
-            drivers = self._drivers()
-            name = self.corrective_name.value.strip() or None
-            source = self.corrective_source.value
-            shape = self._model.shape_tools.add_corrective(
-                name, drivers, delta="handles" if source == "handles" else None
-            )
-            self.corrective_name.value = ""
-            self.select(shape.name)
-            how = (
-                "from the handle sculpt (handles reset)"
-                if source == "handles"
-                else "empty: sculpt it"
-            )
-            return f"added corrective {shape.name} = {' × '.join(drivers)} ({how})"
-
-        return self._run("Add corrective", act)
-
-    def do_set_drivers(self) -> bool:
-        """Make the selected shape a corrective of the two drivers."""
-
-        def act() -> str:
-            name = self._need_shape("set drivers")
-            drivers = self._drivers()
-            self._model.shape_tools.set_drivers(name, drivers)
-            self._on_shape()
-            return f"{name} is now driven by {' × '.join(drivers)}"
-
-        return self._run("Set drivers", act)
-
-    def do_remove_corrective(self) -> bool:
-        """Remove the selected corrective (its shape and keys too, unless *keep shape*)."""
-
-        def act() -> str:
-            name = self._need_shape("remove corrective")
-            keep = bool(self.keep_shape.value)
-            self._model.shape_tools.remove_corrective(name, keep_shape=keep)
-            return f"removed corrective {name}" + (" (kept as an ordinary shape)" if keep else "")
-
-        return self._run("Remove corrective", act)
