@@ -8,12 +8,8 @@ import scipy.sparse as sp
 import trimesh
 from grid_meshes import grid_triangles
 
-from workbench.geometry.operators import (
-    bilaplacian,
-    cotangent_laplacian,
-    mass_matrix,
-    vertex_normals,
-)
+from workbench.geometry.normals import vertex_normals
+from workbench.geometry.operators import bilaplacian, cotangent_laplacian, mass_matrix
 
 
 def _sphere(subdivisions: int = 4) -> tuple[np.ndarray, np.ndarray]:

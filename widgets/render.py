@@ -53,6 +53,7 @@ from PIL import Image
 from workbench import FaceModel, ModelMetadata
 from workbench.converters import register_mesh_converter
 from workbench.core.polygons import Polygons
+from workbench.geometry.normals import vertex_normals
 from workbench.geometry.parts import model_part_roles, part_material
 
 __all__ = [
@@ -66,7 +67,6 @@ __all__ = [
     "screen_positions",
     "to_pyvista",
     "vertex_colors",
-    "vertex_normals",
 ]
 
 #: Camera presets accepted by :func:`render_png`.
@@ -223,32 +223,6 @@ def from_pyvista(
 
 
 # --------------------------------------------------------------------------- shading helpers
-
-
-def vertex_normals(points: ArrayLike, faces: ArrayLike) -> NDArray[np.float32]:
-    """Area-weighted unit vertex normals.
-
-    Parameters
-    ----------
-    points : (n, 3) float
-    faces : (m, 3) int
-
-    Returns
-    -------
-    (n, 3) float32
-        Unit normals; vertices in no face get (0, 0, 0).
-    """
-    p = np.asarray(points, dtype=np.float64)
-    f = np.asarray(faces, dtype=np.int64)
-    # cross product length = 2 * area, so summing it weights by area
-    fn = np.cross(p[f[:, 1]] - p[f[:, 0]], p[f[:, 2]] - p[f[:, 0]])
-    vn = np.zeros_like(p)
-    for k in range(3):
-        for c in range(3):
-            vn[:, c] += np.bincount(f[:, k], weights=fn[:, c], minlength=len(p))
-    length = np.linalg.norm(vn, axis=1, keepdims=True)
-    np.divide(vn, length, out=vn, where=length > 0)
-    return vn.astype(np.float32)
 
 
 def vertex_colors(model: FaceModel, front: ArrayLike = (0.0, 0.0, 1.0)) -> NDArray[np.uint8]:
@@ -536,7 +510,8 @@ class _Scene:
         self.plotter = pl
 
     def _set_normals(self, points: NDArray) -> None:
-        self.mesh.point_data["Normals"] = vertex_normals(points, self.faces)
+        # float32: what VTK shades with
+        self.mesh.point_data["Normals"] = vertex_normals(points, self.faces).astype(np.float32)
         self.mesh.point_data.active_normals_name = "Normals"
 
     def set_points(self, points: NDArray) -> None:

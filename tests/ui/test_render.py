@@ -29,10 +29,10 @@ from widgets.render import (  # noqa: E402
     render_png,
     screen_positions,
     to_pyvista,
-    vertex_normals,
 )
 from workbench import BlendShape, FaceModel, ModelMetadata, load_sample  # noqa: E402
 from workbench.core.polygons import Polygons  # noqa: E402
+from workbench.geometry.normals import vertex_normals  # noqa: E402
 
 pytestmark = pytest.mark.ui
 

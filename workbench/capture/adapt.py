@@ -83,31 +83,18 @@ from scipy.spatial import cKDTree
 
 from workbench._blas import one_blas_thread
 from workbench.capture.result import TrackError
+from workbench.geometry.frames import triangle_frames
+from workbench.geometry.masks import skin_or_all_mask
 from workbench.geometry.operators import cotangent_laplacian, mass_matrix
 from workbench.geometry.sparse_cholesky import SparseSPDSolver
 from workbench.model import BlendShape, FaceModel
 
-__all__ = ["AdaptiveModel", "ExpressionTransfer", "adaptive_model", "laplacian_basis", "point_to_plane_rows", "skin_vertices"]
+__all__ = ["AdaptiveModel", "ExpressionTransfer", "adaptive_model", "laplacian_basis", "point_to_plane_rows"]
 
 #: a template vertex moving less than this (times the length scale) in a shape is pinned in its transfer
 PIN_TOL = 1e-7
 #: below this many vertices the basis comes from a dense eigendecomposition
 _DENSE_EIG = 600
-
-
-def skin_vertices(model: FaceModel) -> NDArray[np.int64]:
-    """Vertex ids of the skin (:attr:`FaceModel.part_roles`); all vertices when no part is skin.
-
-    Returns
-    -------
-    ids : (s,) int64, sorted
-    """
-    roles = tuple(model.part_roles)
-    skin = [i for i, r in enumerate(roles) if r == "skin"]
-    labels = np.asarray(model.component_labels)
-    if not skin:
-        return np.arange(model.n_vertices, dtype=np.int64)
-    return np.flatnonzero(np.isin(labels, skin)).astype(np.int64)
 
 
 def _sub_faces(F: NDArray[np.int64], ids: NDArray[np.int64], n: int) -> NDArray[np.int64]:
@@ -262,17 +249,8 @@ class ExpressionTransfer:
         self.free = mag > PIN_TOL * max(length_scale, 1e-300)
         self._Vs = Vs
 
-    @staticmethod
-    def _frames(X: NDArray[np.float64], F: NDArray[np.int64]) -> NDArray[np.float64]:
-        e1 = X[..., F[:, 1], :] - X[..., F[:, 0], :]
-        e2 = X[..., F[:, 2], :] - X[..., F[:, 0], :]
-        nrm = np.cross(e1, e2)
-        ln = np.linalg.norm(nrm, axis=-1, keepdims=True)
-        nrm = nrm / np.sqrt(np.where(ln > 0, ln, 1.0))
-        return np.stack([e1, e2, nrm], axis=-1)
-
     def _frames_inverse(self, X: NDArray[np.float64], F: NDArray[np.int64]) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
-        S0 = self._frames(X, F)
+        S0 = triangle_frames(X, F)
         det = np.linalg.det(S0)
         scale = float(np.median(np.abs(det))) if det.size else 1.0
         ok = np.abs(det) > 1e-12 * max(scale, 1e-300)
@@ -282,7 +260,7 @@ class ExpressionTransfer:
 
     def strain(self, i: int) -> NDArray[np.float64]:
         """``S_t − I`` of shape ``i`` per skin triangle, (T, 3, 3) (zero on degenerate template triangles)."""
-        Si = self._frames(self._Vs + self._deltas[i, self.skin], self._Fs)
+        Si = triangle_frames(self._Vs + self._deltas[i, self.skin], self._Fs)
         C = Si @ self._inv0 - np.eye(3)
         C[~self._ok0] = 0.0
         return C
@@ -474,7 +452,7 @@ class AdaptiveModel:
         D = np.asarray(model.effective_deltas, np.float64)
         self._names = list(model.shape_names)
         k = D.shape[0]
-        skin = skin_vertices(model)
+        skin = np.flatnonzero(skin_or_all_mask(model)).astype(np.int64)
         Fs = _sub_faces(F, skin, n)
         if Fs.shape[0] == 0:
             raise ValueError("model: the skin has no triangles")

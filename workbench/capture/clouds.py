@@ -63,7 +63,6 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
@@ -73,6 +72,8 @@ from workbench.capture.result import FLAG_HELD, TrackError, TrackResult
 from workbench.capture.rig import ExpressionSpace
 from workbench.capture.solver import WeightSolver
 from workbench.capture.synthetic import face_vertices
+from workbench.geometry.normals import vertex_normals
+from workbench.geometry.surface import boundary_vertices
 
 if TYPE_CHECKING:
     from workbench.core.state import FaceState
@@ -120,13 +121,7 @@ def _farthest(V: NDArray[np.float64], cand: NDArray[np.intp], m: int, seed: int)
 
 def _border_ring(F: NDArray[np.int64], n: int) -> NDArray[np.bool_]:
     """(n,) bool: vertices on the mesh border (an edge of one face) and their neighbours."""
-    he = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
-    key = he[:, 0] * n + he[:, 1]
-    uniq, counts = np.unique(key, return_counts=True)
-    b = uniq[counts == 1]
-    on = np.zeros(n, bool)
-    on[b // n] = True
-    on[b % n] = True
+    on = boundary_vertices(F, n)
     ring = on.copy()
     touch = on[F].any(1)
     ring[F[touch].ravel()] = True
@@ -233,21 +228,11 @@ def _check_units(clouds: list[NDArray[np.float64]], X: NDArray[np.float64], mode
 
 
 # ------------------------------------------------------------------ geometry
-def _normals_at(V: NDArray[np.float64], F: NDArray[np.int64], ids: NDArray[np.intp]) -> tuple[
-    NDArray[np.int64], sp.csr_matrix
-]:
-    """Faces touching ``ids`` and a (s, f) incidence matrix summing their area normals per vertex."""
-    on = np.zeros(V.shape[0], bool)
+def _faces_around(F: NDArray[np.int64], ids: NDArray[np.intp], n: int) -> NDArray[np.int64]:
+    """The triangles touching the vertices ``ids``: enough for those vertices' full normals."""
+    on = np.zeros(n, bool)
     on[ids] = True
-    faces = np.flatnonzero(on[F].any(1))
-    pos = np.full(V.shape[0], -1, np.int64)
-    pos[ids] = np.arange(ids.size)
-    Fs = F[faces]
-    p = pos[Fs]  # (f, 3)
-    ok = p >= 0
-    cols = np.broadcast_to(np.arange(faces.size)[:, None], p.shape)
-    inc = sp.csr_matrix((np.ones(int(ok.sum())), (p[ok], cols[ok])), shape=(ids.size, faces.size))
-    return Fs, inc
+    return F[on[F].any(1)]
 
 
 def _unit(N: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -273,11 +258,12 @@ def _setup(model: FaceState, ids: NDArray[np.intp], stable: NDArray[np.bool_], l
     space = ExpressionSpace.from_model(model)
     V = space.neutral
     F = np.asarray(model.faces, np.int64)
-    Fs, inc = _normals_at(V, F, ids)  # inc: sparse (s, f)
+    Fs = _faces_around(F, ids, V.shape[0])
     D = np.asarray(space.deltas, np.float64)
 
     def area_normals(X: NDArray[np.float64]) -> NDArray[np.float64]:
-        return np.asarray(inc @ np.cross(X[Fs[:, 1]] - X[Fs[:, 0]], X[Fs[:, 2]] - X[Fs[:, 0]]))
+        # unnormalised: the first-order model below is linear in the cross products
+        return vertex_normals(X, Fs, unit=False)[ids]
 
     n0 = area_normals(V)
     scale = np.maximum(np.linalg.norm(n0, axis=1, keepdims=True), 1e-300)

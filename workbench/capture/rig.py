@@ -29,6 +29,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from workbench.core import families as _families
+from workbench.geometry.masks import skin_or_all_mask
 
 if TYPE_CHECKING:
     from workbench.core.state import FaceState
@@ -41,13 +42,7 @@ def head_size(model: FaceState) -> float:
 
     The length the tracker measures errors and noise against (the sample head: 3.86 dm).
     """
-    V = np.asarray(model.vertices, np.float64)
-    roles = tuple(getattr(model, "part_roles", ()))
-    labels = np.asarray(getattr(model, "component_labels", np.zeros(0)))
-    if "skin" in roles and labels.shape == (V.shape[0],):
-        skin = np.isin(labels, [i for i, r in enumerate(roles) if r == "skin"])
-        if skin.any():
-            V = V[skin]
+    V = np.asarray(model.vertices, np.float64)[skin_or_all_mask(model)]
     if V.shape[0] == 0:
         return 1.0
     d = float(np.linalg.norm(V.max(0) - V.min(0)))

@@ -38,6 +38,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from workbench.capture.rig import ExpressionSpace
+from workbench.geometry.axes import axis_vector
+from workbench.geometry.masks import skin_or_all_mask
+from workbench.geometry.normals import face_normals, vertex_normals
 
 if TYPE_CHECKING:
     from workbench.core.state import FaceState
@@ -96,27 +99,6 @@ class SyntheticPerformance:
 
 
 # ------------------------------------------------------------------ geometry helpers
-def _axis(spec: str) -> NDArray[np.float64]:
-    v = np.zeros(3)
-    v["xyz".index(spec[1])] = -1.0 if spec[0] == "-" else 1.0
-    return v
-
-
-def _vertex_normals(V: NDArray[np.float64], F: NDArray[np.int64]) -> NDArray[np.float64]:
-    fn = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
-    N = np.zeros_like(V)
-    for c in range(3):
-        np.add.at(N, F[:, c], fn)
-    return N / np.maximum(np.linalg.norm(N, axis=1, keepdims=True), 1e-300)
-
-
-def _skin(model: FaceState) -> NDArray[np.bool_]:
-    roles = tuple(getattr(model, "part_roles", ()))
-    labels = np.asarray(model.component_labels)
-    on = np.isin(labels, [i for i, r in enumerate(roles) if r == "skin"])
-    return on if on.any() else np.ones(model.n_vertices, bool)
-
-
 def face_vertices(model: FaceState) -> NDArray[np.intp]:
     """Front-facing skin vertices around the moving part of the face (where markers are glued).
 
@@ -127,17 +109,17 @@ def face_vertices(model: FaceState) -> NDArray[np.intp]:
     """
     V = np.asarray(model.vertices, np.float64)
     F = np.asarray(model.faces, np.int64)
-    skin = _skin(model)
+    skin = skin_or_all_mask(model)
     space = ExpressionSpace.from_model(model)
     mot = space.motion()
-    front = _axis(model.metadata.front_axis)
+    front = axis_vector(model.metadata.front_axis)
     moving = skin & (mot >= 0.05 * max(float(mot[skin].max(initial=0.0)), 1e-300))
     if not moving.any():
         moving = skin
     lo, hi = V[moving].min(0), V[moving].max(0)
     pad = 0.1 * (hi - lo)
     inside = ((V >= lo - pad) & (V <= hi + pad)).all(1)
-    N = _vertex_normals(V, F) if F.size else np.tile(front, (V.shape[0], 1))
+    N = vertex_normals(V, F) if F.size else np.tile(front, (V.shape[0], 1))
     facing = N @ front > np.cos(np.radians(70.0))
     ids = np.flatnonzero(skin & inside & facing)
     return ids if ids.size else np.flatnonzero(skin)
@@ -316,7 +298,7 @@ def synthetic_performance(
 
     # head motion
     V0 = space.neutral
-    up, front = _axis(model.metadata.up_axis), _axis(model.metadata.front_axis)
+    up, front = axis_vector(model.metadata.up_axis), axis_vector(model.metadata.front_axis)
     centre = 0.5 * (V0.min(0) + V0.max(0))
     size = space.size
     hm = float(head_motion)
@@ -360,8 +342,8 @@ def synthetic_performance(
     barys: list[NDArray[np.float64]] = []
     if int(points) > 0:
         F = np.asarray(model.faces, np.int64)
-        skin = _skin(model)
-        fn = np.cross(V0[F[:, 1]] - V0[F[:, 0]], V0[F[:, 2]] - V0[F[:, 0]])
+        skin = skin_or_all_mask(model)
+        fn = face_normals(V0, F, unit=False)
         area = 0.5 * np.linalg.norm(fn, axis=1)
         facing = (fn @ front) > 0.2 * 2.0 * area
         ok = skin[F].all(1) & facing

@@ -78,6 +78,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from workbench.capture.pose import PoseError, fit_rigid, fit_rigid_robust
+from workbench.geometry.masks import eyeball_mask, skin_or_all_mask
 
 if TYPE_CHECKING:
     from workbench.capture.result import TrackResult
@@ -530,24 +531,6 @@ class LandmarkRegistration:
         return Y
 
 
-def _skin_mask(model: FaceState) -> NDArray[np.bool_]:
-    n = int(model.n_vertices)
-    roles = tuple(getattr(model, "part_roles", ()))
-    labels = np.asarray(getattr(model, "component_labels", np.zeros(0)))
-    if "skin" in roles and labels.shape == (n,):
-        return np.asarray(np.isin(labels, [i for i, r in enumerate(roles) if r == "skin"]))
-    return np.ones(n, bool)
-
-
-def _eye_mask(model: FaceState) -> NDArray[np.bool_]:
-    n = int(model.n_vertices)
-    roles = tuple(getattr(model, "part_roles", ()))
-    labels = np.asarray(getattr(model, "component_labels", np.zeros(0)))
-    if labels.shape != (n,):
-        return np.zeros(n, bool)
-    return np.asarray(np.isin(labels, [i for i, r in enumerate(roles) if str(r).startswith("eyeball")]))
-
-
 def _rest_landmarks(landmarks: Any, frame: int, image_size: tuple[int, int] | None
                     ) -> tuple[NDArray[np.float64], tuple[int, int], str]:
     if isinstance(landmarks, LandmarkSequence):
@@ -611,8 +594,9 @@ def register_landmarks(
     from scipy.spatial import cKDTree
 
     from workbench.capture.rig import ExpressionSpace
+    from workbench.geometry.normals import vertex_normals
+    from workbench.geometry.surface import SurfaceQuery
     from workbench.rigging.landmarks import template_landmarks
-    from workbench.rigging.meshes import SurfaceQuery, vertex_normals
 
     if not (0.0 < float(depth_weight) <= 1.0):
         raise VideoError(f"depth_weight must be in (0, 1], got {depth_weight!r}")
@@ -625,7 +609,7 @@ def register_landmarks(
 
     V = np.asarray(model.vertices, np.float64)
     F = np.asarray(model.faces, np.int64)
-    skin = _skin_mask(model)
+    skin = skin_or_all_mask(model)
     tl = template_landmarks(model)  # type: ignore[arg-type]  # a FaceState is the FaceModel it needs
     use = {k: int(v) for k, v in (ANCHORS if anchors is None else anchors).items() if k in tl}
     if len(use) < 4:
@@ -679,7 +663,7 @@ def register_landmarks(
     ids = np.empty(N_LANDMARKS, np.intp)
     skin_f = skin & facing if (skin & facing).any() else skin
     ids[:_MESH] = nearest(X[:_MESH], skin_f)
-    eyes = _eye_mask(model)
+    eyes = eyeball_mask(model)
     eyes_f = eyes & facing if (eyes & facing).any() else eyes
     ids[_MESH:] = nearest(X[_MESH:], eyes_f if eyes_f.any() else skin_f)
 

@@ -89,6 +89,7 @@ def procedural_database(
     """
     from workbench.arkit import rig_weights
     from workbench.core.shapes import BlendShape, ModelMetadata
+    from workbench.geometry.axes import face_axes
     from workbench.geometry.subdivision import subdivide_model
     from workbench.methods.wrinkles.examples import (
         EXAMPLE_POSES,
@@ -96,7 +97,6 @@ def procedural_database(
         performance_weights,
     )
     from workbench.model import FaceModel
-    from workbench.rigging.transfer import face_axes
 
     if int(n_frames) < 2:
         raise ValueError(f"procedural_database: n_frames must be >= 2, got {n_frames!r}")
@@ -106,7 +106,7 @@ def procedural_database(
     say(0.0, "preparing the detailed face")
     # the wrinkles are laid out in the sample head's frame (decimetres, +y up, +z front):
     # sculpt a copy turned and scaled into it, and bring the frames back
-    axes = face_axes(model)  # type: ignore[arg-type]
+    axes = face_axes(model)
     scale = float(model.metadata.metres_per_unit) / 0.1
 
     def to_sample(P: ArrayLike) -> NDArray[np.float64]:

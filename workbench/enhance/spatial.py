@@ -129,7 +129,7 @@ class Correspondence:
         units and axes (after :mod:`workbench.rigging` for a different face). With
         ``database_faces`` the map back (input vertices onto the database surface) is built too.
         """
-        from workbench.rigging.meshes import SurfaceQuery
+        from workbench.geometry.surface import SurfaceQuery
 
         a0 = np.asarray(input_neutral, np.float64)
         d0 = np.asarray(database_neutral, np.float64)

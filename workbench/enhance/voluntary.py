@@ -100,10 +100,10 @@ def face_voluntary_cores(model: FaceState, share: float = 0.04) -> dict[str, NDA
     ValueError
         The rig has no brow or mouth shapes at all.
     """
-    from workbench.rigging.transfer import face_axes
+    from workbench.geometry.axes import face_axes
 
     V = np.asarray(model.vertices, np.float64)
-    left = V @ face_axes(model)[0]  # type: ignore[arg-type]
+    left = V @ face_axes(model)[0]
     k = max(2, round(share * len(V)))
     out: dict[str, NDArray[np.int64]] = {}
     for group, parts in _GROUPS.items():

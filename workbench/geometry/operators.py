@@ -9,8 +9,8 @@ Sign conventions (pinned by ``tests/test_operators.py``):
 * ``mass_matrix`` is the diagonal Voronoi-hybrid mass; its trace is the surface area.
 * ``bilaplacian`` is ``L^T M^{-1} L`` (symmetric positive semi-definite), the
   operator of the thin-shell bending energy used by the shell deformer.
-* ``vertex_normals`` are area-weighted and unit length; triangles whose
-  corners run counter-clockwise seen from outside give outward normals.
+
+Normals are in :mod:`workbench.geometry.normals`.
 """
 
 from __future__ import annotations
@@ -71,9 +71,3 @@ def bilaplacian(L: sp.spmatrix, M: sp.spmatrix) -> sp.csr_matrix:
     inv = np.where(m > 0, 1.0 / np.where(m > 0, m, 1.0), 1.0)
     return sp.csr_matrix(L.T @ sp.diags(inv) @ L)
 
-
-def vertex_normals(V: ArrayLike, F: ArrayLike) -> NDArray[np.float64]:
-    """Area-weighted unit vertex normals, (n, 3) float64 (zero rows for isolated vertices)."""
-    v, f = _vf(V, F)
-    n = igl.per_vertex_normals(v, f, igl.PER_VERTEX_NORMALS_WEIGHTING_TYPE_AREA)
-    return np.nan_to_num(np.asarray(n), nan=0.0)

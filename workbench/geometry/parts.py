@@ -56,6 +56,9 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
+from workbench.geometry.axes import AxesError, head_axes
+from workbench.geometry.normals import triangle_areas
+
 if TYPE_CHECKING:
     from workbench.core.shapes import ModelMetadata
 
@@ -165,29 +168,16 @@ def part_material(role: str, name: str = "") -> str:
 # --------------------------------------------------------------------------- geometry
 
 
-_AXES = {"x": 0, "y": 1, "z": 2}
-
-
-def _axis(spec: str) -> NDArray[np.float64]:
-    s = (spec or "+y").strip().lower()
-    v = np.zeros(3)
-    v[_AXES.get(s[-1:], 1)] = -1.0 if s.startswith("-") else 1.0
-    return v
-
-
 def _frame(metadata: ModelMetadata | None) -> NDArray[np.float64]:
     """(3, 3) rows: lateral (the subject's left = up × front), up, front."""
-    up = _axis(getattr(metadata, "up_axis", "+y"))
-    front = _axis(getattr(metadata, "front_axis", "+z"))
-    if abs(float(up @ front)) > 0.5:  # degenerate metadata: fall back to +y up, +z front
-        up, front = np.array([0.0, 1.0, 0.0]), np.array([0.0, 0.0, 1.0])
-    return np.stack([np.cross(up, front), up, front])
+    try:
+        return head_axes(getattr(metadata, "up_axis", "+y") or "+y", getattr(metadata, "front_axis", "+z") or "+z")
+    except AxesError:  # degenerate metadata: fall back to +y up, +z front
+        return head_axes("+y", "+z")
 
 
 def _triangle_areas(V: NDArray[np.float64], F: NDArray[np.int64]) -> NDArray[np.float64]:
-    if F.size == 0:
-        return np.zeros(0)
-    return 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
+    return triangle_areas(V, F) if F.size else np.zeros(0)
 
 
 def _boundary_fraction(F: NDArray[np.int64]) -> float:

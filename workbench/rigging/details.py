@@ -39,6 +39,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
+from workbench.geometry.normals import face_normals, vertex_normals
 from workbench.model import FaceModel
 
 if TYPE_CHECKING:
@@ -79,8 +80,6 @@ class DetailMap:
         t_inv = t.tgt.frame.R.T / t.tgt.frame.scale  # working -> target model
         self.linear = t_inv[None] @ J @ s_lin[None]
         # area stretch of the fit in the template's tangent plane: |cof(J) n| for the template's unit normal
-        from workbench.rigging.meshes import face_normals
-
         n0 = face_normals(t.src.skin_X, t.src.skin_faces)[fv]
         cof = np.linalg.det(J)[:, None, None] * np.linalg.inv(np.swapaxes(J, 1, 2))
         stretch = np.linalg.norm(np.einsum("pij,pj->pi", cof, n0), axis=1)
@@ -113,8 +112,6 @@ class DetailMap:
     def carry(self, source_detail: NDArray[np.float64], source_blend: NDArray[np.float64], source_faces: Any,
               target_blend: NDArray[np.float64], target_faces: Any) -> NDArray[np.float64]:
         """World detail on the template (at ``source_blend``) -> world detail on the target (at ``target_blend``)."""
-        from workbench.methods.wrinkles.features import vertex_normals
-
         w = self.interpolate(source_detail)
         ns = self.interpolate(vertex_normals(source_blend, source_faces))
         ns /= np.maximum(np.linalg.norm(ns, axis=1, keepdims=True), 1e-300)

@@ -36,10 +36,12 @@ from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
 from workbench.arkit import canonical_arkit_name, split_half_of
+from workbench.geometry.axes import AxesError, face_axes
+from workbench.geometry.masks import MissingPartError, skin_surface
+from workbench.geometry.normals import vertex_normals
 from workbench.model import FaceModel
-from workbench.rigging.meshes import vertex_normals
 from workbench.rigging.report import RigTransferError
-from workbench.rigging.transfer import RigTransfer, face_axes
+from workbench.rigging.transfer import RigTransfer
 
 __all__ = ["LANDMARK_NAMES", "SuggestedLandmark", "suggest_landmarks", "template_landmarks"]
 
@@ -111,20 +113,23 @@ class _Rig:
     """A model's skin seen in its own canonical axes (x the subject's left, y up, z front), model units."""
 
     def __init__(self, model: FaceModel) -> None:
-        R = face_axes(model)
+        try:
+            R = face_axes(model)
+            # the skin's vertices on skin triangles, as the transfer's
+            self.skin, local = skin_surface(model)
+        except (AxesError, MissingPartError) as e:
+            raise RigTransferError(str(e)) from None
         self.model = model
         self.P = np.asarray(model.vertices, np.float64) @ R.T  # (n, 3)
-        self.skin = _skin_vertices(model)
         S = self.P[self.skin]
         lo, hi = S.min(0), S.max(0)
         self.size = float(np.linalg.norm(hi - lo))
         self.mid = 0.5 * float(lo[0] + hi[0])  # refined from the left/right pairs once they are found
-        F = np.asarray(model.faces, np.int64)
-        F = F[np.isin(F, self.skin).all(1)]
-        edge = float(np.median(np.linalg.norm(self.P[F[:, 1]] - self.P[F[:, 0]], axis=1))) if F.size else 0.0
+        F = self.skin[local]
+        edge = float(np.median(np.linalg.norm(self.P[F[:, 1]] - self.P[F[:, 0]], axis=1)))
         self.band = max(MIDLINE_BAND * float(hi[0] - lo[0]), edge)
         # outer surface facing front (not the inside of the lips or the mouth): normals turned outward as a whole
-        N = vertex_normals(self.P, F)[self.skin] if F.size else np.tile([0.0, 0.0, 1.0], (self.skin.size, 1))
+        N = vertex_normals(self.P, F)[self.skin]
         if float(((S - S.mean(0)) * N).sum()) < 0:
             N = -N
         self.facing = N[:, 2] > FACING
@@ -175,22 +180,6 @@ class _Rig:
 
     def y(self, v: int) -> float:
         return float(self.P[v, 1])
-
-
-def _skin_vertices(model: FaceModel) -> NDArray[np.int64]:
-    """Sorted model ids of the skin's vertices (those of triangles whose corners are all skin, as the transfer's)."""
-    roles = tuple(model.part_roles)
-    comps = [i for i, r in enumerate(roles) if r == "skin"]
-    if not comps:
-        raise RigTransferError(
-            f"{model.metadata.name or 'model'}: no skin found among its parts {list(model.component_names)}"
-        )
-    on = np.isin(model.component_labels, comps)
-    F = np.asarray(model.faces, np.int64)
-    ids = np.unique(F[on[F].all(1)]) if F.size else np.flatnonzero(on)
-    if ids.size == 0:
-        raise RigTransferError(f"{model.metadata.name or 'model'}: the skin has no triangles")
-    return ids.astype(np.int64)
 
 
 def _arkit_deltas(model: FaceModel) -> dict[str, NDArray[np.float64]]:

@@ -36,9 +36,11 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
+from workbench.geometry.normals import vertex_normals
 from workbench.geometry.operators import cotangent_laplacian, mass_matrix
+from workbench.geometry.similarity import Similarity, fit_similarity
 from workbench.geometry.sparse_cholesky import SparseSPDSolver
-from workbench.rigging.meshes import Similarity, SurfaceQuery, fit_similarity, vertex_normals
+from workbench.geometry.surface import SurfaceQuery
 
 __all__ = ["DEFAULT_SCHEDULE", "NonRigidResult", "affine_icp", "nonrigid_icp", "rigid_icp"]
 

@@ -41,6 +41,7 @@ from psygnal import Signal, SignalGroup
 from workbench.core.families import families
 from workbench.core.history import Command, History, payload_nbytes
 from workbench.core.shapes import UNIT_TO_METRES
+from workbench.geometry.masks import skin_or_all_mask
 from workbench.methods.shapes.symmetry import lateral_axis, nearest_reflected
 from workbench.model import FaceModel
 from workbench.rigging.report import TransferReport
@@ -542,9 +543,8 @@ def _mirror_map(model: FaceModel) -> NDArray[np.int64]:
     meta = model.metadata
     axis, _ = lateral_axis(meta.up_axis, meta.front_axis)
     V = np.asarray(model.vertices, np.float64)
-    roles = list(model.part_roles)
-    skin = np.isin(model.component_labels, [i for i, r in enumerate(roles) if r == "skin"])
-    ref = V[skin] if skin.any() else V
+    skin = skin_or_all_mask(model)
+    ref = V[skin]
     mid = 0.5 * float(ref[:, axis].min() + ref[:, axis].max())
     out = np.arange(V.shape[0], dtype=np.int64)
     for ids in (np.flatnonzero(skin), np.flatnonzero(~skin)):

@@ -57,18 +57,15 @@ from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
 from workbench.core.shapes import UNIT_TO_METRES, BlendShape
+from workbench.geometry.axes import AxesError, face_axes
+from workbench.geometry.frames import triangle_frames
+from workbench.geometry.masks import MissingPartError, skin_surface
+from workbench.geometry.normals import face_normals, vertex_normals
 from workbench.geometry.parts import RIGID_ROLES
+from workbench.geometry.similarity import Similarity, fit_similarity
 from workbench.geometry.sparse_cholesky import SparseSPDSolver
+from workbench.geometry.surface import SurfaceQuery
 from workbench.model import FaceModel, ModelMetadata
-from workbench.rigging.meshes import (
-    Similarity,
-    SurfaceQuery,
-    axis_vector,
-    face_normals,
-    fit_similarity,
-    triangle_frames,
-    vertex_normals,
-)
 from workbench.rigging.registration import affine_icp, nonrigid_icp, rigid_icp
 from workbench.rigging.report import RigTransferError, ShapeQuality, StretchMeter, TransferReport
 
@@ -104,44 +101,24 @@ class _Side:
         return self.X[self.skin_ids]
 
 
-def face_axes(model: FaceModel) -> NDArray[np.float64]:
-    """(3, 3) rotation whose rows are the subject's left, up and front in model coordinates (from metadata).
-
-    Raises
-    ------
-    RigTransferError
-        ``up_axis`` and ``front_axis`` are not perpendicular.
-    """
-    meta = model.metadata
-    up, front = axis_vector(meta.up_axis), axis_vector(meta.front_axis)
-    if abs(float(up @ front)) > 0.5:
-        raise RigTransferError(
-            f"{meta.name or 'model'}: metadata up_axis {meta.up_axis!r} and front_axis {meta.front_axis!r} "
-            "are not perpendicular"
-        )
-    return np.stack([np.cross(up, front), up, front])
-
-
 def _canonical(model: FaceModel) -> Similarity:
     """Model coordinates -> metres, subject's left / up / front as x / y / z."""
-    return Similarity(UNIT_TO_METRES[model.metadata.units], face_axes(model), np.zeros(3))
+    try:
+        axes = face_axes(model)
+    except AxesError as e:
+        raise RigTransferError(str(e)) from None
+    return Similarity(UNIT_TO_METRES[model.metadata.units], axes, np.zeros(3))
 
 
 def _skin(model: FaceModel, what: str) -> tuple[NDArray[np.int64], NDArray[np.int64], tuple[str, ...]]:
-    roles = tuple(model.part_roles)
-    skin_comp = [i for i, r in enumerate(roles) if r == "skin"]
-    F = np.asarray(model.faces, np.int64)
-    if F.size == 0:
+    """The skin surface (model ids, local triangles) and the part roles; raises when there is none."""
+    if np.asarray(model.faces).size == 0:
         raise RigTransferError(f"{what} {model.metadata.name or 'model'}: the mesh has no triangles")
-    labels = model.component_labels
-    if not skin_comp:
-        raise RigTransferError(f"{what}: no skin found among its parts {list(model.component_names)}")
-    on = np.isin(labels, skin_comp)
-    Fs = F[on[F].all(1)]
-    ids = np.unique(Fs)
-    local = np.full(model.n_vertices, -1, np.int64)
-    local[ids] = np.arange(ids.size)
-    return ids, local[Fs], roles
+    try:
+        ids, faces = skin_surface(model)
+    except MissingPartError as e:
+        raise RigTransferError(f"{what} {e}") from None
+    return ids, faces, tuple(model.part_roles)
 
 
 def _check_surface(X: NDArray[np.float64], F: NDArray[np.int64], what: str) -> tuple[NDArray[np.bool_], list[str]]:

@@ -84,10 +84,9 @@ class ShapeToolsFacet:
 
     def _skin_mask(self) -> NDArray[np.bool_]:
         if self._skin is None:
-            from workbench.methods.regions.segmentation import component_roles
+            from workbench.geometry.masks import skin_or_all_mask
 
-            skin = component_roles(self._model) == 0
-            self._skin = skin if skin.any() else np.ones(self._model.n_vertices, bool)
+            self._skin = skin_or_all_mask(self._model)
         return self._skin
 
     def plane(self) -> tuple[int, float, float, float]:

@@ -52,9 +52,9 @@ import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 
 from workbench.arkit import rig_weights
+from workbench.geometry.normals import vertex_normals
 from workbench.geometry.operators import cotangent_laplacian, mass_matrix
 from workbench.geometry.sparse_cholesky import SparseSPDSolver
-from workbench.methods.wrinkles.features import vertex_normals
 
 if TYPE_CHECKING:
     from workbench.core.state import FaceState as FaceModel

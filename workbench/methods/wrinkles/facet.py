@@ -17,6 +17,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from workbench.core.shapes import ModelError
+from workbench.geometry.masks import skin_or_all_mask
 from workbench.methods.wrinkles.editing import detailed_mesh, example_training, with_example
 from workbench.methods.wrinkles.features import tangent_neighbours
 from workbench.methods.wrinkles.layer import (
@@ -24,7 +25,6 @@ from workbench.methods.wrinkles.layer import (
     WrinkleState,
     blend_weights,
     fit_wrinkles,
-    skin_mask,
 )
 
 if TYPE_CHECKING:
@@ -271,7 +271,7 @@ class WrinklesFacet:
             raise ModelError(f"wrinkles.add_example: detailed must be ({m.n_vertices}, 3) finite, got {D.shape}")
         X = blend_weights(m, w)
         f, d = example_training(st.graph, st.handles, X, D, m.faces,
-                                tangent_neighbours(m.faces, m.n_vertices), skin_mask(m))
+                                tangent_neighbours(m.faces, m.n_vertices), skin_or_all_mask(m))
         try:
             new = with_example(ps, f, d)
         except ValueError as exc:

@@ -38,6 +38,9 @@ import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
+# the one definition of vertex normals (area-weighted), re-exported for this module's callers
+from workbench.geometry.normals import vertex_normals
+
 __all__ = [
     "DEFAULT_MAX_EDGES",
     "DEFAULT_WEIGHT_THRESHOLD",
@@ -280,19 +283,6 @@ def tangent_neighbours(faces: ArrayLike, n_vertices: int) -> NDArray[np.int32]:
     _, first = np.unique(corner, return_index=True)
     nb[corner[first]] = succ[first]
     return nb
-
-
-def vertex_normals(X: ArrayLike, faces: ArrayLike) -> NDArray[np.float64]:
-    """Area-weighted unit vertex normals, (n, 3) float64 (numpy; zero for unused vertices)."""
-    P = np.asarray(X, dtype=np.float64).reshape(-1, 3)
-    Fa = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
-    fn = np.cross(P[Fa[:, 1]] - P[Fa[:, 0]], P[Fa[:, 2]] - P[Fa[:, 0]])
-    N = np.zeros_like(P)
-    for c in range(3):
-        for k in range(3):
-            N[:, k] += np.bincount(Fa[:, c], fn[:, k], minlength=P.shape[0])
-    ln = np.linalg.norm(N, axis=1, keepdims=True)
-    return np.divide(N, ln, out=np.zeros_like(N), where=ln > 0)
 
 
 def local_frames(

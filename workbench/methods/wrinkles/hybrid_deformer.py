@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from workbench.geometry.normals import vertex_normals
 from workbench.methods.handles.shell import ShellDeformer
 from workbench.methods.wrinkles import kernels as _kernels
 from workbench.methods.wrinkles.features import (
@@ -34,7 +35,6 @@ from workbench.methods.wrinkles.features import (
     local_frames,
     tangent_neighbours,
     to_world,
-    vertex_normals,
 )
 from workbench.methods.wrinkles.pose_space import FitMode, PoseSpace, fit_pose_space, greedy_fit
 

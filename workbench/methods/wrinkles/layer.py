@@ -33,6 +33,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from workbench.geometry.masks import skin_or_all_mask
 from workbench.methods.wrinkles.editing import example_training
 from workbench.methods.wrinkles.features import FeatureGraph, edge_weights, tangent_neighbours
 from workbench.methods.wrinkles.hybrid_deformer import DetailEvaluator
@@ -157,14 +158,6 @@ class WrinkleLayer:
         return self.details(view, below)
 
 
-def skin_mask(model: FaceState) -> NDArray[np.bool_]:
-    """(n,) bool: the vertices that carry wrinkles by default (the skin; every vertex without one)."""
-    names = model.component_names
-    if "skin" not in names:
-        return np.ones(model.n_vertices, bool)
-    return np.asarray(model.component_labels) == names.index("skin")
-
-
 def fit_wrinkles(
     model: FaceState,
     examples: Mapping[str, tuple[Mapping[str, float], ArrayLike]],
@@ -192,7 +185,7 @@ def fit_wrinkles(
     V = np.asarray(model.vertices, np.float64)
     n = V.shape[0]
     g = graph or FeatureGraph.from_handles(V[h], neighbours)
-    act = skin_mask(model) if active is None else np.asarray(active, bool).reshape(n)
+    act = skin_or_all_mask(model) if active is None else np.asarray(active, bool).reshape(n)
     nb = tangent_neighbours(model.faces, n)
     feats, dets = [], []
     for _, (w, detailed) in examples.items():
