@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from grid_meshes import grid_triangles
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -23,6 +22,7 @@ from workbench.methods.paint.painting import (
     regional_mix,
 )
 from workbench.model import BlendShape, FaceModel, ModelError
+from workbench.testing import grid_triangles, grid_vertices
 
 
 @pytest.fixture(scope="module")
@@ -210,16 +210,9 @@ def test_mirror_painting_is_symmetric(head: FaceModel) -> None:
     assert abs(left - right) <= 0.1 * painted.size
 
 
-def _grid(n: int = 9, x0: float = 5.0) -> tuple[np.ndarray, np.ndarray]:
-    """An n x n grid over x in [x0 - 1, x0 + 1], y in [0, 2]: mirror plane x = x0."""
-    xs, ys = np.meshgrid(np.linspace(-1, 1, n), np.linspace(0, 2, n))
-    V = np.stack([xs.ravel() + x0, ys.ravel(), np.zeros(n * n)], 1)
-    return V, grid_triangles(n)
-
-
 def test_mirror_map_uses_the_mid_plane_and_skips_vertices_without_a_partner() -> None:
     n = 9
-    V, F = _grid(n)
+    V, F = grid_vertices(n, x=(4.0, 6.0), y=(0.0, 2.0)), grid_triangles(n)  # mirror plane x = 5
     i, j = np.arange(n * n) % n, np.arange(n * n) // n
     expected = j * n + (n - 1 - i)  # column i <-> column n - 1 - i, about x = 5 (not x = 0)
     p = 4 * n + 6  # right of the plane; its partner is 4 * n + 2

@@ -16,6 +16,7 @@ from workbench.geometry.subdivision import (
     subdivided_vertex_count,
 )
 from workbench.model import BlendShape, FaceModel, ModelMetadata
+from workbench.testing import grid_triangles, grid_vertices
 
 HEAD_OBJ = Path(__file__).resolve().parent.parent / "sample_models" / "head" / "head.obj"
 
@@ -35,16 +36,9 @@ def _edge_point_row(S: sp.csr_matrix, n: int, a: int, b: int) -> np.ndarray:
     return hits[0]
 
 
-def _grid(nx: int, ny: int, offset=(0.0, 0.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:
-    """A bumpy open triangulated grid (boundary + interior vertices)."""
-    x, y = np.meshgrid(np.arange(nx, dtype=float), np.arange(ny, dtype=float), indexing="ij")
-    V = np.stack([x, y, 0.3 * np.sin(x) * np.cos(y)], axis=-1).reshape(-1, 3) + offset
-    idx = np.arange(nx * ny).reshape(nx, ny)
-    a, b, c, d = idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]
-    F = np.concatenate(
-        [np.stack([a, b, c], -1).reshape(-1, 3), np.stack([a, c, d], -1).reshape(-1, 3)]
-    )
-    return V, F
+def _grid(nx: int, ny: int) -> tuple[np.ndarray, np.ndarray]:
+    """A bumpy open triangulated grid of nx x ny vertices (boundary + interior vertices)."""
+    return grid_vertices(nx, ny, height=lambda x, y: 0.3 * np.sin(x) * np.cos(y)), grid_triangles(nx, ny)
 
 
 def _two_components() -> tuple[np.ndarray, np.ndarray, np.ndarray]:

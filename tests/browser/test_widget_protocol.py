@@ -22,8 +22,8 @@ from kernel_loop import in_kernel_loop
 import widgets
 from widgets.panels.expressions import layout_rows
 from widgets.viewport import BUNDLE
-from workbench.core.polygons import Polygons
 from workbench.model import BlendShape, FaceModel
+from workbench.testing import grid_polygons
 
 pytestmark = pytest.mark.skipif(
     not BUNDLE.exists(), reason="viewport bundle not built (npm --prefix widgets/js run build)"
@@ -31,9 +31,7 @@ pytestmark = pytest.mark.skipif(
 
 
 def _grid() -> FaceModel:
-    xs, ys = np.meshgrid(np.arange(3.0), np.arange(3.0))
-    V = np.stack([xs.ravel(), ys.ravel(), np.zeros(9)], axis=1)
-    quads = [[0, 1, 4, 3], [1, 2, 5, 4], [3, 4, 7, 6], [4, 5, 8, 7]]
+    V, quads = grid_polygons(2, 2)  # 3 x 3 vertices, 4 quads
     one = np.zeros((9, 3), np.float32)
     one[4, 2] = 1.0  # moves 1 of 9 vertices: a sparse update
     allv = np.zeros((9, 3), np.float32)
@@ -44,7 +42,7 @@ def _grid() -> FaceModel:
         BlendShape("eyeBlinkRight", one),
         BlendShape("eyeBlinkLeft", one),
     ]
-    return FaceModel(V, None, shapes, polygons=Polygons.from_lists(quads))
+    return FaceModel(V, None, shapes, polygons=quads)
 
 
 class _Spy:

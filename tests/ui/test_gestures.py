@@ -17,19 +17,17 @@ pytest.importorskip("anywidget")
 from widgets._threading import InteractionGrouper, close_interactions
 from widgets.viewport import BUNDLE, Viewport
 from widgets.viewport.gestures import Gesture, GestureDispatcher
-from workbench.core.polygons import Polygons
 from workbench.model import BlendShape, FaceModel, ModelError
+from workbench.testing import grid_polygons
 
 pytestmark = pytest.mark.skipif(not BUNDLE.exists(), reason="viewport bundle not built")
 
 
 def _grid() -> FaceModel:
-    xs, ys = np.meshgrid(np.arange(3.0), np.arange(3.0))
-    V = np.stack([xs.ravel(), ys.ravel(), np.zeros(9)], axis=1)
-    quads = [[0, 1, 4, 3], [1, 2, 5, 4], [3, 4, 7, 6], [4, 5, 8, 7]]
+    V, quads = grid_polygons(2, 2)  # 3 x 3 vertices, 4 quads
     one = np.zeros((9, 3), np.float32)
     one[4, 2] = 1.0
-    m = FaceModel(V, None, [BlendShape("jawOpen", one)], polygons=Polygons.from_lists(quads))
+    m = FaceModel(V, None, [BlendShape("jawOpen", one)], polygons=quads)
     m.handles.add(4, name="centre")
     return m
 

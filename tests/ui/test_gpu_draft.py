@@ -19,6 +19,8 @@ import numpy as np
 import pytest
 from ci_env import in_ci
 
+from workbench.testing import grid_triangles, grid_vertices
+
 pytestmark = pytest.mark.ui
 
 JS = Path(__file__).resolve().parents[2] / "widgets" / "js"
@@ -38,12 +40,9 @@ console.log(JSON.stringify(out));
 
 
 def _grid(k: int) -> tuple[np.ndarray, np.ndarray]:
-    u, v = np.meshgrid(np.linspace(-1, 1, k), np.linspace(-1, 1, k))
-    V = np.stack([u, v, 0.3 * np.sin(2 * u) * np.cos(v)], axis=-1).reshape(-1, 3)
-    i = np.arange(k * k).reshape(k, k)
-    a, b, c, d = i[:-1, :-1], i[:-1, 1:], i[1:, :-1], i[1:, 1:]
-    F = np.concatenate([np.stack([a, b, d], -1).reshape(-1, 3), np.stack([a, d, c], -1).reshape(-1, 3)])
-    return V, F
+    """A curved k x k grid over [-1, 1]²."""
+    V = grid_vertices(k, x=(-1.0, 1.0), y=(-1.0, 1.0), height=lambda u, v: 0.3 * np.sin(2 * u) * np.cos(v))
+    return V, grid_triangles(k)
 
 
 def _simplify(V: np.ndarray, F: np.ndarray, targets: list[int]) -> list:
