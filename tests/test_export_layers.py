@@ -122,12 +122,13 @@ def test_encoding_reproduces_evaluate_at_with_every_layer(keyed_handles):
     np.testing.assert_allclose(enc.points(TIMES), _evaluate_at(m, TIMES), atol=2e-6, rtol=0)
     if keyed_handles:
         # three keys with different poses, linear then Bézier: far fewer targets than 3 x h = 6
-        assert 1 <= enc.handle_targets.shape[0] <= 6
-        w = enc.handle_weights(np.linspace(-1, 3, 401))
+        (ctl,) = enc.controls
+        assert ctl.layer == "handles" and 1 <= ctl.targets.shape[0] <= 6
+        w = enc.control_weights(ctl, np.linspace(-1, 3, 401))
         assert w.min() >= -1e-9 and w.max() <= 1 + 1e-9
         assert w.min() < 1e-6 and w.max() > 1 - 1e-6  # mapped onto the full [0, 1]
     else:
-        assert enc.handle_targets.shape[0] == 0  # the static offsets are in the constant target
+        assert enc.controls[0].targets.shape[0] == 0  # the static offsets are in the constant target
 
 
 def test_encoding_with_a_timeline_other_than_the_models(tmp_path):

@@ -9,8 +9,6 @@ from __future__ import annotations
 
 from workbench._version import __version__
 from workbench.animation.tracks import Timeline
-from workbench.capture import family as _capture_family  # noqa: F401 - registers model.capture (see capture.family)
-from workbench.enhance import family as _enhance_family  # noqa: F401 - registers model.enhance (see enhance.family)
 from workbench.io import load
 from workbench.methods.handles.shell import ShellDeformer
 from workbench.methods.paint.painting import Brush

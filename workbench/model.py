@@ -26,8 +26,6 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-import workbench.animation.family
-import workbench.methods
 from workbench.converters import mesh_converter
 from workbench.core.families import set_hook
 from workbench.core.shapes import AXES, UNIT_TO_METRES, BlendShape, ModelError, ModelMetadata
@@ -60,8 +58,6 @@ __all__ = [
     "ModelError",
     "ModelMetadata",
 ]
-
-_ = workbench.animation.family  # registered on import, like the methods
 
 
 class FaceModel(FaceState):

@@ -8,22 +8,22 @@ playback frame, only the parameters::
     base = neutral + r(v)
 
 * ``w`` (k,) the shapes' effective weights (derived corrective weights, muted
-  shapes 0: :meth:`StateView.weight_vector`), ``u_H`` (H_u, 3) the handle
-  offsets per shell-basis column (``model.handles.basis()``), ``M`` the rigid
-  head pose;
+  shapes 0: :meth:`StateView.weight_vector`), ``u_H`` (H_u, 3) the controls of
+  the first linear layer that has a basis (the handle offsets per shell-basis
+  column, ``layer.control_basis(view)``), ``M`` the rigid head pose;
 * ``δ`` the shapes' deltas, vertex-major and sparse (only the vertices a shape
   moves: per vertex ``(offset, count)`` into ``(dx, dy, dz, shape)`` entries),
   half floats when that rounds no vertex by more than :data:`HALF_TOLERANCE` of
   the face size at the largest slider value, else floats; ``B`` the shell basis
   of the current handle set;
-* ``a(v)``, ``c(v)`` per-vertex gains of the linear layers: the region blend
-  keeps ``background(v)`` of the global blend (Joshi 2003: the rest is the
-  regions' own weights, constant in the sliders) and the paint layer keeps
-  ``1 - Σ_e W_e(v)`` of everything below it (Pighin 1998 §4.2), so
-  ``a = background · (1 - Σ W)`` and ``c = 1 - Σ W``;
+* ``a(v)``, ``c(v)`` per-vertex gains: each linear layer says how much of the
+  motion below it a vertex keeps (:mod:`workbench.core.linear`; e.g. the region
+  blend keeps its background, Joshi 2003, and painted expressions ``1 - Σ_e W_e``,
+  Pighin 1998 §4.2); ``a`` is the product over all of them, ``c`` over those
+  above the controls layer;
 * ``r(v)`` the *residual*: whatever the kernel's ``evaluate()`` holds beyond
-  that linear part — the regions' and the painted expressions' constant terms
-  and the nonlinear layers (pose-space wrinkles). The kernel computes it from
+  that linear part — the linear layers' constant terms and the nonlinear
+  layers (pose-space wrinkles). The kernel computes it from
   its own evaluation, so Python stays the truth: any layer this model does not
   describe lands in ``r`` and is streamed as sparse rows, exactly like today's
   patches. During an interaction rows are re-sent only when they moved more
@@ -90,6 +90,7 @@ from widgets.viewport.common import (
 )
 from workbench.animation.family import head_matrix
 from workbench.core.families import weight_products
+from workbench.core.linear import decompose, is_linear
 
 #: every GpuSync of a connected viewport (the timeline's playback looks for its model's)
 _SYNCS: weakref.WeakSet[GpuSync] = weakref.WeakSet()
@@ -165,28 +166,39 @@ def local_weight_rules(view: Any) -> dict[str, Any]:
     return {"mute": [i for i, s in enumerate(shapes) if s.mute], "products": sorted(products)}
 
 
-def layer_gains(model: Any) -> np.ndarray:
-    """(n, 2) float32 ``(a, c)``: how much of the global blend and of the shell each vertex keeps."""
+def linear_layers(model: Any, view: Any) -> tuple[np.ndarray, Any]:
+    """``(gains, controls)``: what the page evaluates of the model's layers, asked of the layers.
+
+    ``gains`` (n, 2) float32 ``(a, c)``: how much of the global blend and of the
+    controls layer's displacement each vertex keeps (the product of the gains
+    of the linear layers above each, :func:`workbench.core.linear.decompose`);
+    ``controls`` the first linear layer with keyed controls and a basis (the
+    handle shell), or None. Whatever else the layers add is in the residual.
+    """
     n = model.n_vertices
-    a = np.ones(n, np.float32)
-    keep = np.ones(n, np.float32)
-    try:
-        state = model.slot("regions")
-        regions, weights, level = state.regions, state.weights, state.level
-        if weights is not None and regions.n_vertices == n:
-            a = np.asarray(regions.background[regions.check_level(level)], np.float32).copy()
-    except (KeyError, AttributeError, ValueError, IndexError):
-        pass  # no regions family, or no blend: the residual carries whatever it adds
-    try:
-        mix = model.slot("paint_layers")
-        for w in mix.maps.values():
-            keep -= np.asarray(w, np.float32)
-    except (KeyError, AttributeError):
-        pass
+    dec = decompose(model.pipeline.layers, view, None, n=n, constants=False)
+    layer = None
+    c = np.ones(n, np.float64)
+    for name, _, gain in dec.controls:
+        candidate = model.pipeline.layer(name)
+        if hasattr(candidate, "control_basis"):
+            layer, c = candidate, gain
+            break
     out = np.empty((n, 2), np.float32)
-    out[:, 0] = a * keep
-    out[:, 1] = keep
-    return out
+    out[:, 0] = dec.shape_gain
+    out[:, 1] = c
+    return out, layer
+
+
+def linear_key(model: Any, view: Any) -> tuple[Any, ...]:
+    """The versions of what the linear layers read: equal keys, equal gains and controls."""
+    return tuple((layer.name, *(view.version(r) for r in (layer.reads or ())))
+                 for layer in model.pipeline.layers if is_linear(layer))
+
+
+def layer_gains(model: Any) -> np.ndarray:
+    """(n, 2) float32 ``(a, c)`` of :func:`linear_layers` for the live state."""
+    return linear_layers(model, model.view())[0]
 
 
 class GpuSync:
@@ -207,6 +219,8 @@ class GpuSync:
         self.basis_key: Any = None
         self.gain_key: Any = None
         self.gain: np.ndarray | None = None
+        #: the linear layer whose controls the page evaluates with the basis (the handle shell), or None
+        self.controls_layer: Any = None
         self.columns: np.ndarray | None = None  # basis column of each handle
         self.hu = 0
         self.k = 0
@@ -258,31 +272,10 @@ class GpuSync:
         local = local_weight_rules(view)
         if local != w._gpu_meta.get("local"):
             self.set_meta(local=local)
-        h = model.handles.value
-        bkey = (h.vertices.tobytes(), tuple(model.handles.stiffness)) if len(h) else None
-        if bkey != self.basis_key:
-            t0 = time.perf_counter()
-            if bkey is None:
-                self.hu, self.columns = 0, None
-                basis = b""
-            else:
-                B, columns = model.handles.basis()
-                self.hu, self.columns = int(B.shape[1]), np.asarray(columns)
-                hq = (self.hu + 3) // 4
-                P = np.zeros((n, hq * 4), np.float32)
-                P[:, : self.hu] = B
-                basis = P.tobytes()
-            with w.hold_sync():
-                assign_synced(w, _gpu_basis=basis)
-                self.basis_key = bkey
-                self.set_meta(hu=self.hu, basis=int(w._gpu_meta.get("basis", 0)) + 1,
-                              columns=[] if self.columns is None else self.columns.tolist())
-            self.updates_sent["basis"] += 1
-            self.upload_ms.append((time.perf_counter() - t0) * 1e3)
-        gkey = (id(model.slot("regions")) if "regions" in view.slots else None,
-                id(model.slot("paint_layers")) if "paint_layers" in view.slots else None)
+        # the gains and the controls layer, when a linear layer's inputs changed
+        gkey = linear_key(model, view)
         if gkey != self.gain_key and (final or self.gain is None):
-            gain = layer_gains(model)
+            gain, self.controls_layer = linear_layers(model, view)
             self.gain_key = gkey
             if self.gain is None or not np.array_equal(gain, self.gain):
                 self.gain = gain
@@ -290,6 +283,29 @@ class GpuSync:
                     assign_synced(w, _gpu_gain=f32_bytes(gain))
                     self.set_meta(gain=int(w._gpu_meta.get("gain", 0)) + 1)
                 self.updates_sent["gain"] += 1
+        ctl = self.controls_layer
+        controls = None if ctl is None else ctl.controls(view, None)
+        basis = None if controls is None else ctl.control_basis(view)
+        bkey = None if basis is None else (ctl.name, basis[0])
+        if bkey != self.basis_key:
+            t0 = time.perf_counter()
+            if basis is None:
+                self.hu, self.columns = 0, None
+                data = b""
+            else:
+                _, B, columns = basis
+                self.hu, self.columns = int(B.shape[1]), np.asarray(columns)
+                hq = (self.hu + 3) // 4
+                P = np.zeros((n, hq * 4), np.float32)
+                P[:, : self.hu] = B
+                data = P.tobytes()
+            with w.hold_sync():
+                assign_synced(w, _gpu_basis=data)
+                self.basis_key = bkey
+                self.set_meta(hu=self.hu, basis=int(w._gpu_meta.get("basis", 0)) + 1,
+                              columns=[] if self.columns is None else self.columns.tolist())
+            self.updates_sent["basis"] += 1
+            self.upload_ms.append((time.perf_counter() - t0) * 1e3)
 
     def set_meta(self, **kv: Any) -> None:
         self.widget._gpu_meta = {**self.widget._gpu_meta, **kv}
@@ -305,9 +321,11 @@ class GpuSync:
         assert self.gain is not None
         G = np.asarray(model.blended(), np.float32) - self.neutral
         lin = self.neutral + self.gain[:, :1] * G
-        h = model.handles.value
-        if self.hu and len(h) and np.any(h.offsets):
-            lin += self.gain[:, 1:] * model.layer_displacement("handles")
+        ctl = self.controls_layer
+        if self.hu and ctl is not None:
+            c = ctl.controls(view, None)
+            if c is not None and np.any(c.values):
+                lin += self.gain[:, 1:] * model.layer_displacement(ctl.name)
         return lin
 
     def push(self, tolerance: float, full: bool) -> None:
@@ -361,9 +379,10 @@ class GpuSync:
         """The parameters of a sampled view (weights, shell offsets, head pose)."""
         wv = view.weight_vector()
         uH = np.zeros((self.hu, 3), np.float64)
-        h = view.slot("handles")
-        if self.hu and self.columns is not None and len(h) == self.columns.size:
-            np.add.at(uH, self.columns, np.asarray(h.offsets, np.float64))
+        ctl = self.controls_layer
+        c = None if ctl is None or not self.hu else ctl.controls(view, None)
+        if c is not None and self.columns is not None and len(c.values) == self.columns.size:
+            np.add.at(uH, self.columns, c.values)
             uH /= np.maximum(np.bincount(self.columns, minlength=self.hu), 1)[:, None]
         M = head_matrix(view)
         M = np.eye(4) if M is None else np.asarray(M, np.float64)
@@ -379,7 +398,7 @@ class GpuSync:
             tl = model.timeline.value
             view = model.view()
             key = (id(tl), tl.fps, tl.start, tl.end, self.morph_key, self.basis_key, self.gain_key,
-                   view.version("weights"), view.version("handles"))
+                   view.version("weights"), linear_key(model, view))
             if key == self.clip_key:
                 return self.clip_ok
             self.clip_key, self.clip_ok = key, False
@@ -396,7 +415,7 @@ class GpuSync:
                 ev = model.evaluation_at(float(t))
                 G = np.asarray(ev.blend, np.float32) - self.neutral
                 lin = self.neutral + self.gain[:, :1] * G
-                sh = ev.displacements.get("handles")
+                sh = None if self.controls_layer is None else ev.displacements.get(self.controls_layer.name)
                 if sh is not None and self.hu:
                     lin += self.gain[:, 1:] * sh
                 r = np.asarray(ev.mesh, np.float32) - lin

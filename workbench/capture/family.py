@@ -3,11 +3,8 @@
 Capture builds timelines, it does not deform: no slot, no layer, no file part
 (a result is applied to the timeline, which the timeline family saves).
 
-Imported by ``workbench/__init__.py``, not by :mod:`workbench.model` like the
-method families: capture builds models (the adapted rig), so its modules may
-import :mod:`workbench.model`, and the model module must not import them back
-(an import cycle). Every ``FaceModel`` is made after ``import workbench`` has run
-(importing ``workbench.model`` runs the package first), so it has ``model.capture``.
+Found by :func:`workbench.core.families.discover` like every family: its modules may
+import :mod:`workbench.model` (it builds models), which never imports them back.
 """
 
 from __future__ import annotations

@@ -23,13 +23,21 @@ rigging, capture, enhancement) lives in its own folder and registers one
 
 The state module never imports a family; families import the state (for
 types only). Adding a family is a new folder plus one ``register_family``
-call, never an edit of :mod:`workbench.core.state`.
+call, never an edit of :mod:`workbench.core.state` or of a list elsewhere:
+:func:`discover` (run before the first model is made) imports the ``family``
+module of every package of ``workbench`` and of ``workbench.methods``, and
+every module another installed package names in the entry-point group
+:data:`ENTRY_POINT_GROUP` (``[project.entry-points."face_workbench.families"]
+my_family = "my_package.family"`` in its ``pyproject.toml``).
 """
 
 from __future__ import annotations
 
+import importlib
+import importlib.metadata
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
@@ -130,6 +138,37 @@ _FAMILIES: dict[str, Family] = {}
 _HOOKS: dict[str, Any] = {}
 _PRODUCTS: tuple[WeightProducts, ...] = ()
 
+#: the entry-point group in which other packages name the module that registers their family
+ENTRY_POINT_GROUP = "face_workbench.families"
+#: packages whose sub-packages may hold a ``family`` module
+_FAMILY_ROOTS = ("workbench", "workbench.methods")
+_discovered = False
+
+
+def discover() -> None:
+    """Import every family module once (see the module docstring); later calls do nothing.
+
+    Only packages that have a ``family.py`` are imported, so discovery does not
+    pull in the I/O, export or batch packages. A declared module that fails to
+    import raises, naming the entry point.
+    """
+    global _discovered
+    if _discovered:
+        return
+    _discovered = True  # first: family modules may call families() while importing
+    for root in _FAMILY_ROOTS:
+        package = importlib.import_module(root)
+        for folder in sorted(Path(p) for p in package.__path__):
+            for sub in sorted(folder.iterdir()):
+                if (sub / "__init__.py").is_file() and (sub / "family.py").is_file():
+                    importlib.import_module(f"{root}.{sub.name}.family")
+    for ep in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP):
+        try:
+            importlib.import_module(ep.value)
+        except Exception as exc:
+            raise ImportError(f"method family {ep.name!r} ({ENTRY_POINT_GROUP} entry point of "
+                              f"{ep.dist.name if ep.dist else 'a package'}): cannot import {ep.value!r}: {exc}") from exc
+
 
 def register_family(family: Family) -> Family:
     """Register (or replace, on module reload) a family; returns it."""
@@ -140,11 +179,13 @@ def register_family(family: Family) -> Family:
 
 
 def families() -> tuple[Family, ...]:
-    """Registered families in layer order (then registration order)."""
+    """Registered families in layer order (then registration order); discovers them first."""
+    discover()
     return tuple(sorted(_FAMILIES.values(), key=lambda f: f.order))
 
 
 def family(name: str) -> Family:
+    discover()
     try:
         return _FAMILIES[name]
     except KeyError:

@@ -4,9 +4,8 @@ The slot holds the database and the *Enhanced* preview switch (:mod:`.layer`);
 the layer runs last (after wrinkles), so it enhances the whole edited face. No
 file part: the database is its own file (:meth:`PerformanceDatabase.save`), and
 the preview is a view setting, off when a face is opened. A retimed transition
-is timeline keys, which the timeline family saves. Imported by
-``workbench/__init__.py``, like capture's family: enhancement builds faces from
-frames and may import what builds models.
+is timeline keys, which the timeline family saves. Found by
+:func:`workbench.core.families.discover` like every family.
 """
 
 from __future__ import annotations

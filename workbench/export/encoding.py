@@ -70,12 +70,14 @@ Units are model units here; writers scale by ``metadata.metres_per_unit``.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from workbench.core.families import derive_weights, weight_products
+from workbench.core.linear import Controls, decompose, is_linear
 from workbench.export import ExportError, LayerReport
 
 if TYPE_CHECKING:
@@ -83,7 +85,7 @@ if TYPE_CHECKING:
     from workbench.animation.tracks import Timeline
     from workbench.model import FaceModel
 
-__all__ = ["MeshEncoding", "crossing_times", "curve_range", "segment_polynomials"]
+__all__ = ["EncodedControls", "MeshEncoding", "crossing_times", "curve_range", "segment_polynomials"]
 
 #: singular values below this fraction of the largest are dropped from the handle basis
 _RANK_TOL = 1e-9
@@ -162,6 +164,22 @@ def crossing_times(track: Track, bounds: tuple[float, float]) -> list[float]:
     return out
 
 
+@dataclass(frozen=True)
+class EncodedControls:
+    """One controls layer's keyed parameters as morph targets (see the module docstring).
+
+    Target ``i``'s weight is ``u(t).ravel() @ coeffs[:, i] + shift[i]``, ``u(t)``
+    the values of ``track``; exporters name it ``"<prefix>:basis<i>"``.
+    """
+
+    layer: str
+    prefix: str
+    targets: NDArray[np.float32]
+    track: Track | None
+    coeffs: NDArray[np.float64]
+    shift: NDArray[np.float64]
+
+
 class MeshEncoding:
     """The animated mesh of ``model`` under ``timeline`` as exportable parts (module docstring).
 
@@ -179,11 +197,9 @@ class MeshEncoding:
     shape_targets : (k, n, 3) float32
     static : (n, 3) float32 or None
         The constant target (weight 1); None when it is zero.
-    handle_targets : (r, n, 3) float32
-    handle_coeffs : (3h, r) float64
-        Handle target weight ``i`` is ``o(t).ravel() @ handle_coeffs[:, i] + handle_shift[i]``.
-    handle_shift : (r,) float64
-    handle_track : Track or None
+    controls : list of EncodedControls
+        One per layer with keyed linear controls (the handle offsets): its basis
+        targets, their weights' coefficients and the track that keys them.
     baked_layers : tuple of str
         Layers baked per frame (see :meth:`baked`); empty when all are linear.
     weight_products : dict of str to tuple of str
@@ -194,11 +210,6 @@ class MeshEncoding:
     """
 
     def __init__(self, model: FaceModel, timeline: Timeline) -> None:
-        from workbench.methods.handles.layer import HandleLayer
-        from workbench.methods.paint.expressions import expression_displacement
-        from workbench.methods.paint.layer import PaintLayer
-        from workbench.methods.regions.blend import RegionLayer, RegionState
-
         timeline.check_model(model)
         self.model = model
         self.timeline = timeline
@@ -212,7 +223,8 @@ class MeshEncoding:
             self.slider_range = np.array([[s.slider_min, s.slider_max] for s in shapes]).reshape(-1, 2)
             self.static_weights = np.array([model.weights[nm] for nm in self.shape_names], np.float64)
             self._shapes = shapes
-            self._slots = dict(model.view().slots)
+            view = model.view()
+            self._slots = dict(view.slots)
             names = set(self.shape_names)
             self.weight_products = {
                 nm: drivers for nm, drivers in weight_products(self._slots).items() if nm in names
@@ -222,165 +234,91 @@ class MeshEncoding:
                 if shapes
                 else np.zeros((0, n, 3), np.float32)
             )
-            live = model.pipeline.run(model.view())
-            providers = {layer.name: layer for layer in model.pipeline.layers}
-            # the layers this encoder knows how to write as targets; any other is baked per frame
-            known = {"regions": RegionLayer, "handles": HandleLayer, "paint": PaintLayer}
-            builtin = {name: type(layer) is known.get(name) for name, layer in providers.items()}
-            handles_linear = builtin.get("handles", False)
-            # the paint's base includes the layers below it (regions, handles): linear
-            # only while those are the built-in ones
-            paint_linear = builtin.get("paint", False) and handles_linear and builtin.get("regions", True)
-            reports: dict[str, LayerReport] = {}
-            const = np.zeros((n, 3), np.float64)
-            scale = np.ones(n, np.float64)  # per-vertex factor of the shape targets
-            has_const = False
+            layers = model.pipeline.layers
+            # a nonlinear layer that says it is off for this model (wrinkles not fitted) is not baked
+            silent = {
+                layer.name for layer in layers
+                if not is_linear(layer) and hasattr(layer, "active") and not layer.active(view)
+            }
+            try:
+                dec = decompose(layers, view, timeline, n=n, skip=lambda layer: layer.name in silent)
+            except ExportError:
+                raise
+            except ValueError as exc:  # a layer refusing this timeline (e.g. region tracks without regions)
+                raise ExportError(str(exc)) from exc
+            reports: dict[str, LayerReport] = {nm: LayerReport(nm, "inactive", "off for this model")
+                                               for nm in silent}
+            const = dec.constant
+            has_const = dec.has_constant
+            for name, terms in dec.terms.items():
+                if not terms.baked and terms.controls is None:
+                    reports[name] = LayerReport(name, "linear" if not terms.empty else "inactive", terms.detail)
 
-            # --- regions: C_R - S_R * sum_k g_k delta_k (or baked when the region weights are keyed)
-            regions_keyed = False
-            region_const = np.zeros((n, 3), np.float64)
-            region_cover = np.zeros(n, np.float64)
-            reasons: dict[str, str] = {}
-            if builtin.get("regions", False) and timeline.region_tracks:
-                st = model.regions.state
-                if not isinstance(st, RegionState):
-                    raise ExportError(
-                        "the timeline keys region weights "
-                        f"({len(timeline.region_tracks)} region tracks) but the model has no regions"
-                    )
-                regions_keyed = True
-                reasons["regions"] = (
-                    f"region weights keyed on level {timeline.region_level} "
-                    f"({len(timeline.region_tracks)} region tracks) vary over time"
-                )
-                reports["regions"] = LayerReport("regions", "baked", reasons["regions"])
-            elif builtin.get("regions", False):
-                st = model.regions.state
-                if isinstance(st, RegionState) and st.weights is not None and live.displacements["regions"] is not None:
-                    rw = st.weights.to_level(st.regions, st.level)
-                    W = st.regions.weight_matrix(st.level)
-                    cover = np.asarray(W.sum(axis=1), np.float64).reshape(-1)
-                    rows = np.flatnonzero(cover > 0)
-                    vals = rw.values.astype(np.float64) * (~self.muted)[None, :]
-                    coef = np.asarray(W[rows] @ vals, np.float64)  # (m, k)
-                    region_const[rows] += np.einsum("mk,kmc->mc", coef, eff[:, rows].astype(np.float64))
-                    region_cover = cover
-                    has_const = has_const or rows.size > 0
-                    reports["regions"] = LayerReport(
-                        "regions", "linear" if rows.size else "inactive",
-                        f"level {st.level}, {rw.values.shape[0]} regions over {rows.size} vertices: "
-                        "constant target + shape targets scaled by (1 - coverage)",
-                    )
-                else:
-                    reports["regions"] = LayerReport("regions", "inactive", "no region weights")
+            # --- controls layers (handle offsets): constant when not keyed, else a basis of their keyed span
+            self.controls: list[EncodedControls] = []
+            for name, ctl, gain in dec.controls:
+                keep = None if np.all(gain == 1.0) else gain[:, None]
 
-            # --- paint: C_P - P * (sum_k g_k delta_k + R + D(o)), R the region layer
-            paint = np.zeros(n, np.float64)
-            if paint_linear:
-                mix = model.paint
-                if len(mix):
-                    for name, w in mix.items():
-                        w64 = np.asarray(w, np.float64)
-                        paint += w64
-                        const += w64[:, None] * expression_displacement(model, name).astype(np.float64)
-                    has_const = True
-                    reports["paint"] = LayerReport(
-                        "paint", "linear",
-                        f"{len(mix)} painted expressions on {int(np.count_nonzero(paint))} vertices: "
-                        "constant target + shape and handle targets scaled by (1 - painted weight)",
-                    )
-                else:
-                    reports["paint"] = LayerReport("paint", "inactive", "nothing painted")
+                def disp(u: NDArray[np.float64], ctl: Controls = ctl, keep: NDArray[np.float64] | None = keep,
+                         ) -> NDArray[np.float64]:
+                    d = np.asarray(ctl.apply(u.reshape(ctl.values.shape)), np.float64)
+                    return d if keep is None else d * keep
 
-            # the regions and shapes below the paint keep a (1 - P) share of their motion
-            const += (1.0 - paint)[:, None] * region_const
-            scale = (1.0 - paint) * (1.0 - region_cover)
-            # a region layer baked per frame (keyed region weights) is scaled the same way
-            self._region_keep: NDArray[np.float32] | None = (
-                (1.0 - paint).astype(np.float32)[:, None] if paint_linear and np.any(paint) else None
-            )
-
-            # --- handles: (1 - P) D(o(t))
-            self.handle_track = timeline.handles
-            H = len(model.handles)
-            basis_rows = np.zeros((0, 3 * H))
-            self.handle_coeffs = np.zeros((3 * H, 0))
-            self.handle_shift = np.zeros(0)
-            targets: list[NDArray[np.float64]] = []
-            if handles_linear and H:
-                deformer = model.handles.deformer()
-                keep = (1.0 - paint)[:, None]
-
-                def disp(o: NDArray[np.float64]) -> NDArray[np.float64]:
-                    d = np.asarray(deformer.displacement(o.reshape(H, 3)), np.float64)
-                    return d * keep if paint_linear else d
-
-                tr = self.handle_track
+                tr = ctl.track
+                m = ctl.values.size
+                coeffs_l: list[NDArray[np.float64]] = []
+                shift: list[float] = []
+                targets: list[NDArray[np.float64]] = []
                 if tr is None:
-                    o = np.asarray(model.handles.offsets, np.float64)
-                    if np.any(o):
-                        const += disp(o)
+                    if np.any(ctl.values):
+                        const = const + disp(ctl.values)
                         has_const = True
-                        reports["handles"] = LayerReport(
-                            "handles", "linear", f"{H} handles, offsets not keyed: one constant target"
-                        )
+                        reports[name] = LayerReport(name, "linear", f"{ctl.label}, not keyed: one constant target")
                     else:
-                        reports["handles"] = LayerReport("handles", "inactive", "all offsets are zero")
+                        reports[name] = LayerReport(name, "inactive", f"{ctl.label}, all zero")
                 else:
-                    basis_rows = np.concatenate([tr.values, tr.derivatives(tr.times, "left"),
-                                                 tr.derivatives(tr.times, "right")])
-                    Q = _row_basis(basis_rows)
+                    Q = _row_basis(np.concatenate([tr.values, tr.derivatives(tr.times, "left"),
+                                                   tr.derivatives(tr.times, "right")]))
                     if Q.shape[1]:
                         lo, hi = curve_range(tr, Q)
-                        coeffs, shift = [], []
                         for i in range(Q.shape[1]):
                             d = disp(Q[:, i])
                             span = hi[i] - lo[i]
                             if lo[i] != 0.0:
-                                const += lo[i] * d
+                                const = const + lo[i] * d
                                 has_const = True
                             if span <= 1e-12 * max(1.0, abs(lo[i])):
                                 continue  # constant along q_i: folded into the static target
                             targets.append(span * d)
-                            coeffs.append(Q[:, i] / span)
+                            coeffs_l.append(Q[:, i] / span)
                             shift.append(-lo[i] / span)
-                        if coeffs:
-                            self.handle_coeffs = np.stack(coeffs, axis=1)
-                            self.handle_shift = np.array(shift)
-                        reports["handles"] = LayerReport(
-                            "handles", "linear",
-                            f"{H} handles keyed ({len(tr)} keys): {len(targets)} basis targets "
+                        reports[name] = LayerReport(
+                            name, "linear",
+                            f"{ctl.label} keyed ({len(tr)} keys): {len(targets)} basis targets "
                             "(weights in [0, 1]) + constant target",
                         )
                     else:
-                        reports["handles"] = LayerReport("handles", "inactive", "keyed offsets are all zero")
-            elif H == 0 and "handles" in providers and handles_linear:
-                reports["handles"] = LayerReport("handles", "inactive", "no handles")
+                        reports[name] = LayerReport(name, "inactive", f"{ctl.label}, keyed values all zero")
+                self.controls.append(EncodedControls(
+                    name, ctl.prefix,
+                    np.stack(targets).astype(np.float32) if targets else np.zeros((0, n, 3), np.float32),
+                    tr if targets else None,
+                    np.stack(coeffs_l, axis=1) if coeffs_l else np.zeros((m, 0)),
+                    np.array(shift),
+                ))
 
-            self.handle_targets = (
-                np.stack(targets).astype(np.float32) if targets else np.zeros((0, n, 3), np.float32)
-            )
+            scale = dec.shape_gain
             self.shape_targets = eff if np.all(scale == 1.0) else (eff * scale[None, :, None].astype(np.float32))
-            view = model.view()
-            # a layer that says it is off for this model (wrinkles not fitted) is not baked
-            silent = {
-                name for name, layer in providers.items()
-                if not builtin[name] and hasattr(layer, "active") and not layer.active(view)
+            # baked layers, each times the gain of the linear layers above it
+            self.baked_layers = tuple(name for name, _, _ in dec.baked)
+            self._baked_gain = {
+                name: g.astype(np.float32)[:, None] for name, g, _ in dec.baked if not np.all(g == 1.0)
             }
-            for name in silent:
-                reports[name] = LayerReport(name, "inactive", "off for this model")
-            self.baked_layers = tuple(
-                name for name in providers
-                if name not in silent and (
-                    not (builtin[name] and (name != "paint" or paint_linear))
-                    or (name == "regions" and regions_keyed)
-                )
-            )
+            reasons = {name: why for name, _, why in dec.baked}
             for name in self.baked_layers:
-                reasons.setdefault(name, "not linear in the keyed weights/offsets")
                 reports[name] = LayerReport(name, "baked", reasons[name])
             self._baked_reasons = reasons
-            self.layers = [reports[name] for name in providers if name in reports]
+            self.layers = [reports[layer.name] for layer in layers if layer.name in reports]
         self._const = const
         self._has_const = has_const
         self.static: NDArray[np.float32] | None = const.astype(np.float32) if has_const else None
@@ -427,13 +365,13 @@ class MeshEncoding:
                 out.append(nm)
         return out
 
-    def handle_weights(self, times: ArrayLike) -> NDArray[np.float64]:
-        """(F, r) weights of :attr:`handle_targets` (in [0, 1])."""
+    def control_weights(self, controls: EncodedControls, times: ArrayLike) -> NDArray[np.float64]:
+        """(F, r) weights of ``controls.targets`` (in [0, 1])."""
         ts = np.asarray(times, np.float64).reshape(-1)
-        r = self.handle_targets.shape[0]
-        if r == 0 or self.handle_track is None:
+        r = controls.targets.shape[0]
+        if r == 0 or controls.track is None:
             return np.zeros((ts.size, r))
-        return self.handle_track.sample(ts) @ self.handle_coeffs + self.handle_shift[None, :]
+        return controls.track.sample(ts) @ controls.coeffs + controls.shift[None, :]
 
     # ------------------------------------------------------------------ baked layers
     def baked(self, time: float) -> NDArray[np.float32] | None:
@@ -443,9 +381,10 @@ class MeshEncoding:
         t = float(time)
         if t not in self._baked_cache:
             parts = self.model.layers_at(t, self.baked_layers, self.timeline)
-            region = parts.get("regions")
-            if self._region_keep is not None and region is not None:
-                parts["regions"] = region * self._region_keep
+            for name, gain in self._baked_gain.items():
+                d = parts.get(name)
+                if d is not None:
+                    parts[name] = d * gain
             arrs = [p for p in parts.values() if p is not None]
             total: NDArray[np.float32] | None = None
             if arrs:

@@ -535,12 +535,13 @@ def _build(
 
     if enc.static is not None:
         add_target(enc.static, "layer:static", Curve(None, constant=1.0))
-    for i in range(enc.handle_targets.shape[0]):
-        add_target(
-            enc.handle_targets[i],
-            f"handle:basis{i}",
-            Curve(enc.handle_track, coeffs=enc.handle_coeffs[:, i], offset=float(enc.handle_shift[i])),
-        )
+    for ctl in enc.controls:
+        for i in range(ctl.targets.shape[0]):
+            add_target(
+                ctl.targets[i],
+                f"{ctl.prefix}:basis{i}",
+                Curve(ctl.track, coeffs=ctl.coeffs[:, i], offset=float(ctl.shift[i])),
+            )
     for f, t in enumerate(frames):
         b = enc.baked(float(t))
         if b is not None:

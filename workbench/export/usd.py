@@ -22,9 +22,9 @@ through the decomposition of :class:`workbench.export.encoding.MeshEncoding`:
   drivers' weights, :meth:`MeshEncoding.weights`, exact at every frame);
 * ``layer_static`` (weight 1 at every frame) when the layers add a constant:
   region constant, painted expressions, unkeyed handle offsets;
-* ``handle_basis<i>`` when the handle offsets are keyed: the shell
-  displacement of one basis vector of the keyed offsets' span, weight in
-  ``[0, 1]`` per frame;
+* ``handle_basis<i>`` (``<prefix>_basis<i>`` of any layer with keyed linear
+  controls) when the handle offsets are keyed: the shell displacement of one
+  basis vector of the keyed offsets' span, weight in ``[0, 1]`` per frame;
 * layers that are not linear in the keyed quantities (wrinkles, anything
   registered later) are baked: the Mesh ``points`` get one time sample per
   frame, ``neutral + those layers``; UsdSkel adds the blend shapes on top.
@@ -144,16 +144,17 @@ def write(
     anim.CreateJointsAttr(Vt.TokenArray([]))
     UsdSkel.BindingAPI.Apply(skel.GetPrim()).CreateAnimationSourceRel().SetTargets([anim.GetPath()])
 
-    # targets: shapes, then the layer targets (static, handle basis)
+    # targets: shapes, then the layer targets (static, each controls layer's basis)
     names = list(model.shape_names)
     data = [enc.shape_targets[k] for k in range(len(names))]
     extra: list[str] = []
     if enc.static is not None:
         extra.append("layer:static")
         data.append(enc.static)
-    for i in range(enc.handle_targets.shape[0]):
-        extra.append(f"handle:basis{i}")
-        data.append(enc.handle_targets[i])
+    for ctl in enc.controls:
+        for i in range(ctl.targets.shape[0]):
+            extra.append(f"{ctl.prefix}:basis{i}")
+            data.append(ctl.targets[i])
     all_names = names + extra
     prim_names = _prim_names(all_names, Tf)
     tokens = Vt.TokenArray(prim_names)
@@ -177,7 +178,7 @@ def write(
     cols = [enc.weights(times)]
     if enc.static is not None:
         cols.append(np.ones((times.size, 1)))
-    cols.append(enc.handle_weights(times))
+    cols += [enc.control_weights(ctl, times) for ctl in enc.controls]
     W = np.concatenate(cols, axis=1).astype(np.float32)
     wattr = anim.CreateBlendShapeWeightsAttr()
     for c, w in zip(codes, W, strict=True):

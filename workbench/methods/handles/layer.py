@@ -16,11 +16,12 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Callable
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from workbench.core.linear import Controls, LinearTerms
 from workbench.geometry.parts import model_part_roles
 from workbench.methods.handles.shell import ShellDeformer
 
@@ -85,3 +86,34 @@ class HandleLayer:
             else:
                 self._offsets = None  # the deformer's running state is not the settled one
             return out
+
+    # -- linear description (workbench.core.linear): d = B u, linear in the offsets
+    def gain(self, view: StateView) -> None:
+        return None  # it adds to the mesh below and keeps all of it
+
+    def controls(self, view: StateView, timeline: Any) -> Controls | None:
+        """The handle offsets (keyed by the timeline's ``"handles"`` track); None without handles."""
+        h = view.slot("handles")
+        if len(h) == 0:
+            return None
+        H = len(h)
+
+        def apply(o: NDArray[np.float64]) -> NDArray[np.float64]:
+            return np.asarray(self.deformer(view).displacement(np.asarray(o).reshape(H, 3)), np.float64)
+
+        track = None if timeline is None else timeline.handles
+        return Controls(np.asarray(h.offsets, np.float64), track, apply, f"{H} handles", prefix="handle")
+
+    def control_basis(self, view: StateView) -> tuple[Any, NDArray[np.float32], NDArray[np.int64]]:
+        """``(key, B, columns)``: the shell basis (n, P) and each handle's column (for the GPU path)."""
+        h = view.slot("handles")
+        d = self.deformer(view)
+        B = d.basis_.view()
+        B.flags.writeable = False
+        return (h.vertices.tobytes(), tuple(view.slot("shell_stiffness"))), B, d.handle_columns
+
+    def linear_terms(self, view: StateView, timeline: Any) -> LinearTerms:
+        c = self.controls(view, timeline)
+        if c is None:
+            return LinearTerms(detail="no handles")
+        return LinearTerms(controls=c, detail=c.label)

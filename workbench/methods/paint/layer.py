@@ -11,11 +11,12 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Mapping
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from workbench.core.linear import LinearTerms
 from workbench.methods.paint.expressions import expression_displacement
 
 if TYPE_CHECKING:
@@ -75,3 +76,33 @@ class PaintLayer:
                 self._cache = cache
             self._below, self._expressions, self._maps = below, exprs, dict(mix.maps)
             return self._cache
+
+    # -- linear description (workbench.core.linear): below + d = neutral + (1 − P)(below − neutral) + C_P
+    def gain(self, view: StateView) -> NDArray[np.float64] | None:
+        """``1 − P``, ``P = Σ_e W_e`` the painted weight (None when nothing is painted)."""
+        mix = view.slot("paint_layers")
+        if not len(mix):
+            return None
+        paint = np.zeros(view.n_vertices, np.float64)
+        for w in mix.maps.values():
+            paint += np.asarray(w, np.float64)
+        return 1.0 - paint
+
+    def controls(self, view: StateView, timeline: Any) -> None:
+        return None
+
+    def linear_terms(self, view: StateView, timeline: Any) -> LinearTerms:
+        """Gain ``1 − P`` and the constant ``C_P = Σ_e W_e D_e``."""
+        mix = view.slot("paint_layers")
+        if not len(mix):
+            return LinearTerms(detail="nothing painted")
+        n = view.n_vertices
+        paint = np.zeros(n, np.float64)
+        const = np.zeros((n, 3), np.float64)
+        for name, w in mix.maps.items():
+            w64 = np.asarray(w, np.float64)
+            paint += w64
+            const += w64[:, None] * expression_displacement(view, name).astype(np.float64)
+        return LinearTerms(gain=1.0 - paint, constant=const,
+                           detail=f"{len(mix)} painted expressions on {int(np.count_nonzero(paint))} vertices: "
+                                  "constant target + shape and handle targets scaled by (1 - painted weight)")
