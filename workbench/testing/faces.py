@@ -154,9 +154,11 @@ def _make(source: FaceModel, points: NDArray[np.float64], F: ArrayLike, W: sp.cs
 
 
 def _metadata(source: FaceModel, warp: Warp, units: str | None, name: str, up_axis: str | None,
-              front_axis: str | None) -> ModelMetadata:
+              front_axis: str | None, how: Mapping[str, object]) -> ModelMetadata:
+    """The result's metadata: the source's provenance (its licence) plus how it was generated."""
     return ModelMetadata(name=name, units=_units_after(source, warp, units),
-                         up_axis=up_axis or source.metadata.up_axis, front_axis=front_axis or source.metadata.front_axis)
+                         up_axis=up_axis or source.metadata.up_axis, front_axis=front_axis or source.metadata.front_axis,
+                         provenance=(*source.metadata.provenance, {"generated_from": source.metadata.name, **how}))
 
 
 def _rebuild(face: GeneratedFace, points: NDArray[np.float64], F: ArrayLike, W: sp.csr_matrix,
@@ -204,7 +206,9 @@ def warped(
         polygons = None
     return _make(source, np.asarray(source.vertices, np.float64), F, sp.identity(n, format="csr"),
                  source.component_labels, w, names=source.component_names,
-                 metadata=_metadata(source, w, units, name, up_axis, front_axis), shapes=shapes, polygons=polygons)
+                 metadata=_metadata(source, w, units, name, up_axis, front_axis,
+                                    {"by": "workbench.testing.warped", "retriangulate": retriangulate}),
+                 shapes=shapes, polygons=polygons)
 
 
 def remeshed(
@@ -239,7 +243,8 @@ def remeshed(
     V2, F2, W = split_remesh(source.vertices, source.faces, seed=seed, slide=slide, flips=flips)
     labels = source.component_labels[np.asarray(W.argmax(axis=1)).ravel()]
     return _make(source, V2, F2, W, labels, w, names=source.component_names,
-                 metadata=_metadata(source, w, units, name, up_axis, front_axis), shapes=shapes)
+                 metadata=_metadata(source, w, units, name, up_axis, front_axis,
+                                    {"by": "workbench.testing.remeshed", "seed": seed}), shapes=shapes)
 
 
 def renumbered(face: GeneratedFace, *, seed: int = 0) -> GeneratedFace:
