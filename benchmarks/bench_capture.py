@@ -294,8 +294,7 @@ def _rigid_table(model: Any, perf: Any, cl: Any) -> None:
 
 def _adaptation_table(model: Any, args: argparse.Namespace) -> None:
     from workbench.capture.clouds import track_clouds
-    from workbench.model import BlendShape, FaceModel
-    from workbench.rigging.synthetic import SmoothWarp
+    from workbench.testing import SmoothWarp, warped
 
     V = model.vertices
     D = np.asarray(model.effective_deltas, np.float64)
@@ -305,10 +304,8 @@ def _adaptation_table(model: Any, args: argparse.Namespace) -> None:
                       radii=np.array([0.35, 0.3, 0.35]),
                       amplitudes=np.array([[0.0, 0.0, 0.06], [0.03, 0.03, 0.03], [-0.03, -0.02, 0.03]]),
                       scale=scale, translation=centre - scale * centre)
-    Va = warp(V)
-    actor = FaceModel(Va, model.faces, [BlendShape(s.name, warp(V + D[i]) - Va) for i, s in enumerate(model.shapes)],
-                      polygons=model.polygons, component_labels=model.component_labels,
-                      component_names=model.component_names, metadata=model.metadata)
+    actor = warped(model, warp, name=model.metadata.name).model  # the same mesh, its shapes warped exactly
+    Va = actor.vertices
     visible = [n for n in model.shape_names if not n.startswith("eyeLook") and n != "tongueOut"]
     T = min(args.frames, args.cloud_frames)
     lead = 8

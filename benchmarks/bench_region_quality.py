@@ -8,7 +8,10 @@ Measured, before and after the change, on three rigs built from the sample head:
 * ``unnamed``  — the same mesh with the components renamed "mesh_0", "mesh_1", ...
   (what many exporters write);
 * ``warped``   — unnamed, every quad split along its other diagonal and the
-  neutral warped smoothly (wider forehead, wavy profile, deeper face).
+  rig under a mirror-symmetric smooth warp (Gaussian bumps up to 2 % of the
+  head's size and a scale of up to 7 % per axis; shapes carried exactly).
+
+The rigs come from :mod:`workbench.testing` (the tests check the same ones).
 
 1. **Feature shares.** For one-sided features (a brow, a lid, a mouth corner)
    the share of a shape's strongly moving vertices (moved ≥ half its largest
@@ -43,6 +46,7 @@ from workbench.geometry.parts import model_part_roles, role_from_name
 from workbench.methods.handles.presets import default_face_handles
 from workbench.methods.handles.shell import ShellDeformer
 from workbench.model import FaceModel
+from workbench.testing import random_warp, unnamed_parts, warped
 
 FEATURES = (
     "browDownLeft", "browOuterUpLeft", "eyeBlinkLeft", "eyeSquintLeft", "eyeWideLeft", "cheekSquintLeft",
@@ -53,22 +57,10 @@ FEATURES = (
 TARGET = 0.70
 
 
-def unnamed(base: FaceModel, vertices: np.ndarray | None = None, faces: np.ndarray | None = None) -> FaceModel:
-    return FaceModel(base.vertices if vertices is None else vertices, base.faces if faces is None else faces,
-                     base.shapes, component_labels=base.component_labels,
-                     component_names=[f"mesh_{i}" for i in range(len(base.component_names))],
-                     metadata=base.metadata)
-
-
-def warped(base: FaceModel) -> FaceModel:
-    q = np.asarray(base.polygons.indices).reshape(-1, 4)
-    F = np.concatenate([q[:, [0, 1, 3]], q[:, [1, 2, 3]]])
-    V = base.vertices
-    W = V.copy()
-    W[:, 0] = V[:, 0] * (1.0 + 0.08 * (V[:, 1] - V[:, 1].mean()))
-    W[:, 1] = V[:, 1] + 0.05 * np.sin(2.0 * V[:, 2])
-    W[:, 2] = V[:, 2] * 1.07
-    return unnamed(base, W, F)
+def warped_rig(base: FaceModel) -> FaceModel:
+    """The ``warped`` rig: unnamed, quads cut along their other diagonal, a mirror-symmetric smooth warp."""
+    warp = random_warp(base.vertices, seed=0, symmetric=True, strength=0.02, anisotropy=0.07)
+    return unnamed_parts(warped(base, warp, retriangulate=True).model)
 
 
 def names_only_roles(model: FaceModel) -> tuple[str, ...]:
@@ -112,7 +104,7 @@ def main() -> None:
     ap.add_argument("--threshold", type=float, default=0.25)
     args = ap.parse_args()
     head = workbench.load_sample("head")
-    rigs = {"named": head, "unnamed": unnamed(head), "warped": warped(head)}
+    rigs = {"named": head, "unnamed": unnamed_parts(head), "warped": warped_rig(head)}
     print(f"component roles (names first, else geometry), t = {args.threshold}:")
     for label, m in rigs.items():
         print(f"  {label:8s} {m.component_names[:3]}... -> {list(model_part_roles(m))}")

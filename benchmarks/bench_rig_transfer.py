@@ -6,7 +6,7 @@ The template is the sample head at the "25k" resolution (20,051 vertices, 52
 ARKit shapes). The target is a face the template has never seen: the base
 head re-triangulated so that no vertex sits where one was (every triangle
 split in four through random edge points, old vertices slid along an edge,
-a third of the inner edges flipped; :func:`workbench.rigging.synthetic.split_remesh`),
+a third of the inner edges flipped; :func:`workbench.testing.split_remesh`),
 given a bust below the neck (``--rings`` rings of the neck loop flaring into
 shoulders), warped by three Gaussian bumps, an anisotropic scale and a
 rotation, in centimetres — about 27k vertices.
@@ -71,23 +71,16 @@ import scipy.sparse.linalg as spla
 
 import workbench
 from workbench.geometry.sparse_cholesky import cholmod_available
-from workbench.model import FaceModel, ModelMetadata
+from workbench.model import FaceModel
 from workbench.rigging import RigTransfer
 from workbench.rigging import intersections as ix
-from workbench.rigging import synthetic as syn
-
-WARP = syn.sample_head_warp()
+from workbench.testing import remeshed, sample_head_warp, with_bust
 
 
 def build_target(rings: int) -> FaceModel:
     base = workbench.load_sample("head")
-    V2, F2, W = syn.split_remesh(base.vertices, base.faces, seed=1)
-    lab = base.component_labels[np.asarray(W.argmax(axis=1)).ravel()]
-    loop = max(igl.boundary_loop_all(F2[lab[F2[:, 0]] == 0]), key=len)
-    V3, F3 = syn.add_bust(V2, F2, loop, rings=rings, drop=0.6, flare=2.2)
-    lab3 = np.concatenate([lab, np.zeros(V3.shape[0] - V2.shape[0], lab.dtype)])
-    return FaceModel(WARP(V3), F3, component_labels=lab3, component_names=base.component_names,
-                     metadata=ModelMetadata(name="warped remesh with a bust", units="cm"))
+    face = remeshed(base, seed=1, warp=sample_head_warp(), name="warped remesh with a bust")
+    return with_bust(face, rings=rings, drop=0.6, flare=2.2).model
 
 
 def main() -> None:
