@@ -11,7 +11,7 @@ the conservative check).
 
 Set-up: 29 of the sample's ARKit shapes; the examples are poses of an
 "actor" whose shapes are the sample's scaled (×0.65–1.35) and turned
-(±0.3 rad) by smooth per-shape fields, 2–4 shapes per pose at weights in
+(±0.3 rad) by smooth per-shape fields (:func:`workbench.testing.restyled_shapes`), 2–4 shapes per pose at weights in
 [0.4, 1]; the rough weights are the true ones ± up to 0.3.
 
 Measured, from the progress callback of ``refine_rig``:
@@ -39,6 +39,7 @@ import workbench
 from workbench.geometry.sparse_cholesky import cholmod_available
 from workbench.model import FaceModel
 from workbench.rigging import refine_rig
+from workbench.testing import restyled_shapes
 
 #: 29 shapes, as the paper's rig: brows, eyes, cheeks, nose, jaw and mouth, both sides
 SHAPES = [
@@ -64,34 +65,11 @@ def build(resolution: str) -> tuple[FaceModel, list[np.ndarray], list[dict[str, 
         metadata=head.metadata,
     )
     V = rig.vertices
-    A = rig.deltas.astype(np.float64)
-    centre = V.mean(axis=0)
-    wavelength = 0.4 * float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
-    actor = np.empty_like(A)
-    for i in range(len(A)):
-        rng = np.random.default_rng(i)
-        d = rng.normal(size=3)
-        d /= np.linalg.norm(d)
-        phase = rng.uniform(0, 2 * np.pi, 2)
-        axis = rng.normal(size=3)
-        axis /= np.linalg.norm(axis)
-        x = 2 * np.pi * ((V - centre) @ d) / wavelength
-        s = 1 + 0.35 * np.sin(x + phase[0])
-        ang = 0.3 * np.cos(x + phase[1])
-        # Rodrigues: R v = v cos + (k × v) sin + k (k·v)(1 - cos)
-        v = A[i]
-        kxv = np.cross(axis[None], v)
-        kv = v @ axis
-        rotated = (
-            v * np.cos(ang)[:, None]
-            + kxv * np.sin(ang)[:, None]
-            + np.outer(kv * (1 - np.cos(ang)), axis)
-        )
-        actor[i] = s[:, None] * rotated
+    actor = restyled_shapes(rig, gain=0.35, turn=0.3, wavelength=0.4).deltas.astype(np.float64)
     rng = np.random.default_rng(1)
     examples, rough = [], []
     for _ in range(N_EXAMPLES):
-        idx = rng.choice(len(A), size=rng.integers(2, 5), replace=False)
+        idx = rng.choice(len(actor), size=rng.integers(2, 5), replace=False)
         w = rng.uniform(0.4, 1.0, idx.size)
         examples.append(V + np.tensordot(w, actor[idx], axes=1))
         noisy = np.clip(w + rng.uniform(-0.3, 0.3, idx.size), 0.0, 1.0)

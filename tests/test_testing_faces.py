@@ -40,6 +40,7 @@ from workbench.testing import (
     rename_shape,
     renamed_shapes,
     renumbered,
+    restyled_shapes,
     split_remesh,
     split_sides,
     unnamed_parts,
@@ -283,6 +284,19 @@ def test_split_halves_sum_to_the_whole(head: FaceModel, face: GeneratedFace) -> 
                                g.truth("jawOpen"), atol=1e-5)
     with pytest.raises(ValueError, match="unknown shapes"):
         split_sides(head, ["noSuchShape"])
+
+
+def test_restyled_shapes_keep_names_and_bound_the_gain(head: FaceModel) -> None:
+    same = restyled_shapes(head, gain=0.0, turn=0.0)
+    assert same.shape_names == head.shape_names
+    np.testing.assert_allclose(same.deltas, head.deltas, atol=1e-7)
+    r = restyled_shapes(head, seed=3, gain=0.3, turn=0.5)
+    np.testing.assert_array_equal(r.deltas, restyled_shapes(head, seed=3, gain=0.3, turn=0.5).deltas)
+    old, new = np.linalg.norm(head.deltas, axis=2), np.linalg.norm(r.deltas, axis=2)
+    moving = old > 1e-4
+    ratio = new[moving] / old[moving]  # a turn keeps the length: only the gain changes it
+    assert ratio.min() >= 0.7 - 1e-3 and ratio.max() <= 1.3 + 1e-3 and np.ptp(ratio) > 0.3
+    assert np.abs(r.deltas - head.deltas).max() > 0.01
 
 
 def test_unnamed_parts_keep_the_labels(head: FaceModel) -> None:

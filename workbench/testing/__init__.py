@@ -8,7 +8,7 @@ seed, nothing downloaded:
 * :mod:`~workbench.testing.faces` — :class:`GeneratedFace` (a face plus the
   exact map from its source, so its true shapes are known) and the builders:
   warped, remeshed, renumbered, with a bust, cropped, with a hole, with open
-  mouth and eyes, in other proportions;
+  mouth and eyes, in other proportions, with other motions for the same shapes;
 * :mod:`~workbench.testing.conventions` — the same face in other units, with
   renamed / split shapes and unnamed parts, or unlike the source in every way
   at once (:func:`foreign_face`);
@@ -39,6 +39,7 @@ from workbench.testing.faces import (
     proportions_warp,
     remeshed,
     renumbered,
+    restyled_shapes,
     warped,
     with_bust,
     with_hole,
@@ -96,6 +97,7 @@ __all__ = [
     "rename_shape",
     "renamed_shapes",
     "renumbered",
+    "restyled_shapes",
     "sample_head_warp",
     "split_remesh",
     "split_sides",

@@ -17,7 +17,8 @@ Geometry (a :class:`GeneratedFace` in, or a source :class:`FaceModel`):
 * :func:`with_bust`, :func:`cropped`, :func:`with_hole`, :func:`opened` —
   shoulders below the neck; only the front of the face; a hole; the mouth bag
   and eye sockets cut out (the lips and lids become open borders);
-* :func:`proportions_warp` — larger or smaller eyes and jaw, as a warp.
+* :func:`proportions_warp` — larger or smaller eyes and jaw, as a warp;
+* :func:`restyled_shapes` — the same shape names with other motions (an actor's own expressions).
 
 Units, shape and part names, and all of it at once (:func:`foreign_face`):
 :mod:`workbench.testing.conventions`.
@@ -57,6 +58,7 @@ __all__ = [
     "proportions_warp",
     "remeshed",
     "renumbered",
+    "restyled_shapes",
     "warped",
     "with_bust",
     "with_hole",
@@ -418,3 +420,37 @@ def proportions_warp(model: FaceModel, *, eyes: float = 1.0, jaw: float = 1.0) -
         outer.append(1.75 * r)
         factors.append(jaw)
     return LocalScale(np.reshape(centres, (-1, 3)), np.asarray(inner), np.asarray(outer), np.asarray(factors))
+
+
+def restyled_shapes(model: FaceModel, *, seed: int = 0, gain: float = 0.35, turn: float = 0.3,
+                    wavelength: float = 0.4) -> FaceModel:
+    """The same face and shape names, other motions: an actor who makes each expression their own way.
+
+    Shape ``i``'s displacement at every vertex is scaled by ``1 + gain sin(.)``
+    and turned by ``turn cos(.)`` radians about a random axis, both smooth
+    waves of ``wavelength`` (a share of the model's size) along a random
+    direction, drawn from ``numpy.random.default_rng(seed + i)``. ``gain = turn
+    = 0`` gives the shapes back. Vertex masks are baked in.
+    """
+    V = model.vertices
+    centre = V.mean(axis=0)
+    length = wavelength * float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
+    shapes = []
+    for i, sh in enumerate(model.shapes):
+        rng = np.random.default_rng(seed + i)
+        d = rng.normal(size=3)
+        d /= np.linalg.norm(d)
+        phase = rng.uniform(0, 2 * np.pi, 2)
+        axis = rng.normal(size=3)
+        axis /= np.linalg.norm(axis)
+        x = 2 * np.pi * ((V - centre) @ d) / length
+        scale = 1 + gain * np.sin(x + phase[0])
+        ang = turn * np.cos(x + phase[1])
+        v = _delta(sh)
+        # Rodrigues: R v = v cos + (k x v) sin + k (k . v)(1 - cos)
+        turned = (v * np.cos(ang)[:, None] + np.cross(axis[None], v) * np.sin(ang)[:, None]
+                  + np.outer((v @ axis) * (1 - np.cos(ang)), axis))
+        shapes.append(sh.replace(delta=scale[:, None] * turned, vertex_mask=None))
+    return FaceModel(V, model.faces, shapes, polygons=model.polygons, component_labels=model.component_labels,
+                     component_names=model.component_names, metadata=model.metadata)
+
