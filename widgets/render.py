@@ -53,6 +53,7 @@ from PIL import Image
 from workbench import FaceModel, ModelMetadata
 from workbench.converters import register_mesh_converter
 from workbench.core.polygons import Polygons
+from workbench.geometry.axes import face_axes
 from workbench.geometry.normals import vertex_normals
 from workbench.geometry.parts import model_part_roles, part_material
 
@@ -287,30 +288,10 @@ def _connected_pieces(faces: ArrayLike, ids: NDArray[np.intp]) -> list[NDArray[n
 # --------------------------------------------------------------------------- camera
 
 
-_AXES = {"x": 0, "y": 1, "z": 2}
-
-
-def _axis_vector(spec: str, what: str) -> NDArray[np.float64]:
-    s = spec.strip().lower()
-    sign = -1.0 if s.startswith("-") else 1.0
-    letter = s.lstrip("+-")
-    if letter not in _AXES:
-        raise ValueError(f"{what}: expected an axis like '+y' or '-z', got {spec!r}")
-    vec = np.zeros(3)
-    vec[_AXES[letter]] = sign
-    return vec
-
-
 def _model_axes(model: FaceModel) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """(up, front) unit vectors from the model metadata (default +y up, face +z)."""
-    meta = model.metadata
-    up = _axis_vector(meta.up_axis or "+y", "metadata.up_axis")
-    front = _axis_vector(meta.front_axis or "+z", "metadata.front_axis")
-    if abs(float(up @ front)) > 0.5:
-        raise ValueError(
-            f"metadata: up_axis {meta.up_axis!r} and front_axis {meta.front_axis!r} must differ"
-        )
-    return up, front
+    """(up, front) unit vectors from the model metadata (:func:`workbench.geometry.axes.face_axes`)."""
+    axes = face_axes(model)
+    return axes[1], axes[2]
 
 
 def _rotate(vec: NDArray, axis: NDArray, degrees: float) -> NDArray:

@@ -1,0 +1,125 @@
+"""How the target's parts move in a transferred shape (the rows the skin's Poisson solve leaves out).
+
+A part matched to a template part (an eyeball, the teeth, the tongue, lashes)
+takes the template part's motion, seen through the fit's Jacobian around it; a
+part without a partner follows the target's own transferred skin under it
+(lashes, brows, hair) or moves rigidly with it (lower teeth, tongue); fixed
+parts (eyeballs, upper teeth without a partner) stay still.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.spatial import cKDTree
+
+from workbench.geometry.surface import SurfaceQuery
+from workbench.rigging.correspondence import Correspondence, PartPlan
+from workbench.rigging.sides import Side
+
+__all__ = ["PartsMotion"]
+
+
+class PartsMotion:
+    """Fills the target parts' rows of transferred shapes.
+
+    Parameters
+    ----------
+    src, tgt : Side
+        The template and the target in the working frame.
+    corr : Correspondence
+        Its fit's Jacobians and the template triangle areas weigh the local Jacobian.
+    plan : list of (int, str, int)
+        What each target part does (:func:`.correspondence.match_parts`).
+    """
+
+    def __init__(self, src: Side, tgt: Side, corr: Correspondence, plan: PartPlan) -> None:
+        self.src, self.tgt, self.corr, self.plan = src, tgt, corr, plan
+        self._tri_tree: cKDTree | None = None
+
+    def local_jacobian(self, P: NDArray[np.float64], k: int = 8) -> NDArray[np.float64]:
+        """(3, 3): the fit's Jacobian averaged (by area) over the template skin triangles nearest to the points ``P``."""
+        src = self.src
+        if self._tri_tree is None:
+            self._tri_tree = cKDTree(src.skin_X[src.skin_faces].mean(1))
+        _, nn = self._tri_tree.query(P, k=min(k, src.skin_faces.shape[0]))
+        near = np.unique(nn)
+        w = self.corr.src_area[near]
+        L = (self.corr.J_fit[near] * w[:, None, None]).sum(0) / max(float(w.sum()), 1e-300)
+        return L if abs(np.linalg.det(L)) > 1e-9 else np.eye(3)
+
+    def fill(self, deltas: NDArray[np.float64], out: NDArray[np.float64]) -> None:
+        """Fill the target parts' rows of ``out`` (k, n, 3), working frame, from template ``deltas`` (k, N, 3).
+
+        The skin rows of ``out`` must hold the transferred skin already (parts follow it).
+        """
+        tgt = self.tgt
+        skin_tree: cKDTree | None = None
+        for c, how, sc in self.plan:
+            ids = np.flatnonzero(tgt.model.component_labels == c)
+            if how == "fixed":
+                continue
+            if how == "matched":
+                out[:, ids] = self._matched(deltas, tgt.X[ids], sc)
+                continue
+            # no partner: follow the target's own (already transferred) skin
+            if skin_tree is None:
+                skin_tree = cKDTree(tgt.skin_X)
+            if how == "follow":
+                _, nn = skin_tree.query(tgt.X[ids])
+                out[:, ids] = out[:, tgt.skin_ids[nn]]
+            else:
+                out[:, ids] = self._rigid_with_skin(out, tgt.X[ids], skin_tree)
+
+    def _matched(self, deltas: NDArray[np.float64], Y: NDArray[np.float64], sc: int) -> NDArray[np.float64]:
+        """(k, p, 3): the motion of template part ``sc`` carried to the target part points ``Y``."""
+        src = self.src
+        lin = src.frame.scale * src.frame.R
+        s_ids = np.flatnonzero(src.model.component_labels == sc)
+        Xs = src.X[s_ids]
+        # the part's linear map: the fit's Jacobian averaged over the template skin around it;
+        # its place: the parts' centroids
+        Lp = self.local_jacobian(Xs)
+        cs_, ct_ = Xs.mean(0), Y.mean(0)
+        Xmap = (Y - ct_) @ np.linalg.inv(Lp).T + cs_  # target part points in the template part's frame
+        dpart = deltas[:, s_ids] @ lin.T  # (k, p, 3) working frame
+        # the template part's motion at the closest point of its surface, plus its affine motion
+        # (least squares over the part) across the offset from there: exact on the template's own
+        # part, first-order right for a part of another shape moving rigidly
+        A = np.c_[Xs - Xs.mean(0), np.ones(len(Xs))]
+        coef = np.linalg.pinv(A) @ dpart.transpose(1, 0, 2).reshape(len(Xs), -1)
+        lin_k = coef[:3].reshape(3, -1, 3)  # [j, shape, comp]: d_comp = sum_j x_j lin_k[j]
+        sF = np.asarray(src.model.faces, np.int64)
+        lab = src.model.component_labels
+        pf = sF[(lab[sF] == sc).all(1)]
+        if pf.size:
+            _, f, C, b = SurfaceQuery(src.X, pf).closest(Xmap)
+            at = np.einsum("qj,kqjc->kqc", b, deltas[:, pf[f]] @ lin.T)
+        else:
+            _, nn = cKDTree(Xs).query(Xmap)
+            C = Xs[nn]
+            at = dpart[:, nn]
+        at = at + np.einsum("qj,jkc->kqc", Xmap - C, lin_k)
+        return np.asarray(at @ Lp.T)
+
+    def _rigid_with_skin(self, out: NDArray[np.float64], Y: NDArray[np.float64], skin_tree: cKDTree
+                         ) -> NDArray[np.float64]:
+        """(k, p, 3): a linearised rigid motion fitted to the nearest transferred skin, at the points ``Y``."""
+        tgt = self.tgt
+        _, nn = skin_tree.query(Y, k=min(8, tgt.skin_ids.size))
+        near = np.unique(nn)
+        P = tgt.skin_X[near]
+        c0 = P.mean(0)
+        # d(p) = w x (p - c0) + t: rows [ -[p-c0]_x | I ]
+        r = P - c0
+        rows = np.zeros((len(P), 3, 6))
+        rows[:, 0, 1], rows[:, 0, 2] = r[:, 2], -r[:, 1]
+        rows[:, 1, 0], rows[:, 1, 2] = -r[:, 2], r[:, 0]
+        rows[:, 2, 0], rows[:, 2, 1] = r[:, 1], -r[:, 0]
+        rows[:, :, 3:] = np.eye(3)
+        A = rows.reshape(-1, 6)
+        b = out[:, tgt.skin_ids[near]].transpose(1, 2, 0).reshape(-1, out.shape[0])
+        motion = np.linalg.pinv(A) @ b  # (6, k): rotation vector and translation per shape
+        ry = Y - c0
+        wv, tv = motion[:3].T, motion[3:].T  # (k, 3)
+        return np.asarray(np.cross(wv[:, None, :], ry[None]) + tv[:, None, :])
