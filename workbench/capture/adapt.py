@@ -71,288 +71,31 @@ Shapes: ``n`` vertices, ``k`` shapes, ``K = n_basis``; constraint matrices
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
-import scipy.linalg as sla
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
 from workbench._blas import one_blas_thread
+from workbench.capture.block_statistics import BlockStatistics, spd_solve
+from workbench.capture.constraints import (
+    check_vertex_ids,
+    constraint_rows,
+    default_constraint_vertices,
+    plane_rows,
+    point_to_plane_rows,
+)
+from workbench.capture.expression_transfer import ExpressionTransfer, TransferRows, sub_faces
 from workbench.capture.result import TrackError
-from workbench.geometry.frames import triangle_frames
+from workbench.capture.spectral import laplacian_basis
 from workbench.geometry.masks import skin_or_all_mask
-from workbench.geometry.operators import cotangent_laplacian, mass_matrix
-from workbench.geometry.sparse_cholesky import SparseSPDSolver
 from workbench.model import BlendShape, FaceModel
 
 __all__ = ["AdaptiveModel", "ExpressionTransfer", "adaptive_model", "laplacian_basis", "point_to_plane_rows"]
-
-#: a template vertex moving less than this (times the length scale) in a shape is pinned in its transfer
-PIN_TOL = 1e-7
-#: below this many vertices the basis comes from a dense eigendecomposition
-_DENSE_EIG = 600
-
-
-def _sub_faces(F: NDArray[np.int64], ids: NDArray[np.int64], n: int) -> NDArray[np.int64]:
-    """Faces with all corners in ``ids``, renumbered into ``ids``."""
-    local = np.full(n, -1, np.int64)
-    local[ids] = np.arange(ids.size)
-    Fl = local[F]
-    return Fl[(Fl >= 0).all(1)]
-
-
-def laplacian_basis(vertices: ArrayLike, faces: ArrayLike, n_basis: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """The smoothest ``n_basis`` eigenvectors of a surface: ``-L e = λ M e`` (cotangent ``L``, mass ``M``).
-
-    Shift-invert Lanczos (``scipy.sparse.linalg.eigsh``) with the shifted matrix
-    factored once by :class:`SparseSPDSolver` (CHOLMOD when installed); a dense
-    ``scipy.linalg.eigh`` below a few hundred vertices.
-
-    Parameters
-    ----------
-    vertices : (n, 3) float
-    faces : (m, 3) int
-    n_basis : int
-        ``1 <= n_basis < n``.
-
-    Returns
-    -------
-    E : (n, n_basis) float64
-        Columns with unit RMS over the vertices (``||e||² = n``), ascending λ.
-    eigenvalues : (n_basis,) float64
-        ``λ`` (``≥ 0``; the first is ~0, the constant).
-    """
-    V = np.asarray(vertices, np.float64)
-    F = np.asarray(faces, np.int64)
-    n = V.shape[0]
-    if not (1 <= n_basis < n):
-        raise ValueError(f"n_basis must be in 1..{n - 1} for a surface of {n} vertices, got {n_basis}")
-    L = cotangent_laplacian(V, F)
-    M = mass_matrix(V, F)
-    m = np.asarray(M.diagonal(), np.float64)
-    m = np.where(m > 0, m, max(float(m[m > 0].min()) if (m > 0).any() else 1.0, 1e-300))
-    K = sp.csr_matrix(-L)
-    Md = sp.diags(m)
-    if n <= _DENSE_EIG:
-        w, E = sla.eigh(K.toarray(), np.diag(m), subset_by_index=[0, n_basis - 1])
-    else:
-        area = float(m.sum())
-        sigma = -4.0 * math.pi / area  # below the first non-zero eigenvalue (8π/area on a sphere)
-        fac = SparseSPDSolver(sp.csc_matrix(K - sigma * Md))
-        op = spla.LinearOperator(K.shape, matvec=fac.solve, dtype=np.float64)
-        w, E = spla.eigsh(K, k=n_basis, M=Md, sigma=sigma, which="LM", OPinv=op)
-    order = np.argsort(w)
-    w = np.maximum(np.asarray(w, np.float64)[order], 0.0)
-    E = np.asarray(E, np.float64)[:, order]
-    E /= np.maximum(np.sqrt((E**2).mean(0)), 1e-300)
-    return E, w
-
-
-def point_to_plane_rows(vertex_ids: ArrayLike, normals: ArrayLike, n_vertices: int) -> sp.csr_matrix:
-    """Constraint rows ``nᵀ v_i`` as a sparse ``(m, 3 n_vertices)`` matrix over ``[x0, y0, z0, x1, ...]``.
-
-    A point-to-plane row: ``nᵀ (v_i − c) = 0`` is ``row · b = nᵀ c``. Markers
-    are three rows with the unit axes as normals.
-
-    Parameters
-    ----------
-    vertex_ids : (m,) int
-    normals : (m, 3) float
-    n_vertices : int
-    """
-    ids = np.asarray(vertex_ids, np.int64).reshape(-1)
-    N = np.asarray(normals, np.float64)
-    if N.shape != (ids.size, 3):
-        raise ValueError(f"normals must be ({ids.size}, 3) to match vertex_ids, got {N.shape}")
-    if ids.size and (ids.min() < 0 or ids.max() >= n_vertices):
-        raise ValueError(f"vertex_ids must be in 0..{n_vertices - 1}")
-    m = ids.size
-    indptr = np.arange(0, 3 * m + 1, 3)
-    cols = (3 * ids[:, None] + np.arange(3)).reshape(-1)
-    return sp.csr_matrix((N.reshape(-1), cols, indptr), shape=(m, 3 * n_vertices))
-
-
-class ExpressionTransfer:
-    """The paper's linear expression-transfer operators ``T_i*`` of a template rig (appendix, eq. 7).
-
-    ``T_i* b0`` minimises ``Σ_t Σ_edges |S_t e_t(b0) − e_t(b_i)|²`` over the skin
-    triangles (``S_t`` the template triangle's affine map from ``b0*`` to
-    ``b_i*``, built on the tetrahedron of two edges and the normal scaled by
-    ``1/√|n|``), with the vertices that the template shape leaves in place held
-    at ``b0`` (hard pins). Vertices off the skin get the template's delta.
-
-    Parameters
-    ----------
-    vertices : (n, 3) float
-        The template neutral ``b0*``.
-    faces : (T, 3) int
-    deltas : (k, n, 3) float
-        The template shapes ``b_i* − b0*``.
-    skin : (s,) int, optional
-        Vertex ids of the skin (default all).
-    length_scale : float, optional
-        For the pin tolerance (default the RMS radius of the skin).
-
-    Attributes
-    ----------
-    skin : (s,) int64
-    n_shapes : int
-    """
-
-    def __init__(self, vertices: ArrayLike, faces: ArrayLike, deltas: ArrayLike, *, skin: ArrayLike | None = None,
-                 length_scale: float | None = None) -> None:
-        V = np.asarray(vertices, np.float64)
-        F = np.asarray(faces, np.int64)
-        D = np.asarray(deltas, np.float64)
-        n = V.shape[0]
-        if D.ndim != 3 or D.shape[1:] != (n, 3):
-            raise ValueError(f"deltas must be (k, {n}, 3), got {D.shape}")
-        self.n_vertices = n
-        self.n_shapes = D.shape[0]
-        self.skin = np.arange(n, dtype=np.int64) if skin is None else np.unique(np.asarray(skin, np.int64))
-        self._deltas = D
-        Fs = _sub_faces(F, self.skin, n)
-        ns, T = self.skin.size, Fs.shape[0]
-        self._T = T
-        # G: three edges per triangle, row j*T + t = v[(j+1)%3] − v[j]
-        rows = np.repeat(np.arange(3 * T), 2)
-        a = np.concatenate([Fs[:, 0], Fs[:, 1], Fs[:, 2]])
-        b = np.concatenate([Fs[:, 1], Fs[:, 2], Fs[:, 0]])
-        cols = np.stack([b, a], 1).reshape(-1)
-        self._G = sp.csr_matrix((np.tile([1.0, -1.0], 3 * T), (rows, cols)), shape=(3 * T, ns))
-        self._GtG = sp.csr_matrix(self._G.T @ self._G)
-        # where each edge's four Laplacian entries land in the CSR pattern of GᵀG (for _rhs)
-        self._pattern = self._GtG
-        self._pattern.sort_indices()
-        ea = np.concatenate([a, b, a, b])
-        eb = np.concatenate([a, b, b, a])
-        key = ea * ns + eb
-        pr = np.repeat(np.arange(ns), np.diff(self._pattern.indptr))
-        pkey = pr * ns + self._pattern.indices
-        slot = np.searchsorted(pkey, key)
-        self._scatter = sp.csr_matrix((np.ones(slot.size), (slot, np.arange(slot.size))),
-                                      shape=(self._pattern.nnz, slot.size))
-        Vs = V[self.skin]
-        inv0, ok0 = self._frames_inverse(Vs, Fs)
-        self._Fs = Fs
-        self._inv0 = inv0
-        self._ok0 = ok0
-        Ds = D[:, self.skin]
-        if length_scale is None:
-            length_scale = float(np.sqrt(((Vs - Vs.mean(0)) ** 2).sum(1).mean())) if ns else 1.0
-        mag = np.linalg.norm(Ds, axis=2)
-        #: (k, s) bool: skin vertices each shape moves (the rest are pinned to the neutral)
-        self.free = mag > PIN_TOL * max(length_scale, 1e-300)
-        self._Vs = Vs
-
-    def _frames_inverse(self, X: NDArray[np.float64], F: NDArray[np.int64]) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
-        S0 = triangle_frames(X, F)
-        det = np.linalg.det(S0)
-        scale = float(np.median(np.abs(det))) if det.size else 1.0
-        ok = np.abs(det) > 1e-12 * max(scale, 1e-300)
-        inv = np.zeros_like(S0)
-        inv[ok] = np.linalg.inv(S0[ok])
-        return inv, ok
-
-    def strain(self, i: int) -> NDArray[np.float64]:
-        """``S_t − I`` of shape ``i`` per skin triangle, (T, 3, 3) (zero on degenerate template triangles)."""
-        Si = triangle_frames(self._Vs + self._deltas[i, self.skin], self._Fs)
-        C = Si @ self._inv0 - np.eye(3)
-        C[~self._ok0] = 0.0
-        return C
-
-    def _system(self, i: int) -> tuple[NDArray[np.int64], SparseSPDSolver | None]:
-        free = np.flatnonzero(self.free[i])
-        if free.size == 0:
-            return free, None
-        K = self._GtG[free][:, free]
-        diag = K.diagonal()
-        ridge = 1e-10 * float(diag.mean()) if diag.size else 1e-10
-        return free, SparseSPDSolver(sp.csc_matrix(K + ridge * sp.identity(free.size)))
-
-    def _rhs(self, C: NDArray[np.float64], fields: NDArray[np.float64], rows: NDArray[np.int64]) -> NDArray[np.float64]:
-        """Rows ``rows`` of ``Gᵀ (H − I) G f`` for scalar fields ``f`` (s, q) along each axis → (r, 3 coords, q, 3 axes).
-
-        ``Gᵀ diag(C_cd) G`` is a weighted graph Laplacian per pair of axes ``(c, d)``;
-        the nine share the sparsity pattern of ``GᵀG``.
-        """
-        Ct = np.concatenate([C, C, C]).reshape(3 * self._T, 9)  # the triangle of each edge row
-        data9 = np.asarray(self._scatter @ np.concatenate([Ct, Ct, -Ct, -Ct]))  # (nnz, 9)
-        P = self._pattern
-        starts, lens = P.indptr[rows], np.diff(P.indptr)[rows]
-        offs = np.concatenate([[0], np.cumsum(lens)])
-        idx = np.repeat(starts - offs[:-1], lens) + np.arange(offs[-1])
-        sub_indices = P.indices[idx]
-        f = np.ascontiguousarray(fields, dtype=np.float64)
-        s, q = f.shape
-        out = np.empty((rows.size, 3, q, 3), order="F")  # Fortran: columns contiguous for the solver
-        for cd in range(9):
-            Lcd = sp.csr_matrix((data9[idx, cd], sub_indices, offs), shape=(rows.size, s))
-            out[:, cd // 3, :, cd % 3] = Lcd @ f
-        return out
-
-    def delta(self, i: int, neutral: ArrayLike) -> NDArray[np.float64]:
-        """``T_i* b0 − b0`` for a neutral ``b0`` (n, 3): the transferred delta of shape ``i``, (n, 3)."""
-        b0 = np.asarray(neutral, np.float64)
-        if b0.shape != (self.n_vertices, 3):
-            raise ValueError(f"neutral must be ({self.n_vertices}, 3), got {b0.shape}")
-        out = self._deltas[i].copy()
-        out[self.skin] = 0.0
-        free, solver = self._system(i)
-        if solver is None:
-            return out
-        C = self.strain(i)
-        Gb = (self._G @ b0[self.skin]).reshape(3, self._T, 3)  # edges per triangle
-        CGb = np.einsum("tcd,jtd->jtc", C, Gb).reshape(3 * self._T, 3)
-        rhs = self._G.T @ CGb
-        res = np.zeros((self.skin.size, 3))
-        res[free] = solver.solve(rhs[free])
-        out[self.skin] = res
-        return out
-
-    def apply(self, neutral: ArrayLike) -> NDArray[np.float64]:
-        """All transferred deltas ``T_i* b0 − b0``, (k, n, 3)."""
-        return np.stack([self.delta(i, neutral) for i in range(self.n_shapes)]) if self.n_shapes else \
-            np.zeros((0, self.n_vertices, 3))
-
-    def basis_rows(self, i: int, fields: ArrayLike, rows: ArrayLike) -> NDArray[np.float64]:
-        """``(T_i* − I)`` applied to the vector fields ``f_q ⊗ axis_d`` at some skin vertices.
-
-        Parameters
-        ----------
-        i : int
-            Shape.
-        fields : (s, q) float
-            Scalar fields on the skin (one value per skin vertex).
-        rows : (r,) int
-            Positions in :attr:`skin` where the result is wanted.
-
-        Returns
-        -------
-        X : (r, 3, q, 3) float64
-            ``X[v, c, j, d]``: coordinate ``c`` at vertex ``rows[v]`` of ``(T_i* − I)(f_j axis_d)``.
-        """
-        f = np.asarray(fields, np.float64)
-        r = np.asarray(rows, np.int64)
-        q = f.shape[1]
-        out = np.zeros((r.size, 3, q, 3))
-        free, solver = self._system(i)
-        if solver is None or r.size == 0:
-            return out
-        pos = np.full(self.skin.size, -1, np.int64)
-        pos[free] = np.arange(free.size)
-        want = pos[r] >= 0
-        if not want.any():
-            return out
-        rhs = self._rhs(self.strain(i), f, free)  # (f, 3, q, 3)
-        sol = solver.solve(rhs.reshape(free.size, -1, order="F")).reshape(free.size, 3, q, 3, order="F")
-        out[want] = sol[pos[r[want]]]
-        return out
-
 
 def _check_fraction(name: str, value: float, lo: float, hi: float) -> float:
     v = float(value)
@@ -420,8 +163,6 @@ class AdaptiveModel:
         max_vertices: int = 2000,
         progress: Callable[[float, str], Any] | None = None,
     ) -> None:
-        import time
-
         t0 = time.perf_counter()
         if not isinstance(model, FaceModel):
             raise TypeError(f"model must be a FaceModel, got {type(model).__name__}")
@@ -453,7 +194,7 @@ class AdaptiveModel:
         self._names = list(model.shape_names)
         k = D.shape[0]
         skin = np.flatnonzero(skin_or_all_mask(model)).astype(np.int64)
-        Fs = _sub_faces(F, skin, n)
+        Fs = sub_faces(F, skin, n)
         if Fs.shape[0] == 0:
             raise ValueError("model: the skin has no triangles")
         if self.n_basis >= skin.size:
@@ -475,50 +216,19 @@ class AdaptiveModel:
         self.basis_ = E
         self.eigenvalues_ = lam
         self.transfer_ = ExpressionTransfer(V, F, D, skin=skin, length_scale=ell)
-        self._skin = skin
         self._V0 = V
-        self._D0 = D
 
         # the constraint vertices
         if vertex_ids is None:
-            moved = np.linalg.norm(D[:, skin], axis=2).max(0) > 1e-3 * ell if k else np.ones(skin.size, bool)
-            cand = skin[moved] if moved.any() else skin
-            if cand.size > self.max_vertices:
-                cand = np.sort(np.random.default_rng(0).choice(cand, self.max_vertices, replace=False))
-            S = cand
+            S = default_constraint_vertices(D, skin, ell, self.max_vertices)
         else:
-            S = np.asarray(vertex_ids, np.int64).reshape(-1)
-            if S.size == 0:
-                raise ValueError("vertex_ids is empty")
-            if S.min() < 0 or S.max() >= n:
-                raise ValueError(f"vertex_ids must be in 0..{n - 1}")
-            if np.unique(S).size != S.size:
-                raise ValueError("vertex_ids has repeated vertices")
+            S = check_vertex_ids(vertex_ids, n)
         self.vertex_ids_ = S
-        p = S.size
-        self._col_of = np.full(n, -1, np.int64)
-        self._col_of[S] = np.arange(p)
         self._E_S = E[S]  # (p, K)
         self._E3 = np.kron(self._E_S, np.eye(3))  # (3p, 3K)
-        # transfer rows (T_i* − I) E at S, kept only where shape i is free (zero elsewhere): shape i's rows
-        # are self._te[self._te_off[i]:self._te_off[i + 1]] at local rows self._te_rows[i] of the (3p, 3K) block
         local = np.full(n, -1, np.int64)
         local[skin] = np.arange(skin.size)
-        sl = local[S]
-        K3 = 3 * self.n_basis
-        blocks, rows_of = [], []
-        for i in range(k):
-            say(0.1 + 0.9 * i / max(k, 1), f"adaptive model: transfer rows of {self._names[i]} ({i + 1} of {k})")
-            on = np.flatnonzero(sl >= 0)
-            on = on[self.transfer_.free[i][sl[on]]]
-            X = self.transfer_.basis_rows(i, E_skin, sl[on])  # (r, 3, K, 3)
-            blocks.append(X.reshape(3 * on.size, K3).astype(np.float32))
-            rows_of.append((3 * on[:, None] + np.arange(3)).reshape(-1))
-        self._te = np.concatenate(blocks) if blocks else np.zeros((0, K3), np.float32)
-        self._te_rows = rows_of
-        self._te_off = np.concatenate([[0], np.cumsum([r.size for r in rows_of])]).astype(np.int64)
-        self._te_flat = np.concatenate([i * 3 * p + r for i, r in enumerate(rows_of)]) if rows_of else \
-            np.zeros(0, np.int64)
+        self._rows = TransferRows(self.transfer_, E_skin, local[S], lambda f, msg: say(0.1 + 0.9 * f, msg), self._names)
         self._b0S = V[S].copy()
         self._D0S = D[:, S].copy()
 
@@ -537,11 +247,7 @@ class AdaptiveModel:
         k = len(self._names)
         K3 = 3 * self.n_basis
         self._u = np.zeros((k + 1, K3))
-        self._M: dict[tuple[int, int], NDArray[np.float64]] = {}
-        self._nbr: list[set[int]] = [set() for _ in range(k + 1)]
-        self._y = np.zeros((k + 1, K3))
-        self._g = 1.0  # stored statistics × g = Σ_j γ^{t-j} (frame j's)
-        self._s = 0.0
+        self._stats = BlockStatistics(k + 1, K3, self.gamma, self._reg)
         self.coverage_ = np.zeros(k + 1)
         self.saturated_ = np.zeros(k + 1, bool)
         self.n_frames_ = 0
@@ -564,11 +270,9 @@ class AdaptiveModel:
         self._cur_b0S = self._b0S + ell * (self._E_S @ U[0])
         k = len(self._names)
         if k:
-            tr = np.zeros(k * 3 * p)
-            tr[self._te_flat] = self._te @ self._u[0].astype(np.float32)
             K = self.n_basis
             corr = (self._E_S @ U[1:].transpose(1, 0, 2).reshape(K, 3 * k)).reshape(p, k, 3).transpose(1, 0, 2)
-            self._cur_DS = self._D0S + ell * (tr.reshape(k, p, 3) + corr)
+            self._cur_DS = self._D0S + ell * (self._rows.of_neutral(self._u[0]) + corr)
         else:
             self._cur_DS = np.zeros((0, p, 3))
 
@@ -633,25 +337,6 @@ class AdaptiveModel:
             raise ValueError("x has values that are not finite")
         return xv
 
-    def _local_rows(self, A: Any, c: ArrayLike) -> tuple[sp.csr_matrix, NDArray[np.float64]]:
-        """``A`` over all vertex coordinates → its columns at :attr:`vertex_ids_` (m, 3p), checked."""
-        n = self.model.n_vertices
-        As = sp.csr_matrix(A) if sp.issparse(A) else sp.csr_matrix(np.asarray(A, np.float64))
-        if As.ndim != 2 or As.shape[1] != 3 * n:
-            raise ValueError(f"A must be (m, {3 * n}) over the stacked vertex coordinates, got {As.shape}")
-        m = As.shape[0]
-        cv = np.asarray(c, np.float64).reshape(-1)
-        if cv.shape != (m,):
-            raise ValueError(f"c must have shape ({m},) to match A, got {np.shape(c)}")
-        if not (np.isfinite(cv).all() and np.isfinite(As.data).all()):
-            raise ValueError("A and c must be finite")
-        cols = (3 * self.vertex_ids_[:, None] + np.arange(3)).reshape(-1)
-        AS = sp.csr_matrix(As[:, cols])
-        total = float(As.multiply(As).sum())
-        if abs(float(AS.multiply(AS).sum()) - total) > 1e-9 * max(total, 1e-300):
-            raise ValueError("A touches vertices outside vertex_ids_ (pass them as vertex_ids when building the model)")
-        return AS, cv
-
     def _frame_blocks(self, AS: sp.csr_matrix, cv: NDArray[np.float64], xv: NDArray[np.float64]) -> tuple[
         NDArray[np.intp], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]
     ]:
@@ -662,10 +347,7 @@ class AdaptiveModel:
         rho = 1.0 / math.sqrt(max(m, 1))
         P = np.asarray(AS @ self._E3) * rho
         if active.size:
-            TEx = np.zeros(self._E3.shape)
-            for i in active:
-                TEx[self._te_rows[i]] += xv[i] * self._te[self._te_off[i]:self._te_off[i + 1]]
-            Q = P + np.asarray(AS @ TEx) * rho
+            Q = P + np.asarray(AS @ self._rows.weighted(xv, active)) * rho
         else:
             Q = P.copy()
         pred = (self._b0S + np.tensordot(xv, self._D0S, axes=(0, 0))).reshape(-1) if k else self._b0S.reshape(-1)
@@ -681,23 +363,9 @@ class AdaptiveModel:
         cbar : (m,) float64
         """
         xv = self._check_x(x)
-        AS, cv = self._local_rows(A, c)
+        AS, cv = constraint_rows(A, c, self.vertex_ids_, self.model.n_vertices)
         _, Q, P, cbar = self._frame_blocks(AS, cv, xv)
         return np.concatenate([Q] + [xi * P for xi in xv], axis=1), cbar
-
-    def _block(self, i: int, j: int) -> NDArray[np.float64]:
-        return self._M[(i, j)] if i <= j else self._M[(j, i)].T
-
-    def _add(self, i: int, j: int, blk: NDArray[np.float64]) -> None:
-        key = (i, j) if i <= j else (j, i)
-        val = blk if i <= j else blk.T
-        cur = self._M.get(key)
-        if cur is None:
-            self._M[key] = val.copy()
-            self._nbr[i].add(j)
-            self._nbr[j].add(i)
-        else:
-            cur += val
 
     def update(self, A: Any, c: ArrayLike, x: ArrayLike) -> AdaptiveModel:
         """Add one frame's constraints and refine (Algorithm 1).
@@ -717,7 +385,7 @@ class AdaptiveModel:
         self
         """
         xv = self._check_x(x)
-        AS, cv = self._local_rows(A, c)
+        AS, cv = constraint_rows(A, c, self.vertex_ids_, self.model.n_vertices)
         with one_blas_thread():
             return self._update(AS, cv, xv)
 
@@ -734,28 +402,9 @@ class AdaptiveModel:
         x : (k,) float
         """
         xv = self._check_x(x)
-        AS, cv = self._plane_rows(rows, normals, targets)
+        AS, cv = plane_rows(rows, normals, targets, self.vertex_ids_.size)
         with one_blas_thread():  # small dense blocks: threads only wait for busy cores
             return self._update(AS, cv, xv)
-
-    def _plane_rows(self, rows: ArrayLike, normals: ArrayLike, targets: ArrayLike) -> tuple[
-        sp.csr_matrix, NDArray[np.float64]
-    ]:
-        r = np.asarray(rows, np.int64).reshape(-1)
-        p = self.vertex_ids_.size
-        if r.size and (r.min() < 0 or r.max() >= p):
-            raise ValueError(f"rows must index vertex_ids_ (0..{p - 1})")
-        N = np.asarray(normals, np.float64)
-        if N.shape != (r.size, 3):
-            raise ValueError(f"normals must be ({r.size}, 3) to match rows, got {N.shape}")
-        cv = np.asarray(targets, np.float64).reshape(-1)
-        if cv.shape != (r.size,):
-            raise ValueError(f"targets must be ({r.size},) to match rows, got {np.shape(targets)}")
-        if not (np.isfinite(N).all() and np.isfinite(cv).all()):
-            raise ValueError("normals and targets must be finite")
-        cols = (3 * r[:, None] + np.arange(3)).reshape(-1)
-        AS = sp.csr_matrix((N.reshape(-1), cols, np.arange(0, 3 * r.size + 1, 3)), shape=(r.size, 3 * p))
-        return AS, cv
 
     def fit_neutral(self, A: Any, c: ArrayLike) -> AdaptiveModel:
         """The paper's initialisation (eq. 1): the identity ``z0`` alone from one frame of a neutral face.
@@ -770,13 +419,13 @@ class AdaptiveModel:
         A : (m, 3n) sparse or dense
         c : (m,) float
         """
-        AS, cv = self._local_rows(A, c)
+        AS, cv = constraint_rows(A, c, self.vertex_ids_, self.model.n_vertices)
         with one_blas_thread():
             return self._fit_neutral(AS, cv)
 
     def fit_neutral_planes(self, rows: ArrayLike, normals: ArrayLike, targets: ArrayLike) -> AdaptiveModel:
         """:meth:`fit_neutral` with point-to-plane rows at constraint vertices (see :meth:`update_planes`)."""
-        AS, cv = self._plane_rows(rows, normals, targets)
+        AS, cv = plane_rows(rows, normals, targets, self.vertex_ids_.size)
         with one_blas_thread():
             return self._fit_neutral(AS, cv)
 
@@ -785,71 +434,32 @@ class AdaptiveModel:
         _, Q, _, cbar = self._frame_blocks(AS, cv, xv)
         H = Q.T @ Q
         H[np.diag_indices_from(H)] += self._reg[0]
-        self._u[0] = _spd_solve(H, Q.T @ cbar)
+        self._u[0] = spd_solve(H, Q.T @ cbar)
         self._refresh()
         return self
 
     def _update(self, AS: sp.csr_matrix, cv: NDArray[np.float64], xv: NDArray[np.float64]) -> AdaptiveModel:
         active, Q, P, cbar = self._frame_blocks(AS, cv, xv)
-        # decay, then add this frame (stored × g is the unnormalised sum)
-        self._s = self.gamma * self._s + 1.0
-        self._g *= self.gamma
-        if self._g < 1e-150:
-            for key in self._M:
-                self._M[key] *= self._g
-            self._y *= self._g
-            self._g = 1.0
-        inv_g = 1.0 / self._g
-        sat = self.saturated_
         blocks = [0, *(int(i) + 1 for i in active)]
-        wts = {0: 1.0, **{int(i) + 1: float(xv[i]) for i in active}}
-        PtP = P.T @ P
-        QtP = Q.T @ P
-        for a_idx, a in enumerate(blocks):
-            for b in blocks[a_idx:]:
-                if sat[a] and sat[b]:
-                    continue  # both fixed for good: never read again
-                if a == 0 and b == 0:
-                    blk = Q.T @ Q
-                elif a == 0:
-                    blk = wts[b] * QtP
-                else:
-                    blk = (wts[a] * wts[b]) * PtP
-                self._add(a, b, blk * inv_g)
-            self._y[a] += (Q.T @ cbar if a == 0 else wts[a] * (P.T @ cbar)) * inv_g
+        weights = {0: 1.0, **{int(i) + 1: float(xv[i]) for i in active}}
+        sat = self.saturated_
+        self._stats.add_frame(blocks, weights, Q, P, cbar, sat)
         # coverage
         self.coverage_[0] += max(1.0 - float(xv.sum()), 0.0)
         self.coverage_[1:] += xv
         self.n_frames_ += 1
-        todo = [bk for bk in blocks if not sat[bk]]
-        self._gauss_seidel(todo, self.sweeps)
+        self._stats.gauss_seidel(self._u, [bk for bk in blocks if not sat[bk]], self.sweeps)
         self.saturated_ |= self.coverage_ > self.coverage
         self._refresh()
         return self
-
-    def _gauss_seidel(self, todo: Sequence[int], sweeps: int) -> None:
-        if not todo or self._s == 0:
-            return
-        f = self._g / self._s  # stored → M^t
-        for _ in range(sweeps):
-            for bk in todo:
-                if (bk, bk) not in self._M:
-                    continue
-                rhs = self._y[bk].copy()
-                for j in self._nbr[bk]:
-                    if j != bk:
-                        rhs -= self._block(bk, j) @ self._u[j]
-                Mbb = f * self._M[(bk, bk)]
-                Mbb[np.diag_indices_from(Mbb)] += self._reg[bk]
-                self._u[bk] = _spd_solve(Mbb, f * rhs)
 
     def refine(self, sweeps: int = 10) -> AdaptiveModel:
         """More Gauss–Seidel sweeps over every block with statistics that is not saturated."""
         if isinstance(sweeps, bool) or not isinstance(sweeps, int | np.integer) or sweeps < 1:
             raise ValueError(f"sweeps must be a positive integer, got {sweeps!r}")
-        todo = [bk for bk in range(len(self._names) + 1) if not self.saturated_[bk] and (bk, bk) in self._M]
+        todo = [bk for bk in range(len(self._names) + 1) if not self.saturated_[bk] and self._stats.has(bk)]
         with one_blas_thread():
-            self._gauss_seidel(todo, int(sweeps))
+            self._stats.gauss_seidel(self._u, todo, int(sweeps))
         self._refresh()
         return self
 
@@ -861,32 +471,12 @@ class AdaptiveModel:
         M : (3K (k + 1), 3K (k + 1)) float64
         y : (3K (k + 1),) float64
         """
-        nb = len(self._names) + 1
-        K3 = 3 * self.n_basis
-        f = self._g / self._s if self._s else 0.0
-        M = np.zeros((nb * K3, nb * K3))
-        for (i, j), blk in self._M.items():
-            M[i * K3:(i + 1) * K3, j * K3:(j + 1) * K3] = f * blk
-            M[j * K3:(j + 1) * K3, i * K3:(i + 1) * K3] = f * blk.T
-        return M, f * self._y.reshape(-1)
+        return self._stats.dense()
 
     @property
     def regularization_(self) -> NDArray[np.float64]:
         """The diagonal ``D`` of eq. 6, (3K (k + 1),)."""
         return self._reg.reshape(-1).copy()
-
-
-def _spd_solve(A: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``A⁻¹ b`` for a small SPD ``A`` by Cholesky (LAPACK potrf/potrs).
-
-    ``scipy.linalg.solve(assume_a="pos")`` does the same factorisation but measured
-    ~40× slower per 150×150 block on a loaded 2-core machine (scipy 1.17: extra checks,
-    and a threaded BLAS whose threads wait for busy cores). These blocks are far too
-    small to gain from threads: every public method that solves them (update,
-    update_planes, fit_neutral, fit_neutral_planes, refine) holds BLAS to one thread
-    with :func:`workbench._blas.one_blas_thread` once, around all its work.
-    """
-    return sla.cho_solve(sla.cho_factor(A, check_finite=False), b, check_finite=False)
 
 
 def adaptive_model(adapt: Any, model: Any, vertex_ids: ArrayLike, progress: Callable[[float, str], Any] | None = None,
