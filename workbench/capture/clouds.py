@@ -58,27 +58,31 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
-from scipy.spatial.transform import Rotation
 
 from workbench.capture.adapt import AdaptiveModel, adaptive_model
-from workbench.capture.result import FLAG_HELD, TrackError, TrackResult
+from workbench.capture.cloud_icp import CloudNormals, cloud_pairs, rigid_icp, unit
+from workbench.capture.cloud_inputs import check_clouds, check_units
+from workbench.capture.cloud_samples import STABLE_MOTION, sample_vertices
+from workbench.capture.result import FLAG_HELD, CloudTrackError, TrackResult
 from workbench.capture.rig import ExpressionSpace
 from workbench.capture.solver import WeightSolver
-from workbench.capture.synthetic import face_vertices
 from workbench.geometry.normals import vertex_normals
-from workbench.geometry.surface import boundary_vertices
 
 if TYPE_CHECKING:
     from workbench.core.state import FaceState
 
-__all__ = ["CLOUD_L1", "CLOUD_TEMPORAL", "CloudTrackError", "sample_vertices", "track_clouds"]
+__all__ = ["CLOUD_L1", "CLOUD_TEMPORAL", "STABLE_MOTION", "CloudTrackError", "sample_vertices", "track_clouds"]
+
+# the ICP's pieces under the names benchmarks/bench_capture.py calls them by
+_rigid_icp = rigid_icp
+_CloudNormals = CloudNormals
 
 #: default sparsity for point clouds (relative, as for markers). Twice the markers' default: on a face
 #: that is not the template, weaker L1 lets shapes switch on to explain the identity (the paper's
@@ -87,144 +91,8 @@ CLOUD_L1 = 0.02
 #: default temporal smoothness for point clouds (relative). Lower than the markers' default: a
 #: point-to-plane row sees one direction of a vertex's motion, so the prior weighs more per frame and lags
 CLOUD_TEMPORAL = 0.05
-#: vertices moving less than this share of the head size under any one shape are the stable region
-STABLE_MOTION = 0.005
-#: the cloud's extent must be within this factor of the face's, else it is in other units (a factor of 10
-#: is caught; a cloud of head and shoulders, ~4x the face, is not mistaken for one)
-UNITS_FACTOR = 6.0
-#: neighbours of a cloud point for its PCA normal
-_NORMAL_K = 8
 
 Progress = Callable[[float, str], Any]
-
-
-class CloudTrackError(TrackError):
-    """Point clouds that cannot be tracked (wrong shape, wrong units, nothing usable); names the argument."""
-
-
-def _farthest(V: NDArray[np.float64], cand: NDArray[np.intp], m: int, seed: int) -> NDArray[np.intp]:
-    """``m`` spread-out vertices of ``cand`` by farthest-point sampling (deterministic from ``seed``)."""
-    m = min(int(m), cand.size)
-    if m <= 0:
-        return np.zeros(0, np.intp)
-    P = V[cand]
-    first = int(np.random.default_rng(seed).integers(cand.size))
-    chosen = np.empty(m, np.intp)
-    chosen[0] = first
-    d = ((P - P[first]) ** 2).sum(1)
-    for j in range(1, m):
-        i = int(np.argmax(d))
-        chosen[j] = i
-        np.minimum(d, ((P - P[i]) ** 2).sum(1), out=d)
-    return np.sort(cand[chosen])
-
-
-def _border_ring(F: NDArray[np.int64], n: int) -> NDArray[np.bool_]:
-    """(n,) bool: vertices on the mesh border (an edge of one face) and their neighbours."""
-    on = boundary_vertices(F, n)
-    ring = on.copy()
-    touch = on[F].any(1)
-    ring[F[touch].ravel()] = True
-    return ring
-
-
-def sample_vertices(model: FaceState, samples: int = 1200, rigid_samples: int = 400, *, seed: int = 0
-                    ) -> tuple[NDArray[np.intp], NDArray[np.bool_]]:
-    """The vertices the cloud tracker fits: moving face vertices and stable ones (module docstring, step 1).
-
-    Parameters
-    ----------
-    model : FaceModel
-    samples : int
-        Vertices the shapes move (the weights' constraints), ≥ 1.
-    rigid_samples : int
-        Stable vertices (the rigid pose), ≥ 6.
-    seed : int
-        Start of the farthest-point sampling.
-
-    Returns
-    -------
-    ids : (s,) int
-        Sorted vertex ids (give them to :class:`AdaptiveModel` as ``vertex_ids`` to reuse it).
-    stable : (s,) bool
-        Which of them are stable.
-    """
-    if int(samples) < 1:
-        raise CloudTrackError(f"samples must be ≥ 1, got {samples!r}")
-    if int(rigid_samples) < 6:
-        raise CloudTrackError(f"rigid_samples must be ≥ 6, got {rigid_samples!r}")
-    V = np.asarray(model.vertices, np.float64)
-    F = np.asarray(model.faces, np.int64)
-    space = ExpressionSpace.from_model(model)
-    cand = face_vertices(model)
-    if F.size:
-        cand = cand[~_border_ring(F, model.n_vertices)[cand]]
-    if cand.size < 6:
-        raise CloudTrackError(f"model: only {cand.size} front-facing skin vertices away from the border to fit")
-    mot = space.motion(cand) / space.size
-    still = cand[mot <= STABLE_MOTION]
-    if still.size < 6:  # a face whose shapes move everything: the least moving vertices
-        still = cand[np.argsort(mot)[: max(6, min(int(rigid_samples), cand.size // 4))]]
-    moving = np.setdiff1d(cand, still)
-    if moving.size == 0:
-        moving = cand
-    r = _farthest(V, still, int(rigid_samples), seed)
-    w = _farthest(V, moving, int(samples), seed + 1)
-    ids = np.union1d(r, w)
-    return ids.astype(np.intp), np.isin(ids, r)
-
-
-# ------------------------------------------------------------------ input checks
-def _clouds(clouds: Any) -> list[NDArray[np.float64]]:
-    if isinstance(clouds, np.ndarray):
-        if clouds.ndim != 3 or clouds.shape[2] != 3:
-            raise CloudTrackError(
-                f"clouds must be a sequence of (p, 3) point clouds or a (T, p, 3) array, got shape {clouds.shape}")
-        seq: Sequence[Any] = list(clouds)
-    elif isinstance(clouds, Sequence) and not isinstance(clouds, str | bytes):
-        seq = clouds
-    else:
-        raise CloudTrackError(f"clouds must be a sequence of (p, 3) point clouds, got {type(clouds).__name__}")
-    if len(seq) == 0:
-        raise CloudTrackError("clouds: the take has no frames")
-    out = []
-    for f, c in enumerate(seq):
-        try:
-            P = np.asarray(c, np.float64)
-        except (TypeError, ValueError) as exc:
-            raise CloudTrackError(f"clouds[{f}] is not an array of points: {exc}") from None
-        if P.size == 0:
-            out.append(np.zeros((0, 3)))
-            continue
-        if P.ndim != 2 or P.shape[1] != 3:
-            raise CloudTrackError(f"clouds[{f}] must be (p, 3) points, got shape {P.shape}")
-        if np.isinf(P).any():
-            i = int(np.flatnonzero(np.isinf(P).any(1))[0])
-            raise CloudTrackError(f"clouds[{f}][{i}] is infinite")
-        out.append(P[np.isfinite(P).all(1)])
-    return out
-
-
-def _check_units(clouds: list[NDArray[np.float64]], X: NDArray[np.float64], model: FaceState) -> None:
-    """Raise when the clouds' spread is far from the face's (another unit)."""
-    ref = float(np.sqrt(((X - X.mean(0)) ** 2).sum(1).mean()))
-    ratios = []
-    step = max(1, len(clouds) // 50)
-    for P in clouds[::step]:
-        if P.shape[0] < 10:
-            continue
-        med = np.median(P, axis=0)
-        r = np.sqrt(((P - med) ** 2).sum(1))
-        ratios.append(float(np.sqrt(np.mean(np.minimum(r, np.quantile(r, 0.9)) ** 2))) / ref)
-    if not ratios or ref <= 0:
-        return
-    q = float(np.median(ratios))
-    if not (1.0 / UNITS_FACTOR <= q <= UNITS_FACTOR):
-        units = getattr(getattr(model, "metadata", None), "units", "") or "model units"
-        raise CloudTrackError(
-            f"clouds: the points spread {q:.3g}× as far as the model's face (the model is in {units}); "
-            f"they look like another unit — scale them by about {1.0 / q:.3g}" if q > 0 else
-            "clouds: all points coincide; they cannot be tracked")
 
 
 # ------------------------------------------------------------------ geometry
@@ -233,11 +101,6 @@ def _faces_around(F: NDArray[np.int64], ids: NDArray[np.intp], n: int) -> NDArra
     on = np.zeros(n, bool)
     on[ids] = True
     return F[on[F].any(1)]
-
-
-def _unit(N: NDArray[np.float64]) -> NDArray[np.float64]:
-    ln = np.linalg.norm(N, axis=-1, keepdims=True)
-    return N / np.where(ln > 0, ln, 1.0)
 
 
 @dataclass
@@ -273,7 +136,7 @@ def _setup(model: FaceState, ids: NDArray[np.intp], stable: NDArray[np.bool_], l
     N0 = n0 / scale
     # the λ scale: the average plain shape's squared norm along the normals per sample, in head sizes²
     Dp = D[np.ix_(space.plain, ids)]  # (kp, s, 3)
-    proj = np.einsum("ksd,sd->ks", Dp, _unit(N0))
+    proj = np.einsum("ksd,sd->ks", Dp, unit(N0))
     ref = float((proj**2).sum()) / max(space.plain.size, 1) / max(ids.size, 1) / space.size**2
     ref = ref if ref > 0 else 1.0
     solver = WeightSolver(space.lo, space.hi, l1=l1 * ref, temporal=temporal * ref, relative=False,
@@ -281,98 +144,35 @@ def _setup(model: FaceState, ids: NDArray[np.intp], stable: NDArray[np.bool_], l
     return _CloudSetup(space, ids, stable, N0, dN, ref, solver)
 
 
-class _CloudNormals:
-    """PCA normals of one cloud, computed for the points that are asked for (cached)."""
+class _SampleRig:
+    """The rig at the samples as the frames see it: the template's, or the adapted one's after each update."""
 
-    def __init__(self, P: NDArray[np.float64], tree: cKDTree) -> None:
-        self.P = P
-        self.tree = tree
-        self.N = np.full((P.shape[0], 3), np.nan)
+    def __init__(self, setup: _CloudSetup, am: AdaptiveModel | None) -> None:
+        space = setup.space
+        self.plain = space.plain
+        self.k = space.k
+        self.s = setup.ids.size
+        self.N0 = setup.N0
+        self.dN_flat = setup.dN.reshape(space.k, -1)
+        if am is not None:
+            self.refresh(am)
+        else:
+            self._set(space.neutral[setup.ids].copy(), np.asarray(space.deltas[:, setup.ids], np.float64))
 
-    def __call__(self, j: NDArray[np.intp]) -> NDArray[np.float64]:
-        todo = np.unique(j[np.isnan(self.N[j, 0])])
-        if todo.size:
-            k = min(_NORMAL_K, self.P.shape[0])
-            _, nb = self.tree.query(self.P[todo], k=k)
-            nb = np.asarray(nb).reshape(todo.size, k)
-            Q = self.P[nb] - self.P[nb].mean(1, keepdims=True)
-            C = np.einsum("pki,pkj->pij", Q, Q)
-            _, vec = np.linalg.eigh(C)
-            self.N[todo] = vec[:, :, 0]
-        return self.N[j]
+    def _set(self, X0: NDArray[np.float64], D: NDArray[np.float64]) -> None:
+        self.X0, self.D = X0, D
+        self.D_flat = D.reshape(self.k, -1)  # (k, 3s) for blending
+        self.DpT = np.ascontiguousarray(D[self.plain].transpose(1, 2, 0))  # (s, 3, kp) for the constraint rows
 
+    def refresh(self, am: AdaptiveModel) -> None:
+        """Take the adapted rig's neutral and deltas at the samples."""
+        self._set(am.neutral_at(), am.deltas_at())
 
-def _rigid_icp(X: NDArray[np.float64], N: NDArray[np.float64], tree: cKDTree, cloud: NDArray[np.float64],
-               normals: _CloudNormals, M: NDArray[np.float64], thr: float, cos_min: float, steps: int,
-               min_pairs: int) -> tuple[NDArray[np.float64], int]:
-    """Point-to-plane ICP of model points ``X`` (normals ``N``) to the cloud from pose ``M``: (pose, pairs)."""
-    R, t = M[:3, :3].copy(), M[:3, 3].copy()
-    used = 0
-    for _ in range(steps):
-        Q = X @ R.T + t
-        Nw = N @ R.T
-        d, j = tree.query(Q, distance_upper_bound=thr)
-        ok = np.isfinite(d)
-        if ok.sum() < min_pairs:
-            break
-        jj = j[ok]
-        cos = np.abs((normals(jj) * Nw[ok]).sum(1))
-        keep = cos >= cos_min
-        if keep.sum() < min_pairs:
-            break
-        Qk, Nk, Ck = Q[ok][keep], Nw[ok][keep], cloud[jj[keep]]
-        r = (Nk * (Qk - Ck)).sum(1)
-        sig = max(1.4826 * float(np.median(np.abs(r))), 1e-12 * thr)
-        w = np.minimum(1.0, 1.345 * sig / np.maximum(np.abs(r), 1e-300))  # Huber
-        qc = Qk.mean(0)
-        J = np.concatenate([np.cross(Qk - qc, Nk), Nk], axis=1)  # d r / d (ω, τ)
-        H = (J * w[:, None]).T @ J
-        g = (J * w[:, None]).T @ r
-        H[np.diag_indices(6)] += 1e-12 * max(float(np.trace(H)), 1e-300)
-        try:
-            step = -np.linalg.solve(H, g)
-        except np.linalg.LinAlgError:
-            break
-        dR = Rotation.from_rotvec(step[:3]).as_matrix()
-        R = dR @ R
-        t = dR @ (t - qc) + qc + step[3:]
-        used = int(keep.sum())
-        if np.linalg.norm(step[:3]) * thr + np.linalg.norm(step[3:]) < 1e-4 * thr:
-            break
-    out = np.eye(4)
-    out[:3, :3], out[:3, 3] = R, t
-    return out, used
-
-
-def _pairs(X: NDArray[np.float64], N: NDArray[np.float64], M: NDArray[np.float64], tree: cKDTree,
-           cloud: NDArray[np.float64], normals: _CloudNormals, thr: float, cos_min: float, min_pairs: int,
-           size: float) -> tuple[NDArray[np.intp], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]] | None:
-    """One correspondence pass: each sample's nearest cloud point, with the rejections of the module docstring.
-
-    Returns
-    -------
-    (ok, C, rw, dist) or None
-        Accepted sample indices ``(m,)``, their targets in the model frame ``(m, 3)``, Tukey
-        weights ``(m,)`` and distances ``(m,)``; None when fewer than ``min_pairs`` remain.
-    """
-    R, t = M[:3, :3], M[:3, 3]
-    Q = X @ R.T + t
-    d, j = tree.query(Q, distance_upper_bound=thr)
-    ok = np.flatnonzero(np.isfinite(d))
-    if ok.size < min_pairs:
-        return None
-    cos = np.abs((normals(j[ok]) * (N[ok] @ R.T)).sum(1))
-    ok = ok[cos >= cos_min]
-    if ok.size < min_pairs:
-        return None
-    C = (cloud[j[ok]] - t) @ R  # model frame
-    r = (N[ok] * (X[ok] - C)).sum(1)
-    sig = max(1.4826 * float(np.median(np.abs(r))), 1e-9 * size)
-    good = np.abs(r) <= 4.685 * sig  # Tukey's rejection point
-    if int(good.sum()) < min_pairs:
-        return None
-    u = np.abs(r[good]) / (4.685 * sig)
-    return ok[good], C[good], (1.0 - u * u) ** 2, d[ok][good]
+    def blend(self, wf: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Sample positions and unit normals (model frame) for full weights ``wf``."""
+        X = self.X0 + (wf @ self.D_flat).reshape(self.s, 3)
+        N = unit(self.N0 + (wf @ self.dN_flat).reshape(self.s, 3))
+        return X, N
 
 
 # ------------------------------------------------------------------ the tracker
@@ -489,7 +289,7 @@ def track_clouds(
         raise CloudTrackError("model: it has no blendshapes to track")
     if solver is not None and not callable(getattr(solver, "solve_gram", None)):
         raise CloudTrackError(f"solver must have a solve_gram method like WeightSolver's, got {type(solver).__name__}")
-    P_all = _clouds(clouds)
+    P_all = check_clouds(clouds)
     T = len(P_all)
     M = np.eye(4)
     if initial_pose is not None:
@@ -515,7 +315,7 @@ def track_clouds(
     if thr_max <= 0:
         raise CloudTrackError(f"max_distance must be > 0, got {max_distance!r}")
     thr_min = min(thr_min, thr_max)
-    _check_units(P_all, space.neutral[ids], model)
+    check_units(P_all, space.neutral[ids], model)
     am = adaptive_model(True if adapt is None else adapt, model, ids, progress, error=CloudTrackError)
     t_setup = time.perf_counter() - t_start
 
@@ -523,26 +323,7 @@ def track_clouds(
     derived = sorted(space.derived)
     kp = plain.size
     norm = 1.0 / size**2
-    if am is not None:
-        X0, D_all = am.neutral_at(), am.deltas_at()
-    else:
-        X0 = space.neutral[ids].copy()
-        D_all = np.asarray(space.deltas[:, ids], np.float64)
-    s_ = ids.size
-    k_all = space.k
-    dN_flat = setup.dN.reshape(k_all, -1)
-
-    def layouts(D: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """(k, 3s) for blending and (s, 3, kp) for the constraint rows."""
-        return D.reshape(k_all, -1), np.ascontiguousarray(D[plain].transpose(1, 2, 0))
-
-    D_flat, DpT = layouts(D_all)
-
-    def blend(wf: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """Sample positions and unit normals (model frame) for full weights ``wf``."""
-        X = X0 + (wf @ D_flat).reshape(s_, 3)
-        N = _unit(setup.N0 + (wf @ dN_flat).reshape(s_, 3))
-        return X, N
+    rig = _SampleRig(setup, am)
 
     W = np.zeros((T, kp))
     poses = np.tile(np.eye(4), (T, 1, 1))
@@ -564,41 +345,40 @@ def track_clouds(
         solved = False
         if P.shape[0] >= min_pts:
             tree = cKDTree(P)
-            cn = _CloudNormals(P, tree)
+            cn = CloudNormals(P, tree)
             Mf = M.copy()
             thr = thr_max if first >= 0 else 3.0 * thr_max  # the first frame may start farther away
             found = False
             if am is not None and neutral_start and first < 0:
                 # the paper's initialisation (eq. 1): a neutral face; identity and pose by Gauss–Newton
                 for _it in range(init_iters):
-                    X, N = blend(wf)
-                    Mf, _ = _rigid_icp(X, N, tree, P, cn, Mf, thr, cos_min, 4 * rsteps, 6)
-                    pr = _pairs(X, N, Mf, tree, P, cn, thr, cos_min, min_corr, size)
+                    X, N = rig.blend(wf)
+                    Mf, _ = rigid_icp(X, N, tree, P, cn, Mf, thr, cos_min, 4 * rsteps, 6)
+                    pr = cloud_pairs(X, N, Mf, tree, P, cn, thr, cos_min, min_corr, size)
                     if pr is None:
                         break
                     ok, C, rw, dist = pr
                     sw = np.sqrt(rw)
                     am.fit_neutral_planes(ok, N[ok] * sw[:, None], (N[ok] * C).sum(1) * sw)
-                    X0, D_all = am.neutral_at(), am.deltas_at()
-                    D_flat, DpT = layouts(D_all)
+                    rig.refresh(am)
                     thr = min(thr_max, max(2.5 * float(np.median(dist)), thr_min))
                     found = True
             acc: tuple[NDArray[np.intp], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]] | None = None
             for it in range(iters):
-                X, N = blend(wf)
+                X, N = rig.blend(wf)
                 # rigid pose: the stable samples (all of them while the first frame's pose is unknown)
                 unknown = first < 0 and it == 0 and not found
                 sel = np.ones(ids.size, bool) if unknown else setup.stable
-                Mf, _ = _rigid_icp(X[sel], N[sel], tree, P, cn, Mf, thr, cos_min, 4 * rsteps if unknown else rsteps, 6)
-                pr = _pairs(X, N, Mf, tree, P, cn, thr, cos_min, min_corr, size)
+                Mf, _ = rigid_icp(X[sel], N[sel], tree, P, cn, Mf, thr, cos_min, 4 * rsteps if unknown else rsteps, 6)
+                pr = cloud_pairs(X, N, Mf, tree, P, cn, thr, cos_min, min_corr, size)
                 if pr is None:
                     break
                 ok, C, rw, dist = pr
                 Nn = N[ok] * np.sqrt(rw)[:, None]
-                A = (Nn[:, :, None] * DpT[ok]).sum(1)
-                base = X0[ok]
+                A = (Nn[:, :, None] * rig.DpT[ok]).sum(1)
+                base = rig.X0[ok]
                 if derived:
-                    base = base + np.tensordot(wf[derived], D_all[derived][:, ok], axes=(0, 0))
+                    base = base + np.tensordot(wf[derived], rig.D[derived][:, ok], axes=(0, 0))
                 c = (Nn * (C - base)).sum(1)
                 m = ok.size
                 G = (A.T @ A) * (norm / m)
@@ -611,7 +391,7 @@ def track_clouds(
             if acc is not None:
                 solved = True
                 ok, C, rw, _ = acc
-                X, N = blend(wf)
+                X, N = rig.blend(wf)
                 res = (N[ok] * (X[ok] - C)).sum(1)
                 errors[f] = float(np.sqrt(np.mean(res**2)))
                 pairs[f] = ok.size
@@ -620,8 +400,7 @@ def track_clouds(
                     ta = time.perf_counter()
                     sw = np.sqrt(rw)
                     am.update_planes(ok, N[ok] * sw[:, None], (N[ok] * C).sum(1) * sw, wf)
-                    X0, D_all = am.neutral_at(), am.deltas_at()
-                    D_flat, DpT = layouts(D_all)
+                    rig.refresh(am)
                     t_adapt += time.perf_counter() - ta
         if not solved:
             flags[f] = FLAG_HELD

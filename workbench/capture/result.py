@@ -64,6 +64,10 @@ class TrackError(ValueError):
     """
 
 
+class CloudTrackError(TrackError):
+    """Point clouds that cannot be tracked (wrong shape, wrong units, nothing usable); names the argument."""
+
+
 @dataclass(frozen=True, eq=False)
 class TrackResult:
     """A tracked take (Bouaziz et al. 2013, §3.1: rigid pose + blendshape weights per frame).
