@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from workbench import load_sample
 from workbench.animation.curves import (
     HANDLES,
     HEAD_POSE,
@@ -186,8 +187,13 @@ def test_nan_values_and_tangents_are_rejected():
 
 
 def test_bad_names_interpolations_and_shapes():
-    with pytest.raises(TrackError, match="track name"):
-        Track("jawOpen", (Key(0.0, 0.0),))
+    for bad in ("weights/", "regions/one/a", "jaw open", "/x", ""):
+        with pytest.raises(TrackError, match="track name"):
+            Track(bad, (Key(0.0, 0.0),))
+    # a bare name is a method family's own track: the model refuses it unless a family keys it
+    tl = Timeline(tracks={"jawOpen": Track("jawOpen", (Key(0.0, 0.0),))})
+    with pytest.raises(TrackError, match="'jawOpen': no method family of this model keys it"):
+        tl.check_model(load_sample("head"))
     with pytest.raises(TrackError, match="interpolation"):
         Key(0.0, 0.0, "cubic")  # type: ignore[arg-type]
     with pytest.raises(TrackError, match="value shape"):

@@ -28,7 +28,6 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from workbench.animation.curves import (
-    HANDLES,
     HEAD_POSE,
     IDENTITY_POSE,
     INTERPOLATIONS,
@@ -42,7 +41,12 @@ from workbench.animation.curves import (
     weight_track_name,
 )
 from workbench.animation.tracks import Timeline, add_keys
-from workbench.core.families import weight_product_reads, weight_products
+from workbench.core.families import (
+    track_names,
+    track_value_shape,
+    weight_product_reads,
+    weight_products,
+)
 from workbench.core.pipeline import StateView
 from workbench.core.shapes import ModelError
 
@@ -385,17 +389,13 @@ class TimelineFacet:
             return ()
         if track == HEAD_POSE:
             return (7,)
-        if track == HANDLES:
-            n = len(m.slot("handles"))
-            if not n:
-                raise ModelError(f"{what}: track 'handles': the model has no handles")
-            return (n, 3)
-        if isinstance(track, str) and parse_region_track(track) is not None:
-            return (len(m.shape_names),)
-        raise ModelError(
-            f"{what}: track must be 'weights/<shape>', 'head_pose', 'handles' or "
-            f"'regions/<level>/<region>', got {track!r}"
-        )
+        if isinstance(track, str):
+            own = track_value_shape(m, track)  # the families' own tracks
+            if own is not None:
+                return own
+        names = ", ".join(repr(n + "<...>" if n.endswith("/") else n) for n in track_names())
+        raise ModelError(f"{what}: track must be 'weights/<shape>', 'head_pose' or one of the "
+                         f"families' tracks ({names}), got {track!r}")
 
     # ------------------------------------------------------------- expressions
     def key_expression(self, time: float, expression: str, interpolation: Interpolation = "bezier") -> None:

@@ -43,6 +43,7 @@ from workbench.animation.curves import (
     TrackError,
     quaternion_to_matrix,
 )
+from workbench.core.families import track_names, track_value_shape
 
 if TYPE_CHECKING:
     from workbench.core.state import FaceState as FaceModel
@@ -77,6 +78,9 @@ class TimelineSample:
         Level of the region tracks, None without region tracks.
     region_weights : dict of str to (k,) float
         Shape weights of every keyed region (empty without region tracks).
+    others : dict of str to ndarray
+        Every other track's value by track name: what a family keys under a
+        name of its own (its ``animate`` reads it; see :mod:`workbench.core.families`).
     """
 
     weights: dict[str, float]
@@ -85,6 +89,7 @@ class TimelineSample:
     head_rotation: NDArray[np.float64] | None
     region_level: int | None = None
     region_weights: dict[str, NDArray[np.float64]] = field(default_factory=dict)
+    others: dict[str, NDArray[np.float64]] = field(default_factory=dict)
 
     def head_matrix(self) -> NDArray[np.float64]:
         """(4, 4) homogeneous head transform (identity when the head is not keyed)."""
@@ -230,6 +235,19 @@ class Timeline:
         installs the regions (``FaceModel.set_timeline`` and ``export`` require
         the regions).
         """
+        known = ("weight", "region", HANDLES, HEAD_POSE)
+        for name, tr in self.tracks.items():
+            if tr.kind in known:
+                continue
+            try:
+                want = track_value_shape(model, name)
+            except ValueError as exc:
+                raise TrackError(f"track {name!r}: {exc}") from None
+            if want is None:
+                raise TrackError(f"track {name!r}: no method family of this model keys it "
+                                 f"(their tracks: {track_names()})")
+            if tr.value_shape != want:
+                raise TrackError(f"track {name!r}: values must have shape {want}, got {tr.value_shape}")
         names = set(model.shape_names)
         unknown = sorted(s for s in self.weight_tracks if s not in names)
         if unknown:
@@ -290,7 +308,9 @@ class Timeline:
             p = hp.sample([time])[0]
             tr_, rot = p[:3].copy(), p[3:].copy()
         regions = {r: tr.sample([time])[0] for r, tr in self.region_tracks.items()}
-        return TimelineSample(weights, offsets, tr_, rot, self.region_level, regions)
+        others = {name: tr.evaluate(time) for name, tr in self.tracks.items()
+                  if tr.kind not in ("weight", "region", HANDLES, HEAD_POSE)}
+        return TimelineSample(weights, offsets, tr_, rot, self.region_level, regions, others)
 
     def prefetch_weights(self, times: ArrayLike) -> None:
         """Sample every weight track at all ``times`` in one go; :meth:`evaluate` then looks them up.

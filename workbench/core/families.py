@@ -14,6 +14,8 @@ rigging, capture, enhancement) lives in its own folder and registers one
 * ``file_part`` — its part of the saved ``.fwb`` file (:class:`FilePart`);
 * ``animate`` — how a timeline sample sets its slots (see
   :meth:`FaceState.evaluate_at`);
+* ``tracks`` — the timeline tracks it keys (name and value shape); its
+  ``animate`` reads them from the sample (``sample.others``);
 * ``weight_products`` — shapes whose weight is not set or keyed but derived:
   the product of other shapes' weights (combination / corrective shapes,
   :class:`WeightProducts`). :func:`derive_weights` applies every family's
@@ -131,6 +133,9 @@ class Family:
     animate: Callable[[StateView, Any], Mapping[str, Any]] | None = None
     #: optional: shapes whose weight is the product of other weights (see :class:`WeightProducts`)
     weight_products: WeightProducts | None = None
+    #: timeline tracks it keys: ``{name: value_shape(model, track) -> shape}`` (a name ending in
+    #: "/" is a prefix); ``value_shape`` raises ``ModelError`` when the model cannot take the track
+    tracks: Mapping[str, Callable[[FaceState, str], tuple[int, ...]]] = field(default_factory=dict)
     extra: Mapping[str, Any] = field(default_factory=dict)
 
 
@@ -190,6 +195,20 @@ def family(name: str) -> Family:
         return _FAMILIES[name]
     except KeyError:
         raise KeyError(f"no method family {name!r}; registered: {sorted(_FAMILIES)}") from None
+
+
+def track_value_shape(model: FaceState, track: str) -> tuple[int, ...] | None:
+    """The value shape a family gives ``track`` on ``model`` (None: no family keys it)."""
+    for f in families():
+        for name, shape in f.tracks.items():
+            if track == name or (name.endswith("/") and track.startswith(name)):
+                return tuple(shape(model, track))
+    return None
+
+
+def track_names() -> list[str]:
+    """Every registered track name (prefixes end in "/")."""
+    return [name for f in families() for name in f.tracks]
 
 
 def set_hook(name: str, value: Any) -> None:

@@ -16,6 +16,7 @@ extrapolation). Times are seconds.
 from __future__ import annotations
 
 import dataclasses
+import re
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -35,6 +36,10 @@ from workbench.animation.curves.rotations import quat_slerp
 
 _CODE = {"step": 0, "linear": 1, "bezier": 2}
 
+
+#: a method family's own track (``"mouth_gain"``, ``"my_family/param"``): the
+#: model checks that a registered family keys it (:func:`workbench.core.families.track_value_shape`)
+_FAMILY_TRACK = re.compile(r"[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z0-9_.\-]+)*")
 
 @dataclass(frozen=True, eq=False)
 class Track:
@@ -70,10 +75,12 @@ class Track:
             name in (HANDLES, HEAD_POSE)
             or (name.startswith(WEIGHTS_PREFIX) and len(name) > len(WEIGHTS_PREFIX))
             or parse_region_track(name) is not None
+            or (_FAMILY_TRACK.fullmatch(name) is not None
+                and not name.startswith((WEIGHTS_PREFIX, REGIONS_PREFIX)))
         ):
             raise TrackError(
-                "track name must be 'weights/<shape>', 'handles', 'head_pose' or "
-                f"'regions/<level>/<region>', got {name!r}"
+                "track name must be 'weights/<shape>', 'handles', 'head_pose', "
+                f"'regions/<level>/<region>' or a method family's own track name, got {name!r}"
             )
         keys = tuple(self.keys)
         if not keys:

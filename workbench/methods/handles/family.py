@@ -10,6 +10,7 @@ import numpy as np
 
 from workbench.core.families import Family, SlotSpec, register_family
 from workbench.core.manifest import Checker, Spec
+from workbench.core.shapes import ModelError
 from workbench.methods.handles.facet import HandlesFacet, check_handles, check_stiffness
 from workbench.methods.handles.handle_set import HandleSet
 from workbench.methods.handles.layer import HandleLayer
@@ -78,6 +79,14 @@ class HandlesFilePart:
         return out
 
 
+def handles_track_shape(model: FaceState, track: str) -> tuple[int, ...]:
+    """``"handles"`` keys (h, 3) offsets: one per handle of the model."""
+    n = len(model.slot("handles"))
+    if not n:
+        raise ModelError(f"track {track!r}: the model has no handles")
+    return (n, 3)
+
+
 def animate(view: StateView, sample: Any) -> dict[str, Any]:
     """Keyed handle offsets (when their count matches the handle set)."""
     h = view.slot("handles")
@@ -99,5 +108,6 @@ FAMILY = register_family(
         order=20,
         file_part=HandlesFilePart(),
         animate=animate,
+        tracks={"handles": handles_track_shape},
     )
 )

@@ -9,6 +9,7 @@ import numpy as np
 
 from workbench.core.families import Family, SlotSpec, register_family
 from workbench.core.manifest import Checker, Spec
+from workbench.core.shapes import ModelError
 from workbench.methods.regions.blend import RegionLayer, RegionState, RegionWeights
 from workbench.methods.regions.facet import RegionsFacet, check_state
 from workbench.methods.regions.hierarchy import Regions
@@ -205,6 +206,15 @@ def animate(view: StateView, sample: Any) -> dict[str, Any]:
     return {"regions": RegionState(st.regions, st.level, rw)}
 
 
+def region_track_shape(model: FaceState, track: str) -> tuple[int, ...]:
+    """``"regions/<level>/<region>"`` keys (k,) shape weights inside one region."""
+    from workbench.animation.curves import parse_region_track
+
+    if parse_region_track(track) is None:
+        raise ModelError(f"track {track!r}: a region track is named 'regions/<level>/<region>'")
+    return (len(model.shape_names),)
+
+
 FAMILY = register_family(
     Family(
         name="regions",
@@ -214,5 +224,6 @@ FAMILY = register_family(
         order=10,
         file_part=RegionsFilePart(),
         animate=animate,
+        tracks={"regions/": region_track_shape},
     )
 )
