@@ -21,6 +21,11 @@ class GainState:
     mask: NDArray[np.float32] | None = None
 
 
+def mask_of(st: GainState, view: Any) -> NDArray[np.float64]:
+    """(n,) the mask the gain applies in (ones without one)."""
+    return np.ones(view.n_vertices) if st.mask is None else np.asarray(st.mask, np.float64)
+
+
 class MouthGainLayer:
     """Linear in the keyed weights while the gain itself is not keyed (then it is baked)."""
 
@@ -30,10 +35,7 @@ class MouthGainLayer:
 
     def gain(self, view: Any) -> NDArray[np.float64] | None:
         st: GainState = view.slot("mouth_gain")
-        if st.gain == 1.0:
-            return None
-        m = np.ones(view.n_vertices) if st.mask is None else np.asarray(st.mask, np.float64)
-        return 1.0 + (st.gain - 1.0) * m
+        return None if st.gain == 1.0 else 1.0 + (st.gain - 1.0) * mask_of(st, view)
 
     def controls(self, view: Any, timeline: Any) -> None:
         return None
