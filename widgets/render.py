@@ -29,13 +29,16 @@ Why parts are hand-written instead of using pyvista's helpers:
 Rendering is CPU-only (Mesa llvmpipe through EGL, no display needed) and
 deterministic: a fresh plotter with fixed lights and camera gives the same
 pixels for the same input.
+
+The conversion, the colours and the camera are in :mod:`widgets.rendering`
+(:mod:`~widgets.rendering.convert`, :mod:`~widgets.rendering.colors`,
+:mod:`~widgets.rendering.camera`); their public names are importable from here.
 """
 
 from __future__ import annotations
 
 import hashlib
 import io
-import math
 import os
 import time
 from collections.abc import Iterable, Mapping, Sequence
@@ -50,12 +53,15 @@ import pyvista as pv
 from numpy.typing import ArrayLike, NDArray
 from PIL import Image
 
-from workbench import FaceModel, ModelMetadata
+from widgets.rendering.camera import CAMERAS, screen_positions, setup_camera
+
+# under its old name: widgets.wrinkles.thumbnails imports it from here
+from widgets.rendering.camera import model_axes as _model_axes
+from widgets.rendering.colors import COMPONENT_COLORS, vertex_colors
+from widgets.rendering.convert import from_pyvista, to_pyvista
+from workbench import FaceModel
 from workbench.converters import register_mesh_converter
-from workbench.core.polygons import Polygons
-from workbench.geometry.axes import face_axes
 from workbench.geometry.normals import vertex_normals
-from workbench.geometry.parts import model_part_roles, part_material
 
 __all__ = [
     "CAMERAS",
@@ -69,342 +75,6 @@ __all__ = [
     "to_pyvista",
     "vertex_colors",
 ]
-
-#: Camera presets accepted by :func:`render_png`.
-#: ``face`` is a front view framed on the vertices the blendshapes move
-#: (the face itself, without neck and skull), used for thumbnails.
-CAMERAS = ("front", "three_quarter", "side", "face")
-
-#: sRGB colours (0-255) by part material (:func:`workbench.geometry.parts.part_material`
-#: of the component's role); unrecognised parts use ``skin``.
-COMPONENT_COLORS: dict[str, tuple[int, int, int]] = {
-    "skin": (226, 178, 152),
-    "eye": (242, 240, 235),  # sclera; iris and pupil are added procedurally
-    "iris": (86, 112, 78),
-    "pupil": (18, 16, 16),
-    # the lashes are cards meant for an alpha texture; drawn opaque, a soft
-    # brown reads as a lash line instead of a heavy black band
-    "eyelashes": (128, 92, 76),
-    "eyebrows": (70, 50, 38),
-    "teeth": (238, 232, 212),
-    "tongue": (196, 96, 100),
-    "gums": (190, 104, 104),
-}
-
-_LABEL_ARRAY = "component"
-_NAMES_FIELD = "component_names"
-_VIEW_ANGLE = 24.0  # degrees, vertical field of view: a mild "portrait lens"
-
-
-# --------------------------------------------------------------------------- conversion
-
-
-def _polygon_cell_array(indices: NDArray[np.int32], offsets: NDArray[np.int64]) -> NDArray:
-    """Legacy VTK cell array ``[n0, i.., n1, i.., ...]`` from CSR polygons."""
-    sizes = np.diff(offsets)
-    out = np.empty(indices.size + sizes.size, dtype=np.int64)
-    # polygon k's size sits at offsets[k] + k; its corners follow it
-    size_pos = offsets[:-1] + np.arange(sizes.size)
-    out[size_pos] = sizes
-    mask = np.ones(out.size, dtype=bool)
-    mask[size_pos] = False
-    out[mask] = indices
-    return out
-
-
-def to_pyvista(
-    model: FaceModel,
-    points: ArrayLike | None = None,
-    *,
-    polygons: bool = False,
-    scalars: ArrayLike | None = None,
-    scalars_name: str = "scalars",
-) -> pv.PolyData:
-    """Convert a face model to a :class:`pyvista.PolyData`.
-
-    Parameters
-    ----------
-    model : FaceModel
-    points : (n, 3) float, optional
-        Vertex positions to use instead of the neutral ``model.vertices``
-        (e.g. ``model.evaluate()``).
-    polygons : bool
-        Write the original polygons (quads, n-gons) instead of the triangles.
-    scalars : (n,) or (n, c) array, optional
-        Extra point data, stored under ``scalars_name`` and made active.
-
-    Returns
-    -------
-    pyvista.PolyData
-        Point data ``"component"`` (n,) int32 holds ``model.component_labels``;
-        field data ``"component_names"`` holds the names.
-    """
-    n = model.n_vertices
-    pts = np.asarray(model.vertices if points is None else points, dtype=np.float64)
-    if pts.shape != (n, 3):
-        raise ValueError(f"to_pyvista: points must have shape ({n}, 3), got {pts.shape}")
-    if polygons:
-        poly = model.polygons
-        mesh = pv.PolyData(pts.copy(), faces=_polygon_cell_array(poly.indices, poly.offsets))
-    else:
-        faces: Any = np.asarray(model.faces, dtype=np.int64)  # pyvista's stubs want int, not int64
-        mesh = pv.PolyData.from_regular_faces(pts.copy(), faces)
-    mesh.point_data[_LABEL_ARRAY] = np.asarray(model.component_labels, dtype=np.int32)
-    mesh.field_data[_NAMES_FIELD] = np.asarray(list(model.component_names), dtype=str)
-    if scalars is not None:
-        s = np.asarray(scalars)
-        if s.shape[:1] != (n,):
-            raise ValueError(f"to_pyvista: scalars must have {n} rows, got shape {s.shape}")
-        mesh.point_data[scalars_name] = s
-        mesh.point_data.active_scalars_name = scalars_name
-    return mesh
-
-
-def from_pyvista(
-    mesh: pv.DataSet,
-    name: str | None = None,
-    *,
-    units: str = "m",
-    up_axis: str = "+y",
-    front_axis: str = "+z",
-) -> FaceModel:
-    """Build a :class:`workbench.FaceModel` (no blendshapes) from a pyvista mesh.
-
-    Parameters
-    ----------
-    mesh : pyvista.DataSet
-        Any surface-like dataset; non-PolyData is passed through
-        ``extract_surface``. Polygons are kept as ``model.polygons`` and
-        fan-triangulated for ``model.faces``; lines, vertices and strips are
-        ignored.
-    name : str, optional
-        Model name (``metadata.name``), also recorded in the provenance entry
-        ``{"source": "pyvista", "name": ...}``.
-    units, up_axis, front_axis : str
-        Metadata; a pyvista mesh carries no units or orientation of its own.
-
-    Returns
-    -------
-    FaceModel
-        ``"component"`` point data (if present) become component labels, with
-        names from the ``"component_names"`` field data.
-    """
-    if not isinstance(mesh, pv.PolyData):
-        mesh = mesh.extract_surface()
-    if mesh.GetNumberOfPolys() == 0:
-        raise ValueError("from_pyvista: mesh has no polygon faces (only points/lines?)")
-    cells = mesh.GetPolys()
-    offsets = pv.convert_array(cells.GetOffsetsArray()).astype(np.int64)
-    indices = pv.convert_array(cells.GetConnectivityArray()).astype(np.int32)
-    polygons = Polygons(indices, offsets)
-    faces, _ = polygons.triangulate()
-    labels = names = None
-    if _LABEL_ARRAY in mesh.point_data:
-        labels = np.asarray(mesh.point_data[_LABEL_ARRAY], dtype=np.int32)
-        if _NAMES_FIELD in mesh.field_data:
-            names = [str(s) for s in mesh.field_data[_NAMES_FIELD]]
-    provenance: dict[str, Any] = {"source": "pyvista"}
-    if name is not None:
-        provenance["name"] = name
-    metadata = ModelMetadata(
-        name=name or "",
-        units=units,
-        up_axis=up_axis,
-        front_axis=front_axis,
-        provenance=(provenance,),
-    )
-    return FaceModel(
-        np.asarray(mesh.points, dtype=np.float64),
-        faces,
-        polygons=polygons,
-        component_labels=labels,
-        component_names=names,
-        metadata=metadata,
-    )
-
-
-# --------------------------------------------------------------------------- shading helpers
-
-
-def vertex_colors(model: FaceModel, front: ArrayLike = (0.0, 0.0, 1.0)) -> NDArray[np.uint8]:
-    """Per-vertex RGB colours from the components' part roles (``model.part_roles``).
-
-    The roles come from the names, else from the geometry
-    (:func:`workbench.geometry.parts.component_roles`), so an unnamed eyeball is
-    still drawn as an eye. Eyeballs get a sclera/iris/pupil pattern: a vertex's
-    direction from its eyeball's centre is compared with the face direction
-    ``front``.
-
-    Returns
-    -------
-    (n, 3) uint8
-    """
-    n = model.n_vertices
-    out = np.empty((n, 3), dtype=np.uint8)
-    out[:] = COMPONENT_COLORS["skin"]
-    labels = np.asarray(model.component_labels)
-    names = list(model.component_names)
-    roles = model_part_roles(model)
-    v = np.asarray(model.vertices, dtype=np.float64)
-    fwd = np.asarray(front, dtype=np.float64)
-    fwd = fwd / np.linalg.norm(fwd)
-    for idx, cname in enumerate(names):
-        sel = labels == idx
-        if not np.any(sel):
-            continue
-        key = part_material(roles[idx], cname)
-        out[sel] = COMPONENT_COLORS[key]
-        if key == "eye":
-            ids = np.flatnonzero(sel)
-            for piece in _connected_pieces(model.faces, ids):  # both eyes may be one component
-                p = v[piece]
-                d = p - p.mean(axis=0)
-                d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)
-                cos = d @ fwd
-                rgb = np.empty((len(p), 3), dtype=np.uint8)
-                rgb[:] = COMPONENT_COLORS["eye"]
-                rgb[cos > math.cos(math.radians(36))] = COMPONENT_COLORS["iris"]
-                rgb[cos > math.cos(math.radians(17))] = COMPONENT_COLORS["pupil"]
-                out[piece] = rgb
-    return out
-
-
-def _connected_pieces(faces: ArrayLike, ids: NDArray[np.intp]) -> list[NDArray[np.intp]]:
-    """The vertex ids ``ids`` split into the connected pieces of the faces among them."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
-    F = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
-    local = np.full(int(max(F.max(initial=0), ids.max(initial=0))) + 1, -1, np.int64)
-    local[ids] = np.arange(ids.size)
-    Fl = local[F]
-    Fl = Fl[(Fl >= 0).all(axis=1)]
-    m = ids.size
-    adj = coo_matrix((np.ones(Fl.size), (np.repeat(Fl[:, 0], 3), Fl.ravel())), shape=(m, m))
-    k, lab = connected_components(adj + adj.T, directed=False)
-    return [ids[lab == i] for i in range(k)]
-
-
-# --------------------------------------------------------------------------- camera
-
-
-def _model_axes(model: FaceModel) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """(up, front) unit vectors from the model metadata (:func:`workbench.geometry.axes.face_axes`)."""
-    axes = face_axes(model)
-    return axes[1], axes[2]
-
-
-def _rotate(vec: NDArray, axis: NDArray, degrees: float) -> NDArray:
-    """Rodrigues rotation of ``vec`` about unit ``axis``."""
-    t = math.radians(degrees)
-    return (
-        vec * math.cos(t)
-        + np.cross(axis, vec) * math.sin(t)
-        + axis * float(axis @ vec) * (1 - math.cos(t))
-    )
-
-
-def _face_region(model: FaceModel) -> NDArray[np.bool_] | None:
-    """(n,) bool: vertices moved by any blendshape, or None if there are none."""
-    if not model.shapes:
-        return None
-    biggest = np.zeros(model.n_vertices)
-    for shape in model.shapes:
-        d = shape.effective_delta()
-        np.maximum(biggest, np.abs(d).max(axis=1), out=biggest)
-    # Many shapes drag the scalp and neck a hair's width; only clearly moved
-    # vertices (1% of the model size) outline the face itself.
-    v = np.asarray(model.vertices, dtype=np.float64)
-    size = float(np.linalg.norm(np.ptp(v, axis=0)))
-    for threshold in (0.01 * size, 1e-9):
-        moved = biggest > threshold
-        if moved.sum() >= 3:
-            return moved
-    return None
-
-
-def _camera_for(
-    model: FaceModel, points: NDArray, camera: str, aspect: float
-) -> tuple[tuple, tuple, tuple]:
-    """Camera (position, focal point, view up) framing ``points`` for a preset."""
-    if camera not in CAMERAS:
-        raise ValueError(f"render_png: camera must be one of {CAMERAS}, got {camera!r}")
-    up, front = _model_axes(model)
-    pts = np.asarray(points, dtype=np.float64)
-    if camera == "face":
-        region = _face_region(model)
-        if region is not None:
-            pts = pts[region]
-    direction = front
-    if camera == "three_quarter":
-        # turn toward the subject's left (viewer's right) and look down a little
-        direction = _rotate(front, up, 35.0)
-    elif camera == "side":
-        direction = _rotate(front, up, 90.0)
-    right = np.cross(up, direction)
-    right /= np.linalg.norm(right)
-    true_up = np.cross(direction, right)
-    if camera in ("three_quarter", "side"):
-        direction = _rotate(direction, right, -8.0)
-        true_up = np.cross(direction, right)
-    # extents in the view frame
-    x, y, z = pts @ right, pts @ true_up, pts @ direction
-    cx, cy = 0.5 * (x.min() + x.max()), 0.5 * (y.min() + y.max())
-    half_w, half_h = 0.5 * np.ptp(x), 0.5 * np.ptp(y)
-    margin = 1.08 if camera != "face" else 1.12
-    tan_v = math.tan(math.radians(_VIEW_ANGLE / 2))
-    dist = margin * max(half_h / tan_v, half_w / (tan_v * aspect))
-    focal = cx * right + cy * true_up + float(z.mean()) * direction
-    position = focal + direction * (dist + (z.max() - z.mean()))
-    return tuple(position), tuple(focal), tuple(true_up)
-
-
-def _setup_camera(cam: Any, model: FaceModel, points: NDArray, camera: str, aspect: float) -> None:
-    pos, focal, up = _camera_for(model, points, camera, aspect)
-    cam.position, cam.focal_point, cam.up = pos, focal, up
-    cam.view_angle = _VIEW_ANGLE
-
-
-def screen_positions(
-    model: FaceModel,
-    xyz: ArrayLike,
-    *,
-    size: tuple[int, int] = (480, 480),
-    camera: str = "front",
-) -> NDArray[np.float64]:
-    """Pixel coordinates of 3D points in a :func:`render_png` picture.
-
-    Uses the same camera as ``render_png(model, ..., size=size, camera=camera)``
-    (framed on the neutral mesh, so it does not depend on weights). Handy for
-    tests (which pixels show the mouth?) and for aiming the mouse in browser
-    tests.
-
-    Parameters
-    ----------
-    xyz : (k, 3) float
-        World positions.
-
-    Returns
-    -------
-    (k, 2) float
-        ``(column, row)`` with the origin at the top-left pixel corner.
-    """
-    w, h = int(size[0]), int(size[1])
-    cam = pv.Camera()
-    _setup_camera(cam, model, np.asarray(model.vertices), camera, w / h)
-    m = np.array(
-        [
-            [
-                cam.GetCompositeProjectionTransformMatrix(w / h, -1, 1).GetElement(i, j)
-                for j in range(4)
-            ]
-            for i in range(4)
-        ]
-    )
-    p = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)
-    hom = np.c_[p, np.ones(len(p))] @ m.T
-    ndc = hom[:, :2] / hom[:, 3:4]
-    return np.c_[(ndc[:, 0] + 1) * 0.5 * w, (1 - ndc[:, 1]) * 0.5 * h]
 
 
 # --------------------------------------------------------------------------- rendering
@@ -486,7 +156,7 @@ class _Scene:
                 )
         # our own per-vertex normals + Gouraud/Phong = smooth shading
         actor.prop.interpolation = "phong"
-        _setup_camera(pl.camera, model, np.asarray(model.vertices), camera, w / h)
+        setup_camera(pl.camera, model, np.asarray(model.vertices), camera, w / h)
         pl.reset_camera_clipping_range()
         self.plotter = pl
 

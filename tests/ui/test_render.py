@@ -22,7 +22,6 @@ PIL_Image = pytest.importorskip("PIL.Image")
 
 from widgets.render import (  # noqa: E402
     COMPONENT_COLORS,
-    _polygon_cell_array,
     expression_thumbnails,
     from_pyvista,
     png_to_array,
@@ -30,6 +29,7 @@ from widgets.render import (  # noqa: E402
     screen_positions,
     to_pyvista,
 )
+from widgets.rendering.convert import polygon_cell_array as _polygon_cell_array  # noqa: E402
 from workbench import BlendShape, FaceModel, ModelMetadata, load_sample  # noqa: E402
 from workbench.core.polygons import Polygons  # noqa: E402
 from workbench.geometry.normals import vertex_normals  # noqa: E402
