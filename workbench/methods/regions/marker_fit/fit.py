@@ -49,7 +49,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
-from workbench.methods.regions.blend import _mute, _vertex_ids, bounded_lsq
+from workbench.methods.regions.blend.evaluate import _mute, _vertex_ids
+from workbench.methods.regions.blend.lsq import bounded_lsq
 from workbench.methods.regions.hierarchy import RegionError, Regions
 from workbench.methods.regions.marker_fit.rbf import KERNELS, RBFResidual, _ro
 from workbench.methods.regions.marker_fit.result import MarkerFit

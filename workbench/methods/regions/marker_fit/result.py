@@ -8,7 +8,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from workbench.methods.regions.blend import RegionWeights, _mute
+from workbench.methods.regions.blend.evaluate import _mute
+from workbench.methods.regions.blend.weights import RegionWeights
 from workbench.methods.regions.hierarchy import Regions
 from workbench.methods.regions.marker_fit.rbf import RBFResidual
 from workbench.methods.regions.segmentation import component_roles

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from workbench.methods.regions.blend import _mute, _vertex_ids
+from workbench.methods.regions.blend.evaluate import _mute, _vertex_ids
 from workbench.methods.regions.hierarchy import RegionError
 from workbench.methods.regions.marker_fit.rbf import _ro
 
