@@ -406,10 +406,12 @@ def test_fast_interaction_draws_a_draft_then_the_full_face(open_notebook):
     frame, drafts = nb.frame(), int(vp.get_attribute("data-draft-frame") or 0)
     nb.kernel_eval('model.set_weight("jawOpen", 0.9)')
     nb.wait_frame_after(0, frame)
+    # the draft is drawn at once, the full face a frame or more later (many on a busy machine)
+    wait_until("the full face after the draft", lambda: (vp.get_attribute("data-detail"),
+               sorted(nb.page.evaluate("() => Object.keys(window.__shots || {})"))),
+               lambda v: v == ("full", ["draft", "full"]), timeout=30)
     assert int(vp.get_attribute("data-draft-frame")) > drafts
-    assert vp.get_attribute("data-detail") == "full"
     shots = nb.page.evaluate("() => window.__shots")
-    assert set(shots) == {"draft", "full"}, set(shots)
     draft, full = _png(shots["draft"]), _png(shots["full"])
     moved = pixel_change(before, full)
     assert moved > 0.01, f"the jaw moved only {moved:.1%} of the canvas"

@@ -136,6 +136,11 @@ def test_the_sliders_ignore_the_browsers_snapped_echo_of_off_grid_weights() -> N
         panel.grouper.flush()
         assert model.weights["jawOpen"] == pytest.approx(0.2712)
         assert len(model.history.undo_labels) == n
+        # ... and the slider is sent the model's value again: a page that dropped 0.2712 (it
+        # waited for the echo of its own 0.23) would otherwise keep showing 0.23
+        assert panel.sliders["jawOpen"].value == pytest.approx(0.2712)
+        panel.sliders["jawOpen"].value = 0.27  # the page's echo of that: in step, nothing more
+        assert panel.sliders["jawOpen"].value == 0.27 and model.weights["jawOpen"] == pytest.approx(0.2712)
         # a real drag still works, also back to a value the model sent before
         panel.sliders["jawOpen"].value = 0.5
         panel.sliders["jawOpen"].value = 0.23

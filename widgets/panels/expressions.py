@@ -49,7 +49,7 @@ from typing import Any
 import ipywidgets as W
 import traitlets
 
-from widgets._threading import InteractionGrouper, close_interactions
+from widgets._threading import InteractionGrouper, close_interactions, ui_loop
 from widgets.panels.base import ModelPanel
 
 GROUPS = ("brows", "eyes", "cheeks", "nose", "mouth", "jaw", "tongue", "other")
@@ -256,6 +256,7 @@ class ExpressionPanel(ModelPanel):
             if name not in model.weights or abs(model.weights[name] - value) < 1e-9:
                 return  # an echo of a model update, or a shape that went away
         if self._is_echo(name, value):
+            self._resend_if_stale(name, value)
             return
         self._sent.pop(name, None)  # the person moves this slider now: older values are not echoes
         self.selected = name
@@ -292,6 +293,37 @@ class ExpressionPanel(ModelPanel):
             return False
         step = float(self.sliders[name].step or 0.0)
         return any(abs(v - value) <= 0.5 * step + 1e-9 for v in sent)
+
+    def _resend_if_stale(self, name: str, value: float) -> None:
+        """An echo of an older value (the model moved on): show the model's value in the page again.
+
+        The page drops a value the kernel sends while it still waits for the echo
+        of its own last message for that trait (ipywidgets' echo protocol), so a
+        snapped echo that crosses the model's next value (the last frame of
+        playback) would leave the page on the older value. The kernel then sends
+        the model's value again; the page's echo of that one is within half a
+        step of the model, which ends it.
+        """
+        current = self._model.weights.get(name)
+        slider = self.sliders.get(name)
+        if current is None or slider is None:
+            return
+        if abs(current - value) <= 0.5 * float(slider.step or 0.0) + 1e-9:
+            return  # the echo of the model's current value: in step
+
+        def resend() -> None:
+            now = self._model.weights.get(name)
+            s = self.sliders.get(name)
+            if now is None or s is None or abs(float(s.value) - now) <= 0.5 * float(s.step or 0.0) + 1e-9:
+                return
+            self._sent.setdefault(name, deque(maxlen=8)).append(float(now))
+            s.value = now  # the slider holds the page's stale value: this is a change, and is sent
+
+        loop = ui_loop()
+        if loop is None:
+            resend()
+        else:
+            loop.call_soon(resend)  # after the update that brought the echo has been applied
 
     # ------------------------------------------------------- model -> UI
     def _on_model_weights(self, values: Mapping[str, float]) -> None:
