@@ -15,22 +15,16 @@ import ipywidgets as W
 import traitlets
 
 from widgets._threading import ErrorSink, UiScheduler, close_interactions
-from widgets.capture import CapturePanel
-from widgets.enhance import EnhancePanel
 from widgets.gallery import ExpressionGallery
-from widgets.panels import ExportPanel, ExpressionPanel, PaintPanel, SculptPanel, UndoRedoButtons
-from widgets.panels.shape_tools import ShapeToolsPanel
-from widgets.regions import RegionsPanel
+from widgets.panels import ExpressionPanel, UndoRedoButtons
+from widgets.tabs import TabSpec, tab_specs
 from widgets.timeline import TimelineWidget
 from widgets.viewport import Viewport
-from widgets.wrinkles import WrinklePanel
 
 __all__ = ["PALETTE_COLUMNS", "PALETTE_THUMB_SIZE", "TAB_TITLES", "Workbench", "show_workbench"]
 
-#: tab titles, in order, and the viewport tool each tab selects
-TAB_TITLES = ("Shapes", "Sculpt", "Regions", "Paint", "Export", "Capture", "Enhance")
-_TAB_TOOLS = ("orbit", "sculpt", "orbit", "paint", "orbit", "orbit", "orbit")
-_SHAPES, _SCULPT, _REGIONS, _PAINT, _EXPORT, _CAPTURE = range(6)
+#: the registered tabs' titles, in order (:mod:`widgets.tabs`)
+TAB_TITLES = tuple(spec.title for spec in tab_specs())
 #: thumbnail size and columns of the expression palette (Paint tab, timeline chips)
 PALETTE_THUMB_SIZE = (72, 72)
 PALETTE_COLUMNS = 7
@@ -122,60 +116,26 @@ class Workbench(W.VBox):
         # the page plays the shape sliders at once (GPU path), before the kernel answers
         self.viewport.follow_sliders(self.panel.sliders)
         self.panel.observe(lambda _ch: self.viewport.follow_sliders(self.panel.sliders), "sliders_version")
-        # under the sliders: split / mirror / correctives, following the last slider touched
-        self.shape_tools = ShapeToolsPanel(
-            model,
-            self.viewport,
-            sliders=self.panel,
-            errors=self.errors,
-            before_edit=[self.panel.grouper.flush],
-        )
-        self._shapes_tab = W.VBox([self.panel, self.shape_tools], layout=W.Layout(width="100%"))
-        self._shapes_tab.add_class("fwb-shapes-tab")
-        self.sculpt = SculptPanel(
-            model, self.viewport, errors=self.errors, before_edit=[self.panel.grouper.flush]
-        )
-        self.wrinkles = WrinklePanel(
-            model,
-            self.viewport,
-            errors=self.errors,
-            before_edit=[self.panel.grouper.flush],
-        )
-        self._sculpt_tab = W.VBox([self.sculpt, self.wrinkles], layout=W.Layout(width="100%"))
-        self._sculpt_tab.add_class("fwb-sculpt-tab")
         self.timeline = TimelineWidget(model, errors=self.errors)
-        self.export = ExportPanel(model, errors=self.errors)
-        self.capture = CapturePanel(
-            model,
-            self.viewport,
-            errors=self.errors,
-            before_edit=[self.panel.grouper.flush],
-            selected_keys=lambda: self.timeline.selected_keys,
-        )
-        self.enhance = EnhancePanel(
-            model,
-            errors=self.errors,
-            before_edit=[self.panel.grouper.flush],
-            selected_keys=lambda: self.timeline.selected_keys,
-            capture_result=lambda: self.capture.result,
-        )
-        self._regions: RegionsPanel | None = None
-        self._switching = False
-        self._paint: PaintPanel | None = None
         self._gallery: ExpressionGallery | None = None
-        self._regions_slot = W.VBox([W.HTML("<i>finding the blend regions ...</i>")])
-        self._paint_slot = W.VBox([W.HTML("<i>building the expression palette ...</i>")])
+        self._switching = False
+        # the tabs, from the registry: eager ones built now, lazy ones when shown or read
+        self.tab_specs: tuple[TabSpec, ...] = tab_specs()
+        #: every built panel by attribute name (``wb.regions`` reads it)
+        self.panels: dict[str, Any] = {}
+        self._built: set[str] = set()
+        self._slots: dict[str, W.VBox] = {}
+        children = []
+        for spec in self.tab_specs:
+            if spec.lazy:
+                slot = W.VBox([W.HTML(f"<i>{spec.lazy}</i>")])
+                self._slots[spec.title] = slot
+                children.append(slot)
+            else:
+                children.append(self._build_tab(spec))
         self.tabs = W.Tab(
-            children=[
-                self._shapes_tab,
-                self._sculpt_tab,
-                self._regions_slot,
-                self._paint_slot,
-                self.export,
-                self.capture,
-                self.enhance,
-            ],
-            titles=TAB_TITLES,
+            children=children,
+            titles=[spec.title for spec in self.tab_specs],
             layout=W.Layout(flex="0 0 650px", width="650px"),
         )
         self.tabs.add_class("fwb-tabs")
@@ -205,9 +165,11 @@ class Workbench(W.VBox):
         )
         self.status = W.HTML()
         self.status.add_class("fwb-wb-status")
-        # the Enhance tab's Enhanced preview box, shown over the viewport too (one widget, two views)
+        # what the (built) tabs show over the viewport too, e.g. the Enhanced preview box (one widget, two views)
+        extra = [w for spec in self.tab_specs if spec.topbar is not None and spec.title in self._built
+                 for w in spec.topbar(self)]
         top = W.HBox(
-            [self.undo_button, self.redo_button, self.wireframe, self.enhance.preview, self.status],
+            [self.undo_button, self.redo_button, self.wireframe, *extra, self.status],
             layout=W.Layout(width="100%", align_items="center", grid_gap="6px"),
         )
         top.add_class("fwb-topbar")
@@ -239,19 +201,32 @@ class Workbench(W.VBox):
         self.update_status()
         self._schedule_gallery()
 
-    # ------------------------------------------------------------ lazy panels
-    @property
-    def regions(self) -> RegionsPanel:
-        """The Regions tab's :class:`RegionsPanel` (built on first use)."""
-        if self._regions is None:
-            self._regions = RegionsPanel(
-                self.model,
-                self.viewport,
-                errors=self.errors,
-                before_edit=[self.panel.grouper.flush],
-            )
-            self._regions_slot.children = [self._regions]
-        return self._regions
+    # ------------------------------------------------------------ tabs and their panels
+    def _build_tab(self, spec: TabSpec) -> Any:
+        widget, panels = spec.build(self)
+        self.panels.update(panels)
+        self._built.add(spec.title)
+        return widget
+
+    def _ensure_built(self, spec: TabSpec) -> None:
+        if spec.title not in self._built:
+            self._slots[spec.title].children = [self._build_tab(spec)]
+
+    def panel_built(self, name: str) -> bool:
+        """Whether the tab holding panel ``name`` (``"regions"``) has been built yet."""
+        return name in self.panels
+
+    def __getattr__(self, name: str) -> Any:
+        # a tab's panel by name (wb.regions, wb.paint, wb.capture ...): a lazy tab is built on first read
+        if not name.startswith("_") and "tab_specs" in self.__dict__:
+            panels = self.__dict__["panels"]
+            if name in panels:
+                return panels[name]
+            for spec in self.__dict__["tab_specs"]:
+                if name in spec.attrs:
+                    self._ensure_built(spec)
+                    return panels[name]
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
 
     @property
     def gallery(self) -> ExpressionGallery:
@@ -282,20 +257,6 @@ class Workbench(W.VBox):
 
         loop.call_soon(self.sink.guard("rendering the expression thumbnails")(build))
 
-    @property
-    def paint(self) -> PaintPanel:
-        """The Paint tab's :class:`PaintPanel` (built on first use)."""
-        if self._paint is None:
-            self._paint = PaintPanel(
-                self.model,
-                self.gallery,
-                viewport=self.viewport,
-                errors=self.errors,
-                before_edit=[self.panel.grouper.flush],
-            )
-            self._paint_slot.children = [self._paint]
-        return self._paint
-
     # ------------------------------------------------------------ tabs <-> tool
     def _on_tab(self, change: dict) -> None:
         self._switching = True  # tool changes made here must not move the tab again
@@ -305,42 +266,36 @@ class Workbench(W.VBox):
             self._switching = False
 
     def _switch_tab(self, old: int | None, new: int | None) -> None:
-        if old == _SHAPES:
-            self.shape_tools.end_preview()  # the split preview's colours belong to the Shapes tab
-        if old == _REGIONS and self._regions is not None:
-            # First: leaving drag mode gives the viewport its previous tool back.
-            self._regions.deactivate()
-        if old == _SCULPT:
-            # The wrinkle eraser's strokes belong to the Sculpt tab (the Paint tab paints).
-            self.wrinkles.stop_erasing()
-        if old == _CAPTURE:
-            self.capture.hide_points()  # the take's points belong to the Capture tab
-        if new is None or not 0 <= new < len(_TAB_TOOLS):
+        specs = self.tab_specs
+        if old is not None and 0 <= old < len(specs):
+            spec = specs[old]
+            if spec.on_hide is not None and spec.title in self._built:
+                spec.on_hide(self)
+        if new is None or not 0 <= new < len(specs):
             return
-        self.viewport.tool = _TAB_TOOLS[new]
-        if new == _REGIONS:
-            try:
-                self.regions.activate()
-            except Exception as exc:
-                self.sink.report("building the Regions panel", exc)
-        elif new == _PAINT:
-            try:
-                self.paint  # noqa: B018 - builds the panel
-            except Exception as exc:
-                self.sink.report("building the Paint panel", exc)
-        elif new == _CAPTURE:
-            self.capture.show_frame()
+        spec = specs[new]
+        self.viewport.tool = spec.tool
+        try:
+            self._ensure_built(spec)
+            if spec.on_show is not None:
+                spec.on_show(self)
+        except Exception as exc:
+            self.sink.report(f"building the {spec.title} tab", exc)
 
     def _on_tool(self, change: dict) -> None:
-        # The tool changed from elsewhere (front end, code, Regions' drag mode):
-        # follow it with the tab, unless the current tab already explains it.
+        # The tool changed from elsewhere (front end, code, a tab's own mode): follow
+        # it with the tab, unless the current tab already explains it.
         i = self.tabs.selected_index
-        if self._switching or i == _REGIONS or (i is not None and _TAB_TOOLS[i] == change["new"]):
+        specs = self.tab_specs
+        if self._switching or i is None or not 0 <= i < len(specs):
             return
-        if i == _SCULPT and change["new"] == "paint" and self.wrinkles.erasing:
-            return  # the wrinkle eraser brushes with the paint tool in the Sculpt tab
-        if change["new"] in _TAB_TOOLS:
-            self.tabs.selected_index = _TAB_TOOLS.index(change["new"])
+        spec = specs[i]
+        if spec.tool == change["new"] or (spec.owns_tool is not None and spec.owns_tool(self, change["new"])):
+            return
+        for j, other in enumerate(specs):
+            if other.tool == change["new"]:
+                self.tabs.selected_index = j
+                return
 
     # ------------------------------------------------------------ undo / redo
     def undo(self) -> str | None:
@@ -419,17 +374,11 @@ class Workbench(W.VBox):
         self._wireframe_link.unlink()
         if self._cb_drag in self.viewport.drag_listeners:
             self.viewport.drag_listeners.remove(self._cb_drag)
-        if self._regions is not None:
-            self._regions.deactivate()
-            self._regions.close()
-        if self._paint is not None:
-            self._paint.close()
-        self.wrinkles.close()
-        self.sculpt.close()
-        self.export.close()
-        self.capture.close()
-        self.enhance.close()
-        self.shape_tools.close()
+        for spec in self.tab_specs:
+            if spec.close is not None and spec.title in self._built:
+                spec.close(self)
+        for panel in self.panels.values():
+            panel.close()
         self.timeline.close()
         if self._gallery is not None:
             self._gallery.close()

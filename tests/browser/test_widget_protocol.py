@@ -485,9 +485,9 @@ def test_paint_watchdog_ends_an_abandoned_stroke(monkeypatch):
 def test_paint_panel_brush_links_blends_save_and_bake():
     m = _grid()
     wb = widgets.Workbench(m)
-    assert wb._paint is None  # built lazily
+    assert not wb.panel_built("paint")  # built lazily
     wb.tabs.selected_index = widgets.TAB_TITLES.index("Paint")
-    assert wb.viewport.tool == "paint" and wb._paint is not None
+    assert wb.viewport.tool == "paint" and wb.panel_built("paint")
     p, vp = wb.paint, wb.viewport
     # brush controls drive the viewport's brush
     p.radius.value, p.opacity.value, p.falloff.value = 0.6, 0.25, "linear"

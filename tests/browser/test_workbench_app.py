@@ -20,7 +20,7 @@ _ERRORS = """
 import json
 print(json.dumps({"errors": [o.get("text", "") for o in wb.errors.outputs],
                   "tool": wb.viewport.tool, "tab": wb.tabs.selected_index,
-                  "regions_active": bool(wb._regions is not None and wb._regions._active)}))
+                  "regions_active": bool(wb.panel_built("regions") and wb.regions.active)}))
 """
 
 #: tab title -> (viewport tool, a selector inside the tab's panel that must become visible)

@@ -56,10 +56,10 @@ def test_exports_the_tool_widgets() -> None:
 
 def test_tabs_exist_and_heavy_panels_wait_for_their_tab(wb: Workbench) -> None:
     assert tuple(wb.tabs.titles) == ("Shapes", "Sculpt", "Regions", "Paint", "Export", "Capture", "Enhance")
-    assert wb._regions is None and wb._paint is None
+    assert not wb.panel_built("regions") and not wb.panel_built("paint")
     assert wb.timeline in wb.children[1].children[0].children  # under the viewport
     _select(wb, "Regions")
-    assert wb._regions is not None and wb._paint is None
+    assert wb.panel_built("regions") and not wb.panel_built("paint")
     assert wb.tabs.children[2].children == (wb.regions,)
 
 
@@ -69,7 +69,7 @@ def test_tabs_set_the_viewport_tool(wb: Workbench) -> None:
     _select(wb, "Export")
     assert wb.viewport.tool == "orbit"
     _select(wb, "Paint")
-    assert wb.viewport.tool == "paint" and wb._paint is not None
+    assert wb.viewport.tool == "paint" and wb.panel_built("paint")
     _select(wb, "Shapes")
     assert wb.viewport.tool == "orbit"
     assert wb.tabs.selected_index == 0

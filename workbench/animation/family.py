@@ -113,6 +113,7 @@ FAMILY = register_family(
         slots=(SlotSpec("tracks", lambda m: Timeline(), deforms=True, check=check_timeline),),
         facet=TimelineFacet,
         order=90,
+        tab="widgets.tabs.export",
         file_part=TracksFilePart(),
     )
 )

@@ -12,4 +12,4 @@ from __future__ import annotations
 from workbench.capture.facet import CaptureFacet
 from workbench.core.families import Family, register_family
 
-FAMILY = register_family(Family(name="capture", facet=CaptureFacet, order=95))
+FAMILY = register_family(Family(name="capture", facet=CaptureFacet, order=95, tab="widgets.tabs.capture"))

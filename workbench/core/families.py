@@ -14,6 +14,8 @@ rigging, capture, enhancement) lives in its own folder and registers one
 * ``file_part`` — its part of the saved ``.fwb`` file (:class:`FilePart`);
 * ``animate`` — how a timeline sample sets its slots (see
   :meth:`FaceState.evaluate_at`);
+* ``tab`` — optionally, the module (in a UI package) that registers its tab of
+  the Workbench (:mod:`widgets.tabs`);
 * ``tracks`` — the timeline tracks it keys (name and value shape); its
   ``animate`` reads them from the sample (``sample.others``);
 * ``weight_products`` — shapes whose weight is not set or keyed but derived:
@@ -136,6 +138,8 @@ class Family:
     #: timeline tracks it keys: ``{name: value_shape(model, track) -> shape}`` (a name ending in
     #: "/" is a prefix); ``value_shape`` raises ``ModelError`` when the model cannot take the track
     tracks: Mapping[str, Callable[[FaceState, str], tuple[int, ...]]] = field(default_factory=dict)
+    #: optional: the module that registers its Workbench tab (imported by the widgets, never by the core)
+    tab: str = ""
     extra: Mapping[str, Any] = field(default_factory=dict)
 
 

@@ -21,5 +21,6 @@ FAMILY = register_family(
         facet=EnhanceFacet,
         layer=EnhanceLayer,
         order=96,
+        tab="widgets.tabs.enhance",
     )
 )

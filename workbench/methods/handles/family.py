@@ -106,6 +106,7 @@ FAMILY = register_family(
         facet=HandlesFacet,
         layer=HandleLayer,
         order=20,
+        tab="widgets.tabs.sculpt",
         file_part=HandlesFilePart(),
         animate=animate,
         tracks={"handles": handles_track_shape},

@@ -158,6 +158,7 @@ PAINT = register_family(
         facet=PaintFacet,
         layer=PaintLayer,
         order=30,
+        tab="widgets.tabs.paint",
         file_part=PaintFilePart(),
     )
 )

@@ -222,6 +222,7 @@ FAMILY = register_family(
         facet=RegionsFacet,
         layer=RegionLayer,
         order=10,
+        tab="widgets.tabs.regions",
         file_part=RegionsFilePart(),
         animate=animate,
         tracks={"regions/": region_track_shape},

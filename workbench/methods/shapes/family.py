@@ -88,6 +88,7 @@ FAMILY = register_family(
         slots=(SlotSpec("correctives", lambda m: Correctives(), deforms=True, check=check_correctives),),
         facet=ShapeToolsFacet,
         order=5,
+        tab="widgets.tabs.shapes",
         file_part=CorrectivesFilePart(),
         weight_products=WeightProducts(reads=("correctives",), rules=corrective_rules),
     )
