@@ -297,12 +297,13 @@ class ExpressionPanel(ModelPanel):
     def _resend_if_stale(self, name: str, value: float) -> None:
         """An echo of an older value (the model moved on): show the model's value in the page again.
 
-        The page drops a value the kernel sends while it still waits for the echo
-        of its own last message for that trait (ipywidgets' echo protocol), so a
-        snapped echo that crosses the model's next value (the last frame of
-        playback) would leave the page on the older value. The kernel then sends
-        the model's value again; the page's echo of that one is within half a
-        step of the model, which ends it.
+        The kernel answers every value a page sends with an ``echo_update`` of
+        it, which the page applies (ipywidgets 8's echo protocol,
+        ``WidgetModel._handle_comm_msg``), so the page's snapped echo of a
+        playback frame that crosses the model's next value (the last frame)
+        lands after it and leaves the page on the older value. The kernel then
+        sends the model's value again; the page's echo of that one is within
+        half a step of the model, which ends it.
         """
         current = self._model.weights.get(name)
         slider = self.sliders.get(name)
