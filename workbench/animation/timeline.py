@@ -42,6 +42,7 @@ from workbench.animation.curves import (
 )
 from workbench.animation.tracks import Timeline, add_keys
 from workbench.core.families import (
+    families,
     track_names,
     track_value_shape,
     weight_product_reads,
@@ -469,16 +470,12 @@ class TimelineFacet:
         same = np.array_equal(expr.handle_vertices, h.vertices)
         if not same and np.any(expr.handle_offsets):
             return False
-        from workbench.methods.paint.painting import PaintMix
-        from workbench.methods.regions.blend import RegionState
-
         weights = {s.name: min(max(expr.weights.get(s.name, 0.0), s.slider_min), s.slider_max) for s in m.shapes}
         slots = dict(m.view().slots)
         slots["handles"] = dataclasses.replace(h, offsets=expr.handle_offsets if same else np.zeros_like(h.offsets))
-        regions = slots.get("regions")
-        if isinstance(regions, RegionState) and regions.weights is not None:
-            slots["regions"] = RegionState(regions.regions, regions.level, None)
-        slots["paint_layers"] = PaintMix()
+        for fam in families():  # what a recipe does not record is off (painting, region weights)
+            if fam.recipe_slots is not None:
+                slots.update(fam.recipe_slots(slots))
         versions = {name: -1 - i for i, name in enumerate(("shapes", "weights", *slots))}
         view = StateView(m, weights, slots, versions, m.time)
         played = m.pipeline.run(view, cache=False).mesh - m.vertices32

@@ -140,6 +140,9 @@ class Family:
     tracks: Mapping[str, Callable[[FaceState, str], tuple[int, ...]]] = field(default_factory=dict)
     #: optional: the module that registers its Workbench tab (imported by the widgets, never by the core)
     tab: str = ""
+    #: optional: ``recipe_slots(slots) -> {slot: value}``: its slots as a saved expression's recipe
+    #: (weights and handle offsets) plays back, without the edits a recipe does not record
+    recipe_slots: Callable[[Mapping[str, Any]], Mapping[str, Any]] | None = None
     extra: Mapping[str, Any] = field(default_factory=dict)
 
 

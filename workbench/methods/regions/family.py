@@ -206,6 +206,14 @@ def animate(view: StateView, sample: Any) -> dict[str, Any]:
     return {"regions": RegionState(st.regions, st.level, rw)}
 
 
+def recipe_slots(slots: Mapping[str, Any]) -> dict[str, Any]:
+    """A recipe records no region weights: the regions without them."""
+    st = slots.get("regions")
+    if isinstance(st, RegionState) and st.weights is not None:
+        return {"regions": RegionState(st.regions, st.level, None)}
+    return {}
+
+
 def region_track_shape(model: FaceState, track: str) -> tuple[int, ...]:
     """``"regions/<level>/<region>"`` keys (k,) shape weights inside one region."""
     from workbench.animation.curves import parse_region_track
@@ -226,5 +234,6 @@ FAMILY = register_family(
         file_part=RegionsFilePart(),
         animate=animate,
         tracks={"regions/": region_track_shape},
+        recipe_slots=recipe_slots,
     )
 )
