@@ -1,57 +1,47 @@
 """What every exporter writes: ``model.evaluate_at(t)`` split into linear parts and baked layers.
 
-:meth:`FaceModel.evaluate` is the blend plus the editing layers (``regions``,
-``handles``, ``paint``, and any layer registered later, e.g. wrinkles).
-The three built-in layers are linear in the animated quantities — the
-weights ``g(t)`` and the handle offsets ``o(t)`` — so with
+:meth:`FaceModel.evaluate` is the blend plus every registered layer. Each
+layer says what it is (:mod:`workbench.core.linear`): a linear one gives its
+gain (the share of the motion below it each vertex keeps), its constant and
+its keyed linear controls, so with ``Δ_k`` the effective (masked) delta of
+shape ``k`` (muted shapes at weight 0, keyed weights clamped to the slider
+range as :meth:`FaceModel.set_time` does), :func:`workbench.core.linear.decompose`
+composes them in pipeline order into::
 
-* ``Δ_k`` the effective (masked) delta of shape ``k``, muted shapes at weight 0,
-  keyed weights clamped to the slider range (as :meth:`FaceModel.set_time` does);
-* **regions** (:func:`workbench.methods.regions.blend.region_layer`): with region
-  weights ``w_rk`` on the shown level and memberships ``W_r(v)``, the layer is
-  ``Σ_r W_r Σ_k (w_rk − g_k) Δ_k = C_R − S_R Σ_k g_k Δ_k`` with the constant
-  ``C_R = Σ_k (Σ_r W_r w_rk) Δ_k`` and the coverage ``S_R = Σ_r W_r``;
-* **handles** (:class:`workbench.methods.handles.layer.HandleLayer`): ``D(o) = B o``,
-  linear in the offsets (:mod:`workbench.methods.handles.shell`);
-* **paint** (:class:`workbench.methods.paint.painting.PaintLayer`): with painted maps ``W_e``
-  and expression displacements ``D_e`` the layer is
-  ``Σ_e W_e (D_e − base)``, ``base = blended − neutral + R + D(o)`` with ``R``
-  the region layer (the layers below the paint), i.e.
-  ``C_P − P (Σ_k g_k Δ_k + R + D(o))`` with ``C_P = Σ_e W_e D_e``, ``P = Σ_e W_e``;
+    x(t) = neutral + C + Σ_k g_k(t) G Δ_k + Σ_c G_c A_c(u_c(t)) + Σ_b G_b N_b(t)
 
-the mesh at time ``t`` before the head pose is exactly::
-
-    x(t) = neutral + C + Σ_k g_k(t) (1 − P)(1 − S_R) Δ_k + (1 − P) D(o(t)) + N(t)
-
-with the constant ``C = (1 − P) C_R + C_P`` and ``N(t)`` the sum of every other
-layer. That is what :class:`MeshEncoding` holds:
+``G`` the product of every linear layer's gain, ``C`` the constants (each
+times the gains of the layers above it), ``A_c`` a controls layer's linear
+map of its keyed parameters ``u_c`` (the handle shell of the offsets),
+``N_b(t)`` a baked layer's own displacement and ``G_c``, ``G_b`` the gains of
+the linear layers above them. The layers' own docstrings give their terms
+(the region blend: constant ``Σ_k (Σ_r W_r w_rk) Δ_k``, gain ``1 − Σ_r W_r``;
+painted expressions: constant ``Σ_e W_e D_e``, gain ``1 − Σ_e W_e``). That is
+what :class:`MeshEncoding` holds:
 
 ``shape_targets``
-    ``(1 − P)(1 − S_R) Δ_k``, one per shape, driven by the shape's own weight.
+    ``G Δ_k``, one per shape, driven by the shape's own weight.
 ``static``
-    ``C`` plus ``(1 − P) D(o)`` when the handles are not keyed: one target at
-    weight 1 (instead of one per handle and axis).
-``handle_targets``
-    When the handles are keyed: the key values and tangents of the handle
-    track span a subspace of the ``3h`` offsets; with an orthonormal basis
-    ``q_i`` of it (SVD; usually a few vectors, at most ``3 × keys``),
-    ``o(t) = Σ_i a_i(t) q_i`` and ``a_i(t) = q_i · o(t)`` is the same
-    piecewise cubic/linear/step curve as the keys (any interpolation carries
-    over exactly). Each ``a_i`` is mapped affinely onto ``[0, 1]`` over its
-    exact range (extremes of every Bézier segment included), the offset going
-    into ``static``, so consumers that clamp morph weights to ``[0, 1]``
-    (Blender) play it too. Target ``i`` is ``(hi_i − lo_i)(1 − P) D(q_i)``.
+    ``C`` plus ``G_c A_c(u_c)`` of controls that are not keyed: one target at
+    weight 1 (instead of one per parameter).
+``controls``
+    Per controls layer whose parameters are keyed (:class:`EncodedControls`):
+    the key values and tangents of its track span a subspace of the
+    parameters; with an orthonormal basis ``q_i`` of it (SVD; usually a few
+    vectors, at most ``3 × keys``), ``u(t) = Σ_i a_i(t) q_i`` and
+    ``a_i(t) = q_i · u(t)`` is the same piecewise cubic/linear/step curve as
+    the keys (any interpolation carries over exactly). Each ``a_i`` is mapped
+    affinely onto ``[0, 1]`` over its exact range (extremes of every Bézier
+    segment included), the offset going into ``static``, so consumers that
+    clamp morph weights to ``[0, 1]`` (Blender) play it too. Target ``i`` is
+    ``(hi_i − lo_i) G_c A_c(q_i)``, named ``"<prefix>:basis<i>"``.
 ``baked_layers``
-    Layers that are not the model's own region/handle/paint layer (wrinkles,
-    anything registered later, or a built-in replaced by another provider):
-    not linear in the keyed quantities, so each format bakes their sum
-    ``N(t)`` per frame (:meth:`baked`, through :meth:`FaceModel.layers_at`).
-    A baked sum that is the same at every frame is folded into ``static``.
-    The region layer joins them when the timeline keys region weights
-    (``"regions/<level>/<region>"`` tracks, e.g. a keyed marker fit): then
-    ``w_rk(t)`` varies, ``C_R`` is no constant target, and the layer
-    ``Σ_r W_r Σ_k (w_rk(t) − g_k(t)) Δ_k`` is baked per frame, times ``1 − P``
-    (the shape targets are then not scaled by ``1 − S_R``). Its report says so.
+    Layers that are not linear in the keyed quantities (pose-space wrinkles,
+    anything that does not describe itself), and linear ones that say a
+    timeline makes them so (keyed region weights): each format bakes their sum
+    ``Σ_b G_b N_b(t)`` per frame (:meth:`baked`, through
+    :meth:`FaceModel.layers_at`). A baked sum that is the same at every frame
+    is folded into ``static``. Their reports say why.
 
 **Corrective (combination) shapes** (:mod:`workbench.methods.shapes.correctives`)
 are ordinary shape targets whose weight is not keyed but derived: the product
