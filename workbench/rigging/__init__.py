@@ -8,6 +8,17 @@
   from the transfer.
 * :func:`refine_rig` / :class:`RefineResult` — example-based refinement (Li et
   al. 2010 §3, :mod:`workbench.rigging.refine`), imported on first use.
+* :class:`RigSession` — the Rig tab's state: landmarks, examples and the three
+  stages, each one undo step of the session's own history.
+
+Rigging is a library, not a method family (:mod:`workbench.core.families`),
+on purpose: a family adds state, a layer and edits to *one* face, while
+rigging reads two faces (template and target) and *makes* a third, the rigged
+target, whose shapes every family then works on. Its stages are undoable in
+the :class:`RigSession` that holds them (never modified: the template and the
+target; the result is a new model), so nothing of it belongs in a model's
+slots, file part or pipeline, and the rigged model carries no trace of how it
+was made beyond its metadata.
 """
 
 from __future__ import annotations
