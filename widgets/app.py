@@ -261,7 +261,10 @@ class Workbench(W.VBox):
     def _on_tab(self, change: dict) -> None:
         self._switching = True  # tool changes made here must not move the tab again
         try:
-            self._switch_tab(change["old"], change["new"])
+            # the page gets the tool the switch ends with, not the tab's default on the way
+            # (Regions in drag mode: orbit, then sculpt) - one message, no flicker
+            with self.viewport.hold_sync():
+                self._switch_tab(change["old"], change["new"])
         finally:
             self._switching = False
 

@@ -209,11 +209,21 @@ def test_random_actions_keep_page_and_kernel_in_step(open_notebook, cpu_hogs) ->
     done: list[str] = []
 
     def goto(title: str, tool: str) -> None:
+        """Click the tab; wait until the kernel has switched (its tool) and the page shows that tool.
+
+        (The page's tool alone is no sign: coming from Sculpt to Regions in drag mode
+        it is "sculpt" before the switch, then "orbit" for a moment, then "sculpt".)
+        """
         nonlocal tab
         if tab != title:
             if title == "Regions" and nb.kernel_eval("print(json.dumps(wb.regions.drag_mode.value))"):
                 tool = "sculpt"  # its drag mode comes back on with the tab
-            _tab(nb, title, tool)
+            page.locator(".fwb-tabs .lm-TabBar-tab", has_text=title).click()
+            wait_until(f"the {title} tab in the kernel", lambda: nb.kernel_eval(
+                "print(json.dumps([wb.tab_specs[wb.tabs.selected_index].title, wb.viewport.tool]))"),
+                lambda v: v == [title, tool], timeout=60)
+            page.wait_for_function(
+                "(t) => document.querySelector('.fwb-viewport').getAttribute('data-tool') === t", arg=tool)
             tab = title
 
     def top() -> None:
@@ -266,7 +276,7 @@ def test_random_actions_keep_page_and_kernel_in_step(open_notebook, cpu_hogs) ->
             depth, redo, what = depth + 1, 0, f"{what} handle {k}"
         elif action == "pin":
             goto("Regions", "orbit")
-            if vp.get_attribute("data-tool") != "sculpt":  # drag mode stays on while the tab is shown
+            if not nb.kernel_eval("print(json.dumps(wb.regions.drag_mode.value))"):  # it stays on with the tab
                 page.locator(".fwb-region-drag").click()
                 n_pins = nb.kernel_eval("print(json.dumps(len(wb.regions.pins)))")
                 page.wait_for_function(
