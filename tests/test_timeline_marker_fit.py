@@ -1,6 +1,6 @@
 """A marker fit (Joshi et al. 2003 §3) keyed on the timeline: region-weight tracks.
 
-``FaceModel.key_marker_fit`` keys the fitted global weights and every region's
+``model.regions.key_marker_fit`` keys the fitted global weights and every region's
 weights per frame; the model then plays the fit (without its RBF residual) in
 ``evaluate_at``, ``set_time``/``evaluate``, the file and the exports.
 """
@@ -45,7 +45,7 @@ def fitted() -> tuple[FaceModel, MarkerFit]:
 def test_keyed_fit_plays_back_the_fit_at_every_frame(fitted):
     m, fit = fitted
     regions = m.regions.regions
-    times = m.timeline.key_marker_fit(fit)
+    times = m.regions.key_marker_fit(fit)
     fps = m.tracks.fps
     np.testing.assert_array_equal(times, np.arange(FRAMES) / fps)
     assert m.regions.level == LEVEL
@@ -66,7 +66,7 @@ def test_keyed_fit_plays_back_the_fit_at_every_frame(fitted):
 
 def test_set_time_puts_the_keyed_region_weights_in_the_model(fitted):
     m, fit = fitted
-    m.timeline.key_marker_fit(fit)
+    m.regions.key_marker_fit(fit)
     fps = m.tracks.fps
     seen: list[str] = []
     m.events.regions.connect(lambda: seen.append("regions"))
@@ -85,7 +85,7 @@ def test_key_marker_fit_is_one_undo_step(fitted):
     m, fit = fitted
     before = m.regions
     n_steps = len(m.history.undo_labels)
-    m.timeline.key_marker_fit(fit, start=0.5)
+    m.regions.key_marker_fit(fit, start=0.5)
     assert len(m.history.undo_labels) == n_steps + 1
     assert m.history.undo_labels[-1] == f"Key marker fit ({FRAMES} frames from 0.5s)"
     assert m.undo() == m.history.redo_labels[-1]
@@ -100,7 +100,7 @@ def test_key_marker_fit_is_one_undo_step(fitted):
 
 def test_every_keys_some_frames_and_always_the_last(fitted):
     m, fit = fitted
-    times = m.timeline.key_marker_fit(fit, every=3)
+    times = m.regions.key_marker_fit(fit, every=3)
     fps = m.tracks.fps
     np.testing.assert_allclose(times * fps, [0, 3, 6, 7])
     for tr in m.tracks.tracks.values():
@@ -112,19 +112,19 @@ def test_every_keys_some_frames_and_always_the_last(fitted):
 def test_bad_fits_and_arguments(fitted):
     m, fit = fitted
     with pytest.raises(ModelError, match="every must be an int >= 1"):
-        m.timeline.key_marker_fit(fit, every=0)
+        m.regions.key_marker_fit(fit, every=0)
     with pytest.raises(ModelError, match="fit must be a MarkerFit"):
-        m.timeline.key_marker_fit(fit.region_weights)
+        m.regions.key_marker_fit(fit.region_weights)
     with pytest.raises(ModelError, match="start must be finite"):
-        m.timeline.key_marker_fit(fit, start=float("nan"))
+        m.regions.key_marker_fit(fit, start=float("nan"))
     m.regions.set_level(0)
-    m.timeline.key_marker_fit(fit)  # switches to the fit's level
+    m.regions.key_marker_fit(fit)  # switches to the fit's level
     other = fit_markers(m, m.regions.regions, fit.markers, np.zeros((2, fit.markers.size, 3)) + m.vertices[fit.markers], 0)
     with pytest.raises(ModelError, match="region keys on level 1"):
-        m.timeline.key_marker_fit(other)
+        m.regions.key_marker_fit(other)
     m.add_shape("extra", np.zeros((m.n_vertices, 3)))
     with pytest.raises(ModelError, match="fit was made for 52 shapes"):
-        m.timeline.key_marker_fit(fit)
+        m.regions.key_marker_fit(fit)
     assert m.history.undo_labels[-1] == "Add shape extra"  # nothing recorded by the failures
 
 
@@ -145,7 +145,7 @@ def test_region_tracks_need_regions(tiny_model):
 
 def test_keyed_fit_survives_save_and_load(fitted, tmp_path):
     m, fit = fitted
-    m.timeline.key_marker_fit(fit, every=2)
+    m.regions.key_marker_fit(fit, every=2)
     m.save(tmp_path / "fit.fwb")
     back = load_model(tmp_path / "fit.fwb")
     assert back.regions.state is not None and back.regions.level == LEVEL
@@ -158,7 +158,7 @@ def test_keyed_fit_survives_save_and_load(fitted, tmp_path):
 
 def test_exports_bake_the_keyed_region_weights_and_say_so(fitted, tmp_path):
     m, fit = fitted
-    m.timeline.key_marker_fit(fit)
+    m.regions.key_marker_fit(fit)
     enc = MeshEncoding(m, m.tracks)
     assert enc.baked_layers == ("regions",)
     frames = m.tracks.frame_times()

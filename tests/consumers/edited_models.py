@@ -98,7 +98,7 @@ def fitted_head(n_frames: int = 10) -> FaceModel:
     markers = np.asarray(default_face_handles(m).vertices)
     perf = generate_synthetic_marker_performance(m, markers, n_frames=n_frames, seed=5, noise=0.001)
     fit = fit_markers(m, st.regions, perf.markers, perf.marker_positions, 1)
-    times = m.timeline.key_marker_fit(fit)
+    times = m.regions.key_marker_fit(fit)
     m.timeline.key_head_pose(float(times[0]), head_rotation_from_euler(0, 0, 0), [0, 0, 0], interpolation="linear")
     m.timeline.key_head_pose(float(times[-1]), head_rotation_from_euler(15, -5, 3), [0.05, 0.0, 0.02],
                     interpolation="linear")

@@ -8,8 +8,9 @@ frame by frame. The timeline itself is an immutable
 ``evaluate_at``) is the state's, through the hooks in :mod:`.family`.
 
 Every edit a view makes has a named method here, each one undo step:
-``key_weights`` / ``key_handles`` / ``key_head_pose`` / ``key_expression`` /
-``key_marker_fit`` and ``add_key`` (any track, a given value) add keys;
+``key_weights`` / ``key_handles`` / ``key_head_pose`` / ``key_expression``
+and ``add_key`` (any track, a given value) add keys (a family keys what is its
+own, e.g. ``model.regions.key_marker_fit``);
 ``move_key``, ``delete_key`` / ``delete_keys``, ``set_interpolation`` /
 ``set_interpolations``, ``set_tangents`` and ``set_fps`` edit them. Arguments
 are checked before anything changes, and errors (:class:`ModelError`) name the
@@ -37,10 +38,9 @@ from workbench.animation.curves import (
     TangentMode,
     Track,
     parse_region_track,
-    region_track_name,
     weight_track_name,
 )
-from workbench.animation.tracks import Timeline, add_keys
+from workbench.animation.tracks import Timeline
 from workbench.core.families import (
     families,
     track_names,
@@ -497,66 +497,3 @@ class TimelineFacet:
                 return name
         raise AssertionError("unreachable")  # itertools.count never ends
 
-    # ------------------------------------------------------------- marker fits
-    def key_marker_fit(self, fit: Any, start: float = 0.0, every: int = 1, *,
-                       interpolation: Interpolation = "linear") -> NDArray[np.float64]:
-        """Key a marker fit (Joshi et al. 2003 §3) frame by frame; one undo step; returns the key times.
-
-        Frame ``f`` is keyed at ``start + f / fps``: the fitted global weights of
-        every shape and the fitted weights of every region of ``fit.level``
-        (``"regions/<level>/<region>"``); the model's region level is set to
-        ``fit.level`` in the same undo step. The RBF residual is not keyed (the
-        timeline has no track for a displacement field): use
-        ``fit.positions(model, regions, f)`` per frame when it is needed.
-        ``every`` >= 1 keys every ``every``-th frame (and always the last).
-        """
-        from workbench.methods.regions.marker_fit import MarkerFit
-
-        m = self._model
-        if not isinstance(fit, MarkerFit):
-            raise ModelError(f"key_marker_fit: fit must be a MarkerFit, got {type(fit).__name__}")
-        if isinstance(every, bool) or not isinstance(every, int | np.integer) or every < 1:
-            raise ModelError(f"key_marker_fit: every must be an int >= 1, got {every!r}")
-        t0 = float(start)
-        if not math.isfinite(t0):
-            raise ModelError(f"key_marker_fit: start must be finite seconds, got {start!r}")
-        with m.lock:
-            regions_facet: Any = m.regions  # type: ignore[attr-defined]
-            st = regions_facet.require("key_marker_fit")
-            if tuple(fit.shape_names) != tuple(m.shape_names):
-                raise ModelError(
-                    f"key_marker_fit: fit was made for {len(fit.shape_names)} shapes "
-                    f"{list(fit.shape_names[:4])}..., the model has {len(m.shape_names)} "
-                    f"{m.shape_names[:4]}... (shape list edited since fitting: fit again)"
-                )
-            L = int(fit.level)
-            R = st.regions
-            if L >= R.n_levels or tuple(R.names[L]) != tuple(fit.region_names):
-                raise ModelError(
-                    f"key_marker_fit: fit was made for other regions on level {L} "
-                    "(the regions were edited or re-segmented since fitting: fit again)"
-                )
-            tl = self.value
-            if tl.region_level is not None and tl.region_level != L:
-                raise ModelError(
-                    f"key_marker_fit: the timeline has region keys on level {tl.region_level}, "
-                    f"the fit is on level {L}; delete those keys or fit on level {tl.region_level}"
-                )
-            T = fit.n_frames
-            frames = np.arange(0, T, int(every))
-            if frames[-1] != T - 1:
-                frames = np.append(frames, T - 1)
-            times = t0 + frames / tl.fps
-            G = np.asarray(fit.global_weights, np.float64)[frames]
-            RW = np.asarray(fit.region_weights, np.float64)[frames]
-            for k, name in enumerate(m.shape_names):
-                tl = add_keys(tl, weight_track_name(name), times, G[:, k], interpolation=interpolation)
-            for r, region in enumerate(fit.region_names):
-                tl = add_keys(tl, region_track_name(L, region), times, RW[:, r, :], interpolation=interpolation)
-            tl = tl.replace(start=min(tl.start, float(times[0])), end=max(tl.end, float(times[-1])))
-            label = f"Key marker fit ({frames.size} frames from {t0:g}s)"
-            with m.undo_group(label):
-                if st.level != L:
-                    regions_facet.set_level(L)
-                self.set(tl, label)
-            return times

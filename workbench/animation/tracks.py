@@ -9,7 +9,7 @@ same number of shape weights; while a timeline has region tracks, they
 define the region weights of that level: keyed regions take their keyed
 values and every other region of the level follows the global weights (no
 correction there), whatever static region weights the model holds.
-``FaceModel.key_marker_fit`` writes them from a marker fit.
+``model.regions.key_marker_fit`` writes them from a marker fit.
 
 Everything is immutable: the edit functions (:func:`add_key`,
 :func:`add_keys`, :func:`delete_key`, :func:`move_key`,

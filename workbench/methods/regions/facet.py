@@ -18,17 +18,19 @@ and are one undo step on release, none when cancelled: ``begin_drag``
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from workbench.core.shapes import ModelError
 from workbench.methods.regions.blend import RegionState, RegionWeights
 from workbench.methods.regions.hierarchy import Regions
 
 if TYPE_CHECKING:
+    from workbench.animation.curves import Interpolation
     from workbench.core.state import FaceState
     from workbench.methods.regions.drag import RegionDrag, RegionStroke
     from workbench.methods.regions.topology import RegionTopology
@@ -305,3 +307,69 @@ class RegionsFacet:
             before = R.labels[lv]
             after = self.paint(lv, region, verts, add=not erase).regions.labels[lv]
             return int(np.count_nonzero(after[verts] != before[verts]))
+
+    # ------------------------------------------------------------- marker fits
+    def key_marker_fit(self, fit: Any, start: float = 0.0, every: int = 1, *,
+                       interpolation: Interpolation = "linear") -> NDArray[np.float64]:
+        """Key a marker fit (Joshi et al. 2003 §3) on the timeline frame by frame; one undo step; the key times.
+
+        Frame ``f`` is keyed at ``start + f / fps``: the fitted global weights of
+        every shape and the fitted weights of every region of ``fit.level``
+        (``"regions/<level>/<region>"``); the model's region level is set to
+        ``fit.level`` in the same undo step. The RBF residual is not keyed (the
+        timeline has no track for a displacement field): use
+        ``fit.positions(model, regions, f)`` per frame when it is needed.
+        ``every`` >= 1 keys every ``every``-th frame (and always the last).
+        """
+        from workbench.animation.curves import region_track_name, weight_track_name
+        from workbench.animation.tracks import add_keys
+        from workbench.methods.regions.marker_fit import MarkerFit
+
+        m = self._model
+        if not isinstance(fit, MarkerFit):
+            raise ModelError(f"key_marker_fit: fit must be a MarkerFit, got {type(fit).__name__}")
+        if isinstance(every, bool) or not isinstance(every, int | np.integer) or every < 1:
+            raise ModelError(f"key_marker_fit: every must be an int >= 1, got {every!r}")
+        t0 = float(start)
+        if not math.isfinite(t0):
+            raise ModelError(f"key_marker_fit: start must be finite seconds, got {start!r}")
+        with m.lock:
+            st = self.require("key_marker_fit")
+            if tuple(fit.shape_names) != tuple(m.shape_names):
+                raise ModelError(
+                    f"key_marker_fit: fit was made for {len(fit.shape_names)} shapes "
+                    f"{list(fit.shape_names[:4])}..., the model has {len(m.shape_names)} "
+                    f"{m.shape_names[:4]}... (shape list edited since fitting: fit again)"
+                )
+            L = int(fit.level)
+            R = st.regions
+            if L >= R.n_levels or tuple(R.names[L]) != tuple(fit.region_names):
+                raise ModelError(
+                    f"key_marker_fit: fit was made for other regions on level {L} "
+                    "(the regions were edited or re-segmented since fitting: fit again)"
+                )
+            timeline: Any = m.timeline  # type: ignore[attr-defined]
+            tl = timeline.value
+            if tl.region_level is not None and tl.region_level != L:
+                raise ModelError(
+                    f"key_marker_fit: the timeline has region keys on level {tl.region_level}, "
+                    f"the fit is on level {L}; delete those keys or fit on level {tl.region_level}"
+                )
+            T = fit.n_frames
+            frames = np.arange(0, T, int(every))
+            if frames[-1] != T - 1:
+                frames = np.append(frames, T - 1)
+            times = t0 + frames / tl.fps
+            G = np.asarray(fit.global_weights, np.float64)[frames]
+            RW = np.asarray(fit.region_weights, np.float64)[frames]
+            for k, name in enumerate(m.shape_names):
+                tl = add_keys(tl, weight_track_name(name), times, G[:, k], interpolation=interpolation)
+            for r, region in enumerate(fit.region_names):
+                tl = add_keys(tl, region_track_name(L, region), times, RW[:, r, :], interpolation=interpolation)
+            tl = tl.replace(start=min(tl.start, float(times[0])), end=max(tl.end, float(times[-1])))
+            label = f"Key marker fit ({frames.size} frames from {t0:g}s)"
+            with m.undo_group(label):
+                if st.level != L:
+                    self.set_level(L)
+                timeline.set(tl, label)
+            return times

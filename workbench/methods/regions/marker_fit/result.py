@@ -59,7 +59,7 @@ class MarkerFit:
     def tracks(self) -> dict[str, NDArray[np.float32]]:
         """Per-frame weight curves: ``{region name: (T, k)}`` plus ``"background"`` (global).
 
-        Plain arrays; :meth:`FaceModel.key_marker_fit` puts them on the model's
+        Plain arrays; :meth:`RegionsFacet.key_marker_fit` (``model.regions``) puts them on the model's
         timeline (weight keys for the global weights, ``"regions/<level>/<region>"``
         keys for the regions), where playback, the file and the exports use them.
         The RBF residual is not keyable (see there).
