@@ -224,6 +224,7 @@ def synthetic_performance(
     shapes: ArrayLike | None = None,
     points: int = 0,
     outliers: float = 0.0,
+    weights: ArrayLike | None = None,
 ) -> SyntheticPerformance:
     """A take with known answer (see the module docstring): a pure function of its arguments.
 
@@ -253,6 +254,11 @@ def synthetic_performance(
         Point-cloud samples per frame (0: no clouds).
     outliers : float
         In [0, 1): share of each cloud replaced by points scattered in the head's box.
+    weights : (T, k) float, optional
+        Play these weights (``shape_names`` order) instead of generated bumps: the plain
+        shapes' columns are used, muted shapes are 0 and derived shapes follow their drivers
+        (e.g. a realistic take from :func:`workbench.testing.realistic_take`). ``active``
+        and ``shapes`` are then unused; the random stream of the rest is unchanged.
 
     Returns
     -------
@@ -294,6 +300,13 @@ def synthetic_performance(
 
     # weights
     raw = _bump_curves(rng, T, fps, eligible, k, float(active))
+    if weights is not None:
+        given = np.asarray(weights, np.float64)
+        if given.shape != (T, k):
+            raise ValueError(f"weights must be (T, k) = ({T}, {k}) in shape_names order, got {given.shape}")
+        if not np.isfinite(given).all():
+            raise ValueError("weights must be finite")
+        raw = given
     W = space.full_weights(raw[:, space.plain])
 
     # head motion

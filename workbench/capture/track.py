@@ -25,7 +25,9 @@ the λ's are relative to the average shape's squared norm over all markers
 so the λ's are unit-free, and a frame that loses markers keeps the balance of
 data and priors per marker. ``l1`` shrinks an average shape's weight by
 ``l1/2``; ``temporal = 1`` trusts the constant-velocity prediction as much as
-one frame of data (see :mod:`.solver`).
+one frame of data (see :mod:`.solver`). By default both are chosen per take
+from held-out markers (:mod:`.lambdas`): a dense real take wants little or no
+L1, a sparse generated one more.
 
 Occluded markers (NaN) drop their rows. A frame with fewer than ``min_markers``
 visible markers is not solved: it holds the previous frame's weights and pose
@@ -61,11 +63,13 @@ from workbench.capture.solver import WeightSolver
 if TYPE_CHECKING:
     from workbench.core.state import FaceState
 
-__all__ = ["DEFAULT_L1", "DEFAULT_TEMPORAL", "TrackError", "prepare_markers", "track", "track_markers"]
+__all__ = ["AUTO", "DEFAULT_L1", "DEFAULT_TEMPORAL", "TrackError", "prepare_markers", "track", "track_markers"]
 
-#: default sparsity for markers and landmarks (relative, see the module docstring)
+#: ``l1="auto"`` / ``temporal="auto"`` (the default): chosen per take by held-out markers (:mod:`.lambdas`)
+AUTO = "auto"
+#: the fixed sparsity of earlier versions (relative, see the module docstring); the Capture tab's slider start
 DEFAULT_L1 = 0.01
-#: default temporal smoothness (relative, see the module docstring)
+#: the fixed temporal smoothness of earlier versions (relative); the Capture tab's slider start
 DEFAULT_TEMPORAL = 0.25
 #: markers moving less than this share of the head size under any one shape count as rigid
 RIGID_MOTION = 0.01
@@ -120,12 +124,16 @@ def _positive(value: Any, what: str) -> float:
     return v
 
 
-def _lam(value: Any, default: float, what: str) -> float:
-    if value is None:
-        return default
-    v = float(value)
+def _lam(value: Any, what: str) -> float | None:
+    """A λ as given (a float ≥ 0), or None for ``"auto"`` / None (chosen from the take)."""
+    if value is None or (isinstance(value, str) and value == AUTO):
+        return None
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        v = float("nan")
     if not (math.isfinite(v) and v >= 0):
-        raise TrackError(f"{what} must be a number ≥ 0 (or None for the default {default:g}), got {value!r}")
+        raise TrackError(f"{what} must be a number ≥ 0 or 'auto' (chosen from the take), got {value!r}")
     return v
 
 
@@ -297,8 +305,8 @@ def track_markers(
     vertex_ids: ArrayLike,
     *,
     fps: float = 30.0,
-    l1: float | None = None,
-    temporal: float | None = None,
+    l1: float | str | None = AUTO,
+    temporal: float | str | None = AUTO,
     iterations: int = 2,
     min_markers: int = 4,
     rigid: ArrayLike | None = None,
@@ -328,10 +336,17 @@ def track_markers(
     identity is fitted to the rest markers first (the paper's eq. 1, alternated with the
     pose) instead of the per-marker offsets. ``info["adapted"]`` is the AdaptiveModel
     (None without adaptation); ``.to_model()`` is the adapted rig.
+
+    ``l1`` / ``temporal`` ``"auto"`` (the default; None is the same): chosen from the take by
+    held-out markers (:func:`~workbench.capture.lambdas.choose_lambdas`); ``info["l1"]`` and
+    ``info["temporal"]`` are the values used, ``info["lambda_choice"]`` what was tried (None
+    when both were given).
     """
     fps_ = _positive(fps, "fps")
-    l1_ = _lam(l1, DEFAULT_L1, "l1")
-    temporal_ = _lam(temporal, DEFAULT_TEMPORAL, "temporal")
+    l1_given = _lam(l1, "l1")
+    temporal_given = _lam(temporal, "temporal")
+    l1_ = DEFAULT_L1 if l1_given is None else l1_given
+    temporal_ = DEFAULT_TEMPORAL if temporal_given is None else temporal_given
     if isinstance(iterations, bool) or not isinstance(iterations, int | np.integer) or iterations < 1:
         raise TrackError(f"iterations must be an int ≥ 1, got {iterations!r}")
     if isinstance(min_markers, bool) or not isinstance(min_markers, int | np.integer) or min_markers < 3:
@@ -366,6 +381,19 @@ def track_markers(
             f"frames: no frame has at least min_markers={int(min_markers)} visible markers "
             f"(at most {int(visible.sum(1).max())} of {m})"
         )
+
+    choice = None
+    if l1_given is None or temporal_given is None:
+        from workbench.capture.lambdas import choose_lambdas
+
+        if progress is not None:
+            progress(0.0, "choosing λ₁, λ₂ from held-out markers")
+        mpu = float(getattr(getattr(model, "metadata", None), "metres_per_unit", 1.0) or 1.0)
+        choice = choose_lambdas(setup, Y, visible, good, metres_per_unit=mpu, fix_l1=l1_given,
+                                fix_temporal=temporal_given, iterations=int(iterations))
+        l1_, temporal_ = choice.l1, choice.temporal
+        setup.solver.l1 = l1_ * setup.ref
+        setup.solver.temporal = temporal_ * setup.ref
 
     kp = space.plain.size
     W = np.zeros((T, kp))
@@ -443,7 +471,8 @@ def track_markers(
         {"l1": l1_, "temporal": temporal_, "iterations": int(iterations), "min_markers": int(min_markers),
          "rigid_markers": setup.rigid.copy(), "vertex_ids": ids.copy(), "lambda_scale": setup.ref,
          "neutral_offsets": offsets, "adapted": am,
-         "solver_sweeps": sweeps},
+         "solver_sweeps": sweeps, "lambda_auto": (l1_given is None, temporal_given is None),
+         "lambda_choice": None if choice is None else choice.as_info()},
     )
 
 
@@ -453,8 +482,8 @@ def track(
     *,
     vertex_ids: ArrayLike | None = None,
     fps: float = 30.0,
-    l1: float | None = None,
-    temporal: float | None = None,
+    l1: float | str | None = AUTO,
+    temporal: float | str | None = AUTO,
     adapt: Any = None,
     progress: Progress | None = None,
     **options: Any,
@@ -473,10 +502,12 @@ def track(
         None: the point-cloud tracker, :func:`workbench.capture.clouds.track_clouds`.
     fps : float
         Frame rate of the take.
-    l1 : float, optional
-        Sparsity ``λ`` (relative, unit-free; default :data:`DEFAULT_L1` for markers).
-    temporal : float, optional
-        Temporal smoothness ``λ`` (relative; default :data:`DEFAULT_TEMPORAL` for markers).
+    l1 : float or "auto"
+        Sparsity ``λ`` (relative, unit-free). ``"auto"`` (the default; None is the same): for
+        markers, chosen from the take by held-out markers (:mod:`.lambdas`; the choice is in
+        ``info["lambda_choice"]``); for point clouds, the clouds tracker's default.
+    temporal : float or "auto"
+        Temporal smoothness ``λ`` (relative); ``"auto"`` as for ``l1``.
     adapt : bool, dict, AdaptiveModel or None
         Rig adaptation (the dynamic expression model, §4). Off by default for markers
         (None or False; see :func:`track_markers`), on for point clouds
@@ -499,7 +530,7 @@ def track(
     if vertex_ids is None:
         from workbench.capture.clouds import track_clouds
 
-        return track_clouds(model, frames, fps=fps, l1=l1, temporal=temporal, adapt=adapt, progress=progress,
-                            **options)
+        return track_clouds(model, frames, fps=fps, l1=None if isinstance(l1, str) else l1,
+                            temporal=None if isinstance(temporal, str) else temporal, adapt=adapt, progress=progress, **options)
     return track_markers(model, frames, vertex_ids, fps=fps, l1=l1, temporal=temporal, adapt=adapt,
                          progress=progress, **options)

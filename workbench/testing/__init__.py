@@ -16,7 +16,10 @@ seed, nothing downloaded:
   :class:`LocalScale`, :func:`random_warp`, :func:`compose`);
 * :mod:`~workbench.testing.meshes` — the array-level surgery (:func:`split_remesh`,
   :func:`add_bust`, :func:`cut_hole`, ...);
-* :mod:`~workbench.testing.grids` — tiny hand-checkable grids.
+* :mod:`~workbench.testing.grids` — tiny hand-checkable grids;
+* :mod:`~workbench.testing.takes` — capture takes that behave like a real phone take
+  (dense, co-articulated, asymmetric, noisy weights; markers under head motion) and
+  their statistics against the measured real take (:data:`REAL_TAKE`).
 
 Nothing in the methods imports this package.
 """
@@ -58,6 +61,14 @@ from workbench.testing.meshes import (
     permute_vertices,
     split_remesh,
 )
+from workbench.testing.takes import (
+    REAL_TAKE,
+    TakeStatistics,
+    realistic_take,
+    realistic_weights,
+    take_markers,
+    take_statistics,
+)
 from workbench.testing.warps import (
     Composed,
     LocalScale,
@@ -71,11 +82,13 @@ from workbench.testing.warps import (
 )
 
 __all__ = [
+    "REAL_TAKE",
     "STYLES",
     "Composed",
     "GeneratedFace",
     "LocalScale",
     "SmoothWarp",
+    "TakeStatistics",
     "Warp",
     "add_bust",
     "compose",
@@ -93,6 +106,8 @@ __all__ = [
     "permute_vertices",
     "proportions_warp",
     "random_warp",
+    "realistic_take",
+    "realistic_weights",
     "remeshed",
     "rename_shape",
     "renamed_shapes",
@@ -101,6 +116,8 @@ __all__ = [
     "sample_head_warp",
     "split_remesh",
     "split_sides",
+    "take_markers",
+    "take_statistics",
     "two_bump_grid",
     "unit_factor",
     "unnamed_parts",

@@ -1,0 +1,243 @@
+"""The tracker's λ's chosen by the take itself: held-out markers on a few stretches of the take.
+
+Why: the sparsity prior ``l1`` and the temporal prior ``temporal`` of
+:func:`workbench.capture.track` (Bouaziz et al. 2013, eq. 3: ``λ₂ E_sparse`` and
+``λ₁ E_smooth``) suit some takes and hurt others. A clean generated take has a few
+shapes active at a time and L1 helps; a real phone take has ~33 of 52 shapes active
+at once and a rest pose that is not zero, and the same L1 shrinks every weight (the
+weight error doubles). No single pair of numbers wins on both, so the take decides.
+
+How (K-fold cross-validation over markers): on up to three stretches of the take
+(:data:`STRETCHES` × :data:`STRETCH_FRAMES` frames, spread over it), the head pose
+of each frame is found once (the tracker's own alternation, at the reference λ's);
+the markers that move with the expression are split into :data:`FOLDS` folds; for
+every ``(l1, temporal)`` of a small grid and every fold, the stretch is tracked
+online (warm-started, with the temporal term, exactly as the tracker does) on the
+other markers, and the held-out markers' squared distance to the tracked face is
+summed. The pair with the least held-out error is chosen. The grid holds 0 and the
+old defaults, and the paper's values as the reference point: ``λ₁ = 10`` (smooth),
+``λ₂ = 20`` (sparse), read as weights on a fit term in mm² summed over the
+markers' coordinates (:func:`paper_lambdas`), converted into the tracker's relative
+units. Rigid markers (forehead, nose bridge) are never held out: they carry no
+expression and fix the pose.
+
+Cost: ``folds × grid × frames`` solves of one frame (4 × 35 × ≤ 90 ≈ 13k, each a
+few tens of µs with numba), about a second for any take length.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from workbench.capture.pose import PoseError, fit_rigid_robust
+from workbench.capture.solver import NUMBA, _prediction, _shoot_nb, _shoot_py
+
+if TYPE_CHECKING:
+    from workbench.capture.track import _MarkerSetup
+
+__all__ = ["FOLDS", "L1_GRID", "PAPER_SMOOTH", "PAPER_SPARSE", "STRETCHES", "STRETCH_FRAMES", "TEMPORAL_GRID",
+           "LambdaChoice", "choose_lambdas", "paper_lambdas"]
+
+#: Bouaziz et al. 2013, §4: λ₁ (E_smooth) and λ₂ (E_sparse), on a fit term in mm² (see :func:`paper_lambdas`)
+PAPER_SMOOTH = 10.0
+PAPER_SPARSE = 20.0
+#: relative sparsity λ's tried (the paper's value is added)
+L1_GRID = (0.0, 3e-4, 1e-3, 3e-3, 1e-2, 3e-2)
+#: relative temporal λ's tried (the paper's value is added)
+TEMPORAL_GRID = (0.03, 0.1, 0.25, 1.0)
+#: folds of the moving markers
+FOLDS = 4
+#: stretches of the take and their length (frames)
+STRETCHES = 3
+STRETCH_FRAMES = 30
+
+
+@dataclass(frozen=True)
+class LambdaChoice:
+    """What :func:`choose_lambdas` tried and chose.
+
+    Attributes
+    ----------
+    l1, temporal : float
+        The chosen relative λ's.
+    paper : (float, float)
+        The paper's ``(l1, temporal)`` in the tracker's relative units for this take.
+    grid : tuple of (float, float, float)
+        Every ``(l1, temporal, held-out RMS error)`` tried; the error is per held-out marker, model units.
+    heldout : float
+        The chosen pair's held-out RMS marker error (model units).
+    frames : int
+        Frames of the take the choice was made on.
+    folds : int
+    seconds : float
+        Time the choice took.
+    """
+
+    l1: float
+    temporal: float
+    paper: tuple[float, float]
+    grid: tuple[tuple[float, float, float], ...]
+    heldout: float
+    frames: int
+    folds: int
+    seconds: float
+
+    def as_info(self) -> dict[str, Any]:
+        """A plain dict for :attr:`TrackResult.info` (``info["lambda_choice"]``)."""
+        return {"l1": self.l1, "temporal": self.temporal, "paper": self.paper, "grid": self.grid,
+                "heldout": self.heldout, "frames": self.frames, "folds": self.folds, "seconds": self.seconds}
+
+
+def paper_lambdas(setup: _MarkerSetup, metres_per_unit: float) -> tuple[float, float]:
+    """The paper's ``(λ₂ sparse, λ₁ smooth) = (20, 10)`` in the tracker's relative units for these markers.
+
+    The paper adds them to ``E_fit`` in its own units; read here as a fit term in mm²
+    summed over every marker coordinate. The tracker's fit term is that divided by
+    ``(1000 · metres_per_unit · head_size)² · m`` and its λ's are relative to ``ref``
+    (an average shape's squared motion per marker in head sizes²), so
+    ``λ_relative = λ_paper / ((1000 · mpu · size)² · m · ref)``.
+    """
+    m = max(int(setup.ids.size), 1)
+    mm = 1000.0 * float(metres_per_unit) * float(setup.space.size)
+    denom = mm * mm * m * float(setup.ref)
+    if not (math.isfinite(denom) and denom > 0):
+        return 0.0, 0.0
+    return PAPER_SPARSE / denom, PAPER_SMOOTH / denom
+
+
+def _stretches(good: NDArray[np.bool_]) -> list[NDArray[np.intp]]:
+    """Up to :data:`STRETCHES` runs of :data:`STRETCH_FRAMES` solvable frames spread over the take."""
+    idx = np.flatnonzero(good)
+    n = idx.size
+    if n <= STRETCHES * STRETCH_FRAMES:
+        return [idx]
+    starts = np.linspace(0, n - STRETCH_FRAMES, STRETCHES).round().astype(int)
+    return [idx[s : s + STRETCH_FRAMES] for s in starts]
+
+
+def choose_lambdas(setup: _MarkerSetup, Y: NDArray[np.float64], visible: NDArray[np.bool_],
+                   good: NDArray[np.bool_], *, metres_per_unit: float = 1.0, fix_l1: float | None = None,
+                   fix_temporal: float | None = None, iterations: int = 2) -> LambdaChoice:
+    """Choose ``(l1, temporal)`` by held-out markers (the module docstring); ``fix_*`` keep one of them given.
+
+    ``setup`` is the tracker's per-take set-up, ``Y (T, m, 3)`` the markers, ``visible (T, m)``
+    and ``good (T,)`` as in :func:`~workbench.capture.track.track_markers`.
+    """
+    t_start = time.perf_counter()
+    space = setup.space
+    kp = space.plain.size
+    paper = paper_lambdas(setup, metres_per_unit)
+    l1s = sorted(set(L1_GRID) | {paper[0]}) if fix_l1 is None else [float(fix_l1)]
+    temps = sorted(set(TEMPORAL_GRID) | {paper[1]}) if fix_temporal is None else [float(fix_temporal)]
+    lo, hi = np.asarray(space.lo, np.float64), np.asarray(space.hi, np.float64)
+    kernel = _shoot_nb if NUMBA else _shoot_py
+    ref = setup.ref
+    tol = 1e-6 * math.sqrt(ref)
+    L, d, ix = np.empty((kp, kp)), np.empty(kp), np.empty(kp, np.int64)
+    m = setup.ids.size
+
+    def solve(G: NDArray[np.float64], h: NDArray[np.float64], l1: float, temporal: float,
+              wp: NDArray[np.float64] | None, wp2: NDArray[np.float64] | None, w0: NDArray[np.float64]
+              ) -> NDArray[np.float64]:
+        Q = np.array(G, order="C")
+        b = h.copy()
+        if temporal > 0 and wp is not None:
+            t = temporal * ref
+            Q[np.diag_indices(kp)] += t
+            b += t * _prediction(wp, wp2)
+        w = np.clip(w0, lo, hi)
+        g = Q @ w - b
+        kernel(Q, b, np.full(kp, 0.5 * l1 * ref), lo, hi, w, g, 500, tol, True, L, d, ix)
+        return w
+
+    # 1. each stretch frame's markers in the model frame, posed as the tracker does (reference λ's)
+    l1_ref = paper[0] if fix_l1 is None else float(fix_l1)
+    t_ref = paper[1] if fix_temporal is None else float(fix_temporal)
+    l1_ref, t_ref = min(l1_ref, 3e-3), min(max(t_ref, 0.03), 0.25)  # a mild start when the paper's are extreme
+    runs: list[list[tuple[NDArray[np.bool_], NDArray[np.float64]]]] = []
+    for frames in _stretches(good):
+        w = np.zeros(kp)
+        wp = wp2 = None
+        run = []
+        for f in frames:
+            vis = visible[f]
+            nv = int(vis.sum())
+            G = setup.Gm[vis].sum(0) * (setup.norm / nv)
+            Dv = setup.D[vis].reshape(-1, kp)
+            rig = vis & setup.is_rigid
+            M = np.eye(4)
+            c = np.zeros((nv, 3))
+            for _it in range(int(iterations)):
+                wf = space.full_weights(w)
+                X = setup.marker_positions(w, wf)
+                sel = rig if rig.sum() >= 3 else vis
+                try:
+                    M = fit_rigid_robust(X[sel], Y[f, sel], max_iter=10, tol=1e-6).matrix
+                except PoseError:
+                    pass
+                c = (Y[f, vis] - M[:3, 3]) @ M[:3, :3] - setup.X0[vis]
+                if space.derived:
+                    c = c - setup.derived_offset(wf, vis)
+                w = solve(G, Dv.T @ c.reshape(-1) * (setup.norm / nv), l1_ref, t_ref, wp, wp2, w)
+            wp2, wp = wp, w.copy()
+            full = np.full((m, 3), np.nan)
+            full[vis] = c
+            run.append((vis, full))
+        runs.append(run)
+
+    # 2. folds of the markers that move with the expression
+    moving = np.flatnonzero(~setup.is_rigid)
+    if moving.size < 2 * FOLDS:
+        moving = np.arange(m)
+    rng = np.random.default_rng(0)
+    fold_of = np.full(m, -1)
+    fold_of[rng.permutation(moving)] = np.arange(moving.size) % FOLDS
+    n_folds = min(FOLDS, moving.size)
+
+    # 3. every λ pair, every fold: track the stretches on the other markers, score the held-out ones
+    Dm = setup.D  # (m, 3, kp)
+    scores = np.zeros((len(l1s), len(temps)))
+    count = 0
+    for fo in range(n_folds):
+        held = fold_of == fo
+        prepared = []
+        for run in runs:
+            rows: list[tuple[NDArray[np.float64], ...] | None] = []
+            for vis, c in run:
+                tr = vis & ~held
+                ho = vis & held
+                ntr = int(tr.sum())
+                if ntr < 3:
+                    rows.append(None)
+                    continue
+                G = setup.Gm[tr].sum(0) * (setup.norm / ntr)
+                h = np.einsum("mck,mc->k", Dm[tr], c[tr]) * (setup.norm / ntr)
+                rows.append((G, h, Dm[ho].reshape(-1, kp), c[ho].reshape(-1)))
+            prepared.append(rows)
+        for a, l1 in enumerate(l1s):
+            for b, temporal in enumerate(temps):
+                err = 0.0
+                for rows in prepared:
+                    w = np.zeros(kp)
+                    wp = wp2 = None
+                    for row in rows:
+                        if row is None:
+                            continue
+                        G, h, Dh, ch = row
+                        w = solve(G, h, l1, temporal, wp, wp2, w)
+                        wp2, wp = wp, w.copy()
+                        r = Dh @ w - ch
+                        err += float(r @ r)
+                scores[a, b] += err
+        count += sum(int((vis & held).sum()) for run in runs for vis, _c in run)
+    rms = np.sqrt(scores / max(count, 1))
+    ia, ib = (int(v) for v in np.unravel_index(int(np.argmin(rms)), rms.shape))
+    grid = tuple((float(l1s[i]), float(temps[j]), float(rms[i, j])) for i in range(len(l1s)) for j in range(len(temps)))
+    return LambdaChoice(float(l1s[ia]), float(temps[ib]), (float(paper[0]), float(paper[1])), grid, float(rms[ia, ib]),
+                        int(sum(len(r) for r in runs)), int(n_folds), time.perf_counter() - t_start)
