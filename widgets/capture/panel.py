@@ -95,6 +95,10 @@ class CapturePanel(ModelPanel):
                                          continuous_update=False, readout_format=".3g",
                                          style={"description_width": "90px"})
         self.temporal.add_class("fwb-capture-temporal")
+        self.auto = W.Checkbox(value=True, description="choose λ₁, λ₂ from the take (held-out markers)",
+                               indent=False)
+        self.auto.add_class("fwb-capture-auto")
+        self._syncing = False
         self.adapt = W.Checkbox(value=False, description="Adapt the rig to the actor (default: on for clouds)",
                                 indent=False)
         self.adapt.add_class("fwb-capture-adapt")
@@ -121,11 +125,11 @@ class CapturePanel(ModelPanel):
         self.save_adapted_button.on_click(g("save adapted rig")(lambda _b: self.save_adapted(self.adapted_path.value)))
         self.frame.observe(g("capture frame")(lambda _c: self.show_frame()), "value")
         for s in (self.l1, self.temporal):
-            s.observe(g("retrack window")(lambda _c: self.retrack_window()), "value")
+            s.observe(g("retrack window")(lambda _c: self._on_lambda()), "value")
         self.listen(model.events.time, self._on_time, "capture time")
         self.children = [
             W.HTML("<b>Take</b>"), self.path, self.map_path, W.HBox([self.units, self.load_button]), self.info,
-            self.frame, W.HBox([self.l1, self.temporal]), self.adapt,
+            self.frame, W.HBox([self.l1, self.temporal]), self.auto, self.adapt,
             W.HBox([self.track_button, self.tolerance, self.apply_button]), self.progress, self.plot,
             self.retime_button,
             W.HBox([self.adapted_path, self.save_adapted_button]),
@@ -178,14 +182,37 @@ class CapturePanel(ModelPanel):
         return take
 
     # ------------------------------------------------------------------ tracking
-    def _track(self, frames: Any, progress: Any = None, adapt: Any = None) -> Any:
+    def _track(self, frames: Any, progress: Any = None, adapt: Any = None, auto: bool = False) -> Any:
         from workbench.capture import track
 
         t = self.take
         assert t is not None
-        return track(self.model, frames, vertex_ids=t["vertex_ids"], fps=t["fps"], l1=float(self.l1.value),
-                     temporal=float(self.temporal.value),
+        return track(self.model, frames, vertex_ids=t["vertex_ids"], fps=t["fps"],
+                     l1="auto" if auto else float(self.l1.value),
+                     temporal="auto" if auto else float(self.temporal.value),
                      adapt=bool(self.adapt.value) if adapt is None else adapt, progress=progress)
+
+    def _on_lambda(self) -> None:
+        """A λ slider moved by the user: they take over from the take's choice; re-track the window."""
+        if self._syncing:
+            return
+        self.auto.value = False
+        self.retrack_window()
+
+    def _chosen(self, res: Any) -> str:
+        """The λ's used, for the status line; the sliders show them (without re-tracking)."""
+        l1, tm = res.info.get("l1"), res.info.get("temporal")
+        if l1 is None or tm is None:
+            return ""
+        self._syncing = True
+        try:
+            self.l1.value, self.temporal.value = max(float(l1), 10.0**self.l1.min), float(tm)
+        finally:
+            self._syncing = False
+        ch = res.info.get("lambda_choice")
+        how = (f" chosen by held-out markers (error {ch['heldout']:.3g} {html.escape(self.model.metadata.units)}, "
+               f"{ch['seconds']:.1f} s)" if ch else "")
+        return f"; λ₁ {float(l1):.3g}, λ₂ {float(tm):.3g}{how}"
 
     def track(self) -> Any:
         """Track the whole take (progress bar); returns the :class:`~workbench.capture.TrackResult`."""
@@ -194,7 +221,8 @@ class CapturePanel(ModelPanel):
         self.progress.start("<i>tracking ...</i>")
         t0 = time.perf_counter()
         try:
-            res = self._track(self.take["frames"], self.progress)
+            res = self._track(self.take["frames"], self.progress,
+                              auto=bool(self.auto.value) and self.take["kind"] == "markers")
         except Exception as exc:
             self.progress.fail(f"tracking failed: {exc}")
             raise
@@ -204,7 +232,7 @@ class CapturePanel(ModelPanel):
         self.progress.finish(
             f"{res.n_frames} frames in {dt:.2f} s ({res.n_frames / max(dt, 1e-9):.0f} frames/s); median error "
             f"{np.nanmedian(res.errors):.3g} {html.escape(self.model.metadata.units)}"
-            + (f"; {held} frames held (too few points)" if held else "")
+            + (f"; {held} frames held (too few points)" if held else "") + self._chosen(res)
         )
         self.refresh()
         self.show_frame()
