@@ -9,20 +9,23 @@ weight error doubles). No single pair of numbers wins on both, so the take decid
 
 How (K-fold cross-validation over markers): on up to three stretches of the take
 (:data:`STRETCHES` × :data:`STRETCH_FRAMES` frames, spread over it), the head pose
-of each frame is found once (the tracker's own alternation, at the reference λ's);
-the markers that move with the expression are split into :data:`FOLDS` folds; for
-every ``(l1, temporal)`` of a small grid and every fold, the stretch is tracked
-online (warm-started, with the temporal term, exactly as the tracker does) on the
-other markers, and the held-out markers' squared distance to the tracked face is
-summed. The pair with the least held-out error is chosen. The grid holds 0 and the
-old defaults, and the paper's values as the reference point: ``λ₁ = 10`` (smooth),
-``λ₂ = 20`` (sparse), read as weights on a fit term in mm² summed over the
-markers' coordinates (:func:`paper_lambdas`), converted into the tracker's relative
-units. Rigid markers (forehead, nose bridge) are never held out: they carry no
+of each frame is found once (the tracker's own alternation, at mild λ's); the
+markers that move with the expression are split into :data:`FOLDS` folds; for a
+``(l1, temporal)`` pair and every fold, the stretches are tracked online
+(warm-started, with the temporal term, by the solver's own kernel, exactly as the
+tracker does) on the other markers, and the held-out markers' squared distance to
+the tracked face is summed. The pairs tried: a coordinate search over the grids
+:data:`L1_GRID` and :data:`TEMPORAL_GRID` (0 and the old defaults among them),
+started at the paper's values — ``λ₁ = 10`` (smooth), ``λ₂ = 20`` (sparse), read
+as weights on a fit term in mm² summed over the markers' coordinates
+(:func:`paper_lambdas`), converted into the tracker's relative units and added to
+both grids: the best ``l1`` at the paper's ``temporal``, then the best ``temporal``
+at that ``l1``, then ``l1`` again. The pair with the least held-out error wins.
+Rigid markers (forehead, nose bridge) are never held out: they carry no
 expression and fix the pose.
 
-Cost: ``folds × grid × frames`` solves of one frame (4 × 35 × ≤ 90 ≈ 13k, each a
-few tens of µs with numba), about a second for any take length.
+Cost: ``folds × pairs × frames`` one-frame solves (3 × ≤ 17 × ≤ 75 ≈ 3.8k), under
+a second on a shared 2-core machine for any take length.
 """
 
 from __future__ import annotations
@@ -35,6 +38,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
+from workbench._numba import njit
 from workbench.capture.pose import PoseError, fit_rigid_robust
 from workbench.capture.solver import NUMBA, _prediction, _shoot_nb, _shoot_py
 
@@ -52,10 +56,10 @@ L1_GRID = (0.0, 3e-4, 1e-3, 3e-3, 1e-2, 3e-2)
 #: relative temporal λ's tried (the paper's value is added)
 TEMPORAL_GRID = (0.03, 0.1, 0.25, 1.0)
 #: folds of the moving markers
-FOLDS = 4
+FOLDS = 3
 #: stretches of the take and their length (frames)
 STRETCHES = 3
-STRETCH_FRAMES = 30
+STRETCH_FRAMES = 25
 
 
 @dataclass(frozen=True)
@@ -109,6 +113,65 @@ def paper_lambdas(setup: _MarkerSetup, metres_per_unit: float) -> tuple[float, f
     if not (math.isfinite(denom) and denom > 0):
         return 0.0, 0.0
     return PAPER_SPARSE / denom, PAPER_SMOOTH / denom
+
+
+def _heldout(G_tr, h_tr, G_ho, h_ho, cc_ho, start, l1h, t_abs, lo, hi, tol, L, d, idx):  # pragma: no cover
+    """Track every frame online on the training markers; the summed held-out squared error.
+
+    Per frame ``f``: ``G_tr[f], h_tr[f]`` the training normal equations, ``G_ho[f], h_ho[f],
+    cc_ho[f]`` the held-out markers' (so their error is ``wᵀG w − 2hᵀw + cc``); ``start[f]``
+    begins a stretch (no previous frames). ``l1h`` is half the absolute L1 per weight, ``t_abs``
+    the absolute temporal λ. The solver's own kernel, so the weights are the tracker's.
+    """
+    n, k = h_tr.shape
+    w = np.zeros(k)
+    wp = np.zeros(k)
+    wp2 = np.zeros(k)
+    n_prev = 0
+    err = 0.0
+    Q = np.empty((k, k))
+    b = np.empty(k)
+    g = np.empty(k)
+    for f in range(n):
+        if start[f]:
+            for j in range(k):
+                w[j] = 0.0
+            n_prev = 0
+        for i in range(k):
+            b[i] = h_tr[f, i]
+            for j in range(k):
+                Q[i, j] = G_tr[f, i, j]
+        if t_abs > 0.0 and n_prev > 0:
+            for j in range(k):
+                Q[j, j] += t_abs
+                p = 2.0 * wp[j] - wp2[j] if n_prev > 1 else wp[j]
+                b[j] += t_abs * p
+        for j in range(k):
+            if w[j] < lo[j]:
+                w[j] = lo[j]
+            elif w[j] > hi[j]:
+                w[j] = hi[j]
+        for i in range(k):
+            acc = -b[i]
+            for j in range(k):
+                acc += Q[i, j] * w[j]
+            g[i] = acc
+        _shoot_nb(Q, b, l1h, lo, hi, w, g, 500, tol, True, L, d, idx)
+        e = cc_ho[f]
+        for i in range(k):
+            acc = 0.0
+            for j in range(k):
+                acc += G_ho[f, i, j] * w[j]
+            e += w[i] * acc - 2.0 * h_ho[f, i] * w[i]
+        err += e
+        for j in range(k):
+            wp2[j] = wp[j]
+            wp[j] = w[j]
+        n_prev += 1
+    return err
+
+
+_heldout_nb = njit(cache=True, nogil=True)(_heldout) if NUMBA else _heldout
 
 
 def _stretches(good: NDArray[np.bool_]) -> list[NDArray[np.intp]]:
@@ -200,44 +263,60 @@ def choose_lambdas(setup: _MarkerSetup, Y: NDArray[np.float64], visible: NDArray
     fold_of[rng.permutation(moving)] = np.arange(moving.size) % FOLDS
     n_folds = min(FOLDS, moving.size)
 
-    # 3. every λ pair, every fold: track the stretches on the other markers, score the held-out ones
+    # 3. per fold, the training and held-out normal equations of every stretch frame
+    frames_all = [(vis, c) for run in runs for vis, c in run]
+    starts = np.zeros(len(frames_all), bool)
+    pos = 0
+    for run in runs:
+        starts[pos] = True
+        pos += len(run)
+    nf = len(frames_all)
+    Gm = setup.Gm
     Dm = setup.D  # (m, 3, kp)
-    scores = np.zeros((len(l1s), len(temps)))
+    folds = []
     count = 0
     for fo in range(n_folds):
         held = fold_of == fo
-        prepared = []
-        for run in runs:
-            rows: list[tuple[NDArray[np.float64], ...] | None] = []
-            for vis, c in run:
-                tr = vis & ~held
-                ho = vis & held
-                ntr = int(tr.sum())
-                if ntr < 3:
-                    rows.append(None)
-                    continue
-                G = setup.Gm[tr].sum(0) * (setup.norm / ntr)
-                h = np.einsum("mck,mc->k", Dm[tr], c[tr]) * (setup.norm / ntr)
-                rows.append((G, h, Dm[ho].reshape(-1, kp), c[ho].reshape(-1)))
-            prepared.append(rows)
-        for a, l1 in enumerate(l1s):
-            for b, temporal in enumerate(temps):
-                err = 0.0
-                for rows in prepared:
-                    w = np.zeros(kp)
-                    wp = wp2 = None
-                    for row in rows:
-                        if row is None:
-                            continue
-                        G, h, Dh, ch = row
-                        w = solve(G, h, l1, temporal, wp, wp2, w)
-                        wp2, wp = wp, w.copy()
-                        r = Dh @ w - ch
-                        err += float(r @ r)
-                scores[a, b] += err
-        count += sum(int((vis & held).sum()) for run in runs for vis, _c in run)
-    rms = np.sqrt(scores / max(count, 1))
-    ia, ib = (int(v) for v in np.unravel_index(int(np.argmin(rms)), rms.shape))
-    grid = tuple((float(l1s[i]), float(temps[j]), float(rms[i, j])) for i in range(len(l1s)) for j in range(len(temps)))
-    return LambdaChoice(float(l1s[ia]), float(temps[ib]), (float(paper[0]), float(paper[1])), grid, float(rms[ia, ib]),
+        G_tr = np.zeros((nf, kp, kp))
+        h_tr = np.zeros((nf, kp))
+        G_ho = np.zeros((nf, kp, kp))
+        h_ho = np.zeros((nf, kp))
+        cc_ho = np.zeros(nf)
+        for i, (vis, c) in enumerate(frames_all):
+            tr = vis & ~held
+            ho = vis & held
+            ntr = int(tr.sum())
+            if ntr < 3:  # too few markers to fit this frame on: it is tracked on all, and not scored
+                tr, ho = vis, np.zeros_like(vis)
+                ntr = int(vis.sum())
+            G_tr[i] = Gm[tr].sum(0) * (setup.norm / ntr)
+            h_tr[i] = np.einsum("mck,mc->k", Dm[tr], c[tr]) * (setup.norm / ntr)
+            G_ho[i] = Gm[ho].sum(0)
+            h_ho[i] = np.einsum("mck,mc->k", Dm[ho], c[ho])
+            cc_ho[i] = float((c[ho] ** 2).sum())
+            count += int(ho.sum())
+        folds.append((G_tr, h_tr, G_ho, h_ho, cc_ho))
+
+    scored: dict[tuple[float, float], float] = {}
+
+    def score(l1: float, temporal: float) -> float:
+        """Held-out RMS marker error (model units) of one λ pair, over every fold."""
+        key = (float(l1), float(temporal))
+        if key not in scored:
+            l1h = np.full(kp, 0.5 * l1 * ref)
+            total = sum(max(float(_heldout_nb(*fold, starts, l1h, temporal * ref, lo, hi, tol, L, d, ix)), 0.0)
+                        for fold in folds)
+            scored[key] = math.sqrt(total / max(count, 1))
+        return scored[key]
+
+    # coordinate search from the paper's values: the l1 line, the temporal line, the l1 line again
+    best = (paper[0] if fix_l1 is None else l1s[0], paper[1] if fix_temporal is None else temps[0])
+    for line in ("l1", "temporal", "l1"):
+        if line == "l1":
+            best = min(((a, best[1]) for a in l1s), key=lambda p: score(*p))
+        else:
+            best = min(((best[0], t) for t in temps), key=lambda p: score(*p))
+    grid = tuple((a, t, e) for (a, t), e in sorted(scored.items()))
+    ia_l1, ib_t = best
+    return LambdaChoice(float(ia_l1), float(ib_t), (float(paper[0]), float(paper[1])), grid, float(scored[best]),
                         int(sum(len(r) for r in runs)), int(n_folds), time.perf_counter() - t_start)
