@@ -144,6 +144,31 @@ def test_weight_slider_drag_is_one_undo_step_on_that_region_only(setup):
     assert panel.sliders.weight_sliders[shape].value == pytest.approx(0.7)
 
 
+def test_a_late_echo_of_a_solved_weight_is_no_edit(setup):
+    """A region drag solves off-grid weights; the page's snapped echo of one may arrive after the next."""
+    model, _, panel, _ = setup
+    panel.find_button.click()
+    st = model.regions.state
+    R, lv = st.regions, st.level
+    r = R.names[lv].index("mouth_L_2") if "mouth_L_2" in R.names[lv] else 0
+    panel.region.value = r
+    shape = R.drivers[lv][r][0]
+    slider = panel.sliders.weight_sliders[shape]
+    with model.interaction("Region drag"):  # what a pin drag does: several solves
+        model.regions.set_region(r, {shape: 0.4321})
+        model.regions.set_region(r, {shape: 0.6187})  # the model moved on
+    n_undo = len(model.history.undo_labels)
+    slider.value = 0.43  # the page's late echo of 0.4321, snapped
+    panel.grouper.flush()
+    assert len(model.history.undo_labels) == n_undo  # no "Region ...: shape" step
+    assert model.regions.weights.region(r)[shape] == pytest.approx(0.6187)  # not pulled back
+    assert slider.value == pytest.approx(0.62)  # and the page is sent the current value again
+    slider.value = 0.6  # a person's drag still edits
+    panel.grouper.flush()
+    assert model.regions.weights.region(r)[shape] == pytest.approx(0.6)
+    assert model.history.undo_labels[-1] == f"Region {R.names[lv][r]}: {shape}"
+
+
 def test_drag_handler_solves_and_moves_the_dragged_point_toward_the_target(setup):
     model, vp, panel, sent = setup
     panel.find_button.click()

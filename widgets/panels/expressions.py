@@ -42,15 +42,15 @@ slider the user moved (the Shape tools' selection follows it).
 from __future__ import annotations
 
 import re
-from collections import deque
 from collections.abc import Mapping
 from typing import Any
 
 import ipywidgets as W
 import traitlets
 
-from widgets._threading import InteractionGrouper, close_interactions, ui_loop
+from widgets._threading import InteractionGrouper, close_interactions
 from widgets.panels.base import ModelPanel
+from widgets.slider_echoes import SliderEchoes
 
 GROUPS = ("brows", "eyes", "cheeks", "nose", "mouth", "jaw", "tongue", "other")
 _LEFT_TOKENS = {"l", "left", "lf", "lft"}
@@ -144,7 +144,7 @@ class ExpressionPanel(ModelPanel):
         self.grouper = InteractionGrouper(model, idle_s=idle_s, errors=self.errors)
         self.sliders: dict[str, W.FloatSlider] = {}
         #: per slider, the last values the model sent it (echo detection, see the module docstring)
-        self._sent: dict[str, deque[float]] = {}
+        self._echoes = SliderEchoes()
         self.mutes: dict[str, W.Checkbox] = {}
         self.badges: dict[str, W.HTML] = {}
         self._badge_columns: dict[str, W.VBox] = {}  # slider over badge, in a corrective's cell
@@ -255,10 +255,12 @@ class ExpressionPanel(ModelPanel):
         with model.lock:
             if name not in model.weights or abs(model.weights[name] - value) < 1e-9:
                 return  # an echo of a model update, or a shape that went away
-        if self._is_echo(name, value):
-            self._resend_if_stale(name, value)
+        step = float(self.sliders[name].step or 0.0) if name in self.sliders else 0.0
+        if self._echoes.is_echo(name, value, step):
+            self._echoes.resend_if_stale(name, value, step, lambda: self._model.weights.get(name),
+                                         lambda: self.sliders.get(name))
             return
-        self._sent.pop(name, None)  # the person moves this slider now: older values are not echoes
+        self._echoes.forget(name)  # the person moves this slider now: older values are not echoes
         self.selected = name
         self.grouper.touch(f"Drag {name}")
         model.set_weight(name, value)
@@ -286,52 +288,12 @@ class ExpressionPanel(ModelPanel):
             any_visible = any(id(b) in visible_rows for b in boxes)
             header.layout.display = None if any_visible else "none"
 
-    def _is_echo(self, name: str, value: float) -> bool:
-        """``value`` is a value recently sent to the slider, snapped to its step by the browser."""
-        sent = self._sent.get(name)
-        if not sent:
-            return False
-        step = float(self.sliders[name].step or 0.0)
-        return any(abs(v - value) <= 0.5 * step + 1e-9 for v in sent)
-
-    def _resend_if_stale(self, name: str, value: float) -> None:
-        """An echo of an older value (the model moved on): show the model's value in the page again.
-
-        The kernel answers every value a page sends with an ``echo_update`` of
-        it, which the page applies (ipywidgets 8's echo protocol,
-        ``WidgetModel._handle_comm_msg``), so the page's snapped echo of a
-        playback frame that crosses the model's next value (the last frame)
-        lands after it and leaves the page on the older value. The kernel then
-        sends the model's value again; the page's echo of that one is within
-        half a step of the model, which ends it.
-        """
-        current = self._model.weights.get(name)
-        slider = self.sliders.get(name)
-        if current is None or slider is None:
-            return
-        if abs(current - value) <= 0.5 * float(slider.step or 0.0) + 1e-9:
-            return  # the echo of the model's current value: in step
-
-        def resend() -> None:
-            now = self._model.weights.get(name)
-            s = self.sliders.get(name)
-            if now is None or s is None or abs(float(s.value) - now) <= 0.5 * float(s.step or 0.0) + 1e-9:
-                return
-            self._sent.setdefault(name, deque(maxlen=8)).append(float(now))
-            s.value = now  # the slider holds the page's stale value: this is a change, and is sent
-
-        loop = ui_loop()
-        if loop is None:
-            resend()
-        else:
-            loop.call_soon(resend)  # after the update that brought the echo has been applied
-
     # ------------------------------------------------------- model -> UI
     def _on_model_weights(self, values: Mapping[str, float]) -> None:
         for name, v in values.items():
             s = self.sliders.get(name)
             if s is not None and s.value != v:
-                self._sent.setdefault(name, deque(maxlen=8)).append(float(v))
+                self._echoes.sent(name, v)
                 s.value = v
         if self.badges:  # correctives: a driver's change names only the driver
             self._show_derived()
@@ -341,7 +303,7 @@ class ExpressionPanel(ModelPanel):
         for name in self.badges:
             s = self.sliders.get(name)
             if s is not None and name in played and s.value != played[name]:
-                self._sent.setdefault(name, deque(maxlen=8)).append(float(played[name]))
+                self._echoes.sent(name, played[name])
                 s.value = played[name]
 
     def _on_correctives(self) -> None:

@@ -16,6 +16,7 @@ from typing import Any
 import ipywidgets as W
 
 from widgets._threading import ErrorSink, InteractionGrouper
+from widgets.slider_echoes import SliderEchoes
 
 #: Step of the per-region weight sliders.
 SLIDER_STEP = 0.01
@@ -60,6 +61,8 @@ class RegionSliders:
         self.flush = flush
         self.extra_shapes: list[str] = []
         self.weight_sliders: dict[str, W.FloatSlider] = {}
+        #: the values sent to each (region, shape) slider: a late echo of one is no edit
+        self._echoes = SliderEchoes()
         self.reset_region_button = W.Button(
             description="Reset region", icon="undo", layout=W.Layout(width="auto"),
             tooltip="This region follows the global sliders again",
@@ -96,8 +99,27 @@ class RegionSliders:
     def on_slider(self, shape: str, value: float) -> None:
         """A slider of ``shape`` moved to ``value`` (the browser's message)."""
         r = self.selected()
-        if r is not None:
-            self.set_region_weight(r, shape, value)
+        if r is None:
+            return
+        key = (r, shape)
+        if self._echoes.is_echo(key, float(value), SLIDER_STEP):
+            # the page's snapped echo of a value sent during a region drag: no edit
+            self._echoes.resend_if_stale(key, float(value), SLIDER_STEP, lambda: self._current(r, shape),
+                                         lambda: self.weight_sliders.get(shape), self._shown(shape))
+            return
+        self._echoes.forget(key)
+        self.set_region_weight(r, shape, value)
+
+    def _current(self, r: int, shape: str) -> float | None:
+        st = self.model.regions.state
+        if st is None or self.selected() != r:
+            return None
+        rw = self.model.regions.effective_weights
+        return rw.region(r).get(shape) if r < len(rw.region_names) else None
+
+    def _shown(self, shape: str) -> Callable[[float], float]:
+        lo = self.model.shape(shape).slider_min
+        return lambda v: snap(v, lo)
 
     def _on_reset_region(self, _b: Any = None) -> None:
         r = self.selected()
@@ -156,8 +178,10 @@ class RegionSliders:
             return
         model = self.model
         values = model.regions.effective_weights.region(r)
+        self._echoes.forget()
         for nm in shapes:
             sh = model.shape(nm)
+            self._echoes.sent((r, nm), values[nm])
             s = W.FloatSlider(
                 value=snap(values[nm], sh.slider_min), min=sh.slider_min, max=sh.slider_max,
                 step=SLIDER_STEP, description=nm, continuous_update=True, readout_format=".2f",
@@ -185,6 +209,7 @@ class RegionSliders:
         for nm, s in self.weight_sliders.items():
             v = values.get(nm)
             if v is not None and not is_echo(s.value, v, s.min):
+                self._echoes.sent((r, nm), v)
                 s.value = snap(v, s.min)
 
     def close(self) -> None:
