@@ -241,6 +241,12 @@ def test_scrub_drag_key_and_play(open_notebook):
         polling="raf",
     ).json_value()
     nb.screenshot("playing", full_detail=False)  # a playing clip drafts
+    # the viewport draws the played frames: wait for five (a busy machine draws fewer per second
+    # than the playhead moves), then pause
+    nb.page.wait_for_function(
+        "(prev) => Number(document.querySelector('.fwb-viewport').getAttribute('data-frame')) >= prev + 5",
+        arg=frame1, timeout=60_000,
+    )
     root.locator(".fwb-tl-pause").click()
     _wait_py(nb, "tl.playing", lambda v: not v, timeout=10)
     stats = _py(nb, "tl.playback_stats")
