@@ -196,11 +196,6 @@ def linear_key(model: Any, view: Any) -> tuple[Any, ...]:
                  for layer in model.pipeline.layers if is_linear(layer))
 
 
-def layer_gains(model: Any) -> np.ndarray:
-    """(n, 2) float32 ``(a, c)`` of :func:`linear_layers` for the live state."""
-    return linear_layers(model, model.view())[0]
-
-
 class GpuSync:
     """The GPU half of :class:`~widgets.viewport.sync.SceneSync` (same widget, same locks)."""
 

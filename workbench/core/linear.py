@@ -140,16 +140,6 @@ class Decomposition:
     terms: dict[str, LinearTerms] = field(default_factory=dict)
     has_constant: bool = False
 
-    def gain_of(self, name: str) -> NDArray[np.float64] | None:
-        """The factor applied to the named controls or baked layer's displacement."""
-        for nm, _, g in self.controls:
-            if nm == name:
-                return g
-        for nm, g, _ in self.baked:
-            if nm == name:
-                return g
-        return None
-
 
 def decompose(layers: Sequence[Layer], view: StateView, timeline: Any, *, n: int,
               constants: bool = True, skip: Callable[[Layer], bool] | None = None) -> Decomposition:

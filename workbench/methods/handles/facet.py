@@ -100,10 +100,8 @@ class HandlesFacet:
         the handles in column ``j`` (a view can evaluate the shell itself, e.g. on the
         GPU). Builds the deformer on first use.
         """
-        d = self.deformer()
-        B = d.basis_.view()
-        B.flags.writeable = False
-        return B, d.handle_columns
+        _, B, columns = self.layer.control_basis(self._model.view())
+        return B, columns
 
     def displacement(self) -> NDArray[np.float32]:
         """(n, 3) float32 copy of what the handle layer adds to the live mesh."""
