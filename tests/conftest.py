@@ -7,6 +7,7 @@ test after which the guard recorded any violation fails.
 
 from __future__ import annotations
 
+import asyncio
 import os
 import sys
 
@@ -30,6 +31,33 @@ def _widgets_stay_on_the_ui_thread():
         found = guard.thread_violations[before:]
         del guard.thread_violations[before:]
         pytest.fail(f"widgets changed off the UI thread: {found}")
+
+
+@pytest.fixture(autouse=True)
+def _no_foreign_event_loop(request: pytest.FixtureRequest):
+    """Run each test that drives no browser with no asyncio loop marked running on this thread.
+
+    Playwright's sync API marks the main thread as running its loop between
+    calls (``asyncio._set_running_loop``), for the rest of the session once a
+    browser test started it. Widget code would take that loop for a kernel's
+    and schedule on it (``widgets._threading.ui_loop``), where nothing runs
+    until the next Playwright call; a unit test runs as a script does, with no
+    loop.
+    """
+    if "browser" in request.fixturenames:
+        yield
+        return
+    foreign = asyncio._get_running_loop()
+    threading_mod = sys.modules.get("widgets._threading")
+    if foreign is not None:
+        asyncio._set_running_loop(None)
+        if threading_mod is not None and threading_mod._ui_loop is foreign:
+            threading_mod._ui_loop = None
+    try:
+        yield
+    finally:
+        if foreign is not None:
+            asyncio._set_running_loop(foreign)
 
 
 @pytest.fixture
