@@ -38,13 +38,23 @@ def sparse(head):
                                  shapes=marker_visible_shapes(head))
 
 
+@pytest.fixture(scope="module")
+def dense_default(head, dense):
+    """``track`` with its defaults on the dense take (the λ's chosen), shared by the tests that read it."""
+    return track(head, dense.markers, vertex_ids=dense.marker_ids)
+
+
+@pytest.fixture(scope="module")
+def sparse_default(head, sparse):
+    return track(head, sparse.markers, vertex_ids=sparse.marker_ids)
+
+
 def _rmse(res, perf):
     return float(np.sqrt(np.mean((res.weights - perf.weights) ** 2)))
 
 
-def test_dense_takes_choose_less_sparsity_than_sparse_ones(head, dense, sparse):
-    rd = track(head, dense.markers, vertex_ids=dense.marker_ids)
-    rs = track(head, sparse.markers, vertex_ids=sparse.marker_ids)
+def test_dense_takes_choose_less_sparsity_than_sparse_ones(head, dense, sparse, dense_default, sparse_default):
+    rd, rs = dense_default, sparse_default
     print("dense", rd.info["l1"], rd.info["temporal"], "sparse", rs.info["l1"], rs.info["temporal"])
     assert rd.info["l1"] < rs.info["l1"]
     assert rd.info["l1"] <= 3e-3  # about 0: the weights are dense
@@ -56,8 +66,8 @@ def test_dense_takes_choose_less_sparsity_than_sparse_ones(head, dense, sparse):
         assert _rmse(mine, perf) <= _rmse(swapped, perf) * 1.02
 
 
-def test_the_result_reports_the_choice(head, dense):
-    res = track(head, dense.markers, vertex_ids=dense.marker_ids)
+def test_the_result_reports_the_choice(head, dense, dense_default):
+    res = dense_default
     ch = res.info["lambda_choice"]
     assert res.info["lambda_auto"] == (True, True)
     assert (ch["l1"], ch["temporal"]) == (res.info["l1"], res.info["temporal"])
@@ -72,7 +82,7 @@ def test_the_result_reports_the_choice(head, dense):
     assert 0 < ch["frames"] <= T and ch["folds"] >= 2
 
 
-def test_explicit_values_are_honoured(head, dense):
+def test_explicit_values_are_honoured(head, dense, dense_default):
     res = track(head, dense.markers, vertex_ids=dense.marker_ids, l1=0.02, temporal=0.5)
     assert (res.info["l1"], res.info["temporal"]) == (0.02, 0.5)
     assert res.info["lambda_choice"] is None and res.info["lambda_auto"] == (False, False)
@@ -82,14 +92,13 @@ def test_explicit_values_are_honoured(head, dense):
     assert {a for a, _b, _e in half.info["lambda_choice"]["grid"]} == {0.0}
     # "auto" spelled out is the default
     auto = track(head, dense.markers, vertex_ids=dense.marker_ids, l1="auto", temporal="auto")
-    default = track(head, dense.markers, vertex_ids=dense.marker_ids)
-    assert np.array_equal(auto.weights, default.weights)
+    assert np.array_equal(auto.weights, dense_default.weights)
     with pytest.raises(TrackError, match="l1"):
         track(head, dense.markers, vertex_ids=dense.marker_ids, l1="sparse")
 
 
-def test_l1_still_sparser_than_l2_on_sparse_takes(head, sparse):
-    auto = track(head, sparse.markers, vertex_ids=sparse.marker_ids)
+def test_l1_still_sparser_than_l2_on_sparse_takes(head, sparse, sparse_default):
+    auto = sparse_default
     l2 = track(head, sparse.markers, vertex_ids=sparse.marker_ids, l1=0.0, temporal=auto.info["temporal"])
     n_auto = (auto.weights > 1e-3).sum(1).mean()
     n_l2 = (l2.weights > 1e-3).sum(1).mean()
