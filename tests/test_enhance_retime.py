@@ -155,6 +155,7 @@ def test_retimed_inbetweens_follow_the_true_dynamics(name, neutral_start, extend
     truth = _transition(a2, b2, CURVES[name], n)
     r = retime(seqs, a2, b2, n, extend=extend)
     assert r.matched[0] == index
+    assert r.choice == "match" and r.error < 0.15 * np.linalg.norm(b2 - a2)  # the same transition: auto keeps it
     u = np.linspace(0.0, 1.0, n)
     linear = _transition(a2, b2, lambda t: t, n)
     ease = _transition(a2, b2, _smoothstep, n)
@@ -316,4 +317,13 @@ def test_mesh_topology_mismatch():
 def test_no_forward_match():
     # a two-frame database going end → start: every placement of the keys runs backwards in time
     with pytest.raises(ValueError, match="database"):
-        retime([np.array([[1.0], [0.0]])], [0.0], [1.0], 5)
+        retime([np.array([[1.0], [0.0]])], [0.0], [1.0], 5, method="closest")
+    # "auto" says so instead: no match, no transition to learn from (2 frames) → an ease curve
+    r = retime([np.array([[1.0], [0.0]])], [0.0], [1.0], 5)
+    assert r.choice == "ease" and r.matched == (-1, -1, -1) and r.error == np.inf
+    np.testing.assert_allclose(r.s, _smoothstep(np.linspace(0.0, 1.0, 5)))
+
+
+def test_unknown_method():
+    with pytest.raises(ValueError, match="method"):
+        retime([np.zeros((4, 3))], np.zeros(3), np.ones(3), 5, method="nearest")

@@ -177,3 +177,29 @@ def test_retime_from_an_alembic_point_cache_in_mesh_space() -> None:
         assert p.plot.value[:4] == b"\x89PNG"
     finally:
         wb.close()
+
+
+@pytest.mark.parametrize("choice", ["match", "take", "ease"])
+def test_the_timing_plot_draws_where_the_timing_came_from(choice) -> None:
+    """A plot for each source of timing: the matched motion, the take's transitions blended, an ease curve."""
+    from widgets.enhance.plots import retime_plot_png
+    from workbench.enhance import retime
+
+    rng = np.random.default_rng(0)
+    t = np.linspace(0.0, 1.0, 20)[:, None]
+    poses = rng.uniform(0.3, 1.0, (4, 6))
+    take = np.vstack([np.zeros((3, 6))] + [np.vstack([p * t**3, p * (1 - t) ** 3]) for p in poses])
+    if choice == "match":
+        start, end = take[3], take[22]
+    elif choice == "take":
+        start, end = np.zeros(6), rng.uniform(0.3, 1.0, 6)
+    else:
+        take = np.array([[1.0] * 6, [0.0] * 6])
+        start, end = np.zeros(6), np.ones(6)
+    res = retime([take], start, end, 12)
+    assert res.choice == choice
+    png = retime_plot_png(res, [take], 0.0, 0.4, shape=0, name="jawOpen")
+    assert png[:8] == b"\x89PNG\r\n\x1a\n"
+    width, height = struct.unpack(">II", png[16:24])
+    assert width > 300 and height > 200
+    assert res.describe()

@@ -281,8 +281,7 @@ class CapturePanel(ModelPanel):
             raise ValueError(f"Retime: select keys at exactly two times on the timeline (selected: {times})")
         self.flush()
         res = self.model.enhance.retime(times[0], times[1], [self.result])
-        self.progress.finish(f"retimed {times[0]:g}–{times[1]:g} s from frames {res.matched[1]}–{res.matched[2]} "
-                             f"of the take (undo: one step)")
+        self.progress.finish(f"retimed {times[0]:g}–{times[1]:g} s: {res.describe()} (undo: one step)")
         return res
 
     def save_adapted(self, path: str) -> Path:

@@ -254,8 +254,7 @@ class EnhancePanel(ModelPanel):
         seqs = [x.reshape(len(x), -1) for x in meshes] if meshes is not None else weight_takes(takes, names)
         self.plot.value = retime_plot_png(res, seqs, times[0], times[1], shape=j, name=names[j], extended=extend)
         self.plot.layout.display = None
-        self.progress.finish(f"retimed {times[0]:g}–{times[1]:g} s from frames {res.matched[1]}–{res.matched[2]} "
-                             f"(undo: one step)")
+        self.progress.finish(f"retimed {times[0]:g}–{times[1]:g} s: {res.describe()} (undo: one step)")
         return res
 
     # ------------------------------------------------------------------ display

@@ -84,6 +84,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from workbench.enhance.transitions import transition_timing
+
 __all__ = ["RetimeResult", "project_segments", "retime", "sequence_projection"]
 
 _EPS = 1e-12
@@ -93,6 +95,10 @@ _EPS = 1e-12
 _TIE = 1e-9
 _RES = 1e-7
 _CHORD_BUDGET = 4_000_000  # entries of the (chord samples, segments) tables of §6.2
+#: method="auto" keeps the closest match when its eq. 6 error is within this share of |end − start|
+#: (the same transition, up to noise); realistic takes' closest matches sit at 0.25–1.0 of it
+CLOSE_MATCH = 0.15
+METHODS = ("auto", "closest", "take")
 
 
 @dataclass(frozen=True)
@@ -116,6 +122,14 @@ class RetimeResult:
         where ``start`` and ``end`` project.
     times : (n_frames,) float
         The uniform times between ``τ0`` and ``τ1`` at which ``s`` is sampled.
+    choice : str
+        Where ``s`` comes from: ``"match"`` (the closest match, §6.2), ``"take"``
+        (blended from the take's transitions, :mod:`workbench.enhance.transitions`)
+        or ``"ease"`` (smoothstep: the database has no transition to learn from).
+        ``matched``, ``error``, ``span`` and ``times`` always describe the closest
+        match (``(-1, -1, -1)``, ``inf``, NaN when none moves forward in time).
+    sources : tuple of (int, int, int, float)
+        For ``"take"``: ``(sequence, first, last, weight)`` of every transition blended.
     """
 
     s: NDArray[np.float64]
@@ -124,6 +138,19 @@ class RetimeResult:
     error: float
     span: tuple[float, float]
     times: NDArray[np.float64]
+    choice: str = "match"
+    sources: tuple[tuple[int, int, int, float], ...] = ()
+
+    def describe(self) -> str:
+        """Where the timing came from, in words (for a status line)."""
+        if self.choice == "match":
+            i, first, last = self.matched
+            return f"the timing of take {i}, frames {first}–{last} (match error {self.error:.3g})"
+        if self.choice == "take":
+            takes = sorted({src[0] for src in self.sources})
+            return (f"the timing of {len(self.sources)} transitions of {len(takes)} take(s) blended "
+                    "(none passes near both keys)")
+        return "an ease curve (the takes hold no transition to learn from)"
 
 
 def project_segments(alpha: ArrayLike, beta: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -388,7 +415,8 @@ def _extend(beta: NDArray[np.float64], tau0: float, tau1: float) -> tuple[float,
 
 
 def retime(
-    database: Sequence[ArrayLike], start: ArrayLike, end: ArrayLike, n_frames: int, *, extend: bool = False
+    database: Sequence[ArrayLike], start: ArrayLike, end: ArrayLike, n_frames: int, *, extend: bool = False,
+    method: str = "auto",
 ) -> RetimeResult:
     """Retime the in-betweens of a key pair after the closest database transition (§6).
 
@@ -408,6 +436,13 @@ def retime(
         moving along it (to its rest and its extreme), and time the keys by
         the whole motion. Without it a key that lands on a slow tail (an
         ease-out the actor barely finishes) cuts the motion short.
+    method : {"auto", "closest", "take"}
+        ``"closest"``: the paper's single closest match. ``"take"``: the take's
+        transitions blended (:func:`workbench.enhance.transitions.transition_timing`),
+        which times real takes better than the closest chord when no transition
+        of the take passes near both keys. ``"auto"`` (default): the closest
+        match when its error is within ``CLOSE_MATCH`` (15 %) of ``|end − start|``,
+        else the take's transitions; ``RetimeResult.choice`` says which.
 
     Returns
     -------
@@ -420,9 +455,12 @@ def retime(
     ValueError
         Naming the argument: empty ``database``, a sequence of the wrong shape
         or with < 2 frames, NaN/inf anywhere, ``start``/``end`` shapes that
-        differ, ``end == start``, ``n_frames < 2``; or no database sequence
-        moves forward in time from the start's projection to the end's.
+        differ, ``end == start``, ``n_frames < 2``, an unknown ``method``; or,
+        for ``method="closest"``, no database sequence moves forward in time from
+        the start's projection to the end's.
     """
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {METHODS}, got {method!r}")
     seqs, s_vec, e_vec, shape = _validate(database, start, end, n_frames)
     keys = np.vstack([s_vec, e_vec])
     scale = float(np.linalg.norm(e_vec - s_vec))
@@ -431,23 +469,40 @@ def retime(
         m = _match_pair(T, E, scale)
         if m is not None and (best is None or m[0] < best[0]):
             best = (m[0], i, m[1], m[2])
-    if best is None:
+    if best is None and method == "closest":
         raise ValueError("database: no sequence moves from start towards end (every match is backwards in time)")
-    _, i, tau0, tau1 = best
-    # the reported error exactly (eq. 5's inner-product expansion is only used to choose)
-    err = float(np.linalg.norm(s_vec - _at(seqs[i], tau0)) + np.linalg.norm(e_vec - _at(seqs[i], tau1)))
-    if extend:
-        tau0, tau1 = _extend(seqs[i], tau0, tau1)
-    s, times = _progress_curve(seqs[i], tau0, tau1, int(n_frames))
+    n = int(n_frames)
+    matched, err, span, times = (-1, -1, -1), float("inf"), (float("nan"), float("nan")), np.full(n, np.nan)
+    s: NDArray[np.float64] | None = None
+    choice = "match"
+    sources: tuple[tuple[int, int, int, float], ...] = ()
+    if best is not None:
+        _, i, tau0, tau1 = best
+        # the reported error exactly (eq. 5's inner-product expansion is only used to choose)
+        err = float(np.linalg.norm(s_vec - _at(seqs[i], tau0)) + np.linalg.norm(e_vec - _at(seqs[i], tau1)))
+        if extend:
+            tau0, tau1 = _extend(seqs[i], tau0, tau1)
+        s_match, times = _progress_curve(seqs[i], tau0, tau1, n)
+        matched = (i, int(np.floor(tau0)), min(int(np.ceil(tau1)), seqs[i].shape[0] - 1))
+        span = (float(tau0), float(tau1))
+        if method == "closest" or (method == "auto" and err <= CLOSE_MATCH * scale):
+            s = s_match
+    if s is None:
+        blended = transition_timing(seqs, s_vec, e_vec, n)
+        if blended is not None:
+            s, choice, sources = blended.s, "take", blended.sources
+        else:
+            u = np.linspace(0.0, 1.0, n)
+            s, choice, sources = u * u * (3.0 - 2.0 * u), "ease", ()
     frames = s_vec[None, :] + s[:, None] * (e_vec - s_vec)[None, :]
     frames[0], frames[-1] = s_vec, e_vec
-    first = int(np.floor(tau0))
-    last = min(int(np.ceil(tau1)), seqs[i].shape[0] - 1)
     return RetimeResult(
         s=s,
-        frames=frames.reshape((int(n_frames), *shape)),
-        matched=(i, first, last),
-        error=float(err),
-        span=(float(tau0), float(tau1)),
+        frames=frames.reshape((n, *shape)),
+        matched=matched,
+        error=err,
+        span=span,
         times=times,
+        choice=choice,
+        sources=sources,
     )

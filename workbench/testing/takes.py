@@ -99,6 +99,7 @@ def realistic_weights(
     seed: int = 0,
     factors: int = 6,
     noise: float = 0.004,
+    repeat: float = 0.0,
 ) -> NDArray[np.float64]:
     """Weights ``(T, k)`` like a real phone take (see the module docstring), in ``model.shape_names`` order.
 
@@ -117,6 +118,11 @@ def realistic_weights(
         Latent expression factors the shapes co-articulate on (≥ 1).
     noise : float
         Standard deviation of the phone-like jitter on each weight (temporally correlated).
+    repeat : float
+        Chance that a transition returns to an expression the take showed before
+        (varied: its reach, L/R split and a few shapes differ), as talking revisits
+        visemes and an actor repeats a smile; 0 (default) makes every expression new,
+        the hardest case for methods that look for similar moments in a take.
 
     Returns
     -------
@@ -131,6 +137,8 @@ def realistic_weights(
         raise ValueError(f"factors must be ≥ 1, got {factors!r}")
     if not (np.isfinite(noise) and noise >= 0):
         raise ValueError(f"noise must be a number ≥ 0, got {noise!r}")
+    if not (np.isfinite(repeat) and 0.0 <= repeat <= 1.0):
+        raise ValueError(f"repeat must be a number in [0, 1], got {repeat!r}")
     if not model.shapes:
         raise ValueError("model: it has no blendshapes to animate")
     rng = np.random.default_rng(seed)
@@ -191,13 +199,20 @@ def realistic_weights(
 
     W = np.empty((T, ks))
     v = rest.copy()
+    visited: list[NDArray[np.float64]] = []
     t = 0
     while t < T:
         # a transition into a new expression: per-shape onsets, stopping short (rarely overshooting)
         fast = rng.random() < 0.3  # a fast onset (a jaw drop, a blink)
         L = int(np.clip(round((rng.uniform(3.0, 6.0) if fast else rng.lognormal(np.log(13.0), 0.45)) * rate),
                         max(2, round(3 * rate)), round(28 * rate)))
-        target = key_state() if rng.random() < 0.8 else rest.copy() + rng.normal(0.0, 0.02, ks)
+        if visited and repeat > 0.0 and rng.random() < repeat:
+            seen_key = visited[int(rng.integers(len(visited)))]
+            varied = rest + (seen_key - rest) * rng.uniform(0.8, 1.1) + rng.normal(0.0, 0.03, ks)
+            target = np.clip(varied, 0.0, 1.0)
+        else:
+            target = key_state() if rng.random() < 0.8 else rest.copy() + rng.normal(0.0, 0.02, ks)
+            visited.append(target)
         reach = 1.0 - rng.uniform(0.0, 0.3, ks)
         over = rng.random(ks) < 0.04
         reach[over] = 1.0 + rng.uniform(0.03, 0.1, int(over.sum()))
