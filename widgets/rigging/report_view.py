@@ -86,7 +86,8 @@ class QualityReport(ModelPanel):
         warn = "".join(f"<li style='color:#b60'>{html.escape(w)}</li>" for w in rep.warnings)
         self.summary.value = (
             f"<b>{len(rep.shapes)} shapes</b>, {len(self.flagged)} flagged \u00b7 fit coverage "
-            f"{reg.get('coverage', 0):.0%}, residual median {reg.get('median_residual', 0):.3g} / p95 "
+            f"{reg.get('coverage', 0):.0%} ({reg.get('over_holes', 0):.0%} over holes), residual median "
+            f"{reg.get('median_residual', 0):.3g} / p95 "
             f"{reg.get('p95_residual', 0):.3g} {html.escape(self.session.target.metadata.units)} \u00b7 "
             f"aligned by {html.escape(str(rep.alignment.get('method', '?')))} \u00b7 set-up "
             f"{rep.timings.get('setup', 0):.1f} s, transfer {rep.timings.get('transfer', 0):.2f} s"

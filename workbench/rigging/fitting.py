@@ -18,10 +18,11 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.spatial import cKDTree
 
 from workbench.geometry.normals import triangle_areas
 from workbench.geometry.similarity import Similarity, fit_similarity
-from workbench.geometry.surface import SurfaceQuery
+from workbench.geometry.surface import SurfaceQuery, boundary_vertices
 from workbench.rigging.registration import NonRigidResult, affine_icp, nonrigid_icp, rigid_icp
 from workbench.rigging.report import RigTransferError, StretchMeter
 from workbench.rigging.sides import Side, eye_centres
@@ -157,24 +158,56 @@ def fit_template(
                         progress=progress)
 
 
+def _near_target_border(P: NDArray[np.float64], tgt: Side, query: SurfaceQuery) -> NDArray[np.bool_]:
+    """Points whose way to the target surface ends at (or within 3 mean edges of) one of its open borders.
+
+    A template point over a hole of the target (inside an open mouth bag, over a
+    cut-out eye socket) reaches the target at or next to the hole's rim.
+    """
+    T, F = tgt.skin_X, tgt.skin_faces
+    rim = boundary_vertices(F, T.shape[0])
+    dist, face, _, bary = query.closest(P)
+    out = query.on_boundary(face, bary)
+    if rim.any():
+        edge = float(np.mean(np.linalg.norm(T[F[:, 0]] - T[F[:, 1]], axis=1)))
+        d_rim = cKDTree(T[rim]).query(P)[0]
+        out |= d_rim <= dist + 3.0 * edge
+    return np.asarray(out)
+
+
 def judge_fit(
-    fit: NonRigidResult, src: Side, tgt: Side, head_metres: float, warnings: list[str]
+    fit: NonRigidResult, src: Side, tgt: Side, head_metres: float, warnings: list[str],
+    query: SurfaceQuery | None = None,
 ) -> dict[str, Any]:
     """Registration quality on the template's face (the skin its shapes move); raises if the target is no face.
+
+    Template face that lies over a hole or border of the target (its closest
+    target point is on the target's boundary: an open mouth bag, eye sockets
+    cut out of the skin, a face cut off at the hairline) has no surface to find
+    by design, so it is reported (``over_holes``) rather than counted against
+    the coverage, up to half of the face.
+
+    Parameters
+    ----------
+    query : SurfaceQuery, optional
+        The target skin in the working frame (built from ``tgt`` if omitted).
 
     Returns
     -------
     dict
-        ``coverage`` and ``head_coverage`` (shares of the face and of the whole
-        template skin that found target surface), ``median_residual`` and
-        ``p95_residual`` (target units), ``distortion`` (area share stretched
-        beyond 2x or folded), ``iterations``.
+        ``coverage`` (share of the template's face, less what lies over the
+        target's holes, that found target surface), ``over_holes`` (share of
+        the face over holes or borders), ``head_coverage`` (share of the whole
+        template skin), ``median_residual`` and ``p95_residual`` (target
+        units), ``distortion`` (area share stretched beyond 2x or folded),
+        ``iterations``.
 
     Raises
     ------
     RigTransferError
-        Under 80 % coverage, over 5 % distortion or a median residual over 1 %
-        of the head: the target does not look like a face.
+        Under 80 % coverage, half the face or more over holes, over 5 %
+        distortion or a median residual over 1 % of the head: the target does
+        not look like a face.
     """
     S0 = src.skin_X
     F = src.skin_faces
@@ -186,16 +219,24 @@ def judge_fit(
     face_t = face_v[F].any(1)
     bad = (stretch > 2.0) | flipped
     distortion = float(area[bad & face_t].sum() / max(area[face_t].sum(), 1e-300))
-    coverage = float(fit.accepted[face_v].mean())
+    if query is None:
+        query = SurfaceQuery(tgt.skin_X, tgt.skin_faces)
+    over_hole = ~fit.accepted & _near_target_border(fit.positions, tgt, query)
+    judged = face_v & ~over_hole
+    over_holes = float(over_hole[face_v].mean())
+    coverage = float(fit.accepted[judged].mean()) if judged.any() else 0.0
     to_t = head_metres / tgt.model.metadata.metres_per_unit
     d = fit.distance[face_v & fit.accepted] if (face_v & fit.accepted).any() else fit.distance[face_v]
     med = float(np.median(d))
     p95 = float(np.percentile(d, 95))
-    info = dict(coverage=coverage, head_coverage=float(fit.accepted.mean()), median_residual=med * to_t,
+    info = dict(coverage=coverage, over_holes=over_holes, head_coverage=float(fit.accepted.mean()),
+                median_residual=med * to_t,
                 p95_residual=p95 * to_t, distortion=distortion, iterations=fit.iterations)
     problems = []
     if coverage < 0.8:
         problems.append(f"only {coverage:.0%} of the template's face found target surface near it")
+    if over_holes >= 0.5:
+        problems.append(f"{over_holes:.0%} of the template's face lies over holes or borders of it")
     if distortion > 0.05:
         problems.append(f"fitting the template onto it stretched or folded {distortion:.0%} of the template's face")
     if med > 0.01:
@@ -210,4 +251,7 @@ def judge_fit(
         warnings.append(f"fit: {distortion:.1%} of the template's face stretched beyond 2x or folded")
     if coverage < 0.95:
         warnings.append(f"fit: {1 - coverage:.0%} of the template's face found no target surface (holes?)")
+    if over_holes > 0.05:
+        log_holes = f"fit: {over_holes:.0%} of the template's face lies over holes or open borders of the target"
+        warnings.append(log_holes + " (an open mouth, eye sockets): there it follows the nearest border")
     return info

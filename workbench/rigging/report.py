@@ -214,7 +214,9 @@ class TransferReport:
         ("landmarks", "eyes", "head top") and the rigid fit's accepted share.
     registration : dict
         The template skin fitted onto the target: ``coverage`` (share of its
-        vertices that found target surface), ``median_residual`` and
+        face that found target surface, less what lies over the target's holes),
+        ``over_holes`` (share of its face over holes or open borders of the
+        target: an open mouth bag, eye sockets), ``median_residual`` and
         ``p95_residual`` (target units), ``distortion`` (area share of template
         triangles stretched beyond 2x or flipped by the fit), ``iterations``.
     correspondence : dict
@@ -266,7 +268,8 @@ class TransferReport:
         reg = self.registration
         if reg:
             lines.append(
-                f"  fit: coverage {reg.get('coverage', 0):.0%}, residual median {reg.get('median_residual', 0):.3g} / "
+                f"  fit: coverage {reg.get('coverage', 0):.0%} ({reg.get('over_holes', 0):.0%} of the face over "
+                f"holes of the target), residual median {reg.get('median_residual', 0):.3g} / "
                 f"p95 {reg.get('p95_residual', 0):.3g} (target units), distortion {reg.get('distortion', 0):.1%}"
             )
         w = self.worst

@@ -175,7 +175,7 @@ class RigTransfer:
             self.src, self.tgt, self._t_query, self._landmarks,
             progress=None if progress is None else (lambda f, m: self._say(0.08 + 0.72 * f, m)),
         )
-        self.registration = judge_fit(self.fit, self.src, self.tgt, self.head_metres, self.warnings)
+        self.registration = judge_fit(self.fit, self.src, self.tgt, self.head_metres, self.warnings, self._t_query)
 
         # 4. correspondence, parts, 5. the factorisation
         self._say(0.82, "correspondence")
