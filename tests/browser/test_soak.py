@@ -84,9 +84,13 @@ _PAGE = """
 
 @pytest.fixture
 def cpu_hogs() -> Iterator[None]:
-    """Two busy processes beside the browser and the kernel (ended by their pids)."""
+    """Two busy processes beside the browser and the kernel (ended by their pids).
+
+    ``WORKBENCH_SOAK_HOGS`` sets how many (0 when a script runs its own beside the whole suite).
+    """
     hogs = [
-        subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(2)
+        subprocess.Popen([sys.executable, "-c", "while True: pass"])
+        for _ in range(int(os.environ.get("WORKBENCH_SOAK_HOGS", "2")))
     ]
     try:
         yield
