@@ -86,6 +86,10 @@ def test_step_fields_are_checked_per_kind(project):
     assert msg.startswith('jobs.toml line 14: [[steps]] t1 = "end": expected an integer or a number'), msg
     text = GOOD + '[[steps]]\nkind = "retime"\nt0 = 0.5\ndatabase = ["db.csv"]\n'
     assert "line 11: [[steps]]: missing field 't1'" in _error(project, text)
+    text = GOOD + '[[steps]]\nkind = "retime"\nt0 = 0.5\nt1 = 1.0\ndatabase = ["db.csv"]\nmethod = "nearest"\n'
+    assert "method" in (msg := _error(project, text)) and "expected auto, closest or take" in msg, msg
+    text = GOOD + '[[steps]]\nkind = "retime"\nt0 = 0.5\nt1 = 1.0\ndatabase = ["db.csv"]\nmethod = "take"\n'
+    assert parse_jobs(text, project / "jobs.toml").steps[-1].options["method"] == "take"
 
 
 def test_track_needs_a_marker_map(project):

@@ -83,6 +83,14 @@ def test_retime_from_the_performance_draws_the_timing_plot() -> None:
         assert np.abs(w - np.linspace(w[0], w[-1], 31)).max() > 0.02
         wb.undo()
         assert len(model.tracks.tracks[track].keys) == 2
+        # the timing's source is the user's choice, and the status line says which was used
+        p.extend.value = False
+        for method in ("closest", "take"):
+            p.timing.value = method
+            res = p.retime_selected()
+            assert res.choice == ("match" if method == "closest" else "take")
+            assert res.describe() in p.progress.label.value
+            wb.undo()
     finally:
         wb.close()
 

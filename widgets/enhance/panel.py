@@ -106,6 +106,12 @@ class EnhancePanel(ModelPanel):
         self.retime_path.add_class("fwb-enhance-retime-path")
         self.extend = W.Checkbox(value=False, description="extend to the full matched motion", indent=False)
         self.extend.add_class("fwb-enhance-extend")
+        self.timing = W.Dropdown(options=[("auto: a close match, else the take's transitions", "auto"),
+                                          ("the closest match (§6.2)", "closest"),
+                                          ("the take's transitions blended", "take")],
+                                 value="auto", description="timing", layout=W.Layout(width="420px"),
+                                 style={"description_width": "50px"})
+        self.timing.add_class("fwb-enhance-timing")
         self.retime_button = button("Retime selected keys", "fwb-enhance-retime",
                                     "Bermano et al. 2014 §6.2: key the in-betweens of the two selected key times "
                                     "with a performance's timing (one undo step)", "clock-o")
@@ -127,7 +133,7 @@ class EnhancePanel(ModelPanel):
             self.progress, self.info, self.preview,
             W.HTML("<b>Bake</b>"), W.HBox([self.bake_path, self.bake_button]),
             W.HTML("<b>Retime from performance</b>"),
-            W.HBox([self.retime_source, self.extend]), self.retime_path, self.retime_button, self.plot,
+            W.HBox([self.retime_source, self.extend]), self.timing, self.retime_path, self.retime_button, self.plot,
         ]
         self.refresh()
 
@@ -244,7 +250,7 @@ class EnhancePanel(ModelPanel):
         takes = self._takes()
         self.flush()
         extend = bool(self.extend.value)
-        res = self.model.enhance.retime(times[0], times[1], takes, extend=extend)
+        res = self.model.enhance.retime(times[0], times[1], takes, extend=extend, method=str(self.timing.value))
         self.last_retime = res
         derived = set(self.model.shape_tools.correctives)
         names = [n for n in self.model.shape_names if n not in derived]

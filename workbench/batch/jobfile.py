@@ -73,6 +73,7 @@ STEP_FIELDS: dict[str, dict[str, tuple[tuple[type, ...], bool, str]]] = {
         "database": ((list,), True, "performance takes whose timing is matched"),
         "n_frames": ((int,), False, "in-betweens including both ends"),
         "extend": ((bool,), False, "let the match extend beyond the key pair"),
+        "method": ((str,), False, "where the timing comes from: auto, closest or take"),
     },
     "enhance": {
         "database": ((str,), True, "a saved PerformanceDatabase (.npz)"),
@@ -268,6 +269,8 @@ def _step(c: _Checker, i: int, raw: dict[str, Any], suffixes_seen: set[str]) -> 
         options["database"] = [str(c.existing("steps", i, "database", x)) for x in db]
         if not options["t1"] > options["t0"]:
             raise c.fail("steps", i, "t1", f"must be greater than t0 = {options['t0']}")
+        if options.get("method", "auto") not in ("auto", "closest", "take"):
+            raise c.fail("steps", i, "method", f"expected auto, closest or take, got {options['method']!r}")
     elif kind == "enhance":
         options["database"] = str(c.existing("steps", i, "database", options["database"]))
     elif kind == "transfer_rig":

@@ -222,8 +222,9 @@ def _step_retime(c: _Context) -> list[Path]:
     takes = _animation_takes(list(o["database"]), list(c.model.shape_names))
     with c.on_model(c.animation()) as m:
         res = m.enhance.retime(float(o["t0"]), float(o["t1"]), takes,
-                               n_frames=o.get("n_frames"), extend=bool(o.get("extend", False)))
-        c.log.info("retimed %g-%g s: %s", o["t0"], o["t1"], res)
+                               n_frames=o.get("n_frames"), extend=bool(o.get("extend", False)),
+                               method=str(o.get("method", "auto")))
+        c.log.info("retimed %g-%g s: %s", o["t0"], o["t1"], res.describe())
         c.timeline = m.tracks
     return []
 

@@ -202,7 +202,7 @@ class EnhanceFacet:
     # ------------------------------------------------------------------ temporal (§6.2)
 
     def retime(self, t0: float, t1: float, database: Any, *, n_frames: int | None = None, extend: bool = False,
-               label: str | None = None) -> RetimeResult:
+               method: str = "auto", label: str | None = None) -> RetimeResult:
         """Key the in-betweens of ``t0`` → ``t1`` with the timing of the best-matching take (one undo step).
 
         Parameters
@@ -216,6 +216,9 @@ class EnhanceFacet:
             In-betweens including both ends; default one per frame of the timeline's fps.
         extend : bool
             See :func:`workbench.enhance.retime`.
+        method : {"auto", "closest", "take"}
+            Where the timing comes from (see :func:`workbench.enhance.retime`);
+            ``RetimeResult.choice`` says which was used.
 
         Returns
         -------
@@ -239,12 +242,13 @@ class EnhanceFacet:
         if meshes is not None:
             # mesh space: the keys are the faces shown at t0 and t1 (model space), the takes point caches
             ends = [np.asarray(m.evaluation_at(t).mesh, np.float64) for t in (a, b)]
-            found = retime(meshes, ends[0], ends[1], n, extend=extend)
+            found = retime(meshes, ends[0], ends[1], n, extend=extend, method=method)
             s = found.s
             frames = W[0][None, :] + s[:, None] * (W[1] - W[0])[None, :]
-            res = RetimeResult(s, frames, found.matched, found.error, found.span, found.times)
+            res = RetimeResult(s, frames, found.matched, found.error, found.span, found.times, found.choice,
+                               found.sources)
         else:
-            res = retime(weight_takes(database, names), W[0], W[1], n, extend=extend)
+            res = retime(weight_takes(database, names), W[0], W[1], n, extend=extend, method=method)
         times = np.linspace(a, b, n)[1:-1]
         new = tl
         for j in changed:
