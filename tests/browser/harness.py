@@ -238,6 +238,17 @@ _JS_NOTEBOOK_STATE = """
 
 
 #: what the session's browser tests saw go wrong between page and kernel (printed at the end;
+#: the page's kernel connection: its status and the messages JupyterLab holds back until connected
+_JS_KERNEL_CONNECTION = """() => {
+  const w = window.jupyterapp && window.jupyterapp.shell.currentWidget;
+  const k = w && w.sessionContext && w.sessionContext.session && w.sessionContext.session.kernel;
+  if (!k) return null;
+  return {status: k.status, connectionStatus: k.connectionStatus,
+          pendingMessages: k._pendingMessages ? k._pendingMessages.length : null,
+          futures: k._futures ? k._futures.size : null,
+          wsReadyState: k._ws ? k._ws.readyState : null};
+}"""
+
 #: every count but "checked" must stay 0): notebooks reopened after a lost cell reply, full
 #: updates a page asked for, widget changes off the kernel's UI thread
 HEALTH = {"checked": 0, "reopens": 0, "resyncs": 0, "thread_violations": 0}
@@ -374,9 +385,57 @@ class NotebookPage:
             elif stalled_since is None or stalled_counts != st["counts"]:  # type: ignore[index]
                 stalled_since, stalled_counts = time.monotonic(), st["counts"]  # type: ignore[index]
             elif time.monotonic() - stalled_since > lost_after:
-                raise LostCellReply(f"notebook {self.name}: a cell reply never arrived: {st}")
+                probe = self.probe_kernel(st)  # type: ignore[arg-type]
+                raise LostCellReply(f"notebook {self.name}: a cell reply never arrived: {st}; probe: {probe}")
             time.sleep(0.2)
         raise AssertionError(f"notebook {self.name} did not finish in {timeout} s: {st}")
+
+    def probe_kernel(self, st: dict[str, Any], wait: float = 10.0) -> dict[str, Any]:
+        """Which side lost a reply: ask the kernel directly on a shell connection of our own.
+
+        A kernel that answers our ``kernel_info_request`` has a live shell loop, so the
+        page's requests never reached it (JupyterLab or the server lost them); a kernel
+        that does not answer is wedged. Whether the stuck cells then complete tells
+        whether a new connection woke it (ipykernel#1554's symptom). Saved as
+        ``lost-reply-probe.json`` in the test's artifacts with the server log's tail.
+        """
+        out: dict[str, Any] = {"kernel_id": st.get("kernelId"), "counts_before": st.get("counts")}
+        try:
+            from jupyter_client import BlockingKernelClient
+
+            runtime = self.lab.base / "runtime"
+            cf = next(runtime.glob(f"kernel-{st.get('kernelId')}*.json"), None)
+            if cf is None:
+                out["kernel_info"] = f"no connection file in {runtime}"
+            else:
+                kc = BlockingKernelClient(connection_file=str(cf))
+                kc.load_connection_file()
+                kc.start_channels()
+                try:
+                    t0 = time.monotonic()
+                    reply = kc.kernel_info(reply=True, timeout=10)
+                    out["kernel_info"] = f"answered in {time.monotonic() - t0:.2f} s ({reply['content']['status']})"
+                except Exception as exc:  # any failure is the finding
+                    out["kernel_info"] = f"no answer: {type(exc).__name__}: {exc}"
+                finally:
+                    kc.stop_channels()
+            deadline = time.monotonic() + wait
+            after = st
+            while time.monotonic() < deadline:
+                after = self.state() or after
+                if all(c is not None for c in after["counts"]):
+                    break
+                time.sleep(0.2)
+            out["counts_after"] = after.get("counts")
+            out["page_connection"] = self.page.evaluate(_JS_KERNEL_CONNECTION)
+        except Exception as exc:  # the probe must not hide the lost reply
+            out["probe_error"] = f"{type(exc).__name__}: {exc}"
+        if self.artifacts is not None:
+            with contextlib.suppress(OSError):
+                self.artifacts.mkdir(parents=True, exist_ok=True)
+                (self.artifacts / "lost-reply-probe.json").write_text(json.dumps(out, indent=1, default=str))
+                (self.artifacts / "jupyterlab-log-tail.txt").write_text(self.lab.log_tail(200))
+        return out
 
     def kernel_eval(self, code: str, timeout: float = 60.0) -> Any:
         """Run ``code`` in the notebook's kernel; return the JSON it prints last.

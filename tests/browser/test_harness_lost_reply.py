@@ -52,3 +52,25 @@ def test_a_busy_kernel_or_unrun_cells_are_not_a_lost_reply() -> None:
     nb = _notebook([_st([None, None])])
     with pytest.raises(AssertionError, match="did not finish"):
         nb.run_all(timeout=1, lost_after=0.1)
+
+
+def test_the_probe_asks_the_kernel_on_a_connection_of_its_own(tmp_path) -> None:
+    """A live kernel answers the probe's kernel_info_request (so a lost reply was lost upstream of it)."""
+    from types import SimpleNamespace
+
+    from jupyter_client import KernelManager
+
+    runtime = tmp_path / "runtime"
+    runtime.mkdir()
+    km = KernelManager(connection_file=str(runtime / "kernel-abc123.json"))
+    km.start_kernel()
+    try:
+        nb = NotebookPage(_FakePage(), SimpleNamespace(base=tmp_path, log_tail=lambda n: "log"),  # type: ignore[arg-type]
+                          tmp_path / "artifacts", "fake.ipynb")
+        nb.state = lambda: _st([1, 2])  # type: ignore[method-assign]
+        out = nb.probe_kernel(_st([1, None], pending=1) | {"kernelId": "abc123"}, wait=1.0)
+        assert out["kernel_info"].startswith("answered"), out
+        assert out["counts_after"] == [1, 2]
+        assert (tmp_path / "artifacts" / "lost-reply-probe.json").exists()
+    finally:
+        km.shutdown_kernel(now=True)
