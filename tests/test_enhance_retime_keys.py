@@ -103,3 +103,20 @@ def test_mesh_space_takes_time_the_keys_like_their_weights(takes) -> None:
     np.testing.assert_allclose(played, 0.9 * res.s, atol=1e-6)
     with pytest.raises(ModelError, match="must be \\(40, 5084, 3\\) on the model's mesh"):
         model.enhance.retime(0.0, 1.0, [caches[0][:, :10]])
+
+
+def test_takes_at_another_rate_are_resampled_to_the_timelines() -> None:
+    """A 60 fps tracked take times a 30 fps timeline by seconds, not by frames."""
+    from types import SimpleNamespace
+
+    from workbench.enhance.facet import weight_takes
+
+    t60 = np.arange(61) / 60.0
+    take = SimpleNamespace(shape_names=["a", "b"], weights=np.stack([t60, t60**2], axis=1), fps=60.0)
+    (W,) = weight_takes([take], ["b", "a"], 30.0)
+    assert W.shape == (31, 2)
+    t30 = np.arange(31) / 30.0
+    np.testing.assert_allclose(W[:, 1], t30, atol=1e-12)
+    np.testing.assert_allclose(W[:, 0], t30**2, atol=3e-4)  # linear interpolation of t² between 60 fps samples
+    (W_native,) = weight_takes([take], ["a", "b"])
+    assert W_native.shape == (61, 2)

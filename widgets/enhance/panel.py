@@ -257,7 +257,8 @@ class EnhancePanel(ModelPanel):
         j = int(np.argmax(np.abs(res.frames[-1] - res.frames[0])))
         meshes = mesh_takes(takes, self.model.n_vertices)
         # the database motion's progress along its chord is drawn; point caches are flattened to vectors
-        seqs = [x.reshape(len(x), -1) for x in meshes] if meshes is not None else weight_takes(takes, names)
+        fps = self.model.slot("tracks").fps
+        seqs = [x.reshape(len(x), -1) for x in meshes] if meshes is not None else weight_takes(takes, names, fps)
         self.plot.value = retime_plot_png(res, seqs, times[0], times[1], shape=j, name=names[j], extended=extend)
         self.plot.layout.display = None
         self.progress.finish(f"retimed {times[0]:g}–{times[1]:g} s: {res.describe()} (undo: one step)")

@@ -43,28 +43,44 @@ if TYPE_CHECKING:
 __all__ = ["EnhanceFacet", "weight_takes"]
 
 
-def weight_takes(database: Any, shape_names: Sequence[str]) -> list[NDArray[np.float64]]:
-    """(T_i, k) weight arrays in ``shape_names`` order from arrays, tracked takes or timelines."""
+def weight_takes(database: Any, shape_names: Sequence[str], fps: float | None = None) -> list[NDArray[np.float64]]:
+    """(T_i, k) weight arrays in ``shape_names`` order from arrays, tracked takes or timelines.
+
+    With ``fps``, takes that know their rate (timelines, tracked takes) are resampled to
+    it, so that transition lengths compare with the keyed one (a 60 fps take timing a
+    30 fps timeline); plain arrays are taken at ``fps`` as they are.
+    """
     items = [database] if isinstance(database, Timeline) or hasattr(database, "shape_names") else list(database)
     if not items:
         raise ModelError("retime: the database has no takes")
     names = list(shape_names)
     out = []
     for i, item in enumerate(items):
+        rate = getattr(item, "fps", None)
         if isinstance(item, Timeline):
-            W = item.weight_matrix(names, item.frame_times())
+            times = item.frame_times() if fps is None else _frame_times(item.start, item.end, fps)
+            W = item.weight_matrix(names, times)
         elif hasattr(item, "shape_names") and hasattr(item, "weights"):
             index = {n: j for j, n in enumerate(item.shape_names)}
             missing = [n for n in names if n not in index]
             if missing:
                 raise ModelError(f"retime: database[{i}] has no weights for {missing[:5]}")
             W = np.asarray(item.weights, np.float64)[:, [index[n] for n in names]]
+            if fps is not None and rate and abs(float(rate) - fps) > 1e-9 and W.shape[0] > 1:
+                t = np.arange(W.shape[0]) / float(rate)
+                tn = _frame_times(0.0, float(t[-1]), fps)
+                W = np.stack([np.interp(tn, t, W[:, j]) for j in range(W.shape[1])], axis=1)
         else:
             W = np.asarray(item, np.float64)
             if W.ndim != 2 or W.shape[1] != len(names):
                 raise ModelError(f"retime: database[{i}] must be (T, {len(names)}) weights, got {W.shape}")
         out.append(W)
     return out
+
+
+def _frame_times(start: float, end: float, fps: float) -> NDArray[np.float64]:
+    n = int(np.floor((end - start) * fps + 1e-9)) + 1
+    return start + np.arange(n, dtype=np.float64) / fps
 
 
 def default_correspondence(model: FaceState, database: PerformanceDatabase) -> Correspondence:
@@ -248,7 +264,7 @@ class EnhanceFacet:
             res = RetimeResult(s, frames, found.matched, found.error, found.span, found.times, found.choice,
                                found.sources)
         else:
-            res = retime(weight_takes(database, names), W[0], W[1], n, extend=extend, method=method)
+            res = retime(weight_takes(database, names, tl.fps), W[0], W[1], n, extend=extend, method=method)
         times = np.linspace(a, b, n)[1:-1]
         new = tl
         for j in changed:
