@@ -456,3 +456,25 @@ def test_another_widgets_edit_mid_drag_keeps_the_drag_as_one_step(setup):
     assert panel.errors.count + vp.errors.count == 0
     panel.undo_button.click()
     np.testing.assert_array_equal(model.evaluate(), X0)
+
+
+def test_every_offered_pin_lies_in_a_region_of_the_shown_level(setup):
+    """A default marker in the background of the shown level is not offered (its drag could only refuse)."""
+    from workbench.methods.handles.presets import default_face_handles
+
+    model, vp, panel, _ = setup
+    panel.find_button.click()
+    panel.drag_mode.value = True
+    defaults = np.asarray(default_face_handles(model).vertices)
+    for level in range(model.regions.state.regions.n_levels):
+        model.regions.set_level(level)
+        st = model.regions.state
+        np.testing.assert_array_equal(vp.handles, panel.pins)  # the viewport shows this level's pins
+        assert all(st.regions.regions_at(st.level, int(v)) for v in panel.pins), level
+        left_out = [int(v) for v in defaults if int(v) not in set(panel.pins.tolist())]
+        assert all(not st.regions.regions_at(st.level, v) for v in left_out), level
+    # and an offered pin drags: one undo step
+    n = len(model.history.undo_labels)
+    v = int(panel.pins[0])
+    drag(vp, 0, v, [np.asarray(model.vertices[v]) + np.array([0.0, 0.01, 0.0])])
+    assert len(model.history.undo_labels) == n + 1

@@ -282,7 +282,9 @@ class RegionsPanel(ModelPanel):
 
     # ------------------------------------------------------------ drag mode
     def _pin_vertices(self) -> np.ndarray:
-        """(p,) int: the default marker set plus the model's handles (the drag-mode markers)."""
+        """(p,) int: the drag-mode markers — the default marker set, less the markers in the shown
+        level's background (no region to solve: a drag there could only refuse), plus the model's
+        handles (the user's own, always shown)."""
         from workbench.methods.handles.presets import default_face_handles
 
         if self._default_pins is None:
@@ -290,9 +292,14 @@ class RegionsPanel(ModelPanel):
                 self._default_pins = np.asarray(default_face_handles(self._model).vertices, np.int64)
             except Exception:  # a model without shapes / skin: only user handles
                 self._default_pins = np.zeros(0, np.int64)
+        pins = self._default_pins
+        st = self._model.regions.state
+        if st is not None and pins.size:
+            inside = np.asarray((st.regions.weight_matrix(st.level)[pins] > 0).sum(axis=1)).ravel() > 0
+            pins = pins[inside]
         extra = np.asarray(self._model.handles.vertices, np.int64)
-        extra = extra[~np.isin(extra, self._default_pins)]
-        return np.concatenate([self._default_pins, extra])
+        extra = extra[~np.isin(extra, pins)]
+        return np.concatenate([pins, extra])
 
     @property
     def pins(self) -> np.ndarray:
@@ -370,6 +377,8 @@ class RegionsPanel(ModelPanel):
             self.sliders.build()
             self.edits.refresh()
             self._update_overlay()
+            if self.marker_mode.installed(self.drag_handler):  # other regions: other draggable pins
+                self.marker_mode.show(self._pin_vertices())
         else:
             self.sliders.refresh()
         self.update_status()
