@@ -23,6 +23,7 @@ change between them — as one undo step. The database is any sequence of takes:
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
@@ -58,8 +59,7 @@ def weight_takes(database: Any, shape_names: Sequence[str], fps: float | None = 
     for i, item in enumerate(items):
         rate = getattr(item, "fps", None)
         if isinstance(item, Timeline):
-            times = item.frame_times() if fps is None else _frame_times(item.start, item.end, fps)
-            W = item.weight_matrix(names, times)
+            W = item.weight_matrix(names, (item if fps is None else item.replace(fps=fps)).frame_times())
         elif hasattr(item, "shape_names") and hasattr(item, "weights"):
             index = {n: j for j, n in enumerate(item.shape_names)}
             missing = [n for n in names if n not in index]
@@ -68,7 +68,7 @@ def weight_takes(database: Any, shape_names: Sequence[str], fps: float | None = 
             W = np.asarray(item.weights, np.float64)[:, [index[n] for n in names]]
             if fps is not None and rate and abs(float(rate) - fps) > 1e-9 and W.shape[0] > 1:
                 t = np.arange(W.shape[0]) / float(rate)
-                tn = _frame_times(0.0, float(t[-1]), fps)
+                tn = Timeline(fps=fps, end=float(t[-1])).frame_times()
                 W = np.stack([np.interp(tn, t, W[:, j]) for j in range(W.shape[1])], axis=1)
         else:
             W = np.asarray(item, np.float64)
@@ -76,11 +76,6 @@ def weight_takes(database: Any, shape_names: Sequence[str], fps: float | None = 
                 raise ModelError(f"retime: database[{i}] must be (T, {len(names)}) weights, got {W.shape}")
         out.append(W)
     return out
-
-
-def _frame_times(start: float, end: float, fps: float) -> NDArray[np.float64]:
-    n = int(np.floor((end - start) * fps + 1e-9)) + 1
-    return start + np.arange(n, dtype=np.float64) / fps
 
 
 def default_correspondence(model: FaceState, database: PerformanceDatabase) -> Correspondence:
@@ -259,10 +254,8 @@ class EnhanceFacet:
             # mesh space: the keys are the faces shown at t0 and t1 (model space), the takes point caches
             ends = [np.asarray(m.evaluation_at(t).mesh, np.float64) for t in (a, b)]
             found = retime(meshes, ends[0], ends[1], n, extend=extend, method=method)
-            s = found.s
-            frames = W[0][None, :] + s[:, None] * (W[1] - W[0])[None, :]
-            res = RetimeResult(s, frames, found.matched, found.error, found.span, found.times, found.choice,
-                               found.sources)
+            # the mesh-space timing, keyed on the weights
+            res = dataclasses.replace(found, frames=W[0][None, :] + found.s[:, None] * (W[1] - W[0])[None, :])
         else:
             res = retime(weight_takes(database, names, tl.fps), W[0], W[1], n, extend=extend, method=method)
         times = np.linspace(a, b, n)[1:-1]

@@ -148,8 +148,7 @@ class RetimeResult:
             return f"the timing of take {i}, frames {first}–{last} (match error {self.error:.3g})"
         if self.choice == "take":
             takes = sorted({src[0] for src in self.sources})
-            return (f"the timing of {len(self.sources)} transitions of {len(takes)} take(s) blended "
-                    "(none passes near both keys)")
+            return f"the timing of {len(self.sources)} transitions of {len(takes)} take(s) blended"
         return "an ease curve (the takes hold no transition to learn from)"
 
 
@@ -482,11 +481,12 @@ def retime(
         err = float(np.linalg.norm(s_vec - _at(seqs[i], tau0)) + np.linalg.norm(e_vec - _at(seqs[i], tau1)))
         if extend:
             tau0, tau1 = _extend(seqs[i], tau0, tau1)
-        s_match, times = _progress_curve(seqs[i], tau0, tau1, n)
         matched = (i, int(np.floor(tau0)), min(int(np.ceil(tau1)), seqs[i].shape[0] - 1))
         span = (float(tau0), float(tau1))
         if method == "closest" or (method == "auto" and err <= CLOSE_MATCH * scale):
-            s = s_match
+            s, times = _progress_curve(seqs[i], tau0, tau1, n)
+        else:
+            times = np.linspace(tau0, tau1, n)  # what §6.2 would have sampled; its curve is not needed
     if s is None:
         blended = transition_timing(seqs, s_vec, e_vec, n)
         if blended is not None:

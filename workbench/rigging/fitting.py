@@ -176,8 +176,7 @@ def _near_target_border(P: NDArray[np.float64], tgt: Side, query: SurfaceQuery) 
 
 
 def judge_fit(
-    fit: NonRigidResult, src: Side, tgt: Side, head_metres: float, warnings: list[str],
-    query: SurfaceQuery | None = None,
+    fit: NonRigidResult, src: Side, tgt: Side, head_metres: float, warnings: list[str], query: SurfaceQuery
 ) -> dict[str, Any]:
     """Registration quality on the template's face (the skin its shapes move); raises if the target is no face.
 
@@ -189,8 +188,8 @@ def judge_fit(
 
     Parameters
     ----------
-    query : SurfaceQuery, optional
-        The target skin in the working frame (built from ``tgt`` if omitted).
+    query : SurfaceQuery
+        The target skin the template was fitted onto (working frame).
 
     Returns
     -------
@@ -219,8 +218,6 @@ def judge_fit(
     face_t = face_v[F].any(1)
     bad = (stretch > 2.0) | flipped
     distortion = float(area[bad & face_t].sum() / max(area[face_t].sum(), 1e-300))
-    if query is None:
-        query = SurfaceQuery(tgt.skin_X, tgt.skin_faces)
     over_hole = ~fit.accepted & _near_target_border(fit.positions, tgt, query)
     judged = face_v & ~over_hole
     over_holes = float(over_hole[face_v].mean())
