@@ -253,7 +253,19 @@ _JS_KERNEL_CONNECTION = """() => {
 #: updates a page asked for, widget changes off the kernel's UI thread
 HEALTH = {"checked": 0, "reopens": 0, "resyncs": 0, "thread_violations": 0}
 
-_JS_RESYNCS = "() => (globalThis.fwbResyncs || []).map((r) => r.why)"
+_JS_RESYNCS = "() => globalThis.fwbResyncs || []"
+
+#: what each viewport in the kernel sent last (a resync report is read against it)
+_PY_SENT_LOGS = """
+import json, gc
+from widgets.viewport import Viewport as _V
+print(json.dumps([{"uid": _o._uid, "version": _o._version, "mode": _o._gpu_mode, "sent": list(_o.sync.sent_log),
+                   "resyncs": list(_o.resyncs)} for _o in gc.get_objects() if isinstance(_o, _V)]))
+"""
+
+#: console errors that mean a widget model missed part of a state update (ipywidgets logs them
+#: and goes on; a change handler that threw skips the change events after it)
+_LOST_STATE_ERRORS = ("Error setting state", "Could not process update msg")
 
 _PY_VIOLATIONS = """
 import sys, json
@@ -315,12 +327,31 @@ class NotebookPage:
         unexpected = len(resyncs) - self.expected_resyncs
         if unexpected > 0:
             HEALTH["resyncs"] += unexpected
-            problems.append(f"{self.name}: the page asked for {len(resyncs)} full updates ({resyncs})")
+            report = self.resync_report(resyncs)
+            problems.append(f"{self.name}: the page asked for {len(resyncs)} full updates "
+                            f"({[r.get('why') for r in resyncs]}); {report}")
+        lost = [line for line in self.console if any(e in line for e in _LOST_STATE_ERRORS)]
+        if lost:
+            problems.append(f"{self.name}: a widget model missed part of a state update: {lost[:3]}")
         violations = self.kernel_eval(_PY_VIOLATIONS, timeout=30)
         if violations:
             HEALTH["thread_violations"] += len(violations)
             problems.append(f"{self.name}: widgets changed off the UI thread: {violations[:3]}")
         return problems
+
+    def resync_report(self, resyncs: list[dict[str, Any]]) -> str:
+        """Save what the page saw and the kernel sent around each resync; a short summary."""
+        try:
+            sent = self.kernel_eval(_PY_SENT_LOGS, timeout=30)
+        except Exception as exc:  # the report must not hide the failure it explains
+            sent = f"kernel not asked: {exc}"
+        self.artifacts.mkdir(parents=True, exist_ok=True)
+        path = self.artifacts / "resyncs.json"
+        path.write_text(json.dumps({"page": resyncs, "kernel": sent}, indent=1, default=str))
+        last = resyncs[-1]
+        return (f"last: have {last.get('have')}, model {last.get('model')}, held {last.get('held')}, "
+                f"page saw {last.get('trace', [])[-6:]}; kernel sent "
+                f"{[v.get('sent', [])[-6:] for v in sent] if isinstance(sent, list) else sent} (all in {path})")
 
     # ---- notebook / kernel
     def state(self) -> dict[str, Any] | None:

@@ -262,6 +262,7 @@ class GpuSync:
                               names=list(view.shape_names),
                               morph=int(w._gpu_meta.get("morph", 0)) + 1)
             self.residual = None  # re-sent whole below
+            self.sync.log_sent(f"rig morph {w._gpu_meta.get('morph')}", w._version)
             self.updates_sent["rig"] += 1
             self.upload_ms.append((time.perf_counter() - t0) * 1e3)
         local = local_weight_rules(view)
@@ -339,6 +340,7 @@ class GpuSync:
                 assign_synced(w, _gpu_residual=f32_bytes(residual), _gpu_params=params.tobytes())
                 w._gpu_mode = "gpu"
                 w._version = version
+            self.sync.log_sent("gpu full", version)
             self.residual_stale = False
             return
         ids = changed_rows(residual, self.residual, max(tolerance, floor))
@@ -349,6 +351,7 @@ class GpuSync:
             with w.hold_sync():
                 assign_synced(w, _gpu_residual=f32_bytes(residual), _gpu_params=params.tobytes())
                 w._version = w._version + 1
+            self.sync.log_sent("gpu residual", w._version)
             return
         self.residual[ids] = rows
         version = w._version + 1
@@ -365,6 +368,7 @@ class GpuSync:
             content["seq"] = self.sync.patch_seq
         buffers = [params.tobytes(), u32_bytes(ids), f32_bytes(rows)]
         w.send(content, buffers=buffers)
+        self.sync.log_sent("params", version)
         self.payload.append(len(json.dumps(content)) + sum(len(b) for b in buffers))
         self.updates_sent["params"] += 1
         self.updates_sent["residual_rows"] += int(ids.size)

@@ -84,6 +84,8 @@ class SceneSync:
         #: kernel-side ms per geometry update (diff + serialise + send), for benchmarks
         self.push_ms: deque[float] = deque(maxlen=256)
         self.last_push_ms = 0.0
+        #: the last geometry updates sent, (ms, kind, version): what a resync report is read against
+        self.sent_log: deque[tuple[int, str, int]] = deque(maxlen=24)
         #: seq of the gesture message being applied (sent with its geometry patch)
         self.patch_seq: Any = None
         self._hold = 0
@@ -192,7 +194,11 @@ class SceneSync:
             if self.patch_seq is not None:
                 content["seq"] = self.patch_seq
             w.send(content, buffers=[u32_bytes(changed), f32_bytes(pos[changed])])
+            self.log_sent("patch", version)
             self.updates_sent["patch"] += 1
+
+    def log_sent(self, kind: str, version: int) -> None:
+        self.sent_log.append((int(time.monotonic() * 1e3), kind, int(version)))
 
     def resync(self, rig: bool = False) -> None:
         """The page lost track: send the full state (``rig``: the GPU rig too, which the page
@@ -230,6 +236,7 @@ class SceneSync:
                 w._faces = u32_bytes(faces.reshape(-1))
                 w._topology = w._topology + 1
             assign_synced(w, _positions=f32_bytes(pos), _version=w._version + 1)
+        self.log_sent("full", w._version)
         self.updates_sent["full"] += 1
 
     # ------------------------------------------------------------- paint overlay

@@ -27,6 +27,7 @@ import { padded, texRows } from "./gpu_morph.js";
 import { typed } from "./util.js";
 
 const GAP_MS = 1000;
+const TRACE_LEN = 24;
 
 export class Store {
   constructor(model) {
@@ -49,6 +50,13 @@ export class Store {
     this.meta = {};
     this.held = []; // geometry messages ahead of our version: [content, buffers]
     this.gapTimer = null;
+    this.trace = []; // the last TRACE_LEN updates seen (for the diagnosis a resync carries)
+  }
+
+  // Remember an update (kind, its version, what we did with it); a resync reports the list.
+  note(kind, version, what = "") {
+    this.trace.push([kind, version, what, Math.round(performance.now())]);
+    if (this.trace.length > TRACE_LEN) this.trace.shift();
   }
 
   // The rig traits (on load and whenever _gpu_meta changes): only the parts whose version moved.
@@ -88,6 +96,9 @@ export class Store {
       if (!g.basis) { g.hu = 0; g.hq = 0; }
       g.basisRows = texRows(g.n * g.hq);
       g.basisVersion += 1;
+    }
+    if (m.morph !== this.meta.morph || m.gain !== this.meta.gain || m.basis !== this.meta.basis) {
+      this.note("rig", this.version, `morph ${m.morph} gain ${m.gain} basis ${m.basis}`);
     }
     this.meta = { ...m };
   }
@@ -143,11 +154,16 @@ export class Store {
   }
 
   applyGpuParams(content, buffers) {
-    if (content.version <= this.version) return;
+    if (content.version <= this.version) {
+      this.note("params", content.version, "stale");
+      return;
+    }
     if (content.version !== this.version + 1 || !this.gpu || !this.positions) {
+      this.note("params", content.version, `held at ${this.version}${this.gpu ? "" : ", no rig"}`);
       this.hold(content, buffers);
       return;
     }
+    this.note("params", content.version, "applied");
     this.gpuMode = true;
     this.kernelParams = new Float32Array(typed(buffers[0], Float32Array));
     this.gpuParams = new Float32Array(this.kernelParams);
@@ -210,6 +226,7 @@ export class Store {
     // Every full update bumps _version; change events for several traits of one
     // message call this repeatedly, the first call does the work.
     if (version === this.version && this.model.get("_topology") === this._topology) return;
+    this.note("full", version, `from ${this.version}, mode ${this.model.get("_gpu_mode")}`);
     const topo =
       !this.positions ||
       this.positions.length !== pos.length ||
@@ -253,8 +270,8 @@ export class Store {
       this.gapTimer = setTimeout(() => {
         this.gapTimer = null;
         if (!this.held.length) return;
-        this.held = [];
         this.requestFull("gap", !this.gpu);
+        this.held = [];
       }, GAP_MS);
     }
   }
@@ -263,8 +280,19 @@ export class Store {
   // globalThis.fwbResyncs and require none).
   requestFull(why, rig) {
     const g = globalThis;
-    (g.fwbResyncs = g.fwbResyncs || []).push({ why, have: this.version, at: performance.now() });
-    this.model.send({ type: "request_full", have: this.version, rig, why });
+    const m = this.model;
+    const record = {
+      why, have: this.version, at: Math.round(performance.now()),
+      // what the widget model holds (a full update whose change events never reached us shows
+      // here as a newer _version than ours) and the updates we saw last
+      model: { version: m.get("_version"), mode: m.get("_gpu_mode"), meta: m.get("_gpu_meta") || {} },
+      held: this.held.map(([c]) => [c.type, c.version]),
+      trace: this.trace.slice(),
+    };
+    delete record.model.meta.names;
+    delete record.model.meta.columns;
+    (g.fwbResyncs = g.fwbResyncs || []).push(record);
+    m.send({ type: "request_full", have: this.version, rig, why });
   }
 
   // Apply the held messages that follow our version now (in order), drop older ones.
@@ -281,11 +309,16 @@ export class Store {
   }
 
   applyPatch(content, buffers) {
-    if (content.version <= this.version) return; // stale (already in a newer full state)
+    if (content.version <= this.version) { // stale (already in a newer full state)
+      this.note("patch", content.version, "stale");
+      return;
+    }
     if (content.version !== this.version + 1 || !this.positions) {
+      this.note("patch", content.version, `held at ${this.version}`);
       this.hold(content, buffers); // a full update still being decoded, or a missed one
       return;
     }
+    this.note("patch", content.version, "applied");
     const ids = typed(buffers[0], Uint32Array);
     const values = typed(buffers[1], Float32Array);
     const P = this.positions;
