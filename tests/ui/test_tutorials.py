@@ -25,6 +25,7 @@ ipykernel, pyvista); the core-only CI job does not collect ``tests/ui``.
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import shutil
@@ -176,6 +177,13 @@ def test_markdown_images_exist(notebook: Path) -> None:
     nb = nbformat.read(notebook, as_version=4)
     missing = [ref for ref in _markdown_images(nb) if not (NOTEBOOKS / ref).is_file()]
     assert missing == [], f"{notebook.name} shows images that do not exist: {missing}"
+
+
+@pytest.mark.parametrize("notebook", _notebooks(), ids=lambda p: p.stem)
+def test_every_cell_has_an_id(notebook: Path) -> None:
+    """nbformat 4.5 cell ids (JupyterLab's collaboration and links need them; nbformat will refuse files without)."""
+    cells = json.loads(notebook.read_text())["cells"]
+    assert [i for i, c in enumerate(cells) if not c.get("id")] == [], notebook.name
 
 
 def test_picture_check_fails_without_pictures() -> None:
