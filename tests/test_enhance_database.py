@@ -21,6 +21,7 @@ from workbench.enhance.frequency import CurvatureFlowFilter
 from workbench.enhance.gradients import deformation_gradients, rigid_align
 from workbench.enhance.matching import simplex_lsq
 from workbench.enhance.patches import face_patches, grow_patches
+from workbench.enhance.polar import from_polar
 from workbench.enhance.voluntary import voluntary_region_weights
 from workbench.methods.wrinkles.examples import EXAMPLE_POSES, WrinkleSculptor
 
@@ -85,11 +86,11 @@ def test_flow_removes_bumps_and_the_detail_band_of_a_smooth_sphere_is_empty() ->
     assert np.abs(bumps_after).max() < 0.25 * np.abs(bumps_before).max()
     db = PerformanceDatabase.from_frames(V, F, np.stack([V, bumpy]), patch_size=50)
     A = igl.doublearea(V, F)
-    smooth, rough = _energy(db.detail_[0], A), _energy(db.detail_[1], A)
+    smooth, rough = _energy(db.detail_matrices(0), A), _energy(db.detail_matrices(1), A)
     assert smooth < 1e-2  # a uniform ~0.5 % shrink plus the umbrella step's tangential slide
     assert rough > 10 * smooth
     # the surface part of the detail band: tilt of each detailed triangle against its low-frequency one
-    tilt_smooth, tilt_rough = _tilt(db.detail_[0], A), _tilt(db.detail_[1], A)
+    tilt_smooth, tilt_rough = _tilt(db.detail_matrices(0), A), _tilt(db.detail_matrices(1), A)
     assert tilt_smooth < 1e-5
     assert tilt_rough > 1e3 * tilt_smooth
 
@@ -128,7 +129,7 @@ def test_low_plus_high_frequency_gradients_reconstruct_the_detailed_frame(head: 
     for i in range(len(frames)):
         low = db.lowpass(frames[i])
         assert np.abs(low - frames[i]).max() > 1e-3  # the split is not trivial
-        x = db.reconstruct(db.compose(db.detail_[i], low), frames[i])
+        x = db.reconstruct(db.compose(db.detail_matrices(i), low), frames[i])
         assert np.abs(x - frames[i]).max() < 1e-6  # dm: 0.1 µm
         placed = db.frame(i, low)  # placed at the low frame: a translation per piece only
         shift = placed - x
@@ -145,7 +146,7 @@ def test_detail_of_a_wrinkled_pose_moves_a_smooth_blend_toward_the_truth(head: d
     ratios = []
     for i in range(len(frames)):
         wrinkled = np.linalg.norm(frames[i] - smooth[i], axis=1) > 1e-3
-        x = db.reconstruct(db.compose(db.detail_[i], db.lowpass(smooth[i])), smooth[i])
+        x = db.reconstruct(db.compose(db.detail_matrices(i), db.lowpass(smooth[i])), smooth[i])
         before = np.linalg.norm(smooth[i] - frames[i], axis=1)[wrinkled].mean()
         after = np.linalg.norm(x - frames[i], axis=1)[wrinkled].mean()
         ratios.append(after / before)
@@ -228,7 +229,8 @@ def test_save_load_round_trip_is_exact(head: dict, tmp_path: Path) -> None:
         a, b = getattr(db, name), getattr(back, name)
         assert a.dtype == b.dtype and np.array_equal(a, b), name
     assert back.region_names_ == db.region_names_
-    assert (back.patch_size, back.lambda_dt, back.metres_per_unit) == (db.patch_size, db.lambda_dt, db.metres_per_unit)
+    assert (back.patch_size, back.lambda_dt, back.metres_per_unit, back.detail_blend) == (
+        db.patch_size, db.lambda_dt, db.metres_per_unit, db.detail_blend)
     low = db.lowpass(head["frames"][1])
     np.testing.assert_array_equal(back.frame(1, low), db.frame(1, low))
 
@@ -239,6 +241,23 @@ def test_load_rejects_other_files(tmp_path: Path) -> None:
         PerformanceDatabase.load(tmp_path / "other.npz")
     with pytest.raises(DatabaseError, match="path"):
         PerformanceDatabase.load(tmp_path / "missing.npz")
+
+
+def test_a_format_1_file_with_matrix_detail_is_read(head: dict, tmp_path: Path) -> None:
+    """Format 1 stored the detail as 3x3 matrices and had no detail_blend: read, converted, blended as matrices."""
+    db: PerformanceDatabase = head["db"]  # type: ignore[assignment]
+    path = db.save(tmp_path / "db.npz")
+    with np.load(path, allow_pickle=False) as z:
+        data = {k: z[k] for k in z.files}
+    data["format"] = np.array("workbench.enhance.database/1")
+    data["detail"] = np.stack([db.detail_matrices(i) for i in range(db.n_frames_)]).astype(np.float32)
+    del data["detail_blend"]
+    np.savez(tmp_path / "v1.npz", **data)
+    old = PerformanceDatabase.load(tmp_path / "v1.npz")
+    assert old.detail_.shape == db.detail_.shape and old.detail_blend == "matrix"
+    np.testing.assert_allclose(old.detail_, db.detail_, atol=1e-5)
+    low = db.lowpass(head["frames"][1])
+    np.testing.assert_allclose(old.frame(1, low), db.frame(1, low), atol=1e-5)
 
 
 def test_load_rejects_a_damaged_file(head: dict, tmp_path: Path) -> None:
@@ -253,6 +272,12 @@ def test_load_rejects_a_damaged_file(head: dict, tmp_path: Path) -> None:
 
 
 # --------------------------------------------------------------------------- bad input
+
+
+def test_an_unknown_detail_blend_is_named() -> None:
+    V, F = _sphere(10.0, 2)
+    with pytest.raises(DatabaseError, match="detail_blend must be 'matrix' or 'polar', got 'quaternion'"):
+        PerformanceDatabase.from_frames(V, F, np.stack([V, V * 1.01]), detail_blend="quaternion")  # type: ignore[arg-type]
 
 
 def test_bad_input_gives_clear_errors() -> None:
@@ -371,24 +396,36 @@ def test_match_finds_a_database_frame_from_its_low_frequency_version(head: dict)
         assert w[0, i] > 0.99, (i, w.round(3))
 
 
-def test_blend_detail_follows_eq4(head: dict) -> None:
+@pytest.mark.parametrize("blend", ["matrix", "polar"])
+def test_blend_detail_follows_eq4(head: dict, blend: str) -> None:
     db0: PerformanceDatabase = head["db"]  # type: ignore[assignment]
     V = head["V"]
     left = (V[:, 0] > 0).astype(float)
     db = PerformanceDatabase.from_frames(
-        db0.neutral_, db0.faces_, head["frames"][:3], regions={"left": left, "right": 1 - left}, metres_per_unit=0.1
+        db0.neutral_, db0.faces_, head["frames"][:3], regions={"left": left, "right": 1 - left}, metres_per_unit=0.1,
+        detail_blend=blend,
     )
     one_hot = np.eye(3)[[0, 0]]
-    np.testing.assert_allclose(db.blend_detail(one_hot), db.detail_[0], atol=1e-6)
+    np.testing.assert_allclose(db.blend_detail(one_hot), db.detail_matrices(0), atol=1e-6)
     W = np.eye(3)[[1, 2]]  # the left region takes frame 1, the right frame 2
     H = db.blend_detail(W)
     om = db.region_weights_.astype(np.float64)
     only_left = (om[0] == 1) & (om[1] == 0)
     mixed = (om[0] > 0) & (om[1] > 0)
-    np.testing.assert_allclose(H[only_left], db.detail_[1][only_left], atol=1e-6)
+    np.testing.assert_allclose(H[only_left], db.detail_matrices(1)[only_left], atol=1e-6)
     assert mixed.any()
     share = om[0, mixed] / om[:, mixed].sum(0)
-    expected = share[:, None, None] * db.detail_[1][mixed] + (1 - share)[:, None, None] * db.detail_[2][mixed]
+    if blend == "polar":  # linear in the polar parts (rotation vector, stretch), the paper's shape space
+        P1, P2 = db.detail_[1].astype(np.float64), db.detail_[2].astype(np.float64)
+        expected_parts = share[:, None] * P1[mixed] + (1 - share)[:, None] * P2[mixed]
+        np.testing.assert_allclose(db.blend_polar(W)[mixed], expected_parts, atol=1e-6)
+        expected = from_polar(expected_parts)
+    else:
+        H1, H2 = db.detail_matrices(1), db.detail_matrices(2)
+        expected = share[:, None, None] * H1[mixed] + (1 - share)[:, None, None] * H2[mixed]
     np.testing.assert_allclose(H[mixed], expected, atol=1e-6)
+    # the fused kernel gives the same target Jacobians
+    low = db.lowpass(head["frames"][0])
+    np.testing.assert_allclose(db.blend_compose(W, low), db.compose(H, low), rtol=1e-5, atol=1e-6)
     with pytest.raises(ValueError, match="weights must be"):
         db.blend_detail(np.ones((1, 3)))

@@ -9,6 +9,8 @@ recovery dir are temporary, so the test leaves nothing in the user's home.
 
 from __future__ import annotations
 
+import contextlib
+import json
 import os
 import re
 import socket
@@ -123,6 +125,7 @@ def test_run_command_opens_the_workbench_notebook(keep_notebook, run_command, br
     out = ARTIFACTS / "test_run_command_opens_the_workbench_notebook"
     out.mkdir(parents=True, exist_ok=True)
     page = browser.new_page(viewport={"width": 1400, "height": 900})
+    nb = NotebookPage(page, None, out, "run_command")  # type: ignore[arg-type]  # console from the start
     try:
         page.goto(url, timeout=120_000)
         tab = page.locator(".lm-DockPanel .lm-TabBar-tab.lm-mod-current .lm-TabBar-tabLabel")
@@ -137,7 +140,6 @@ def test_run_command_opens_the_workbench_notebook(keep_notebook, run_command, br
         # Run > Run All Cells from the menu bar, as the README says: the head is drawn
         page.locator(".lm-MenuBar-itemLabel", has_text="Run").first.click()
         page.locator(".lm-Menu-itemLabel", has_text="Run All Cells").first.click()
-        nb = NotebookPage(page, None, out, "run_command")  # type: ignore[arg-type]
         nb.wait_viewports(1, timeout=300)
         # the notebook's default: the 25k sample head (20,051 vertices), rig on the GPU
         assert nb.viewport().get_attribute("data-vertex-count") == "20051"
@@ -148,6 +150,15 @@ def test_run_command_opens_the_workbench_notebook(keep_notebook, run_command, br
         head = nb.canvas_shot("workbench_drawn")
         # a drawn, shaded head, not an empty canvas: many distinct grey levels
         assert len(np.unique(head[..., :3].reshape(-1, 3) // 8, axis=0)) > 50
+    except Exception:
+        # what the user would have seen, the cells' state and the page's console, for the diagnosis
+        with contextlib.suppress(Exception):
+            page.screenshot(path=str(out / "failed.png"), full_page=True)
+        with contextlib.suppress(Exception):
+            (out / "notebook-state.json").write_text(json.dumps(nb.state(), indent=1, default=str))
+        (out / "console.log").write_text("\n".join(nb.console))
+        (out / "server.log").write_text(log.read_text()[-20000:])
+        raise
     finally:
         page.close()
     # stopping the process the command started stops JupyterLab (it execs the server)
