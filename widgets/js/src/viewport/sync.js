@@ -285,11 +285,11 @@ export class Store {
       why, have: this.version, at: Math.round(performance.now()),
       // what the widget model holds (a full update whose change events never reached us shows
       // here as a newer _version than ours) and the updates we saw last
-      model: { version: m.get("_version"), mode: m.get("_gpu_mode"), meta: m.get("_gpu_meta") || {} },
+      model: { version: m.get("_version"), mode: m.get("_gpu_mode"), meta: { ...(m.get("_gpu_meta") || {}) } },
       held: this.held.map(([c]) => [c.type, c.version]),
       trace: this.trace.slice(),
     };
-    delete record.model.meta.names;
+    delete record.model.meta.names; // a copy: the model's own _gpu_meta keeps them
     delete record.model.meta.columns;
     (g.fwbResyncs = g.fwbResyncs || []).push(record);
     m.send({ type: "request_full", have: this.version, rig, why });
