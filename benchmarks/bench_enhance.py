@@ -305,9 +305,9 @@ def run(res: str, n_frames: int, validate: bool, n_db: int) -> dict[str, Any]:
         b_dn = rms_mm(band(db, dense_frames), b_true, mpu)
         active = np.median((full.weights > 1e-3).sum(axis=2))
         # the paper's blend of the detail (polar parts) on the same database and frames
-        db.detail_blend = "polar"
+        db.set_detail_blend("polar")
         polar = db.enhance_result(inputs, correspondence=corr)
-        db.detail_blend = "matrix"
+        db.set_detail_blend("matrix")
         e_pol = rms_mm(polar.frames, truth, mpu)
         b_pol = rms_mm(band(db, polar.frames), b_true, mpu)
         out["validation"] = {

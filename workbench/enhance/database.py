@@ -65,7 +65,7 @@ from workbench.geometry.sparse_cholesky import Backend
 __all__ = ["DatabaseError", "PerformanceDatabase"]
 
 FORMAT = "workbench.enhance.database/2"
-#: version 1 stored the detail as 3x3 matrices (blended as matrices); read and converted
+#: version 1 had no detail_blend (matrices, blended as matrices): read as "matrix"
 _FORMATS_READ = ("workbench.enhance.database/1", FORMAT)
 
 
@@ -182,10 +182,12 @@ class PerformanceDatabase:
     faces_ : (m, 3) int64
     neutral_low_ : (n, 3) float64
         ``f(d0)``, the reference of the shape space and of the reconstruction.
-    detail_ : (D, m, 9) float32
-        High-frequency detail ``d^h`` per frame and triangle, in the low-frequency triangle's frame,
-        as polar parts (rotation vector, stretch; :mod:`workbench.enhance.polar`), the space §5.4
-        blends in; :meth:`detail_matrices` gives the matrices.
+    detail_ : (D, m, 3, 3) or (D, m, 9) float32
+        High-frequency detail ``d^h`` per frame and triangle, in the low-frequency triangle's frame:
+        3x3 matrices with ``detail_blend="matrix"``, polar parts (rotation vector, stretch;
+        :mod:`workbench.enhance.polar`) with ``"polar"`` — what the blend reads, so that neither
+        path converts per frame. :meth:`detail_matrices` gives matrices either way;
+        :meth:`set_detail_blend` converts.
     features_ : (D, P, 9) float64
         Compressed shape-space vectors ``D̃`` (row-major patch-mean deformation gradients).
     vertex_patch_ : (n,) int32, face_patch_ : (m,) int32
@@ -288,7 +290,7 @@ class PerformanceDatabase:
         self.face_patch_ = face_patches(f, self.vertex_patch_)
         self._averager = None
         D, m = x.shape[0], f.shape[0]
-        self.detail_ = np.empty((D, m, 9), np.float32)
+        self.detail_ = np.empty((D, m, *self._detail_shape), np.float32)
         self.features_ = np.empty((D, self.n_patches_, 9), np.float64)
         chunk = 8
         for s in range(0, D, chunk):
@@ -341,11 +343,30 @@ class PerformanceDatabase:
     def _detail(self, low: NDArray[np.float64], detailed: NDArray[np.float64]) -> NDArray[np.float32]:
         T = deformation_gradients(low, self.faces_, detailed)
         R = local_frames(low, self.faces_)
-        return to_polar(R.transpose(0, 2, 1) @ T @ R).astype(np.float32)
+        H = R.transpose(0, 2, 1) @ T @ R
+        return (to_polar(H) if self.detail_blend == "polar" else H).astype(np.float32)
+
+    @property
+    def _detail_shape(self) -> tuple[int, ...]:
+        return (9,) if self.detail_blend == "polar" else (3, 3)
 
     def detail_matrices(self, index: int) -> NDArray[np.float64]:
-        """Frame ``index``'s detail ``H`` as matrices (m, 3, 3) (from its polar parts)."""
-        return from_polar(self.detail_[index])
+        """Frame ``index``'s detail ``H`` as matrices (m, 3, 3)."""
+        d = self.detail_[index]
+        return from_polar(d) if d.ndim == 2 else d.astype(np.float64)
+
+    def set_detail_blend(self, detail_blend: DetailBlend) -> PerformanceDatabase:
+        """Blend the detail as matrices or polar parts from now on (converts :attr:`detail_`; returns self)."""
+        mode = _check_detail_blend(detail_blend)
+        if mode != self.detail_blend:
+            D = self.detail_.shape[0]
+            m = len(self.faces_)
+            conv = to_polar if mode == "polar" else from_polar
+            out = np.empty((D, m, *((9,) if mode == "polar" else (3, 3))), np.float32)
+            for i in range(D):
+                out[i] = conv(self.detail_[i])
+            self.detail_, self.detail_blend = out, mode
+        return self
 
     # ------------------------------------------------------------------ what §5 uses
     def lowpass(self, X: ArrayLike) -> NDArray[np.float64]:
@@ -454,8 +475,7 @@ class PerformanceDatabase:
             return self.compose(self.blend_detail(weights), low)
         C, active = self.detail_coefficients(weights)
         y = np.asarray(low, np.float64)
-        return blend_compose(C, active, self.detail_, local_frames(y, self.faces_), self.low_gradients(y),
-                             polar=self.detail_blend == "polar")
+        return blend_compose(C, active, self.detail_, local_frames(y, self.faces_), self.low_gradients(y))
 
     def blend_detail(self, weights: ArrayLike) -> NDArray[np.float64]:
         """Detail ``b^h`` (m, 3, 3) blended from per-region weights (R, D) by eq. 4.
@@ -465,21 +485,11 @@ class PerformanceDatabase:
         with ``"matrix"`` linear in the matrices. Triangles outside every region (all
         ``ω = 0``) take the regions' mean.
         """
-        if self.detail_blend == "polar":
-            return from_polar(self.blend_polar(weights))
         C, active = self.detail_coefficients(weights)
-        out = np.zeros((C.shape[0], 3, 3))
-        for j, i in enumerate(active):
-            out += C[:, j, None, None] * from_polar(self.detail_[i])
-        return out
-
-    def blend_polar(self, weights: ArrayLike) -> NDArray[np.float64]:
-        """Eq. 4 on the polar parts: (m, 9) float64."""
-        C, active = self.detail_coefficients(weights)
-        out = np.zeros((C.shape[0], 9), np.float32)
+        out = np.zeros((C.shape[0], *self.detail_.shape[2:]), np.float32)
         for j, i in enumerate(active):  # k is small (the convex weights are sparse): one axpy per frame
-            out += C[:, j, None] * self.detail_[i]
-        return out.astype(np.float64)
+            out += C[:, j].reshape(-1, *([1] * (self.detail_.ndim - 2))) * self.detail_[i]
+        return from_polar(out) if self.detail_blend == "polar" else out.astype(np.float64)
 
     # ------------------------------------------------------------------ files
     def save(self, path: str | os.PathLike[str]) -> Path:
@@ -531,11 +541,7 @@ class PerformanceDatabase:
             backend=backend,
         )
         self.neutral_, self.faces_ = _check_mesh(data["neutral"], data["faces"])
-        detail = data["detail"]
-        if detail.ndim == 4 and detail.shape[2:] == (3, 3):  # format 1: matrices
-            detail = np.stack([to_polar(d) for d in detail]).astype(np.float32) if len(detail) else (
-                np.zeros((0, detail.shape[1], 9), np.float32))
-        self.detail_ = detail
+        self.detail_ = data["detail"]
         self.features_ = data["features"]
         self.vertex_patch_ = data["vertex_patch"]
         self.face_patch_ = data["face_patch"]
@@ -544,7 +550,7 @@ class PerformanceDatabase:
         n, m = len(self.neutral_), len(self.faces_)
         D = self.detail_.shape[0]
         if (
-            self.detail_.shape[1:] != (m, 9)
+            self.detail_.shape[1:] != (m, *self._detail_shape)
             or self.features_.shape[0] != D
             or self.vertex_patch_.shape != (n,)
             or self.face_patch_.shape != (m,)
