@@ -296,16 +296,11 @@ def _rigid_table(model: Any, perf: Any, cl: Any) -> None:
 
 def _adaptation_table(model: Any, args: argparse.Namespace) -> None:
     from workbench.capture.clouds import track_clouds
-    from workbench.testing import SmoothWarp, warped
+    from workbench.testing import capture_actor_warp, warped
 
     V = model.vertices
     D = np.asarray(model.effective_deltas, np.float64)
-    centre = 0.5 * (V.min(0) + V.max(0))
-    scale = np.array([1.05, 0.96, 1.03])
-    warp = SmoothWarp(centres=np.array([[0.0, 7.0, 1.5], [0.35, 7.4, 1.2], [-0.3, 6.3, 1.2]]),
-                      radii=np.array([0.35, 0.3, 0.35]),
-                      amplitudes=np.array([[0.0, 0.0, 0.06], [0.03, 0.03, 0.03], [-0.03, -0.02, 0.03]]),
-                      scale=scale, translation=centre - scale * centre)
+    warp = capture_actor_warp(V)
     actor = warped(model, warp, name=model.metadata.name).model  # the same mesh, its shapes warped exactly
     Va = actor.vertices
     visible = [n for n in model.shape_names if not n.startswith("eyeLook") and n != "tongueOut"]

@@ -30,7 +30,7 @@ import workbench
 from workbench.capture import adapt as adapt_module
 from workbench.capture import synthetic_performance
 from workbench.capture.clouds import track_clouds
-from workbench.testing import SmoothWarp, realistic_weights, warped
+from workbench.testing import capture_actor_warp, realistic_weights, warped
 
 
 class _PaperSaturation:
@@ -58,13 +58,7 @@ def main() -> None:
     ap.add_argument("--points", type=int, default=4000)
     args = ap.parse_args()
     model = workbench.load_sample("head", args.resolution)
-    V = model.vertices
-    centre = 0.5 * (V.min(0) + V.max(0))
-    scale = np.array([1.05, 0.96, 1.03])
-    warp = SmoothWarp(centres=np.array([[0.0, 7.0, 1.5], [0.35, 7.4, 1.2], [-0.3, 6.3, 1.2]]),
-                      radii=np.array([0.35, 0.3, 0.35]),
-                      amplitudes=np.array([[0.0, 0.0, 0.06], [0.03, 0.03, 0.03], [-0.03, -0.02, 0.03]]),
-                      scale=scale, translation=centre - scale * centre)
+    warp = capture_actor_warp(model.vertices)
     actor = warped(model, warp, name=model.metadata.name).model
     T = args.frames
     W = realistic_weights(actor, T, seed=3)

@@ -231,6 +231,23 @@ def random_warp(
                       translation=translation)
 
 
+def capture_actor_warp(vertices: ArrayLike) -> SmoothWarp:
+    """The actor of the capture benchmarks: the sample head in place and in its units, another face.
+
+    Three Gaussian bumps of up to 0.06 units (6 mm on the decimetre sample: mid-face,
+    upper left, lower right) and an anisotropic scale (1.05, 0.96, 1.03) about the
+    centre of ``vertices``' bounding box. Shared by ``bench_capture.py``'s adaptation
+    table and ``bench_capture_clouds_realistic.py``.
+    """
+    V = np.asarray(vertices, np.float64)
+    centre = 0.5 * (V.min(0) + V.max(0))
+    scale = np.array([1.05, 0.96, 1.03])
+    return SmoothWarp(centres=np.array([[0.0, 7.0, 1.5], [0.35, 7.4, 1.2], [-0.3, 6.3, 1.2]]),
+                      radii=np.array([0.35, 0.3, 0.35]),
+                      amplitudes=np.array([[0.0, 0.0, 0.06], [0.03, 0.03, 0.03], [-0.03, -0.02, 0.03]]),
+                      scale=scale, translation=centre - scale * centre)
+
+
 def sample_head_warp() -> SmoothWarp:
     """The warp of the rigging tests and benchmarks, for the sample head (dm in, cm out).
 
