@@ -138,10 +138,12 @@ def _check_regions(regions: Any, n: int, faces: NDArray[np.int64]) -> tuple[list
 
 
 DetailBlend = Literal["matrix", "polar"]
+#: the per-triangle shape of ``detail_`` under each blend: what the blend reads
+_DETAIL_SHAPE: dict[str, tuple[int, ...]] = {"matrix": (3, 3), "polar": (9,)}
 
 
 def _check_detail_blend(value: str) -> DetailBlend:
-    if value not in ("matrix", "polar"):
+    if value not in _DETAIL_SHAPE:
         raise DatabaseError(f"detail_blend must be 'matrix' or 'polar', got {value!r}")
     return value  # type: ignore[return-value]
 
@@ -290,7 +292,7 @@ class PerformanceDatabase:
         self.face_patch_ = face_patches(f, self.vertex_patch_)
         self._averager = None
         D, m = x.shape[0], f.shape[0]
-        self.detail_ = np.empty((D, m, *self._detail_shape), np.float32)
+        self.detail_ = np.empty((D, m, *_DETAIL_SHAPE[self.detail_blend]), np.float32)
         self.features_ = np.empty((D, self.n_patches_, 9), np.float64)
         chunk = 8
         for s in range(0, D, chunk):
@@ -346,24 +348,18 @@ class PerformanceDatabase:
         H = R.transpose(0, 2, 1) @ T @ R
         return (to_polar(H) if self.detail_blend == "polar" else H).astype(np.float32)
 
-    @property
-    def _detail_shape(self) -> tuple[int, ...]:
-        return (9,) if self.detail_blend == "polar" else (3, 3)
-
     def detail_matrices(self, index: int) -> NDArray[np.float64]:
         """Frame ``index``'s detail ``H`` as matrices (m, 3, 3)."""
         d = self.detail_[index]
-        return from_polar(d) if d.ndim == 2 else d.astype(np.float64)
+        return from_polar(d) if self.detail_blend == "polar" else d.astype(np.float64)
 
     def set_detail_blend(self, detail_blend: DetailBlend) -> PerformanceDatabase:
         """Blend the detail as matrices or polar parts from now on (converts :attr:`detail_`; returns self)."""
         mode = _check_detail_blend(detail_blend)
         if mode != self.detail_blend:
-            D = self.detail_.shape[0]
-            m = len(self.faces_)
             conv = to_polar if mode == "polar" else from_polar
-            out = np.empty((D, m, *((9,) if mode == "polar" else (3, 3))), np.float32)
-            for i in range(D):
+            out = np.empty((*self.detail_.shape[:2], *_DETAIL_SHAPE[mode]), np.float32)
+            for i in range(len(out)):
                 out[i] = conv(self.detail_[i])
             self.detail_, self.detail_blend = out, mode
         return self
@@ -550,7 +546,7 @@ class PerformanceDatabase:
         n, m = len(self.neutral_), len(self.faces_)
         D = self.detail_.shape[0]
         if (
-            self.detail_.shape[1:] != (m, *self._detail_shape)
+            self.detail_.shape[1:] != (m, *_DETAIL_SHAPE[self.detail_blend])
             or self.features_.shape[0] != D
             or self.vertex_patch_.shape != (n,)
             or self.face_patch_.shape != (m,)
