@@ -137,6 +137,9 @@ def test_run_command_opens_the_workbench_notebook(keep_notebook, run_command, br
             timeout=60_000,
         )
         page.screenshot(path=str(out / "opened.png"))
+        # as the README says, once the status bar shows the kernel Idle: JupyterLab silently skips
+        # cells run before its kernel connects (jupyterlab#8490; test_jupyterlab_upstream.py shows it)
+        page.locator("#jp-main-statusbar", has_text="Idle").wait_for(timeout=120_000)
         # Run > Run All Cells from the menu bar, as the README says: the head is drawn
         page.locator(".lm-MenuBar-itemLabel", has_text="Run").first.click()
         page.locator(".lm-Menu-itemLabel", has_text="Run All Cells").first.click()
