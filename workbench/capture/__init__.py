@@ -14,7 +14,8 @@ temporal prior (§3.1), optionally adapting the rig to the actor (§2, §3.2).
   shooting (:mod:`.solver`); :mod:`.pose` — robust rigid pose;
 * :func:`synthetic_performance` — generated ground truth (:mod:`.synthetic`);
 * :func:`track_clouds` / :class:`AdaptiveModel` — point clouds and the dynamic
-  expression model (:mod:`.clouds`, :mod:`.adapt`);
+  expression model (:mod:`.clouds`, :mod:`.adapt`); :class:`IdentityModel` /
+  :func:`sample_identity_model` — the identity PCA (:mod:`.identity`);
 * :mod:`.inputs` — C3D, marker CSV, NPY/NPZ, PLY/NPZ clouds, depth PNGs;
 * :func:`track_video` and friends — video through MediaPipe FaceMesh (the
   ``video`` extra; :mod:`.video`, imported on first use).
@@ -29,6 +30,7 @@ from typing import Any
 
 from workbench.capture.adapt import AdaptiveModel
 from workbench.capture.clouds import CloudTrackError, track_clouds
+from workbench.capture.identity import IdentityModel, sample_identity_model
 from workbench.capture.result import TrackError, TrackResult
 from workbench.capture.solver import WeightSolver
 from workbench.capture.synthetic import SyntheticPerformance, synthetic_performance
@@ -37,6 +39,7 @@ from workbench.capture.track import track
 __all__ = [
     "AdaptiveModel",
     "CloudTrackError",
+    "IdentityModel",
     "LandmarkSequence",
     "SyntheticPerformance",
     "TrackError",
@@ -45,6 +48,7 @@ __all__ = [
     "WeightSolver",
     "landmark_vertex_map",
     "register_landmarks",
+    "sample_identity_model",
     "synthetic_performance",
     "track",
     "track_clouds",

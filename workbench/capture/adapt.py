@@ -4,14 +4,17 @@ A template rig ``B* = [b0*, b1*, ..., bk*]`` (the model's neutral and its
 shapes) is adapted online to the face that is being tracked, as in the
 paper's *adaptive DEM*:
 
-* **Identity** — the neutral ``b0 = b0* + ℓ E z0``: a smooth offset in a
+* **Identity** — the neutral ``b0 = m + P y + ℓ E z0``: the paper's identity
+  PCA ``m + P y`` when one is given (``identity=``, :mod:`workbench.capture.identity`:
+  for the sample head, built from MakeHuman's modelling targets; ``m`` is the
+  template's neutral ``b0*``), solved at the initialisation (:meth:`fit_neutral`,
+  eq. 1, prior ``β1 ||D_P y||²``) and then kept; plus a smooth offset in a
   low-dimensional spectral basis ``E`` (the first ``n_basis`` eigenvectors of
   the skin's cotangent Laplacian, ``-L e = λ M e`` with the mass matrix ``M``,
-  per coordinate). There is no identity PCA model here (the paper's
-  ``m + P y`` needs a database of scanned faces), so **E doubles as the
-  identity basis**: ``z0`` plays both the paper's ``y`` and ``z0``, and it is
-  regularised with ``β1`` (the PCA term's weight) on the bending
-  ``||D_E z0||²`` plus ``β3 ||z0||²``.
+  per coordinate). Without a PCA (a user's own rig has no population of
+  scans), **E doubles as the identity basis**: ``z0`` plays both the paper's
+  ``y`` and ``z0``, and it is regularised with ``β1`` (the PCA term's weight)
+  on the bending ``||D_E z0||²`` plus ``β3 ||z0||²``.
 * **Expression transfer** — ``b_i = T_i* b0`` with the paper's linear
   operator (appendix, eq. 7): the affine map ``S_t = S_i S_0⁻¹`` of every
   template triangle (the tetrahedron spanned by two edges and the scaled
@@ -90,6 +93,7 @@ from workbench.capture.constraints import (
     point_to_plane_rows,
 )
 from workbench.capture.expression_transfer import ExpressionTransfer, TransferRows, sub_faces
+from workbench.capture.identity import IdentityModel
 from workbench.capture.result import TrackError
 from workbench.capture.spectral import laplacian_basis
 from workbench.geometry.masks import skin_or_all_mask
@@ -130,6 +134,11 @@ class AdaptiveModel:
         Size of the default ``vertex_ids``.
     progress : callable, optional
         ``progress(fraction, message)`` while the basis and the transfer rows are built.
+    identity : IdentityModel, optional
+        The paper's identity PCA ``m + P y`` (:mod:`workbench.capture.identity`, on
+        this model's vertices, ``m`` its neutral). :meth:`fit_neutral` then solves
+        ``y`` with ``z0`` (eq. 1, ``β1 ||D_P y||²``); without it ``E`` doubles as the
+        identity basis.
 
     Attributes
     ----------
@@ -142,6 +151,8 @@ class AdaptiveModel:
     eigenvalues_ : (K,) float64
     coefficients_ : (k + 1, K, 3) float64
         ``u = [z0, z1, ..., zk]`` (unit-free; the offset is ``ℓ E z``).
+    identity_coefficients_ : (l,) float64
+        ``y`` (model units; zeros without ``identity`` or before :meth:`fit_neutral`).
     coverage_ : (k + 1,) float64
         ``σ`` of the neutral (``Σ max(x̄, 0)``) and of every shape.
     saturated_ : (k + 1,) bool
@@ -162,6 +173,7 @@ class AdaptiveModel:
         sweeps: int = 2,
         max_vertices: int = 2000,
         progress: Callable[[float, str], Any] | None = None,
+        identity: IdentityModel | None = None,
     ) -> None:
         t0 = time.perf_counter()
         if not isinstance(model, FaceModel):
@@ -180,6 +192,7 @@ class AdaptiveModel:
             raise ValueError(f"coverage must be > 0 (inf never saturates), got {coverage!r}")
         if isinstance(sweeps, bool) or not isinstance(sweeps, int | np.integer) or sweeps < 1:
             raise ValueError(f"sweeps must be a positive integer, got {sweeps!r}")
+        self.identity: IdentityModel | None = None
         self.model = model
         self.n_basis = int(n_basis)
         self.betas = b
@@ -229,15 +242,16 @@ class AdaptiveModel:
         local = np.full(n, -1, np.int64)
         local[skin] = np.arange(skin.size)
         self._rows = TransferRows(self.transfer_, E_skin, local[S], lambda f, msg: say(0.1 + 0.9 * f, msg), self._names)
-        self._b0S = V[S].copy()
-        self._D0S = D[:, S].copy()
+        self._template_b0S = V[S].copy()
+        self._template_D0S = D[:, S].copy()
+        self._P_S: NDArray[np.float64] | None = None
 
         # the regularisation diagonal
         dE = lam / lam[-1] if lam[-1] > 0 else np.zeros_like(lam)
         bend = np.repeat(dE**2, 3)
         self._reg = np.stack([b[0] * bend + b[2]] + [b[1] * bend + b[2]] * k) if k else \
             (b[0] * bend + b[2])[None]
-        self.reset()
+        self.use_identity(identity)  # checks it, then reset()
         self.setup_seconds_ = time.perf_counter() - t0
         say(1.0, f"adaptive model ready ({self.setup_seconds_:.1f} s)")
 
@@ -247,12 +261,45 @@ class AdaptiveModel:
         k = len(self._names)
         K3 = 3 * self.n_basis
         self._u = np.zeros((k + 1, K3))
+        self._set_identity(np.zeros(0 if self.identity is None else self.identity.n_components))
         self._stats = BlockStatistics(k + 1, K3, self.gamma, self._reg)
         self.coverage_ = np.zeros(k + 1)
         self.saturated_ = np.zeros(k + 1, bool)
         self.n_frames_ = 0
         self._refresh()
         return self
+
+    def use_identity(self, identity: IdentityModel | None) -> AdaptiveModel:
+        """Use another identity PCA (or none) from now on; back to the template (:meth:`reset`).
+
+        Cheaper than a new model: the Laplacian basis and the transfer rows are kept.
+        """
+        if identity is not None:
+            if not isinstance(identity, IdentityModel):
+                raise TypeError(f"identity must be an IdentityModel, got {type(identity).__name__}")
+            if identity.mean.shape != (self.model.n_vertices, 3):
+                raise ValueError(f"identity: its mean has {identity.mean.shape[0]} vertices, the model "
+                                 f"{self.model.n_vertices}")
+        self.identity = identity
+        S = self.vertex_ids_
+        self._P_S = None if identity is None else identity.basis[:, S].reshape(identity.n_components, -1).T
+        return self.reset()
+
+    def _set_identity(self, y: NDArray[np.float64]) -> None:
+        """The template at the constraint vertices moved to the identity ``m + P y`` (transfer is linear in b0)."""
+        self.identity_coefficients_ = np.asarray(y, np.float64).copy()
+        self._id_offset = np.zeros_like(self._V0)
+        self._b0S = self._template_b0S.copy()
+        self._D0S = self._template_D0S.copy()
+        if self.identity is None or not np.any(y):
+            return
+        off = np.tensordot(self.identity_coefficients_, self.identity.basis, axes=(0, 0))
+        self._id_offset = off
+        S = self.vertex_ids_
+        self._b0S = self._b0S + off[S]
+        b0 = self._V0 + off
+        for i in range(len(self._names)):  # T_i* b0 − b0 (one sparse solve per shape)
+            self._D0S[i] = self.transfer_.delta(i, b0)[S]
 
     @property
     def shape_names(self) -> list[str]:
@@ -286,9 +333,9 @@ class AdaptiveModel:
 
     @property
     def neutral_(self) -> NDArray[np.float64]:
-        """The adapted neutral ``b0* + ℓ E z0``, (n, 3)."""
+        """The adapted neutral ``b0* + P y + ℓ E z0``, (n, 3)."""
         U0 = self._u[0].reshape(self.n_basis, 3)
-        return self._V0 + self.length_scale_ * (self.basis_ @ U0)
+        return self._V0 + self._id_offset + self.length_scale_ * (self.basis_ @ U0)
 
     @property
     def shapes_(self) -> NDArray[np.float64]:
@@ -407,10 +454,13 @@ class AdaptiveModel:
             return self._update(AS, cv, xv)
 
     def fit_neutral(self, A: Any, c: ArrayLike) -> AdaptiveModel:
-        """The paper's initialisation (eq. 1): the identity ``z0`` alone from one frame of a neutral face.
+        """The paper's initialisation (eq. 1): the identity (``y`` and ``z0``) from one frame of a neutral face.
 
         Solves ``min ||Ā0 z0 − c̄||² + β1 ||D_E z0||² + β3 ||z0||²`` with ``x = 0``
-        (``Ā0 = A E / √m``), replacing ``z0``; the statistics are not touched (add the
+        (``Ā0 = A E / √m``), replacing ``z0``; with an identity PCA, ``y`` joins it
+        (columns ``A P / (√m ℓ)``, prior ``β1 ||D_P y||²``) and replaces the previous ``y``
+        (``y`` is not refined online: the neutral frame constrains it, the
+        correctives ``z0`` carry on); the statistics are not touched (add the
         frame with :meth:`update` and ``x = 0`` when its correspondences are final).
         Alternate it with new correspondences (and the pose) for the Gauss–Newton of eq. 1.
 
@@ -431,10 +481,25 @@ class AdaptiveModel:
 
     def _fit_neutral(self, AS: sp.csr_matrix, cv: NDArray[np.float64]) -> AdaptiveModel:
         xv = np.zeros(len(self._names))
+        if self.identity is not None:
+            self._set_identity(np.zeros(self.identity.n_components))  # y and z0 are solved together, from m
         _, Q, _, cbar = self._frame_blocks(AS, cv, xv)
+        reg = self._reg[0]
+        if self._P_S is not None and self._P_S.shape[1]:
+            # [y, z0] jointly, y in model units: its columns and prior scaled like the rows (÷ √m ℓ);
+            # β1 of the PCA prior in mm² as the paper's (IdentityModel.prior_weight)
+            ident = self.identity
+            assert ident is not None
+            scale = 1.0 / (math.sqrt(max(AS.shape[0], 1)) * self.length_scale_)
+            Q = np.concatenate([np.asarray(AS @ self._P_S) * scale, Q], axis=1)
+            reg = np.concatenate([ident.prior_weight(self.betas[0]) * scale**2 / ident.std**2, reg])
         H = Q.T @ Q
-        H[np.diag_indices_from(H)] += self._reg[0]
-        self._u[0] = spd_solve(H, Q.T @ cbar)
+        H[np.diag_indices_from(H)] += reg
+        sol = spd_solve(H, Q.T @ cbar)
+        l_ = sol.size - self._u.shape[1]
+        self._u[0] = sol[l_:]
+        if l_:
+            self._set_identity(sol[:l_])
         self._refresh()
         return self
 
