@@ -298,6 +298,20 @@ WATCH_WIDGET_RESTORE = """
       this.addEventListener("message", (e) => { try { seen(e.data); } catch (err) { /* not ours */ } });
     }
   };
+  // ipywidgets logs a failed state update as a WrappedError whose message hides the cause (the
+  // exception thrown while deserialising or while a change handler ran): keep the whole chain
+  const error = console.error;
+  console.error = function (...args) {
+    try {
+      for (const a of args) {
+        if (a && a.error_stack) {
+          (window.__fwbWrappedErrors = window.__fwbWrappedErrors || []).push(
+            a.error_stack.map((x) => String((x && x.stack) || x)).join(" ==> "));
+        }
+      }
+    } catch (err) { /* never break the page's own logging */ }
+    return error.apply(this, args);
+  };
 })();
 """
 
@@ -332,7 +346,11 @@ class NotebookPage:
                             f"({[r.get('why') for r in resyncs]}); {report}")
         lost = [line for line in self.console if any(e in line for e in _LOST_STATE_ERRORS)]
         if lost:
-            problems.append(f"{self.name}: a widget model missed part of a state update: {lost[:3]}")
+            causes = self.page.evaluate("() => window.__fwbWrappedErrors || []")
+            self.artifacts.mkdir(parents=True, exist_ok=True)
+            (self.artifacts / "lost-state-updates.txt").write_text("\n\n=====\n\n".join(causes) or "no cause kept")
+            problems.append(f"{self.name}: a widget model missed part of a state update: {lost[:1]}; "
+                            f"cause: {causes[:1] if causes else 'not kept'} (all in lost-state-updates.txt)")
         violations = self.kernel_eval(_PY_VIOLATIONS, timeout=30)
         if violations:
             HEALTH["thread_violations"] += len(violations)
