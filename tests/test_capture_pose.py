@@ -110,3 +110,30 @@ def test_apply_reproduces_the_points():
     Q = P @ R.T + t
     pose = fit_rigid_robust(P, Q)
     np.testing.assert_allclose(pose.apply(P), Q, atol=1e-10)
+
+
+def test_one_closed_form_behind_every_rigid_fit() -> None:
+    """fit_rigid, fit_similarity and rigid_align are procrustes; a hand-made pose comes back exactly."""
+    from workbench.enhance.gradients import rigid_align
+    from workbench.geometry.similarity import fit_similarity, procrustes
+
+    rng = np.random.default_rng(4)
+    P = rng.normal(size=(30, 3))
+    a = 0.7
+    R0 = np.array([[np.cos(a), -np.sin(a), 0.0], [np.sin(a), np.cos(a), 0.0], [0.0, 0.0, 1.0]])
+    t0, s0 = np.array([0.3, -1.0, 2.0]), 1.7
+    w = rng.uniform(0.5, 2.0, 30)
+    Q = s0 * P @ R0.T + t0
+    R, t, s, sv = procrustes(P, Q, w, scale=True)
+    np.testing.assert_allclose(R, R0, atol=1e-12)
+    np.testing.assert_allclose(t, t0, atol=1e-12)
+    assert abs(s - s0) < 1e-12 and np.all(np.diff(sv) <= 0)
+    M = fit_rigid(P, Q, w, scale=True)
+    np.testing.assert_allclose(M[:3, :3], s0 * R0, atol=1e-12)
+    sim = fit_similarity(P, Q, w)
+    np.testing.assert_allclose(sim(P), Q, atol=1e-12)
+    Rr, tr = rigid_align(P, Q / s0, w)
+    np.testing.assert_allclose(Rr, R0, atol=1e-12)
+    # a mirror image is not a rotation: the closest rotation, det +1
+    Rm, _, _, _ = procrustes(P, P * np.array([1.0, 1.0, -1.0]))
+    assert np.linalg.det(Rm) > 0.999999

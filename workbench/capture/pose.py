@@ -29,6 +29,8 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from workbench.geometry.similarity import procrustes
+
 __all__ = ["PoseError", "RigidPose", "fit_rigid", "fit_rigid_robust", "pose_matrix"]
 
 Loss = Literal["huber", "tukey", "l2"]
@@ -106,26 +108,17 @@ def _points(P: ArrayLike, Q: ArrayLike, weights: ArrayLike | None) -> tuple[
     return P_, Q_, w
 
 
-def _det3(M: NDArray[np.float64]) -> float:
-    return float(M[0, 0] * (M[1, 1] * M[2, 2] - M[1, 2] * M[2, 1])
-                 - M[0, 1] * (M[1, 0] * M[2, 2] - M[1, 2] * M[2, 0])
-                 + M[0, 2] * (M[1, 0] * M[2, 1] - M[1, 1] * M[2, 0]))
-
-
 def _kabsch(P: NDArray[np.float64], Q: NDArray[np.float64], w: NDArray[np.float64], scale: bool,
             what: str, check: bool = True) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
-    """Weighted closed form on finite points with w ≥ 0, Σw > 0 (checked by the caller).
+    """:func:`~workbench.geometry.similarity.procrustes` on finite points with w ≥ 0, Σw > 0 (checked by the caller).
 
     ``check``: raise :class:`PoseError` when the weighted points are collinear (else the
     caller guards against it, e.g. by the singular values of the cross-covariance).
     """
-    sw = float(w.sum())
-    mp = w @ P / sw
-    mq = w @ Q / sw
-    Pc = P - mp
-    Pw = Pc * w[:, None]
-    C = Pw.T @ Pc  # weighted covariance of P (times Σw)
     if check:
+        sw = float(w.sum())
+        Pc = P - w @ P / sw
+        C = (Pc * w[:, None]).T @ Pc  # weighted covariance of P (times Σw)
         ev = np.linalg.eigvalsh(C)  # ascending
         if not ev[2] > 0 or ev[1] <= _DEGENERATE**2 * ev[2]:
             spread = np.sqrt(np.maximum(ev[::-1], 0.0) / sw)
@@ -133,16 +126,9 @@ def _kabsch(P: NDArray[np.float64], Q: NDArray[np.float64], w: NDArray[np.float6
                 f"{what}: the {P.shape[0]} points are collinear or coincide "
                 f"(spread {spread[0]:.3g}, {spread[1]:.3g}): a rigid pose needs 3 points not on one line"
             )
-    H = Pw.T @ (Q - mq)  # Σ w p qᵀ
-    U, S, Vt = np.linalg.svd(H)
+    R, t, s, S = procrustes(P, Q, w, scale=scale)
     if not check and not S[1] > _DEGENERATE * S[0]:
         raise PoseError(f"{what}: the weighted points are collinear")
-    d = 1.0 if _det3(U) * _det3(Vt) >= 0 else -1.0
-    R = Vt.T @ U.T if d > 0 else (Vt.T * np.array([1.0, 1.0, -1.0])) @ U.T
-    s = 1.0
-    if scale:
-        s = float((S[0] + S[1] + d * S[2]) / np.trace(C))
-    t = mq - s * (R @ mp)
     return R, t, s
 
 

@@ -29,6 +29,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.sparse.csgraph import connected_components
 
 from workbench.enhance.frequency import lumped_areas
+from workbench.geometry.similarity import procrustes
 from workbench.geometry.sparse_cholesky import Backend, SparseSPDSolver
 
 __all__ = [
@@ -112,16 +113,8 @@ def local_frames(X: ArrayLike, F: ArrayLike) -> NDArray[np.float64]:
 
 def rigid_align(X: ArrayLike, target: ArrayLike, weights: ArrayLike | None = None) -> tuple[NDArray, NDArray]:
     """Rotation ``R`` (3, 3) and translation ``t`` (3,) minimising ``Σ w |R x + t − y|²`` (Horn/Kabsch)."""
-    x = np.asarray(X, np.float64)
-    y = np.asarray(target, np.float64)
-    w = np.ones(x.shape[0]) if weights is None else np.asarray(weights, np.float64)
-    w = w / w.sum()
-    cx, cy = w @ x, w @ y
-    H = (x - cx).T @ ((y - cy) * w[:, None])
-    U, _, Vt = np.linalg.svd(H)
-    s = np.sign(np.linalg.det(Vt.T @ U.T))
-    R = Vt.T @ np.diag([1.0, 1.0, s]) @ U.T
-    return R, cy - R @ cx
+    R, t, _, _ = procrustes(X, target, weights)
+    return R, t
 
 
 def boundary_laplacian(F: ArrayLike, n: int) -> sp.csr_matrix:

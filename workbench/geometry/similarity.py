@@ -1,4 +1,13 @@
-"""Similarity transforms ``p -> s R p + t`` and their least-squares fit (Umeyama 1991)."""
+"""Similarity transforms ``p -> s R p + t`` and their least-squares fit (Umeyama 1991).
+
+:func:`procrustes` is the one closed form (weighted Kabsch / Horn, Umeyama's
+scale, reflections excluded) behind :func:`fit_similarity` (rig registration),
+:func:`workbench.capture.pose.fit_rigid` (the head pose while tracking, which
+adds its degeneracy checks and reweighting) and
+:func:`workbench.enhance.gradients.rigid_align` (aligning frames before their
+frequencies are split). Hand-written: a 3×3 SVD; ``scipy``'s
+``Rotation.align_vectors`` has no translation, scale or weights normalised this way.
+"""
 
 from __future__ import annotations
 
@@ -7,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["Similarity", "fit_similarity"]
+__all__ = ["Similarity", "fit_similarity", "procrustes"]
 
 
 @dataclass(frozen=True)
@@ -51,21 +60,54 @@ def fit_similarity(
     scale : bool
         Fit the scale (else 1).
     """
-    X = np.asarray(X, np.float64)
-    Y = np.asarray(Y, np.float64)
-    w = np.ones(X.shape[0]) if w is None else np.asarray(w, np.float64)
-    ws = w.sum()
-    if ws <= 0:
-        raise ValueError("fit_similarity: all weights are zero")
-    mx = (w[:, None] * X).sum(0) / ws
-    my = (w[:, None] * Y).sum(0) / ws
-    Xc, Yc = X - mx, Y - my
-    C = (w[:, None] * Yc).T @ Xc / ws
-    U, S, Vt = np.linalg.svd(C)
-    D = np.eye(3)
-    if np.linalg.det(U @ Vt) < 0:
-        D[2, 2] = -1.0
-    R = U @ D @ Vt
-    var = float((w * (Xc**2).sum(1)).sum() / ws)
-    s = float(np.trace(np.diag(S) @ D) / var) if scale and var > 0 else 1.0
-    return Similarity(s, R, my - s * (mx @ R.T))
+    R, t, s, _ = procrustes(X, Y, w, scale=scale)
+    return Similarity(s, R, t)
+
+
+def procrustes(
+    P: ArrayLike, Q: ArrayLike, w: ArrayLike | None = None, *, scale: bool = False
+) -> tuple[NDArray[np.float64], NDArray[np.float64], float, NDArray[np.float64]]:
+    """The weighted least-squares ``Q ≈ s R P + t`` in closed form (Kabsch / Horn; Umeyama's scale).
+
+    Parameters
+    ----------
+    P, Q : (p, 3) float
+        Corresponding points (finite; p >= 3 not on one line for a unique rotation).
+    w : (p,) float, optional
+        Weights >= 0 (default 1), not all zero.
+    scale : bool
+        Fit the scale ``s`` (else 1).
+
+    Returns
+    -------
+    R : (3, 3) float64
+        A rotation (det +1: reflections excluded).
+    t : (3,) float64
+    s : float
+    singular_values : (3,) float64
+        Of the weighted cross-covariance ``Σ w (p − p̄)(q − q̄)ᵀ``, descending: a second
+        one near 0 relative to the first means the points are (nearly) collinear.
+
+    Raises
+    ------
+    ValueError
+        All weights are zero.
+    """
+    X = np.asarray(P, np.float64)
+    Y = np.asarray(Q, np.float64)
+    wv = np.ones(X.shape[0]) if w is None else np.asarray(w, np.float64)
+    ws = float(wv.sum())
+    if not ws > 0:
+        raise ValueError("procrustes: all weights are zero")
+    mx = wv @ X / ws
+    my = wv @ Y / ws
+    Xc = X - mx
+    Xw = Xc * wv[:, None]
+    U, S, Vt = np.linalg.svd(Xw.T @ (Y - my))  # Σ w x yᵀ = U S Vt; R = V D Uᵀ
+    d = 1.0 if np.linalg.det(U) * np.linalg.det(Vt) >= 0 else -1.0
+    R = (Vt.T * np.array([1.0, 1.0, d])) @ U.T
+    s = 1.0
+    if scale:
+        var = float((Xw * Xc).sum())
+        s = float((S[0] + S[1] + d * S[2]) / var) if var > 0 else 1.0
+    return R, my - s * (R @ mx), s, S
