@@ -134,6 +134,7 @@ def test_one_closed_form_behind_every_rigid_fit() -> None:
     np.testing.assert_allclose(sim(P), Q, atol=1e-12)
     Rr, tr = rigid_align(P, Q / s0, w)
     np.testing.assert_allclose(Rr, R0, atol=1e-12)
+    np.testing.assert_allclose(tr, t0 / s0, atol=1e-12)
     # a mirror image is not a rotation: the closest rotation, det +1
     Rm, _, _, _ = procrustes(P, P * np.array([1.0, 1.0, -1.0]))
     assert np.linalg.det(Rm) > 0.999999
