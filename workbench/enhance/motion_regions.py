@@ -47,6 +47,8 @@ from scipy.cluster.vq import kmeans2
 from scipy.sparse.csgraph import connected_components
 from scipy.sparse.linalg import eigsh
 
+from workbench.enhance.voluntary import checked_mesh, mesh_edges
+
 __all__ = ["MotionRegions", "motion_regions", "voluntary_cores_from_motion"]
 
 
@@ -70,10 +72,6 @@ class MotionRegions:
     def vertices(self, region: int) -> NDArray[np.int64]:
         """Indices of the vertices of one region."""
         return np.flatnonzero(self.labels == int(region))
-
-
-def _edges(F: NDArray[np.int64]) -> NDArray[np.int64]:
-    return np.unique(np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1), axis=0)
 
 
 def _in_one_piece(lab: NDArray[np.int64], a: NDArray[np.int64], b: NDArray[np.int64], k: int) -> NDArray[np.int64]:
@@ -141,13 +139,8 @@ def motion_regions(
     ValueError
         Shapes that do not match, nothing moves, or fewer moving vertices than ``n_regions``.
     """
-    V = np.asarray(neutral, np.float64)
-    F = np.asarray(faces, np.int64)
+    V, F = checked_mesh(neutral, faces, "motion_regions: ")
     P = np.asarray(frames, np.float64)
-    if V.ndim != 2 or V.shape[1] != 3:
-        raise ValueError(f"motion_regions: neutral must be (n, 3), got {V.shape}")
-    if F.ndim != 2 or F.shape[1] != 3 or (F.size and (F.min() < 0 or F.max() >= len(V))):
-        raise ValueError(f"motion_regions: faces must be (m, 3) indices into the {len(V)} vertices of neutral")
     if P.ndim != 3 or P.shape[1:] != V.shape or len(P) == 0:
         raise ValueError(f"motion_regions: frames must be (T, {len(V)}, 3) with T >= 1, got {P.shape}")
     if int(n_regions) < 2:
@@ -161,7 +154,7 @@ def motion_regions(
     if not top > 0:
         raise ValueError("motion_regions: no vertex moves in frames")
     moving = motion >= still * top
-    e = _edges(F)
+    e = mesh_edges(F)
     e = e[moving[e[:, 0]] & moving[e[:, 1]]]
     A = sp.csr_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
     _, piece = connected_components(A + A.T, directed=False)

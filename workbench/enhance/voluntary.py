@@ -28,6 +28,22 @@ if TYPE_CHECKING:
 __all__ = ["face_voluntary_cores", "voluntary_region_weights"]
 
 
+def checked_mesh(neutral: ArrayLike, faces: ArrayLike, who: str) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """``(V, F)`` as float64 / int64 after checking shapes and indices (errors name ``who``)."""
+    V = np.asarray(neutral, np.float64)
+    F = np.asarray(faces, np.int64)
+    if V.ndim != 2 or V.shape[1] != 3:
+        raise ValueError(f"{who}neutral must be (n, 3), got {V.shape}")
+    if F.ndim != 2 or F.shape[1] != 3 or (F.size and (F.min() < 0 or F.max() >= len(V))):
+        raise ValueError(f"{who}faces must be (m, 3) indices into the {len(V)} vertices of neutral")
+    return V, F
+
+
+def mesh_edges(F: NDArray[np.int64]) -> NDArray[np.int64]:
+    """Unique undirected edges ``(e, 2)`` of triangles ``F``, each as (low, high)."""
+    return np.unique(np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1), axis=0)
+
+
 def voluntary_region_weights(
     neutral: ArrayLike, faces: ArrayLike, cores: Mapping[str, ArrayLike], sigma: float
 ) -> dict[str, NDArray[np.float32]]:
@@ -47,17 +63,12 @@ def voluntary_region_weights(
     dict name -> (m,) float32 in [0, 1]
         Ready for ``PerformanceDatabase.from_frames(..., regions=...)``.
     """
-    V = np.asarray(neutral, np.float64)
-    F = np.asarray(faces, np.int64)
-    if V.ndim != 2 or V.shape[1] != 3:
-        raise ValueError(f"neutral must be (n, 3), got {V.shape}")
-    if F.ndim != 2 or F.shape[1] != 3 or (F.size and (F.min() < 0 or F.max() >= len(V))):
-        raise ValueError(f"faces must be (m, 3) indices into the {len(V)} vertices of neutral")
+    V, F = checked_mesh(neutral, faces, "")
     if not (np.isfinite(sigma) and sigma > 0):
         raise ValueError(f"sigma must be > 0, got {sigma!r}")
     if not cores:
         raise ValueError("cores is empty: give at least one region")
-    e = np.unique(np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1), axis=0)
+    e = mesh_edges(F)
     w = np.maximum(np.linalg.norm(V[e[:, 0]] - V[e[:, 1]], axis=1), 1e-12)
     n = len(V)
     graph = sp.csr_matrix((w, (e[:, 0], e[:, 1])), shape=(n, n))
