@@ -243,7 +243,7 @@ def sample_identity_model(
     ValueError
         ``model`` is not the sample head at a Loop level of its base mesh; ``n_components`` out of range.
     """
-    from workbench.geometry.subdivision import loop_subdivision
+    from workbench.geometry.subdivision import loop_subdivision, subdivided_vertex_count
     from workbench.samples import load_sample
 
     say = progress or (lambda f, msg: None)
@@ -255,12 +255,11 @@ def sample_identity_model(
     X = sample_identities(T, n_samples, spread=spread, seed=seed, neutral=base.vertices)
     n = int(model.n_vertices)
     if n != base.n_vertices:
-        for levels in (1, 2, 3):
-            S, _ = loop_subdivision(base.faces, base.n_vertices, levels)
-            if S.shape[0] == n:
-                break
-        else:
+        # the level from the vertex count alone; the operator is built once, for that level
+        levels = next((lv for lv in (1, 2, 3) if subdivided_vertex_count(base.faces, base.n_vertices, lv) == n), 0)
+        if not levels:
             raise ValueError(f"sample_identity_model: model has {n} vertices, not a Loop level of the sample head")
+        S, _ = loop_subdivision(base.faces, base.n_vertices, levels)
         if not np.allclose(S @ np.asarray(base.vertices, np.float64), model.vertices, atol=1e-6):
             raise ValueError("sample_identity_model: model is not the sample head (its vertices differ)")
     else:

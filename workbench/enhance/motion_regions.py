@@ -233,11 +233,11 @@ def voluntary_cores_from_motion(
     for name, this_side in (("brow_left", V[:, 0] >= mid), ("brow_right", V[:, 0] < mid)):
         halves = []
         for r in np.flatnonzero(moves & (height >= 2.0 / 3.0)):
-            ids = regions.vertices(int(r))
-            here = ids[this_side[ids]]
+            members = regions.vertices(int(r))
+            here = members[this_side[members]]
             # a brow region may cross the midline (a face whose brows move together): take its half
-            if here.size >= 0.25 * ids.size:
-                halves.append((ids.size, float(V[here, 1].mean()), here))
+            if here.size >= 0.25 * members.size:
+                halves.append((members.size, float(V[here, 1].mean()), here))
         # the highest, among regions not much smaller than the largest (a sliver of a crease is no brow)
         big = [h for h in halves if h[0] >= 0.25 * max((h[0] for h in halves), default=0)]
         if big:
