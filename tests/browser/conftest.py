@@ -148,6 +148,7 @@ def open_notebook(
                 nb.wait_kernel_idle()
                 if run:
                     nb.wait_widgets_restored()  # no cell before the widget manager's restore
+                    nb.install_comm_log()
                     nb.run_all()
             except LostCellReply as exc:
                 nb.screenshot(f"lost-cell-reply-{attempt}")

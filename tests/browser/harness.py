@@ -9,6 +9,7 @@ import contextlib
 import io
 import json
 import os
+import re
 import socket
 import subprocess
 import sys
@@ -267,6 +268,55 @@ print(json.dumps([{"uid": _o._uid, "version": _o._version, "mode": _o._gpu_mode,
 #: and goes on; a change handler that threw skips the change events after it)
 _LOST_STATE_ERRORS = ("Error setting state", "Could not process update msg")
 
+#: Installed in each test kernel before its cells run: a log of the comm traffic of every widget
+#: (opens, updates with the model ids they reference, closes), read when a model missed an update
+_PY_COMM_LOG_INSTALL = """
+import collections as _c, time as _t, ipywidgets as _w
+if not hasattr(_w.Widget, "_fwb_comm_log"):
+    _w.Widget._fwb_comm_log = _c.deque(maxlen=50000)
+    def _fwb_refs(obj, out):
+        if isinstance(obj, str):
+            if obj.startswith("IPY_MODEL_"):
+                out.append(obj[10:])
+        elif isinstance(obj, dict):
+            for v in obj.values():
+                _fwb_refs(v, out)
+        elif isinstance(obj, (list, tuple)):
+            for v in obj:
+                _fwb_refs(v, out)
+        return out
+    def _fwb_wrap():
+        W, log = _w.Widget, _w.Widget._fwb_comm_log
+        send0, open0, close0 = W._send, W.open, W.close
+        def _send(self, msg, buffers=None):
+            st = msg.get("state", {}) if isinstance(msg, dict) else {}
+            log.append([_t.monotonic(), getattr(self.comm, "comm_id", None), "send " + str(msg.get("method")),
+                        sorted(st), _fwb_refs(st, [])])
+            return send0(self, msg, buffers)
+        def _open(self):
+            r = open0(self)
+            log.append([_t.monotonic(), getattr(self.comm, "comm_id", None), "open " + type(self).__name__,
+                        [], _fwb_refs(self.get_state(), [])])
+            return r
+        def _close(self):
+            if getattr(self, "comm", None) is not None:
+                log.append([_t.monotonic(), self.comm.comm_id, "close " + type(self).__name__, [], []])
+            return close0(self)
+        W._send, W.open, W.close = _send, _open, _close
+    _fwb_wrap()
+"""
+
+#: the comm log's story of one model: its messages and, for every model they name, its open/close
+_PY_COMM_LOG_REPORT = """
+import json, ipywidgets as _w
+_log = list(getattr(_w.Widget, "_fwb_comm_log", []))
+_mine = [e for e in _log if e[1] == MODEL_ID]
+_named = {r for e in _mine for r in e[4]}
+_life = [e for e in _log if e[1] in _named and not e[2].startswith("send")]
+print(json.dumps({"model": MODEL_ID, "messages": _mine[-40:], "named_models_open_close": _life[-200:],
+                  "named_never_opened": sorted(_named - {e[1] for e in _log if e[2].startswith("open")})}))
+"""
+
 _PY_VIOLATIONS = """
 import sys, json
 _g = sys.modules.get("widgets._threading")
@@ -298,15 +348,32 @@ WATCH_WIDGET_RESTORE = """
       this.addEventListener("message", (e) => { try { seen(e.data); } catch (err) { /* not ours */ } });
     }
   };
-  // ipywidgets logs a failed state update as a WrappedError whose message hides the cause (the
-  // exception thrown while deserialising or while a change handler ran): keep the whole chain
+  // ipywidgets logs a failed state update as a bare Error("Could not process update msg ...")
+  // from inside a promise's catch handler and rethrows the cause, which JupyterLab's message
+  // chain then drops. Remember the reason each catch handler is given, so the logged line can
+  // be paired with its cause (older ipywidgets: a WrappedError carrying error_stack).
+  const nativeCatch = Promise.prototype.catch;
+  Promise.prototype.catch = function (handler) {
+    if (typeof handler !== "function") return nativeCatch.call(this, handler);
+    return nativeCatch.call(this, function (reason) {
+      window.__fwbLastRejection = reason;
+      return handler.call(this, reason);
+    });
+  };
+  const describe = (x) => String((x && x.stack) || x);
   const error = console.error;
   console.error = function (...args) {
     try {
       for (const a of args) {
+        const text = String((a && a.message) || a);
         if (a && a.error_stack) {
           (window.__fwbWrappedErrors = window.__fwbWrappedErrors || []).push(
-            a.error_stack.map((x) => String((x && x.stack) || x)).join(" ==> "));
+            a.error_stack.map(describe).join(" ==> "));
+        } else if (text.includes("Could not process update msg")) {
+          (window.__fwbWrappedErrors = window.__fwbWrappedErrors || []).push(
+            text + " <== cause: " + describe(window.__fwbLastRejection));
+        } else if (text.includes("Error setting state")) {  // the handler's message is in the line
+          (window.__fwbWrappedErrors = window.__fwbWrappedErrors || []).push(text);
         }
       }
     } catch (err) { /* never break the page's own logging */ }
@@ -349,8 +416,19 @@ class NotebookPage:
             causes = self.page.evaluate("() => window.__fwbWrappedErrors || []")
             self.artifacts.mkdir(parents=True, exist_ok=True)
             (self.artifacts / "lost-state-updates.txt").write_text("\n\n=====\n\n".join(causes) or "no cause kept")
+            ids = sorted(set(re.findall(r"model id: ([0-9a-zA-Z_-]+)", " ".join(lost))))
+            stories = []
+            for mid in ids:
+                try:
+                    stories.append(self.kernel_eval(f"MODEL_ID = {mid!r}\n" + _PY_COMM_LOG_REPORT, timeout=30))
+                except Exception as exc:  # the report must not hide the problem it reports
+                    stories.append({"model": mid, "error": f"{type(exc).__name__}: {exc}"})
+            (self.artifacts / "lost-state-comm-log.json").write_text(json.dumps(stories, indent=1))
+            closed = [e for st in stories for e in st.get("named_models_open_close", []) if e[2].startswith("close")]
             problems.append(f"{self.name}: a widget model missed part of a state update: {lost[:1]}; "
-                            f"cause: {causes[:1] if causes else 'not kept'} (all in lost-state-updates.txt)")
+                            f"cause: {causes[:1] if causes else 'not kept'} (all in lost-state-updates.txt); "
+                            f"models its messages name that the kernel closed: {closed[-5:]}, never opened: "
+                            f"{[st.get('named_never_opened') for st in stories]} (lost-state-comm-log.json)")
         violations = self.kernel_eval(_PY_VIOLATIONS, timeout=30)
         if violations:
             HEALTH["thread_violations"] += len(violations)
@@ -485,6 +563,10 @@ class NotebookPage:
                 (self.artifacts / "lost-reply-probe.json").write_text(json.dumps(out, indent=1, default=str))
                 (self.artifacts / "jupyterlab-log-tail.txt").write_text(self.lab.log_tail(200))
         return out
+
+    def install_comm_log(self) -> None:
+        """Log the kernel's widget comm traffic from now on (read when a model misses an update)."""
+        self.kernel_eval(_PY_COMM_LOG_INSTALL, timeout=60)
 
     def kernel_eval(self, code: str, timeout: float = 60.0) -> Any:
         """Run ``code`` in the notebook's kernel; return the JSON it prints last.
