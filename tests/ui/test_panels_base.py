@@ -300,3 +300,27 @@ def test_panels_keep_their_undo_classes(tiny_model) -> None:
     for p in panels:
         assert p.undo_button.tooltip == "Undo Set up" and not p.undo_button.disabled
         p.close()
+
+
+def _tree(widget: W.Widget) -> list[W.Widget]:
+    out = [widget]
+    for child in getattr(widget, "children", ()):
+        out += _tree(child)
+    return out
+
+
+def test_rebuilt_sliders_close_the_old_rows_and_show_no_closed_widget(tiny_model) -> None:
+    m = tiny_model
+    p = ExpressionPanel(m)
+    old = [w for w in _tree(p.body) if w is not p.body]
+    assert old and all(w.comm is not None for w in old)
+    m.shape_tools.split("up")  # the shapes change: the rows are rebuilt
+    new = [w for w in _tree(p.body) if w is not p.body]
+    assert {"up_L", "up_R"} <= set(p.sliders) and "up" not in p.sliders
+    # every widget of the old rows is closed (none leaks), none of them is still shown,
+    # and nothing the body shows is closed: the page never meets a child the kernel closed
+    assert all(w.comm is None for w in old)
+    assert not {id(w) for w in old} & {id(w) for w in new}
+    assert all(w.comm is not None for w in new)
+    p.close()
+    assert all(w.comm is None for w in new)

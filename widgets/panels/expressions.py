@@ -186,10 +186,9 @@ class ExpressionPanel(ModelPanel):
         with model.lock:
             shapes = {s.name: s for s in model.shapes}
             weights = dict(model.weights)
-        for s in self.sliders.values():
-            s.close()
-        for w in [*self.mutes.values(), *self.badges.values(), *self._badge_columns.values()]:
-            w.close()
+        # the old widgets are closed only after the body shows the new ones: the page never
+        # holds a container whose children the kernel has already closed
+        old = self._own_widgets()
         self.sliders, self.mutes, self._rows, self._headers = {}, {}, [], {}
         self.badges, self._badge_columns, self._cells = {}, {}, {}
         children: list[W.Widget] = []
@@ -208,9 +207,23 @@ class ExpressionPanel(ModelPanel):
             children.append(header)
             children.extend(row_widgets)
         self.body.children = children
+        for w in old:
+            w.close()
         self._on_correctives()
         self._on_search()
         self.sliders_version += 1
+
+    def _own_widgets(self) -> list[W.Widget]:
+        """Every widget the body's rows are made of (closed when the rows are rebuilt or the panel closes)."""
+        return [
+            *(header for header, _ in self._headers.values()),
+            *(box for _, box in self._rows),
+            *self._cells.values(),
+            *self._badge_columns.values(),
+            *self.badges.values(),
+            *self.mutes.values(),
+            *self.sliders.values(),
+        ]
 
     def _make_cell(self, shape: Any, value: float) -> W.Widget:
         name = shape.name
@@ -368,10 +381,5 @@ class ExpressionPanel(ModelPanel):
         try:
             super().close()
         finally:
-            for w in [
-                *self.sliders.values(),
-                *self.mutes.values(),
-                *self.badges.values(),
-                *self._badge_columns.values(),
-            ]:
+            for w in self._own_widgets():
                 w.close()

@@ -168,13 +168,14 @@ class RegionSliders:
 
     def build(self) -> None:
         """New sliders for the selected region."""
-        for s in self.weight_sliders.values():
-            s.close()
-        self.weight_sliders = {}
+        # the old sliders close only once the box shows the new ones (never a closed child on the page)
+        old, self.weight_sliders = list(self.weight_sliders.values()), {}
         shapes = self.shapes()
         r = self.selected()
         if r is None or not shapes:
             self.box.children = [W.HTML("<i>no region selected</i>")]
+            for s in old:
+                s.close()
             return
         model = self.model
         values = model.regions.effective_weights.region(r)
@@ -195,6 +196,8 @@ class RegionSliders:
             )
             self.weight_sliders[nm] = s
         self.box.children = list(self.weight_sliders.values())
+        for s in old:
+            s.close()
 
     def refresh(self) -> None:
         """Slider values from the model (no new sliders)."""
