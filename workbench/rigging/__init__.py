@@ -8,6 +8,9 @@
   from the transfer.
 * :func:`refine_rig` / :class:`RefineResult` — example-based refinement (Li et
   al. 2010 §3, :mod:`workbench.rigging.refine`), imported on first use.
+* :func:`clone_animation` / :class:`ExpressionCloner` — a performance (an
+  animated mesh) of one face played on another of any topology, vertex order
+  and units (expression cloning, Noh & Neumann 2001; :mod:`workbench.rigging.clone`).
 * :class:`RigSession` — the Rig tab's state: landmarks, examples and the three
   stages, each one undo step of the session's own history.
 
@@ -25,6 +28,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
+from workbench.rigging.clone import ExpressionCloner, clone_animation
 from workbench.rigging.details import DetailMap, transfer_details
 from workbench.rigging.landmarks import SuggestedLandmark, suggest_landmarks, template_landmarks
 from workbench.rigging.report import RigTransferError, ShapeQuality, TransferReport
@@ -41,6 +45,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "DetailMap",
+    "ExpressionCloner",
     "RefineResult",
     "RigExample",
     "RigSession",
@@ -51,6 +56,7 @@ __all__ = [
     "SuggestedLandmark",
     "TransferReport",
     "TransferResult",
+    "clone_animation",
     "refine_rig",
     "suggest_landmarks",
     "template_landmarks",

@@ -124,9 +124,11 @@ class RigTransfer:
     Raises
     ------
     RigTransferError
-        The inputs cannot be transferred (no shapes, no skin, degenerate or
-        non-manifold surface, a target that does not look like a face); the
-        message names what is wrong. Nothing is built.
+        The inputs cannot be transferred (no skin, degenerate or non-manifold
+        surface, a target that does not look like a face; :meth:`run`: a source
+        without shapes); the message names what is wrong. Nothing is built. The
+        set-up alone (correspondence, fit) serves expression cloning
+        (:class:`~workbench.rigging.clone.ExpressionCloner`), which needs no shapes.
     """
 
     def __init__(
@@ -149,8 +151,6 @@ class RigTransfer:
                 target = load(target)
             else:
                 raise TypeError(f"transfer_rig: target must be a FaceModel or a path, got {type(target).__name__}")
-        if not source.shapes:
-            raise RigTransferError(f"source {source.metadata.name or 'model'}: has no blendshapes to transfer")
         if conjugation not in ("jacobian", "rotation", "none"):
             raise ValueError(f"conjugation must be 'jacobian', 'rotation' or 'none', got {conjugation!r}")
         self.source = source
@@ -234,6 +234,8 @@ class RigTransfer:
 
         ``progress`` replaces the set-up's progress callback from here on.
         """
+        if not self.source.shapes:
+            raise RigTransferError(f"source {self.source.metadata.name or 'model'}: has no blendshapes to transfer")
         if progress is not None:
             self._progress = progress
         t0 = time.perf_counter()

@@ -1,0 +1,126 @@
+"""Benchmark: expression cloning of a performance onto faces it has not seen (issue 29).
+
+Run: .venv/bin/python benchmarks/bench_expression_cloning.py [--frames 120] [--seed 1]
+
+The performance: the sample head (5,084 vertices, dm) playing a realistic take
+(:func:`workbench.testing.takes.realistic_weights`: dense, co-articulated,
+asymmetric weights) as an animated mesh. It is cloned onto faces whose true
+performance is known exactly (``GeneratedFace.pose``):
+
+* **warp + renumber** — the head under a smooth random warp, quads cut along
+  the other diagonal, vertices renumbered;
+* **proportions, mm** — jaw 1.25x and eyes 1.15x about their centres, a random
+  warp, renumbered, in millimetres;
+* **remesh + warp + bust** — re-triangulated with no vertex where one was,
+  warped (bumps, anisotropic scale, rotation; cm), shoulders added: ~27k
+  vertices (the set-up and frames/s target's size);
+* **foreign** — :func:`workbench.testing.foreign_face`: remeshed, other
+  proportions, warp, bust, open mouth and eyes, cm.
+
+Error: mean vertex error over the mean true motion per frame, median over
+frames (the issue's "within 10 % of the motion"). Peers, same run, same
+alignment: **nearest copy** (each target vertex takes the motion of the
+nearest source vertex after the rigid alignment: the naive baseline) and
+**deformation transfer** (Sumner & Popović: each frame's motion solved through
+the rig transfer's prefactored Poisson system, as a per-frame
+deformation-transfer solve; parts as in cloning).
+
+Measured 2026-11-28, 120 frames, on a machine running a browser-test loop beside
+two CPU hogs (timings inflated 2-4x; the rig transfer's set-up alone was 4.1 s
+at 27k on a quieter day):
+
+    face                   vertices   clone    copy      DT clone/copy set-up s clone f/s  DT f/s
+    warp + renumber            5084   0.057   0.207   0.101       0.28      9.3       176     217
+    proportions, mm            5084   0.260   0.421   0.326       0.62     19.8       462     166
+    remesh + warp + bust      26951   0.090   0.405   0.126       0.22     18.5       268      22
+    foreign                   16235   0.120   0.305   0.126       0.39     14.1       182      21
+
+Cloning beats both peers on every face. Met: the issue's 10 % on a warped,
+re-triangulated, renumbered head (5.7 %); >= 100 frames/s at 27k (268). Not
+met: 5 % on every generated face, and the set-up under load (18.5 s at 27k).
+The proportions face misses most: where the jaw grew 1.25x the local scales
+measured on the fitted source reach ~1.18 (the non-rigid fit is stiffer than
+the warp), and with every T set to the identity the error is the same (0.27),
+so the correspondence, not the motion-vector adjustment, limits it there.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+import workbench
+from workbench.rigging import ExpressionCloner
+from workbench.testing import (
+    compose,
+    foreign_face,
+    in_units,
+    proportions_warp,
+    random_warp,
+    remeshed,
+    renumbered,
+    sample_head_warp,
+    warped,
+    with_bust,
+)
+from workbench.testing.takes import realistic_weights
+
+
+def faces(head):
+    yield "warp + renumber", renumbered(
+        warped(head, random_warp(head.vertices, seed=3), shapes=False, retriangulate=True), seed=2)
+    prop = compose(proportions_warp(head, eyes=1.15, jaw=1.25), random_warp(head.vertices, seed=5))
+    yield "proportions, mm", in_units(renumbered(warped(head, prop, shapes=False), seed=4), "mm")
+    yield "remesh + warp + bust", with_bust(remeshed(head, seed=1, warp=sample_head_warp()), rings=75, drop=0.6,
+                                            flare=2.2)
+    yield "foreign", foreign_face(head, seed=2)
+
+
+def error(pred, truth, rest) -> float:
+    motion = np.linalg.norm(truth - rest, axis=2).mean(1)
+    return float(np.median(np.linalg.norm(pred - truth, axis=2).mean(1) / np.maximum(motion, 1e-300)))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--frames", type=int, default=120)
+    ap.add_argument("--seed", type=int, default=1)
+    args = ap.parse_args()
+    head = workbench.load_sample("head")
+    names = list(head.shape_names)
+    W = realistic_weights(head, args.frames, seed=args.seed)
+    deltas = np.stack([head.shape(n).delta for n in names]).astype(np.float64)
+    frames = head.vertices + np.einsum("tk,knc->tnc", W, deltas)
+    print(f"performance: {args.frames} frames of the sample head ({head.n_vertices} vertices, realistic take)")
+    print(f"{'face':22s} {'vertices':>8s} {'clone':>7s} {'copy':>7s} {'DT':>7s} {'clone/copy':>10s} "
+          f"{'set-up s':>8s} {'clone f/s':>9s} {'DT f/s':>7s}")
+    for name, face in faces(head):
+        truth = np.stack([face.pose(dict(zip(names, w, strict=True))) for w in W])
+        # the truth of a bust vertex is its own rest position (it lies on no source surface)
+        rest = face.model.vertices
+        t0 = time.perf_counter()
+        cloner = ExpressionCloner(head, face.model)
+        setup = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        out = cloner.clone(frames)
+        fps = args.frames / (time.perf_counter() - t0)
+        rt = cloner.transfer_
+        _, nn = cKDTree(rt.src.X).query(rt.tgt.X)
+        copy = rest + rt.tgt.frame.inverse_linear(rt.src.frame.linear(frames - head.vertices)[:, nn])
+        t0 = time.perf_counter()
+        motion = frames - head.vertices
+        work = np.zeros((args.frames, face.model.n_vertices, 3))
+        work[:, rt.tgt.skin_ids] = rt._poisson.solve(motion)
+        rt._parts.fill(motion, work)
+        dt = rest + rt.tgt.frame.inverse_linear(work)
+        dt_fps = args.frames / (time.perf_counter() - t0)
+        e, ec, ed = error(out, truth, rest), error(copy, truth, rest), error(dt, truth, rest)
+        print(f"{name:22s} {face.model.n_vertices:8d} {e:7.3f} {ec:7.3f} {ed:7.3f} {e / ec:10.2f} "
+              f"{setup:8.1f} {fps:9.0f} {dt_fps:7.0f}")
+
+
+if __name__ == "__main__":
+    main()
