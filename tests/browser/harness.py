@@ -271,50 +271,65 @@ _LOST_STATE_ERRORS = ("Error setting state", "Could not process update msg")
 #: Installed in each test kernel before its cells run: a log of the comm traffic of every widget
 #: (opens, updates with the model ids they reference, closes), read when a model missed an update
 _PY_COMM_LOG_INSTALL = """
-import collections as _c, time as _t, ipywidgets as _w
-if not hasattr(_w.Widget, "_fwb_comm_log"):
-    _w.Widget._fwb_comm_log = _c.deque(maxlen=50000)
-    def _fwb_refs(obj, out):
+def _fwb_install_comm_log():
+    # everything local: the test's cells own the kernel's global names
+    import collections, time, ipywidgets
+    W = ipywidgets.Widget
+    if hasattr(W, "_fwb_comm_log"):
+        return
+    log = W._fwb_comm_log = collections.deque(maxlen=50000)
+
+    def refs(obj, out):
         if isinstance(obj, str):
             if obj.startswith("IPY_MODEL_"):
                 out.append(obj[10:])
         elif isinstance(obj, dict):
             for v in obj.values():
-                _fwb_refs(v, out)
+                refs(v, out)
         elif isinstance(obj, (list, tuple)):
             for v in obj:
-                _fwb_refs(v, out)
+                refs(v, out)
         return out
-    def _fwb_wrap():
-        W, log = _w.Widget, _w.Widget._fwb_comm_log
-        send0, open0, close0 = W._send, W.open, W.close
-        def _send(self, msg, buffers=None):
-            st = msg.get("state", {}) if isinstance(msg, dict) else {}
-            log.append([_t.monotonic(), getattr(self.comm, "comm_id", None), "send " + str(msg.get("method")),
-                        sorted(st), _fwb_refs(st, [])])
-            return send0(self, msg, buffers)
-        def _open(self):
-            r = open0(self)
-            log.append([_t.monotonic(), getattr(self.comm, "comm_id", None), "open " + type(self).__name__,
-                        [], _fwb_refs(self.get_state(), [])])
-            return r
-        def _close(self):
-            if getattr(self, "comm", None) is not None:
-                log.append([_t.monotonic(), self.comm.comm_id, "close " + type(self).__name__, [], []])
-            return close0(self)
-        W._send, W.open, W.close = _send, _open, _close
-    _fwb_wrap()
+
+    send0, open0, close0 = W._send, W.open, W.close
+
+    def _send(self, msg, buffers=None):
+        st = msg.get("state", {}) if isinstance(msg, dict) else {}
+        log.append([time.monotonic(), getattr(self.comm, "comm_id", None), "send " + str(msg.get("method")),
+                    sorted(st), refs(st, [])])
+        return send0(self, msg, buffers)
+
+    def _open(self):
+        r = open0(self)
+        log.append([time.monotonic(), getattr(self.comm, "comm_id", None), "open " + type(self).__name__,
+                    [], refs(self.get_state(), [])])
+        return r
+
+    def _close(self):
+        if getattr(self, "comm", None) is not None:
+            log.append([time.monotonic(), self.comm.comm_id, "close " + type(self).__name__, [], []])
+        return close0(self)
+
+    W._send, W.open, W.close = _send, _open, _close
+
+_fwb_install_comm_log()
+del _fwb_install_comm_log
 """
 
 #: the comm log's story of one model: its messages and, for every model they name, its open/close
 _PY_COMM_LOG_REPORT = """
-import json, ipywidgets as _w
-_log = list(getattr(_w.Widget, "_fwb_comm_log", []))
-_mine = [e for e in _log if e[1] == MODEL_ID]
-_named = {r for e in _mine for r in e[4]}
-_life = [e for e in _log if e[1] in _named and not e[2].startswith("send")]
-print(json.dumps({"model": MODEL_ID, "messages": _mine[-40:], "named_models_open_close": _life[-200:],
-                  "named_never_opened": sorted(_named - {e[1] for e in _log if e[2].startswith("open")})}))
+def _fwb_comm_story(mid):
+    import json, ipywidgets
+    log = list(getattr(ipywidgets.Widget, "_fwb_comm_log", []))
+    mine = [e for e in log if e[1] == mid]
+    named = {r for e in mine for r in e[4]}
+    life = [e for e in log if e[1] in named and not e[2].startswith("send")]
+    opened = {e[1] for e in log if e[2].startswith("open")}
+    print(json.dumps({"model": mid, "messages": mine[-40:], "named_models_open_close": life[-200:],
+                      "named_never_opened": sorted(named - opened)}))
+
+_fwb_comm_story(MODEL_ID)
+del _fwb_comm_story
 """
 
 _PY_VIOLATIONS = """
@@ -420,7 +435,7 @@ class NotebookPage:
             stories = []
             for mid in ids:
                 try:
-                    stories.append(self.kernel_eval(f"MODEL_ID = {mid!r}\n" + _PY_COMM_LOG_REPORT, timeout=30))
+                    stories.append(self.kernel_eval(_PY_COMM_LOG_REPORT.replace("MODEL_ID", repr(mid)), timeout=30))
                 except Exception as exc:  # the report must not hide the problem it reports
                     stories.append({"model": mid, "error": f"{type(exc).__name__}: {exc}"})
             (self.artifacts / "lost-state-comm-log.json").write_text(json.dumps(stories, indent=1))
