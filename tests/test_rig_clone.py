@@ -17,6 +17,7 @@ import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
 import workbench
+from workbench.model import FaceModel
 from workbench.rigging import ExpressionCloner, clone_animation
 from workbench.rigging.clone import local_scales
 from workbench.testing import in_units, renumbered, warped
@@ -112,3 +113,11 @@ def test_bad_frames_are_named_before_any_set_up(head, take, make, match) -> None
     _, _, frames = take
     with pytest.raises(ValueError, match=match):
         clone_animation(make(frames), head, "/nonexistent/target.obj")  # fails before reading the target
+
+
+def test_a_source_without_shapes_a_plain_animated_mesh_clones_too(head, take) -> None:
+    _, _, frames = take
+    plain = FaceModel(head.vertices, head.faces, component_labels=head.component_labels,
+                      component_names=head.component_names, metadata=head.metadata)
+    out = clone_animation(frames[:4], plain, head)
+    np.testing.assert_allclose(out, frames[:4], atol=1e-6 * np.abs(frames - head.vertices).max())

@@ -82,11 +82,11 @@ class PoissonTransfer:
         Lc = sp.csr_matrix((blocks.ravel(), (rows, cols)), shape=(n, n))
         # still vertices: far from the fitted template (neck, bust), or on template triangles no shape moves
         source = src.model
-        disp = np.stack([sh.delta for sh in source.shapes])
-        big = float(np.abs(disp).max())
-        moving_src = np.zeros(source.n_vertices, bool)
-        if big > 0:
-            moving_src = np.any(np.abs(disp) > 1e-7 * big, axis=(0, 2))
+        moving_src = np.ones(source.n_vertices, bool)  # no shapes (a performance's source): all may move
+        if source.shapes:
+            disp = np.stack([sh.delta for sh in source.shapes])
+            big = float(np.abs(disp).max())
+            moving_src = np.any(np.abs(disp) > 1e-7 * big, axis=(0, 2)) if big > 0 else np.zeros_like(moving_src)
         still_face = ~np.any(moving_src[src.skin_ids[src.skin_faces]], axis=1)
         pin = np.clip((corr.v_dist - MAP_DISTANCE) / MAP_DISTANCE, 0.0, 1.0)
         pin[corr.v_ok & still_face[corr.v_face]] = 1.0

@@ -212,9 +212,14 @@ def judge_fit(
     F = src.skin_faces
     stretch, flipped = StretchMeter(S0, F).measure(fit.positions - S0)
     area = triangle_areas(S0, F)
-    disp = np.stack([sh.delta[src.skin_ids] for sh in src.model.shapes])
-    big = float(np.abs(disp).max())
-    face_v = (np.linalg.norm(disp, axis=2) > 0.02 * big).any(0) if big > 0 else np.ones(S0.shape[0], bool)
+    # the face: where the template's shapes move (a template without shapes, a performance's
+    # source for expression cloning: all of its skin)
+    face_v = np.ones(S0.shape[0], bool)
+    if src.model.shapes:
+        disp = np.stack([sh.delta[src.skin_ids] for sh in src.model.shapes])
+        big = float(np.abs(disp).max())
+        if big > 0:
+            face_v = (np.linalg.norm(disp, axis=2) > 0.02 * big).any(0)
     face_t = face_v[F].any(1)
     bad = (stretch > 2.0) | flipped
     distortion = float(area[bad & face_t].sum() / max(area[face_t].sum(), 1e-300))

@@ -301,6 +301,8 @@ def transfer_rig_report(
     TransferResult
         ``.model`` (the rigged target) and ``.report``.
     """
+    if isinstance(source, FaceModel) and not source.shapes:  # before the set-up's work
+        raise RigTransferError(f"source {source.metadata.name or 'model'}: has no blendshapes to transfer")
     return RigTransfer(source, target, landmarks=landmarks, progress=progress, conjugation=conjugation).run()
 
 
