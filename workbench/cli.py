@@ -1,4 +1,4 @@
-"""Command line: ``workbench info PATH``, ``workbench export``, ``workbench rig``, ``workbench app``, ``workbench batch``.
+"""Command line: ``workbench info PATH``, ``export``, ``rig``, ``clone``, ``app``, ``batch``.
 
 ``info`` prints what a new user wants to know before opening a face: vertex,
 triangle and polygon counts, the connected components (eyes, teeth...), the
@@ -115,6 +115,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     p_rig.add_argument("--wrinkles", action="store_true",
                        help="also carry the template's wrinkle examples to the rig and fit its wrinkles")
     p_rig.add_argument("--out", required=True, help="the rig to write (.fwb)")
+    p_clone = sub.add_parser(
+        "clone",
+        help="play an animated face (a point cache, an animated .glb/.fbx/.usd/.abc, a keyed .fwb) on another "
+        "face of any topology and units (expression cloning, Noh & Neumann 2001)",
+    )
+    p_clone.add_argument("performance", help="the animation: a face file whose timeline plays it")
+    p_clone.add_argument("target", help="the face to play it on (.obj, .glb/.gltf, .fbx, .usd, .fwb...)")
+    p_clone.add_argument("--landmarks", default=None, metavar="PAIRS.CSV",
+                         help="corresponding vertices: CSV with a header, rows performance_vertex,target_vertex")
+    p_clone.add_argument("--out", required=True,
+                         help="what to write: .fwb, or any export format (.abc, .pc2, .mdd, .glb, .usd...)")
     p_app = sub.add_parser("app", help="serve the workbench as an app without code cells (Voila, 127.0.0.1)")
     p_app.add_argument("--port", type=int, default=8866, help="port on 127.0.0.1 (default 8866; the next free one is used)")
     p_app.add_argument(
@@ -139,6 +150,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return serve_app(args.port, token=not args.no_token, notebook=args.notebook)
     if args.command == "rig":
         return rig_command(args)
+    if args.command == "clone":
+        return clone_command(args)
     if args.command == "info" and Path(args.path).suffix.lower() == ".c3d":
         return _markers_info(args.path)  # markers, not a face
     if args.command == "info":
@@ -486,3 +499,53 @@ def serve_app(port: int, *, token: bool = True, notebook: str | Path | None = No
 
 if __name__ == "__main__":
     sys.exit(main())
+
+
+def clone_command(args: argparse.Namespace) -> int:
+    """``workbench clone PERFORMANCE TARGET --out OUT``: the performance's frames played on the target."""
+    from workbench.animation.curves import TrackError
+    from workbench.export import ExportError, export
+    from workbench.io import load
+    from workbench.rigging import ExpressionCloner, RigTransferError
+
+    try:
+        paths = {"PERFORMANCE": Path(args.performance), "TARGET": Path(args.target)}
+        for what, path in paths.items():
+            if not path.exists():
+                raise CommandError(f"{what} {path}: no such file or folder")
+        out = Path(args.out)
+        if not out.parent.is_dir():
+            raise CommandError(f"--out {out}: the folder {out.parent} does not exist")
+        try:
+            perf = load(paths["PERFORMANCE"])
+        except (OSError, ValueError) as exc:
+            raise CommandError(f"PERFORMANCE {paths['PERFORMANCE']}: {exc}") from None
+        timeline = perf.tracks
+        if not timeline.tracks:
+            raise CommandError(f"PERFORMANCE {paths['PERFORMANCE']}: its timeline has no keys: nothing to clone")
+        try:
+            target = load(paths["TARGET"])
+        except (OSError, ValueError) as exc:
+            raise CommandError(f"TARGET {paths['TARGET']}: {exc}") from None
+        landmarks = (read_landmarks(args.landmarks, perf.n_vertices, target.n_vertices)
+                     if args.landmarks else None)
+        times = timeline.frame_times()
+        frames = np.stack([perf.evaluate_at(float(t)) for t in times])
+        cloner = ExpressionCloner(perf, target, landmarks=landmarks)
+        face = cloner.clone_face(frames, times, fps=timeline.fps)
+        if out.suffix.lower() == ".fwb":
+            face.save(out)
+            written = [out]
+        else:
+            written = list(export(face, face.tracks, out))
+    except CommandError as exc:
+        print(f"workbench clone: {exc}", file=sys.stderr)
+        return 2
+    except (OSError, ValueError, RigTransferError, ExportError, TrackError) as exc:
+        print(f"workbench clone: {exc}", file=sys.stderr)
+        return 2
+    for w in cloner.transfer_.warnings:
+        print(f"workbench clone: warning: {w}", file=sys.stderr)
+    for p in written:
+        print(p)
+    return 0

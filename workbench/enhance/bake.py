@@ -57,33 +57,16 @@ class EnhancedTake:
 
     def timeline(self) -> Timeline:
         """Linear keys that replay every frame exactly (shape ``frame_k`` is 1 at frame k only)."""
-        from workbench.animation.curves import Key, Track, weight_track_name
-        from workbench.animation.tracks import Timeline
-        from workbench.io.alembic import frame_shape_name
+        from workbench.animation.baked_frames import baked_frames_timeline
 
-        t = self.times
-        tracks = {}
-        for k in range(1, t.size):
-            keys = [Key(float(t[k - 1]), 0.0, "linear"), Key(float(t[k]), 1.0, "linear")]
-            if k + 1 < t.size:
-                keys.append(Key(float(t[k + 1]), 0.0, "linear"))
-            name = weight_track_name(frame_shape_name(k))
-            tracks[name] = Track(name, tuple(keys))
-        return Timeline(fps=self.fps, tracks=tracks).fit_range()
+        return baked_frames_timeline(self.times, self.fps)
 
     def to_model(self) -> FaceModel:
         """A face on the database's mesh that plays the enhanced frames on its timeline."""
-        from workbench.core.shapes import BlendShape
-        from workbench.io.alembic import frame_shape_name
-        from workbench.model import FaceModel
+        from workbench.animation.baked_frames import baked_frames_model
 
-        base = self.frames[0]
-        shapes = [BlendShape(frame_shape_name(k), (self.frames[k] - base).astype(np.float32))
-                  for k in range(1, len(self.frames))]
-        model = FaceModel(base, self.faces, shapes, metadata=self.metadata)
-        if len(self.frames) > 1:
-            model.timeline.set(self.timeline(), "Enhanced frames")
-        return model
+        return baked_frames_model(self.frames, self.faces, self.times, self.fps, metadata=self.metadata,
+                                  what="Enhanced frames")
 
     def export(self, path: str | Path, *, format: str | None = None, **options: Any) -> Any:
         """Write the enhanced frames with :func:`workbench.export.export` (any format); returns its result."""

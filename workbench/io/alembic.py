@@ -42,6 +42,7 @@ from typing import Any, NoReturn
 import numpy as np
 from numpy.typing import NDArray
 
+from workbench.animation.baked_frames import baked_frames_timeline, frame_shape_name
 from workbench.geometry.mesh_checks import MeshFormatError
 from workbench.io.base import FrameSequence, ImportedFace
 from workbench.io.blender_bridge import run_dump
@@ -81,11 +82,6 @@ def detect(path: Path) -> bool:
 
 def read(path: Path) -> ImportedFace:
     return read_alembic(path)
-
-
-def frame_shape_name(k: int) -> str:
-    """The shape holding frame ``k`` of a cache: ``frame_0001``."""
-    return f"frame_{k:04d}"
 
 
 @dataclass(frozen=True)
@@ -378,9 +374,7 @@ def read_alembic_animation(path: str | Path, shape_names: Sequence[str], *, fps:
     AnimationImportError
         The archive is static or malformed, or the model lacks a frame shape.
     """
-    from workbench.animation.curves import Key, Track, weight_track_name
     from workbench.animation.importers import AnimationImportError
-    from workbench.animation.tracks import Timeline
 
     p = Path(path)
     try:
@@ -397,11 +391,4 @@ def read_alembic_animation(path: str | Path, shape_names: Sequence[str], *, fps:
             str(p), f"the model has no shapes {missing[:5]}{'...' if len(missing) > 5 else ''} "
             f"(read the face with read_alembic first: frames 1..{t.size - 1} are its shapes)",
         )
-    tracks = {}
-    for k in range(1, t.size):
-        keys = [Key(t[k - 1], 0.0, "linear"), Key(t[k], 1.0, "linear")]
-        if k + 1 < t.size:
-            keys.append(Key(t[k + 1], 0.0, "linear"))
-        name = weight_track_name(frame_shape_name(k))
-        tracks[name] = Track(name, tuple(keys))
-    return Timeline(fps=fps or ts.fps, tracks=tracks).fit_range()
+    return baked_frames_timeline(t, fps or ts.fps)

@@ -258,6 +258,25 @@ class ExpressionCloner:
                 progress(b / Tn, f"cloned {b} of {Tn} frames")
         return out
 
+    def clone_face(self, frames: ArrayLike, times: ArrayLike | None = None, *, fps: float = 30.0,
+                   progress: Progress = None) -> FaceModel:
+        """The target playing the cloned frames on its timeline (baked frames: every exporter writes it).
+
+        ``times`` (T,) seconds default to ``arange(T) / fps``. The face keeps the target's mesh, parts and
+        metadata; its neutral is the first cloned frame and shape ``frame_k`` holds frame k
+        (:mod:`workbench.animation.baked_frames`).
+        """
+        from workbench.animation.baked_frames import baked_frames_model
+
+        meshes = self.clone(frames, progress=progress)
+        t = np.arange(len(meshes)) / float(fps) if times is None else np.asarray(times, np.float64).reshape(-1)
+        if t.size != len(meshes):
+            raise ValueError(f"clone_face: times has {t.size} entries for {len(meshes)} frames")
+        tgt = self.target
+        return baked_frames_model(meshes, tgt.faces, t, fps, metadata=tgt.metadata,
+                                  component_labels=tgt.component_labels,
+                                  component_names=list(tgt.component_names), what="Cloned performance")
+
 
 def _check_frames(frames: ArrayLike, n: int) -> NDArray[np.float64]:
     P = np.asarray(frames, np.float64)
