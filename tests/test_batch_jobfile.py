@@ -113,3 +113,12 @@ def test_importing_workbench_does_not_import_dask():
             "print(bad); sys.exit(1 if bad else 0)")
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stdout + proc.stderr
+
+
+def test_a_clone_step_needs_an_existing_face(project):
+    text = GOOD + '[[steps]]\nkind = "clone"\nonto = "nowhere.obj"\n'
+    msg = _error(project, text)
+    assert "onto" in msg and "nowhere.obj" in msg, msg
+    (project / "other.obj").write_text("v 0 0 0\n")
+    step = parse_jobs(GOOD + '[[steps]]\nkind = "clone"\nonto = "other.obj"\n', project / "jobs.toml").steps[-1]
+    assert step.kind == "clone" and step.options["onto"] == str(project / "other.obj")

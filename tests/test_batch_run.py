@@ -230,6 +230,33 @@ def test_enhance_step(tmp_path, client):
     np.testing.assert_allclose(got, want, atol=1e-5, rtol=0)  # 10 µm: BLAS threads differ (worker: 1)
 
 
+
+def test_clone_step_plays_the_take_on_another_face(tmp_path, client):
+    """A warped, renumbered face of other triangles: the PC2 holds what ExpressionCloner gives directly."""
+    from workbench.export.pointcache import PC2_HEADER
+    from workbench.rigging import ExpressionCloner
+    from workbench.testing import random_warp, renumbered, warped
+
+    head = small_head()
+    other = renumbered(warped(head, random_warp(head.vertices, seed=3), shapes=False, retriangulate=True), seed=2)
+    other.model.save(tmp_path / "other.fwb")
+    job = make_project(tmp_path, characters=1, takes=1, formats=("glb",),
+                       extra_steps='[[steps]]\nkind = "clone"\nonto = "other.fwb"\n')
+    report = _run(job, client)
+    outcome = report.by_label()["char0/take0/01-clone"]
+    assert outcome.status == "done", outcome.error
+    (pc2,) = outcome.outputs
+    assert pc2.endswith("char0/take0.cloned.pc2")
+    n = other.model.n_vertices
+    header = np.fromfile(pc2, PC2_HEADER, count=1)[0]
+    assert (header["points"], header["samples"]) == (n, 31)
+    got = np.fromfile(pc2, "<f4", offset=32).reshape(31, n, 3)
+    tl = Timeline.from_json(report.by_label()["char0/take0/00-export"].timeline)
+    frames = np.stack([head.evaluate_at(float(t), tl) for t in tl.frame_times()]).astype(np.float64)
+    want = ExpressionCloner(head, other.model).clone(frames) * other.model.metadata.metres_per_unit
+    np.testing.assert_allclose(got, want, atol=1e-5 * np.abs(want).max(), rtol=0)
+    assert np.abs(got - got[0]).max() > 1e-4  # the face moves
+
 def workbench_loop_faces(model):
     from workbench.geometry.subdivision import loop_subdivision
 

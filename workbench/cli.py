@@ -134,7 +134,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     p_app.add_argument("--notebook", default=None, help="notebook to serve (default: notebooks/workbench.ipynb)")
     p_batch = sub.add_parser(
         "batch",
-        help="run a TOML job file (characters x takes x steps: track, transfer_rig, retime, enhance, export) "
+        help="run a TOML job file (characters x takes x steps: track, transfer_rig, retime, enhance, clone, export) "
         "as Dask tasks on a local cluster or a scheduler (needs the batch extra)",
     )
     p_batch.add_argument("jobs", help="the job file (.toml); see workbench.batch.jobfile")
@@ -203,48 +203,17 @@ class CommandError(Exception):
 
 
 def read_landmarks(path: str | Path, n_template: int, n_target: int) -> list[tuple[int, int]]:
-    """``template_vertex,target_vertex`` pairs from a CSV with a header row.
+    """``template_vertex,target_vertex`` pairs from a CSV with a header row (:func:`read_landmark_pairs`).
 
     Raises CommandError naming the file and line: missing file, no header, a
     row without two integers, a vertex id out of range.
     """
-    import csv
+    from workbench.rigging.landmarks import read_landmark_pairs
 
-    p = Path(path)
-    if not p.is_file():
-        raise CommandError(f"--landmarks {p}: no such file")
-    pairs: list[tuple[int, int]] = []
-    with p.open(newline="", encoding="utf-8-sig") as fh:
-        rows = [(i + 1, r) for i, r in enumerate(csv.reader(fh)) if any(c.strip() for c in r)]
-    if not rows:
-        raise CommandError(f"--landmarks {p}: empty file (expected a header and template_vertex,target_vertex rows)")
-    head_line, header = rows[0]
-    if len(header) == 2 and all(_is_int(c) for c in header):
-        raise CommandError(f"--landmarks {p}: line {head_line}: expected a header row "
-                           "(e.g. template_vertex,target_vertex), got numbers")
-    for line, row in rows[1:]:
-        cells = [c.strip() for c in row]
-        if len(cells) != 2 or not all(_is_int(c) for c in cells):
-            raise CommandError(f"--landmarks {p}: line {line}: expected two integer vertex ids, got {','.join(row)!r}")
-        a, b = int(cells[0]), int(cells[1])
-        if not 0 <= a < n_template:
-            raise CommandError(f"--landmarks {p}: line {line}: template vertex {a} out of range "
-                               f"(the template has {n_template} vertices)")
-        if not 0 <= b < n_target:
-            raise CommandError(f"--landmarks {p}: line {line}: target vertex {b} out of range "
-                               f"(the target has {n_target} vertices)")
-        pairs.append((a, b))
-    if not pairs:
-        raise CommandError(f"--landmarks {p}: no pairs after the header")
-    return pairs
-
-
-def _is_int(text: str) -> bool:
     try:
-        int(text.strip())
-    except ValueError:
-        return False
-    return True
+        return read_landmark_pairs(path, n_template, n_target, what="--landmarks")
+    except ValueError as exc:
+        raise CommandError(str(exc)) from None
 
 
 def read_examples(folder: str | Path, n_vertices: int) -> tuple[list[str], list[np.ndarray], list[dict[str, float]] | None]:

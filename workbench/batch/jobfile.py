@@ -26,7 +26,7 @@ A job file (read with the standard library's :mod:`tomllib`) looks like::
 a TOML syntax error, an unknown table or field, a value of the wrong type,
 a file that does not exist — raises :class:`JobFileError` naming the file,
 the line and the field, e.g. ``jobs.toml line 9: [[steps]] kind = "exprot":
-expected one of track, transfer_rig, retime, enhance, export``. Paths are resolved against the job
+expected one of track, transfer_rig, retime, enhance, clone, export``. Paths are resolved against the job
 file's folder.
 """
 
@@ -77,6 +77,10 @@ STEP_FIELDS: dict[str, dict[str, tuple[tuple[type, ...], bool, str]]] = {
     },
     "enhance": {
         "database": ((str,), True, "a saved PerformanceDatabase (.npz)"),
+    },
+    "clone": {
+        "onto": ((str,), True, "the face to play the take on (any topology and units; expression cloning)"),
+        "landmarks": ((str,), False, "CSV of character_vertex,target_vertex pairs"),
     },
     "export": {
         "formats": ((list,), True, "file suffixes: glb, gltf, usdc, usda, usd, fbx, abc, pc2, mdd, csv, obj"),
@@ -273,6 +277,10 @@ def _step(c: _Checker, i: int, raw: dict[str, Any], suffixes_seen: set[str]) -> 
             raise c.fail("steps", i, "method", f"expected auto, closest or take, got {options['method']!r}")
     elif kind == "enhance":
         options["database"] = str(c.existing("steps", i, "database", options["database"]))
+    elif kind == "clone":
+        options["onto"] = str(c.existing("steps", i, "onto", options["onto"]))
+        if "landmarks" in options:
+            options["landmarks"] = str(c.existing("steps", i, "landmarks", options["landmarks"]))
     elif kind == "transfer_rig":
         template = options.get("template", "head")
         looks_like_file = any(ch in template for ch in "/\\.")

@@ -42,6 +42,10 @@ def _step_inputs(kind: str, options: dict[str, Any]) -> dict[str, Any]:
         out["database"] = [file_digest(p) for p in options["database"]]
     elif kind == "enhance":
         out["database"] = file_digest(options["database"])
+    elif kind == "clone":
+        out["onto"] = file_digest(options["onto"])
+        if "landmarks" in options:
+            out["landmarks"] = file_digest(options["landmarks"])
     elif kind == "transfer_rig":
         t = options.get("template", "head")
         out["template"] = file_digest(t) if os.path.exists(t) else f"sample:{t}"

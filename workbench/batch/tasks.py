@@ -15,6 +15,8 @@ The steps call the existing core APIs:
 * ``enhance`` — ``PerformanceDatabase.load(path).enhance(frames)`` through the correspondence from the
   character's mesh (the same, a Loop subdivision, or closest points), written as a PC2 point cache at the
   database's resolution;
+* ``clone`` — :class:`workbench.rigging.ExpressionCloner` (character → the ``onto`` face, built once per
+  worker): the take's frames played on that face, written as ``<take>.cloned.pc2``;
 * ``export`` — :func:`workbench.export.export` for each format, to ``<output>/<character>/<take>.<ext>``.
 
 A take that no ``track`` step reads is imported as an animation
@@ -251,6 +253,39 @@ def _step_enhance(c: _Context) -> list[Path]:
     return list(take.export(path))
 
 
+def _step_clone(c: _Context) -> list[Path]:
+    from workbench.export import export
+
+    o = c.spec.options
+    cloner = _expression_cloner(c.model, c.spec.rig_out.digest, o["onto"], o.get("landmarks"))
+    tl = c.animation()
+    times = np.asarray(tl.frame_times(), np.float64)
+    frames = np.stack([c.model.evaluate_at(float(t), tl) for t in times]).astype(np.float64)
+    c.log.info("cloning %d frames of %d vertices onto %s (%d vertices)", len(times), c.model.n_vertices,
+               o["onto"], cloner.target.n_vertices)
+    face = cloner.clone_face(frames, times, fps=tl.fps)
+    path = c.spec.output_path("cloned.pc2")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    _remove_stale_temporaries(path)
+    return [Path(p) for p in export(face, face.tracks, path)]
+
+
+def _expression_cloner(model: FaceModel, rig_digest: str, onto: str, landmarks: str | None) -> Any:
+    """The cloner from the character's rig onto ``onto``, built once per worker (keyed by content)."""
+    from workbench.io import load
+    from workbench.rigging import ExpressionCloner
+    from workbench.rigging.landmarks import read_landmark_pairs
+
+    def build() -> Any:
+        target = load(onto)
+        pairs = (read_landmark_pairs(landmarks, model.n_vertices, target.n_vertices, what="clone: landmarks")
+                 if landmarks else None)
+        return ExpressionCloner(model, target, landmarks=pairs)
+
+    key = f"clone:{rig_digest}:{file_digest(onto)}:{file_digest(landmarks) if landmarks else ''}"
+    return memo(key, build).value
+
+
 def _step_export(c: _Context) -> list[Path]:
     from workbench.export import export
 
@@ -283,7 +318,7 @@ def _remove_stale_temporaries(path: Path) -> None:
 
 
 STEPS = {"track": _step_track, "transfer_rig": _step_transfer_rig, "retime": _step_retime,
-         "enhance": _step_enhance, "export": _step_export}
+         "enhance": _step_enhance, "clone": _step_clone, "export": _step_export}
 
 
 # ------------------------------------------------------------------ the task

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
@@ -43,7 +44,7 @@ from workbench.model import FaceModel
 from workbench.rigging.report import RigTransferError
 from workbench.rigging.transfer import RigTransfer
 
-__all__ = ["LANDMARK_NAMES", "SuggestedLandmark", "suggest_landmarks", "template_landmarks"]
+__all__ = ["LANDMARK_NAMES", "SuggestedLandmark", "read_landmark_pairs", "suggest_landmarks", "template_landmarks"]
 
 #: every landmark :func:`template_landmarks` can find, in the order it returns them
 LANDMARK_NAMES: tuple[str, ...] = (
@@ -361,3 +362,49 @@ def suggest_landmarks(transfer: RigTransfer, names: Sequence[str] | None = None)
         SuggestedLandmark(name, int(v), int(tgt.skin_ids[j]), float(dist / per_unit))
         for name, v, j, dist in zip(found, verts, nn, d, strict=True)
     ]
+
+
+def read_landmark_pairs(path: str | Path, n_template: int, n_target: int, *, what: str = "landmarks"
+                        ) -> list[tuple[int, int]]:
+    """``template_vertex,target_vertex`` pairs from a CSV with a header row.
+
+    Raises ValueError naming ``what``, the file and the line: missing file, no
+    header, a row without two integers, a vertex id out of range.
+    """
+    import csv
+
+    p = Path(path)
+    if not p.is_file():
+        raise ValueError(f"{what} {p}: no such file")
+    pairs: list[tuple[int, int]] = []
+    with p.open(newline="", encoding="utf-8-sig") as fh:
+        rows = [(i + 1, r) for i, r in enumerate(csv.reader(fh)) if any(c.strip() for c in r)]
+    if not rows:
+        raise ValueError(f"{what} {p}: empty file (expected a header and template_vertex,target_vertex rows)")
+    head_line, header = rows[0]
+    if len(header) == 2 and all(_is_int(c) for c in header):
+        raise ValueError(f"{what} {p}: line {head_line}: expected a header row "
+                           "(e.g. template_vertex,target_vertex), got numbers")
+    for line, row in rows[1:]:
+        cells = [c.strip() for c in row]
+        if len(cells) != 2 or not all(_is_int(c) for c in cells):
+            raise ValueError(f"{what} {p}: line {line}: expected two integer vertex ids, got {','.join(row)!r}")
+        a, b = int(cells[0]), int(cells[1])
+        if not 0 <= a < n_template:
+            raise ValueError(f"{what} {p}: line {line}: template vertex {a} out of range "
+                               f"(the template has {n_template} vertices)")
+        if not 0 <= b < n_target:
+            raise ValueError(f"{what} {p}: line {line}: target vertex {b} out of range "
+                               f"(the target has {n_target} vertices)")
+        pairs.append((a, b))
+    if not pairs:
+        raise ValueError(f"{what} {p}: no pairs after the header")
+    return pairs
+
+
+def _is_int(text: str) -> bool:
+    try:
+        int(text.strip())
+    except ValueError:
+        return False
+    return True
