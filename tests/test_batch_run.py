@@ -200,10 +200,24 @@ def test_track_and_transfer_rig_steps(tmp_path, client):
     assert np.ptp(got["weights"][:, head.shape_names.index("jawOpen")]) > 0.01
 
 
+def _one_pc2_step(tmp_path, client, step: str, kind: str):
+    """Run export (glb) then ``step`` on one character and take; the step's PC2 header, frames and report."""
+    from workbench.export.pointcache import PC2_HEADER
+
+    job = make_project(tmp_path, characters=1, takes=1, formats=("glb",), extra_steps=step)
+    report = _run(job, client)
+    outcome = report.by_label()[f"char0/take0/01-{kind}"]
+    assert outcome.status == "done", outcome.error
+    (pc2,) = outcome.outputs
+    assert pc2.endswith(f"char0/take0.{kind}d.pc2")  # enhanced, cloned
+    header = np.fromfile(pc2, PC2_HEADER, count=1)[0]
+    got = np.fromfile(pc2, "<f4", offset=32).reshape(header["samples"], header["points"], 3)
+    return header, got, report
+
+
 def test_enhance_step(tmp_path, client):
     """A database one Loop subdivision finer than the character: the frames come out at its resolution."""
     from workbench.enhance import Correspondence, PerformanceDatabase
-    from workbench.export.pointcache import PC2_HEADER
 
     head = small_head()
     corr = Correspondence.loop(head.faces, head.n_vertices, 1)
@@ -211,17 +225,10 @@ def test_enhance_step(tmp_path, client):
     fine_faces = np.asarray(workbench_loop_faces(head), np.int64)
     PerformanceDatabase.from_frames(frames[0], fine_faces, frames,
                                     metres_per_unit=head.metadata.metres_per_unit).save(tmp_path / "db.npz")
-    job = make_project(tmp_path, characters=1, takes=1, formats=("glb",),
-                       extra_steps='[[steps]]\nkind = "enhance"\ndatabase = "db.npz"\n')
-    report = _run(job, client)
-    outcome = report.by_label()["char0/take0/01-enhance"]
-    assert outcome.status == "done", outcome.error
-    (pc2,) = outcome.outputs
-    assert pc2.endswith("char0/take0.enhanced.pc2")
+    header, got, report = _one_pc2_step(tmp_path, client, '[[steps]]\nkind = "enhance"\ndatabase = "db.npz"\n',
+                                        "enhance")
     n_fine = frames.shape[1]
-    header = np.fromfile(pc2, PC2_HEADER, count=1)[0]
     assert (header["signature"], header["points"], header["samples"]) == (b"POINTCACHE2", n_fine, 31)
-    got = np.fromfile(pc2, "<f4", offset=32).reshape(31, n_fine, 3)
     # the same as calling the database directly on the take's frames (metres in the file)
     tl = Timeline.from_json(report.by_label()["char0/take0/00-export"].timeline)
     takes = np.stack([head.evaluate_at(float(t), tl) for t in tl.frame_times()]).astype(np.float64)
@@ -230,32 +237,23 @@ def test_enhance_step(tmp_path, client):
     np.testing.assert_allclose(got, want, atol=1e-5, rtol=0)  # 10 µm: BLAS threads differ (worker: 1)
 
 
-
 def test_clone_step_plays_the_take_on_another_face(tmp_path, client):
     """A warped, renumbered face of other triangles: the PC2 holds what ExpressionCloner gives directly."""
-    from workbench.export.pointcache import PC2_HEADER
     from workbench.rigging import ExpressionCloner
     from workbench.testing import random_warp, renumbered, warped
 
     head = small_head()
     other = renumbered(warped(head, random_warp(head.vertices, seed=3), shapes=False, retriangulate=True), seed=2)
     other.model.save(tmp_path / "other.fwb")
-    job = make_project(tmp_path, characters=1, takes=1, formats=("glb",),
-                       extra_steps='[[steps]]\nkind = "clone"\nonto = "other.fwb"\n')
-    report = _run(job, client)
-    outcome = report.by_label()["char0/take0/01-clone"]
-    assert outcome.status == "done", outcome.error
-    (pc2,) = outcome.outputs
-    assert pc2.endswith("char0/take0.cloned.pc2")
-    n = other.model.n_vertices
-    header = np.fromfile(pc2, PC2_HEADER, count=1)[0]
-    assert (header["points"], header["samples"]) == (n, 31)
-    got = np.fromfile(pc2, "<f4", offset=32).reshape(31, n, 3)
+    header, got, report = _one_pc2_step(tmp_path, client, '[[steps]]\nkind = "clone"\nonto = "other.fwb"\n',
+                                        "clone")
+    assert (header["points"], header["samples"]) == (other.model.n_vertices, 31)
     tl = Timeline.from_json(report.by_label()["char0/take0/00-export"].timeline)
     frames = np.stack([head.evaluate_at(float(t), tl) for t in tl.frame_times()]).astype(np.float64)
     want = ExpressionCloner(head, other.model).clone(frames) * other.model.metadata.metres_per_unit
     np.testing.assert_allclose(got, want, atol=1e-5 * np.abs(want).max(), rtol=0)
     assert np.abs(got - got[0]).max() > 1e-4  # the face moves
+
 
 def workbench_loop_faces(model):
     from workbench.geometry.subdivision import loop_subdivision
