@@ -349,13 +349,24 @@ print(json.dumps(list(_g.thread_violations) if _g else []))
 #: That race is the widget manager's own (jupyter-widgets/ipywidgets PR #2570, PR #3549 and
 #: the analysis in jupyter-widgets/ipyleaflet PR #968): a person who runs a cell a moment
 #: after opening a notebook can meet it too. The tests start running cells once it is over.
-WATCH_WIDGET_RESTORE = """
+WATCH_WIDGET_RESTORE = r"""
 (() => {
   const Native = window.WebSocket;
   const text = new TextDecoder();
+  // the comm messages the page received, in order (a lost update's report asks when the models
+  // it names arrived): [ms since load, msg_type, comm_id]
+  const received = (window.__fwbCommsReceived = []);
+  const commType = /"msg_type":\s*"(comm_open|comm_msg|comm_close)"/;
+  const commId = /"comm_id":\s*"([0-9a-zA-Z_-]+)"/;
   const seen = (data) => {
     const s = typeof data === "string" ? data : text.decode(data);
     if (s.includes('"comm_info_reply"') || s.includes('"update_states"')) window.__fwbWidgetsRestored = true;
+    const t = commType.exec(s);
+    if (t) {
+      const id = commId.exec(s);
+      received.push([Math.round(performance.now()), t[1], id ? id[1] : "?"]);
+      if (received.length > 50000) received.splice(0, 10000);
+    }
   };
   window.WebSocket = class extends Native {
     constructor(...args) {
@@ -438,6 +449,14 @@ class NotebookPage:
                     stories.append(self.kernel_eval(_PY_COMM_LOG_REPORT.replace("MODEL_ID", repr(mid)), timeout=30))
                 except Exception as exc:  # the report must not hide the problem it reports
                     stories.append({"model": mid, "error": f"{type(exc).__name__}: {exc}"})
+            # when the page received the models the failed updates name, against the updates themselves
+            flat = sorted(set(ids) | {r for st in stories for m in st.get("messages", []) for r in m[4]})
+            arrivals = self.page.evaluate(
+                "(ids) => { const want = new Set(ids); return (window.__fwbCommsReceived || [])"
+                ".filter((r) => want.has(r[2])); }", flat)
+            for st in stories:
+                st["page_received"] = [a for a in arrivals if a[2] == st.get("model") or
+                                       any(a[2] in m[4] for m in st.get("messages", []))]
             (self.artifacts / "lost-state-comm-log.json").write_text(json.dumps(stories, indent=1))
             closed = [e for st in stories for e in st.get("named_models_open_close", []) if e[2].startswith("close")]
             problems.append(f"{self.name}: a widget model missed part of a state update: {lost[:1]}; "

@@ -40,6 +40,10 @@ def test_a_failed_state_update_is_reported_with_its_cause(open_notebook: Any) ->
     story = json.loads((nb.artifacts / "lost-state-comm-log.json").read_text())
     assert story[0]["model"] == box_id and story[0]["named_never_opened"] == ["fwbnosuchmodel"], story
     assert [m[2] for m in story[0]["messages"]][-1] == "send update", story
+    # the page's side: it received the box's open and its update, and nothing of the unknown model
+    got = [(r[1], r[2]) for r in story[0]["page_received"]]
+    assert ("comm_open", box_id) in got and ("comm_msg", box_id) in got, got
+    assert all(r[2] != "fwbnosuchmodel" for r in story[0]["page_received"]), got
     # the check itself is what the teardown runs: leave it a clean page
     nb.console.clear()
     nb.page.evaluate("() => { window.__fwbWrappedErrors = []; }")
