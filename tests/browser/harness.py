@@ -358,9 +358,15 @@ WATCH_WIDGET_RESTORE = r"""
   const received = (window.__fwbCommsReceived = []);
   const commType = /"msg_type":\s*"(comm_open|comm_msg|comm_close)"/;
   const commId = /"comm_id":\s*"([0-9a-zA-Z_-]+)"/;
+  // the kernel session of every message (the header's comes first): JupyterLab drops, silently,
+  // a message whose session is not the one of the message it received last
+  const session = /"session":\s*"([^"]+)"/;
+  const sessions = (window.__fwbSessions = {});
   const seen = (data) => {
     const s = typeof data === "string" ? data : text.decode(data);
     if (s.includes('"comm_info_reply"') || s.includes('"update_states"')) window.__fwbWidgetsRestored = true;
+    const ses = session.exec(s);
+    if (ses) sessions[ses[1]] = (sessions[ses[1]] || 0) + 1;
     const t = commType.exec(s);
     if (t) {
       const id = commId.exec(s);
@@ -457,12 +463,16 @@ class NotebookPage:
             for st in stories:
                 st["page_received"] = [a for a in arrivals if a[2] == st.get("model") or
                                        any(a[2] in m[4] for m in st.get("messages", []))]
+            sessions = self.page.evaluate("() => window.__fwbSessions || {}")
+            for st in stories:
+                st["page_sessions"] = sessions  # more than one: JupyterLab may have dropped messages
             (self.artifacts / "lost-state-comm-log.json").write_text(json.dumps(stories, indent=1))
             closed = [e for st in stories for e in st.get("named_models_open_close", []) if e[2].startswith("close")]
             problems.append(f"{self.name}: a widget model missed part of a state update: {lost[:1]}; "
                             f"cause: {causes[:1] if causes else 'not kept'} (all in lost-state-updates.txt); "
                             f"models its messages name that the kernel closed: {closed[-5:]}, never opened: "
-                            f"{[st.get('named_never_opened') for st in stories]} (lost-state-comm-log.json)")
+                            f"{[st.get('named_never_opened') for st in stories]}, kernel sessions the page saw: "
+                            f"{len(sessions)} (lost-state-comm-log.json)")
         violations = self.kernel_eval(_PY_VIOLATIONS, timeout=30)
         if violations:
             HEALTH["thread_violations"] += len(violations)

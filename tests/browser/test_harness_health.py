@@ -44,6 +44,7 @@ def test_a_failed_state_update_is_reported_with_its_cause(open_notebook: Any) ->
     got = [(r[1], r[2]) for r in story[0]["page_received"]]
     assert ("comm_open", box_id) in got and ("comm_msg", box_id) in got, got
     assert all(r[2] != "fwbnosuchmodel" for r in story[0]["page_received"]), got
+    assert len(story[0]["page_sessions"]) == 1 and "kernel sessions the page saw: 1" in problems[0], story
     # the check itself is what the teardown runs: leave it a clean page
     nb.console.clear()
     nb.page.evaluate("() => { window.__fwbWrappedErrors = []; }")
