@@ -50,7 +50,6 @@ import argparse
 import time
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 import workbench
 from workbench.rigging import ExpressionCloner
@@ -107,15 +106,9 @@ def main() -> None:
         t0 = time.perf_counter()
         out = cloner.clone(frames)
         fps = args.frames / (time.perf_counter() - t0)
-        rt = cloner.transfer_
-        _, nn = cKDTree(rt.src.X).query(rt.tgt.X)
-        copy = rest + rt.tgt.frame.inverse_linear(rt.src.frame.linear(frames - head.vertices)[:, nn])
+        copy = cloner.nearest_copy(frames)
         t0 = time.perf_counter()
-        motion = frames - head.vertices
-        work = np.zeros((args.frames, face.model.n_vertices, 3))
-        work[:, rt.tgt.skin_ids] = rt._poisson.solve(motion)
-        rt._parts.fill(motion, work)
-        dt = rest + rt.tgt.frame.inverse_linear(work)
+        dt = cloner.deformation_transfer(frames)
         dt_fps = args.frames / (time.perf_counter() - t0)
         e, ec, ed = error(out, truth, rest), error(copy, truth, rest), error(dt, truth, rest)
         print(f"{name:22s} {face.model.n_vertices:8d} {e:7.3f} {ec:7.3f} {ed:7.3f} {e / ec:10.2f} "

@@ -445,39 +445,48 @@ class NotebookPage:
                             f"({[r.get('why') for r in resyncs]}); {report}")
         lost = [line for line in self.console if any(e in line for e in _LOST_STATE_ERRORS)]
         if lost:
-            causes = self.page.evaluate("() => window.__fwbWrappedErrors || []")
-            self.artifacts.mkdir(parents=True, exist_ok=True)
-            (self.artifacts / "lost-state-updates.txt").write_text("\n\n=====\n\n".join(causes) or "no cause kept")
-            ids = sorted(set(re.findall(r"model id: ([0-9a-zA-Z_-]+)", " ".join(lost))))
-            stories = []
-            for mid in ids:
-                try:
-                    stories.append(self.kernel_eval(_PY_COMM_LOG_REPORT.replace("MODEL_ID", repr(mid)), timeout=30))
-                except Exception as exc:  # the report must not hide the problem it reports
-                    stories.append({"model": mid, "error": f"{type(exc).__name__}: {exc}"})
-            # when the page received the models the failed updates name, against the updates themselves
-            flat = sorted(set(ids) | {r for st in stories for m in st.get("messages", []) for r in m[4]})
-            arrivals = self.page.evaluate(
-                "(ids) => { const want = new Set(ids); return (window.__fwbCommsReceived || [])"
-                ".filter((r) => want.has(r[2])); }", flat)
-            for st in stories:
-                st["page_received"] = [a for a in arrivals if a[2] == st.get("model") or
-                                       any(a[2] in m[4] for m in st.get("messages", []))]
-            sessions = self.page.evaluate("() => window.__fwbSessions || {}")
-            for st in stories:
-                st["page_sessions"] = sessions  # more than one: JupyterLab may have dropped messages
-            (self.artifacts / "lost-state-comm-log.json").write_text(json.dumps(stories, indent=1))
-            closed = [e for st in stories for e in st.get("named_models_open_close", []) if e[2].startswith("close")]
             problems.append(f"{self.name}: a widget model missed part of a state update: {lost[:1]}; "
-                            f"cause: {causes[:1] if causes else 'not kept'} (all in lost-state-updates.txt); "
-                            f"models its messages name that the kernel closed: {closed[-5:]}, never opened: "
-                            f"{[st.get('named_never_opened') for st in stories]}, kernel sessions the page saw: "
-                            f"{len(sessions)} (lost-state-comm-log.json)")
+                            + self.lost_update_report(lost))
         violations = self.kernel_eval(_PY_VIOLATIONS, timeout=30)
         if violations:
             HEALTH["thread_violations"] += len(violations)
             problems.append(f"{self.name}: widgets changed off the UI thread: {violations[:3]}")
         return problems
+
+    def lost_update_report(self, lost: list[str]) -> str:
+        """Save why the page lost a state update and when the models it names arrived; a short summary.
+
+        ``lost-state-updates.txt``: the rejections paired with the logged lines (the cause
+        ipywidgets does not log); ``lost-state-comm-log.json``: per failed model, the
+        kernel's messages of it and the open/close of every model they name, the models
+        never opened, when the page received each of them and the kernel sessions it saw.
+        """
+        causes = self.page.evaluate("() => window.__fwbWrappedErrors || []")
+        self.artifacts.mkdir(parents=True, exist_ok=True)
+        (self.artifacts / "lost-state-updates.txt").write_text("\n\n=====\n\n".join(causes) or "no cause kept")
+        ids = sorted(set(re.findall(r"model id: ([0-9a-zA-Z_-]+)", " ".join(lost))))
+        stories = []
+        for mid in ids:
+            try:
+                stories.append(self.kernel_eval(_PY_COMM_LOG_REPORT.replace("MODEL_ID", repr(mid)), timeout=30))
+            except Exception as exc:  # the report must not hide the problem it reports
+                stories.append({"model": mid, "error": f"{type(exc).__name__}: {exc}"})
+        # when the page received the models the failed updates name, against the updates themselves
+        flat = sorted(set(ids) | {r for st in stories for m in st.get("messages", []) for r in m[4]})
+        arrivals = self.page.evaluate(
+            "(ids) => { const want = new Set(ids); return (window.__fwbCommsReceived || [])"
+            ".filter((r) => want.has(r[2])); }", flat)
+        sessions = self.page.evaluate("() => window.__fwbSessions || {}")
+        for st in stories:
+            st["page_received"] = [a for a in arrivals if a[2] == st.get("model") or
+                                   any(a[2] in m[4] for m in st.get("messages", []))]
+            st["page_sessions"] = sessions  # more than one: JupyterLab may have dropped messages
+        (self.artifacts / "lost-state-comm-log.json").write_text(json.dumps(stories, indent=1))
+        closed = [e for st in stories for e in st.get("named_models_open_close", []) if e[2].startswith("close")]
+        return (f"cause: {causes[:1] if causes else 'not kept'} (all in lost-state-updates.txt); "
+                f"models its messages name that the kernel closed: {closed[-5:]}, never opened: "
+                f"{[st.get('named_never_opened') for st in stories]}, kernel sessions the page saw: "
+                f"{len(sessions)} (lost-state-comm-log.json)")
 
     def resync_report(self, resyncs: list[dict[str, Any]]) -> str:
         """Save what the page saw and the kernel sent around each resync; a short summary."""

@@ -181,7 +181,7 @@ class ExpressionCloner:
                                           progress=lambda f, m: say(0.9 * f, m))
         self.source, self.target = rt.source, rt.target
         say(0.9, "motion-vector frames")
-        src, tgt, corr = rt.src, rt.tgt, rt._corr
+        src, tgt, corr = rt.src, rt.tgt, rt.correspondence
         X0, X1 = src.skin_X, rt.fit.positions
         F = np.asarray(src.skin_faces, np.int64)
         n_s = X0.shape[0]
@@ -196,6 +196,7 @@ class ExpressionCloner:
         # target skin vertex -> source triangle (barycentric), lip-side safe, far ones held still
         B = self._barycentric_rows(corr, tgt, F, n_s)
         self.operator_ = self._operator(B, T)
+        self._nearest: NDArray[np.int64] | None = None  # for the nearest-copy peer, on first use
         self.setup_seconds_ = time.perf_counter() - t0
         say(1.0, "set up")
 
@@ -237,8 +238,12 @@ class ExpressionCloner:
     # ------------------------------------------------------------------ playing
     def clone(self, frames: ArrayLike, *, progress: Progress = None) -> NDArray[np.float64]:
         """(T, n_target, 3) target meshes playing ``frames`` ((T, n_source, 3) source meshes)."""
+        return self._play(_check_frames(frames, self.source.n_vertices), progress=progress)
+
+    def _play(self, P: NDArray[np.float64], *, say_from: float = 0.0, progress: Progress = None
+              ) -> NDArray[np.float64]:
+        """:meth:`clone` of checked frames; progress runs from ``say_from`` to 1."""
         src_model, tgt_model = self.source, self.target
-        P = _check_frames(frames, src_model.n_vertices)
         rt = self.transfer_
         src, tgt = rt.src, rt.tgt
         Tn = P.shape[0]
@@ -252,11 +257,36 @@ class ExpressionCloner:
             m = work[:, src.skin_ids].reshape(b - a, -1).T  # (3 n_s, k)
             w = np.zeros((b - a, tgt_model.n_vertices, 3))
             w[:, tgt.skin_ids] = np.asarray(self.operator_ @ m).T.reshape(b - a, n_ts, 3)
-            rt._parts.fill(motion, w)
+            rt.parts_motion.fill(motion, w)
             out[a:b] = tgt_model.vertices + tgt.frame.inverse_linear(w)
             if progress is not None:
-                progress(b / Tn, f"cloned {b} of {Tn} frames")
+                progress(say_from + (1.0 - say_from) * b / Tn, f"cloned {b} of {Tn} frames")
         return out
+
+    def nearest_copy(self, frames: ArrayLike) -> NDArray[np.float64]:
+        """Peer: (T, n_target, 3) where each target vertex copies the motion of the nearest source vertex.
+
+        The naive baseline of the benchmark and the tutorial: the same rigid alignment and
+        units as :meth:`clone`, no correspondence, no local frames.
+        """
+        from scipy.spatial import cKDTree
+
+        P = _check_frames(frames, self.source.n_vertices)
+        rt = self.transfer_
+        if self._nearest is None:
+            self._nearest = cKDTree(rt.src.X).query(rt.tgt.X)[1]
+        motion = rt.src.frame.linear(P - self.source.vertices)
+        return self.target.vertices + rt.tgt.frame.inverse_linear(motion[:, self._nearest])
+
+    def deformation_transfer(self, frames: ArrayLike) -> NDArray[np.float64]:
+        """Peer: (T, n_target, 3) by deformation transfer of each frame's motion (Sumner & Popović).
+
+        One back-substitution of the rig transfer's prefactored Poisson system per frame
+        (:meth:`~workbench.rigging.RigTransfer.transfer_motion`).
+        """
+        P = _check_frames(frames, self.source.n_vertices)
+        rt = self.transfer_
+        return self.target.vertices + rt.tgt.frame.inverse_linear(rt.transfer_motion(P - self.source.vertices))
 
     def clone_face(self, frames: ArrayLike, times: ArrayLike | None = None, *, fps: float = 30.0,
                    progress: Progress = None) -> FaceModel:
@@ -315,6 +345,6 @@ def clone_animation(frames: ArrayLike, source: FaceModel, target: FaceModel | st
         Target meshes in the target's units.
     """
     say = progress or (lambda f, m: None)
-    _check_frames(frames, source.n_vertices)  # fail before the set-up
+    P = _check_frames(frames, source.n_vertices)  # fail before the set-up
     cloner = ExpressionCloner(source, target, landmarks=landmarks, progress=lambda f, m: say(0.5 * f, m))
-    return cloner.clone(frames, progress=lambda f, m: say(0.5 + 0.5 * f, m))
+    return cloner._play(P, say_from=0.5, progress=say)

@@ -61,6 +61,7 @@ from workbench.geometry.surface import SurfaceQuery
 from workbench.model import FaceModel, ModelMetadata
 from workbench.rigging.correspondence import (
     Conjugation,
+    Correspondence,
     SkinCorrespondence,
     correspond,
     match_parts,
@@ -225,6 +226,33 @@ class RigTransfer:
         return self._poisson.right_hand_sides(deltas)
 
     @property
+    def correspondence(self) -> Correspondence:
+        """The dense correspondence: each target skin vertex on a template triangle (barycentric)."""
+        return self._corr
+
+    @property
+    def parts_motion(self) -> PartsMotion:
+        """Moves the target's non-skin parts (eyes, teeth…) with the template motion it is given."""
+        return self._parts
+
+    @property
+    def poisson(self) -> PoissonTransfer:
+        """The prefactored Poisson system of deformation transfer (template deltas -> target skin)."""
+        return self._poisson
+
+    def transfer_motion(self, motion: NDArray[np.float64]) -> NDArray[np.float64]:
+        """(k, n_target, 3) target motion (working frame) for (k, N, 3) template motion, by deformation transfer.
+
+        One Poisson back-substitution per column (Sumner & Popović); the parts follow
+        through :attr:`parts_motion`. :meth:`run` uses it for the shapes.
+        """
+        motion = np.asarray(motion, np.float64)
+        out = np.zeros((motion.shape[0], self.target.n_vertices, 3))
+        out[:, self.tgt.skin_ids] = self._poisson.solve(motion)  # (k, n_skin, 3) working frame
+        self._parts.fill(motion, out)
+        return out
+
+    @property
     def skin_correspondence(self) -> SkinCorrespondence:
         """Where each target skin vertex sits on the fitted template (for detail transfer)."""
         return self._corr.skin()
@@ -242,10 +270,7 @@ class RigTransfer:
         self._say(0.95, "transferring shapes")
         shapes = list(self.source.shapes)
         deltas = np.stack([s.delta for s in shapes]).astype(np.float64)  # (k, N, 3) template units
-        work = self._poisson.solve(deltas)  # (k, n_skin, 3) working frame
-        out = np.zeros((len(shapes), self.target.n_vertices, 3))
-        out[:, self.tgt.skin_ids] = work
-        self._parts.fill(deltas, out)
+        out = self.transfer_motion(deltas)
         # working frame -> target units and axes
         back = out @ self.tgt.frame.R / self.tgt.frame.scale
         masks = self._corr.masks(shapes, self.src, self.tgt)
@@ -258,7 +283,7 @@ class RigTransfer:
             self.warnings.append(
                 f"target: its own shapes {sorted(names & set(self.target.shape_names))} were replaced by the template's"
             )
-        quality = self._quality.shapes(shapes, work, self.warnings)
+        quality = self._quality.shapes(shapes, out[:, self.tgt.skin_ids], self.warnings)
         transfer_s = time.perf_counter() - t0
         report = TransferReport(
             source=self.source.metadata.name or "source",
