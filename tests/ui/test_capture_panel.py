@@ -212,3 +212,39 @@ def test_retime_the_selected_key_pair_from_the_tracked_take(take) -> None:
         assert "retimed 0–1 s" in cap.progress.label.value
     finally:
         wb.close()
+
+
+def test_drive_handles_replays_the_markers_through_the_shell_and_applies_in_one_step(take) -> None:
+    """Mode "drive handles (shell)": the markers become handles, the face follows them, one undo step."""
+    from widgets import Workbench
+
+    _, perf = take
+    model = workbench.load_sample("head")
+    wb = Workbench(model, height=240)
+    try:
+        cap = wb.capture
+        assert cap.mode.disabled  # no take yet
+        cap.set_take(perf.markers, vertex_ids=perf.marker_ids, fps=30.0, name="mocap")
+        assert not cap.mode.disabled
+        cap.mode.value = "shell"
+        cap.track_button.click()
+        rep = cap.replayed
+        assert rep is not None and rep.n_frames == 90, wb.errors.outputs
+        assert "through the shell" in cap.progress.label.value and "wrinkles" in cap.progress.label.value
+        assert cap.result is rep.tracked and cap.plot.value[:4] == b"\x89PNG"
+        n_undo = len(model.history.undo_labels)
+        cap.apply_button.click()
+        assert len(model.history.undo_labels) == n_undo + 1
+        assert np.array_equal(model.handles.vertices, perf.marker_ids)
+        model.set_time(45 / 30.0)
+        # the face the viewport shows is the replay (within the key tolerance of the weights and offsets)
+        size = float(np.linalg.norm(np.ptp(model.vertices, axis=0)))
+        assert np.abs(model.evaluate(posed=False) - rep.meshes[45]).max() < 0.02 * size
+        wb.undo()
+        assert len(model.history.undo_labels) == n_undo and len(model.handles) != len(perf.marker_ids)
+        # a point-cloud take cannot drive handles
+        seen = perf.markers[0][np.isfinite(perf.markers[0]).all(axis=1)]
+        cap.set_take([seen, seen], fps=30.0, name="clouds")
+        assert cap.mode.disabled
+    finally:
+        wb.close()

@@ -102,6 +102,15 @@ class CapturePanel(ModelPanel):
         self.adapt = W.Checkbox(value=False, description="Adapt the rig to the actor (default: on for clouds)",
                                 indent=False)
         self.adapt.add_class("fwb-capture-adapt")
+        self.mode = W.ToggleButtons(options=[("solve weights", "weights"), ("drive handles (shell)", "shell")],
+                                    value="weights", description="markers",
+                                    tooltips=["Blendshape weights + head pose per frame (Bouaziz et al. 2013)",
+                                              "The markers drive the shell's handles over the rig's weights, "
+                                              "with wrinkles from their strain (Bickel et al. 2008, Fig. 6)"],
+                                    style={"description_width": "60px", "button_width": "150px"})
+        self.mode.add_class("fwb-capture-mode")
+        #: the marker replay of the take (mode "shell"), or None
+        self.replayed: Any = None
         self.track_button = button("Track", "fwb-capture-track", "Track the whole take", "play")
         self.tolerance = W.BoundedFloatText(value=0.01, min=0.0, max=0.5, step=0.005, description="key tolerance",
                                             style={"description_width": "90px"}, layout=W.Layout(width="190px"))
@@ -129,7 +138,7 @@ class CapturePanel(ModelPanel):
         self.listen(model.events.time, self._on_time, "capture time")
         self.children = [
             W.HTML("<b>Take</b>"), self.path, self.map_path, W.HBox([self.units, self.load_button]), self.info,
-            self.frame, W.HBox([self.l1, self.temporal]), self.auto, self.adapt,
+            self.frame, self.mode, W.HBox([self.l1, self.temporal]), self.auto, self.adapt,
             W.HBox([self.track_button, self.tolerance, self.apply_button]), self.progress, self.plot,
             self.retime_button,
             W.HBox([self.adapted_path, self.save_adapted_button]),
@@ -173,7 +182,7 @@ class CapturePanel(ModelPanel):
             n = len(clouds)
         if n == 0:
             raise ValueError("set_take: the take has no frames")
-        self.take, self.result, self.applied_start = take, None, None
+        self.take, self.result, self.replayed, self.applied_start = take, None, None, None
         self.frame.max = n - 1
         self.frame.value = 0
         self.adapt.value = take["kind"] == "clouds"
@@ -218,6 +227,8 @@ class CapturePanel(ModelPanel):
         """Track the whole take (progress bar); returns the :class:`~workbench.capture.TrackResult`."""
         if self.take is None:
             raise ValueError("Track: load a take first")
+        if self.mode.value == "shell" and self.take["kind"] == "markers":
+            return self.replay()
         self.progress.start("<i>tracking ...</i>")
         t0 = time.perf_counter()
         try:
@@ -227,7 +238,7 @@ class CapturePanel(ModelPanel):
             self.progress.fail(f"tracking failed: {exc}")
             raise
         dt = time.perf_counter() - t0
-        self.result = res
+        self.result, self.replayed = res, None
         held = int(np.asarray(res.held).sum())
         self.progress.finish(
             f"{res.n_frames} frames in {dt:.2f} s ({res.n_frames / max(dt, 1e-9):.0f} frames/s); median error "
@@ -238,9 +249,39 @@ class CapturePanel(ModelPanel):
         self.show_frame()
         return res
 
+    def replay(self) -> Any:
+        """Replay the marker take through the shell with wrinkles (mode "drive handles"); progress bar.
+
+        Returns the :class:`~workbench.capture.ReplayResult`; :attr:`result` becomes its blendshape
+        tracking (None on a face without shapes), for the plot.
+        """
+        t = self.take
+        if t is None or t["kind"] != "markers":
+            raise ValueError("Drive handles: load a marker take first (point clouds have no marker vertices)")
+        self.progress.start("<i>replaying the markers through the shell ...</i>")
+        t0 = time.perf_counter()
+        auto = bool(self.auto.value)
+        try:
+            rep = self.model.capture.replay(t["frames"], vertex_ids=t["vertex_ids"], fps=t["fps"],
+                                            l1="auto" if auto else float(self.l1.value),
+                                            temporal="auto" if auto else float(self.temporal.value),
+                                            progress=self.progress)
+        except Exception as exc:
+            self.progress.fail(f"replay failed: {exc}")
+            raise
+        dt = time.perf_counter() - t0
+        self.replayed, self.result = rep, rep.tracked
+        self.progress.finish(
+            f"{rep.n_frames} frames through the shell in {dt:.2f} s, {rep.vertex_ids.size} markers as handles; "
+            f"wrinkles: {html.escape(str(rep.info.get('wrinkles')))}"
+            + (self._chosen(rep.tracked) if rep.tracked is not None else ""))
+        self.refresh()
+        self.show_frame()
+        return rep
+
     def retrack_window(self) -> None:
         """Re-track the frames around the current one with the λ's as they are now."""
-        if self.take is None or self.result is None:
+        if self.take is None or self.result is None or self.replayed is not None:
             return
         from workbench.capture.result import TrackResult
 
@@ -261,10 +302,20 @@ class CapturePanel(ModelPanel):
         self.show_frame()
 
     def apply(self) -> float:
-        """Key the result on the timeline (one undo step); returns the start time used (0)."""
+        """Key the result on the timeline (one undo step); returns the start time used (0).
+
+        A replay (mode "drive handles") also makes the markers the handles and installs their wrinkles.
+        """
+        self.flush()
+        if self.replayed is not None:
+            rep = self.replayed
+            self.model.capture.apply_replay(rep, tolerance=float(self.tolerance.value))
+            self.applied_start = 0.0
+            self.progress.finish(f"applied the replay of {rep.n_frames} frames: the markers are the handles, "
+                                 "their offsets and the weights are keyed (undo: one step)")
+            return 0.0
         if self.result is None:
             raise ValueError("Apply to timeline: track the take first")
-        self.flush()
         self.model.capture.apply(self.result, tolerance=float(self.tolerance.value))
         self.applied_start = 0.0
         self.progress.finish(f"applied {self.result.n_frames} frames to the timeline (undo: one step)")
@@ -345,8 +396,9 @@ class CapturePanel(ModelPanel):
                     else f"point clouds of ~{int(np.median([len(c) for c in t['frames']]))} points")
             self.info.value = f"<b>{html.escape(t['name'])}</b>: {n} frames at {t['fps']:g} fps, {what}"
         self.track_button.disabled = t is None
-        self.apply_button.disabled = self.result is None
+        self.apply_button.disabled = self.result is None and self.replayed is None
         self.retime_button.disabled = self.result is None
+        self.mode.disabled = t is None or t["kind"] != "markers"
         self.adapt.disabled = t is None
         has_adapted = self.result is not None and self.result.info.get("adapted") is not None
         self.save_adapted_button.disabled = not has_adapted

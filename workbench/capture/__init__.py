@@ -5,6 +5,8 @@ Animation" (Bouaziz, Wang, Pauly, SIGGRAPH 2013): per frame, a rigid head pose
 and blendshape weights with an L1 sparsity prior and a second-difference
 temporal prior (§3.1), optionally adapting the rig to the actor (§2, §3.2).
 
+* :func:`replay` / :class:`ReplayResult` — markers drive the shell's handles and the
+  wrinkles (Bickel et al. 2008, Fig. 6; :mod:`.replay`), ``model.capture.apply_replay``;
 * :func:`track` — the entry point: ``(T, m, 3)`` markers / landmarks with
   ``vertex_ids`` (:mod:`.track`), or point clouds (:mod:`.clouds`);
 * :class:`TrackResult` — weights, poses, errors, flags; ``to_timeline``
@@ -31,6 +33,7 @@ from typing import Any
 from workbench.capture.adapt import AdaptiveModel
 from workbench.capture.clouds import CloudTrackError, track_clouds
 from workbench.capture.identity import IdentityModel, sample_identity_model
+from workbench.capture.replay import ReplayResult, replay
 from workbench.capture.result import TrackError, TrackResult
 from workbench.capture.solver import WeightSolver
 from workbench.capture.synthetic import SyntheticPerformance, synthetic_performance
@@ -41,6 +44,7 @@ __all__ = [
     "CloudTrackError",
     "IdentityModel",
     "LandmarkSequence",
+    "ReplayResult",
     "SyntheticPerformance",
     "TrackError",
     "TrackResult",
@@ -48,6 +52,7 @@ __all__ = [
     "WeightSolver",
     "landmark_vertex_map",
     "register_landmarks",
+    "replay",
     "sample_identity_model",
     "synthetic_performance",
     "track",
