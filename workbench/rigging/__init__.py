@@ -11,6 +11,9 @@
 * :func:`clone_animation` / :class:`ExpressionCloner` — a performance (an
   animated mesh) of one face played on another of any topology, vertex order
   and units (expression cloning, Noh & Neumann 2001; :mod:`workbench.rigging.clone`).
+* :func:`transfer_details` / :func:`transfer_pose_space` — wrinkle details onto
+  the target (Bickel et al. 2008 §5.4): carried example poses refitted on the rig,
+  or the fitted pose space itself as printed (:mod:`workbench.rigging.pose_space_transfer`).
 * :class:`RigSession` — the Rig tab's state: landmarks, examples and the three
   stages, each one undo step of the session's own history.
 
@@ -31,6 +34,7 @@ from typing import TYPE_CHECKING, Any
 from workbench.rigging.clone import ExpressionCloner, clone_animation
 from workbench.rigging.details import DetailMap, transfer_details
 from workbench.rigging.landmarks import SuggestedLandmark, suggest_landmarks, template_landmarks
+from workbench.rigging.pose_space_transfer import transfer_pose_space
 from workbench.rigging.report import RigTransferError, ShapeQuality, TransferReport
 from workbench.rigging.session import RigExample, RigSession, RigState
 from workbench.rigging.transfer import (
@@ -61,6 +65,7 @@ __all__ = [
     "suggest_landmarks",
     "template_landmarks",
     "transfer_details",
+    "transfer_pose_space",
     "transfer_rig",
     "transfer_rig_report",
 ]

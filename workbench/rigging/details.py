@@ -90,6 +90,8 @@ class DetailMap:
         self._src_skin = np.asarray(t.src.skin_ids, np.int64)
         self._tgt_skin = np.asarray(t.tgt.skin_ids, np.int64)
         self._tgt_X = np.asarray(t.tgt.skin_X, np.float64)
+        #: (n_target, 3) the target's rest vertices (model units)
+        self.target_rest = np.asarray(t.target.vertices, np.float64)
 
     def interpolate(self, field: NDArray[np.float64]) -> NDArray[np.float64]:
         """A per-template-vertex field ``(n_source, c)`` at the mapped target vertices ``(p, c)``."""

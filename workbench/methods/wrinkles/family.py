@@ -85,6 +85,8 @@ class WrinklesFilePart:
             "basis": [int(b) for b in ps.basis if b >= 0],
             "errors": [float(e) for e in ps.errors],
         }
+        if st.free_nodes:
+            entry["free_nodes"] = True
         arrays = {
             "wrinkles_edges": st.graph.edges.astype("<i4"),
             "wrinkles_rest_lengths": st.graph.rest_lengths.astype("<f8"),
@@ -124,6 +126,7 @@ class WrinklesFilePart:
             "beta": None if beta is None else c.number(beta, f"{f}.beta"),
             "basis": basis,
             "errors": [c.number(e, f"{f}.errors[{i}]") for i, e in enumerate(c.lst(c.key(w, f, "errors", []), f"{f}.errors"))],
+            "free_nodes": c.boolean(c.key(w, f, "free_nodes", False), f"{f}.free_nodes"),
         }}
 
     def specs(self, m: Mapping[str, Any], present: set[str]) -> tuple[dict[str, Spec], set[str]]:
@@ -165,7 +168,8 @@ class WrinklesFilePart:
                             basis=w["basis"], mode=w["mode"], rcond=w["rcond"])
         ps = dataclasses.replace(ps, errors=tuple(w["errors"]))
         state = WrinkleState(g, h, ps, tuple(e["name"] for e in w["examples"]),
-                             tuple(e["weights"] for e in w["examples"]), w["strength"], w["enabled"], w["weighted"])
+                             tuple(e["weights"] for e in w["examples"]), w["strength"], w["enabled"], w["weighted"],
+                             bool(w.get("free_nodes", False)))
         return {"wrinkles": state}
 
 

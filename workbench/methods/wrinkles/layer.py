@@ -65,6 +65,11 @@ class WrinkleState:
     enabled : bool
     weighted : bool
         WPSD (True) or global PSD.
+    free_nodes : bool
+        The feature graph's nodes (``handles``) need not be the model's handles: the
+        strain is measured at those vertices of whatever mesh is below (a §5.4
+        transfer onto a face animated some other way: "the nodes of the feature graph
+        and the handle vertices on the target model do not have to match").
     """
 
     graph: FeatureGraph | None = None
@@ -75,6 +80,7 @@ class WrinkleState:
     strength: float = 1.0
     enabled: bool = True
     weighted: bool = True
+    free_nodes: bool = False
 
     @property
     def fitted(self) -> bool:
@@ -92,8 +98,12 @@ class WrinkleState:
         )
 
     def active_for(self, handles: NDArray[np.int32]) -> bool:
-        """Fitted, shown, and made for exactly these handle vertices."""
-        return self.enabled and self.strength != 0.0 and self.made_for(handles)
+        """Fitted, shown, and made for exactly these handle vertices (any, with :attr:`free_nodes`)."""
+        if not (self.enabled and self.strength != 0.0):
+            return False
+        if self.free_nodes:
+            return self.pose_space is not None and self.graph is not None and self.handles is not None
+        return self.made_for(handles)
 
 
 def blend_weights(model: FaceState | StateView, weights: Mapping[str, float]) -> NDArray[np.float64]:
