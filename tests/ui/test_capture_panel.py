@@ -248,3 +248,47 @@ def test_drive_handles_replays_the_markers_through_the_shell_and_applies_in_one_
         assert cap.mode.disabled
     finally:
         wb.close()
+
+
+def test_clone_a_performance_of_another_face_then_track_it_onto_this_rig(tmp_path) -> None:
+    """The Capture tab's clone entry: a performance file of the sample head, played on a foreign face's own rig."""
+    from widgets import Workbench
+    from workbench.animation.importers.keys import timeline_from_samples
+    from workbench.testing import foreign_face
+    from workbench.testing.takes import realistic_weights
+
+    head = workbench.load_sample("head")
+    T = 20
+    W = realistic_weights(head, T, seed=3)
+    head.timeline.set(timeline_from_samples(np.arange(T) / 30.0, W, head.shape_names, fps=30.0), "performance")
+    perf_path = tmp_path / "performance.fwb"
+    head.save(perf_path)
+    foreign = foreign_face(head, seed=3)
+    model = foreign.model
+    wb = Workbench(model, height=240)
+    try:
+        cap = wb.capture
+        cap.clone_path.value = str(tmp_path / "missing.fwb")
+        cap.clone_button.click()
+        assert cap.take is None and "missing.fwb" in str(wb.errors.outputs)
+        cap.clone_path.value = str(perf_path)
+        cap.clone_button.click()
+        assert cap.take is not None and cap.take["kind"] == "markers", wb.errors.outputs
+        assert cap.take["frames"].shape == (T, 120, 3) and "clone of performance.fwb" in cap.info.value
+        assert "cloned 20 frames" in cap.progress.label.value
+        cap.auto.value = False
+        cap.track_button.click()
+        n_undo = len(model.history.undo_labels)
+        cap.apply_button.click()
+        assert len(model.history.undo_labels) == n_undo + 1
+        # this face's own (split, renamed) rig now plays the performance: near the true clone
+        names = list(head.shape_names)
+        errs, motion = [], []
+        for f in (5, 10, 15):
+            truth = foreign.pose(dict(zip(names, W[f], strict=True)))
+            model.set_time(f / 30.0)
+            errs.append(np.linalg.norm(model.evaluate(posed=False) - truth, axis=1).mean())
+            motion.append(np.linalg.norm(truth - model.vertices, axis=1).mean())
+        assert np.median(errs) < 0.5 * np.median(motion), (errs, motion)
+    finally:
+        wb.close()

@@ -123,11 +123,19 @@ class CapturePanel(ModelPanel):
         self.adapted_path.add_class("fwb-capture-adapted-path")
         self.save_adapted_button = button("Save adapted rig", "fwb-capture-save-adapted",
                                           "Save the rig adapted to the actor as a new model (.fwb)", "save")
+        self.clone_path = W.Text(placeholder="performance: a face file whose timeline plays it (.fwb, .glb, .abc...)",
+                                 layout=W.Layout(width="98%"))
+        self.clone_path.add_class("fwb-capture-clone-path")
+        self.clone_button = button("Clone onto this face", "fwb-capture-clone",
+                                   "Expression cloning (Noh & Neumann 2001): the performance's motion carried onto "
+                                   "this face through a dense correspondence, as a marker take to track or replay",
+                                   "clone")
         self.progress = ProgressRow("fwb-capture-progress", "fwb-capture-status")
         self.plot = W.Image(format="png", layout=W.Layout(width="100%"))
         self.plot.add_class("fwb-capture-plot")
         g = self.guard
         self.load_button.on_click(g("load take")(lambda _b: self.load(self.path.value, self.map_path.value or None)))
+        self.clone_button.on_click(g("clone performance")(lambda _b: self.clone(self.clone_path.value)))
         self.track_button.on_click(g("track")(lambda _b: self.track()))
         self.apply_button.on_click(g("apply capture")(lambda _b: self.apply()))
         self.retime_button.on_click(g("retime from performance")(lambda _b: self.retime_selected()))
@@ -137,7 +145,8 @@ class CapturePanel(ModelPanel):
             s.observe(g("retrack window")(lambda _c: self._on_lambda()), "value")
         self.listen(model.events.time, self._on_time, "capture time")
         self.children = [
-            W.HTML("<b>Take</b>"), self.path, self.map_path, W.HBox([self.units, self.load_button]), self.info,
+            W.HTML("<b>Take</b>"), self.path, self.map_path, W.HBox([self.units, self.load_button]),
+            W.HTML("<b>or a performance of another face</b>"), W.HBox([self.clone_path, self.clone_button]), self.info,
             self.frame, self.mode, W.HBox([self.l1, self.temporal]), self.auto, self.adapt,
             W.HBox([self.track_button, self.tolerance, self.apply_button]), self.progress, self.plot,
             self.retime_button,
@@ -189,6 +198,41 @@ class CapturePanel(ModelPanel):
         self.refresh()
         self.show_frame()
         return take
+
+    def clone(self, path: str, *, markers: int = 120) -> dict[str, Any]:
+        """Clone the performance in ``path`` onto this face and use it as the take (progress bar).
+
+        The performance is any face file whose timeline plays it; expression cloning carries its
+        frames onto this face (any topology, order, units), and ``markers`` spread face vertices of
+        the clone become a marker take: *Track* fits this face's rig to it, *drive handles* replays it.
+        """
+        from workbench.io import load
+        from workbench.rigging import ExpressionCloner
+
+        p = Path(str(path).strip())
+        if not str(path).strip():
+            raise ValueError("Clone: give the performance's file")
+        if not p.exists():
+            raise ValueError(f"Clone: {p}: no such file")
+        self.progress.start(f"<i>cloning {html.escape(p.name)} ...</i>")
+        t0 = time.perf_counter()
+        try:
+            perf = load(p)
+            timeline = perf.tracks
+            if not timeline.tracks:
+                raise ValueError(f"Clone: {p.name}: its timeline has no keys: nothing to clone")
+            times = timeline.frame_times()
+            frames = np.stack([perf.evaluate_at(float(t)) for t in times])
+            cloner = ExpressionCloner(perf, self.model, progress=lambda f, m: self.progress(0.9 * f, m))
+            ids, take = cloner.marker_take(frames, markers=markers)
+        except Exception as exc:
+            self.progress.fail(f"cloning failed: {exc}")
+            raise
+        out = self.set_take(take, vertex_ids=ids, fps=float(timeline.fps), name=f"clone of {p.name}")
+        self.progress.finish(f"cloned {len(times)} frames of {html.escape(p.name)} onto this face in "
+                             f"{time.perf_counter() - t0:.1f} s ({ids.size} markers); Track or drive handles next"
+                             + "".join(f"<br>warning: {html.escape(w)}" for w in cloner.transfer_.warnings[:3]))
+        return out
 
     # ------------------------------------------------------------------ tracking
     def _track(self, frames: Any, progress: Any = None, adapt: Any = None, auto: bool = False) -> Any:

@@ -125,6 +125,17 @@ def face_vertices(model: FaceState) -> NDArray[np.intp]:
     return ids if ids.size else np.flatnonzero(skin)
 
 
+def spread_face_vertices(model: FaceState, count: int, *, seed: int = 0) -> NDArray[np.intp]:
+    """``count`` face vertices spread out by farthest-point sampling (where a marker set would be glued).
+
+    From :func:`face_vertices`; sorted ids. Deterministic given ``seed``.
+    """
+    cand = face_vertices(model)
+    if int(count) < 3:
+        raise ValueError(f"count must be at least 3 markers, got {count!r}")
+    return _farthest(np.asarray(model.vertices, np.float64), cand, int(count), np.random.default_rng(seed))
+
+
 def _farthest(V: NDArray[np.float64], cand: NDArray[np.intp], m: int, rng: np.random.Generator) -> NDArray[np.intp]:
     """``m`` spread-out vertices of ``cand`` by farthest-point sampling from a random start."""
     m = min(int(m), cand.size)

@@ -288,6 +288,20 @@ class ExpressionCloner:
         rt = self.transfer_
         return self.target.vertices + rt.tgt.frame.inverse_linear(rt.transfer_motion(P - self.source.vertices))
 
+    def marker_take(self, frames: ArrayLike, *, markers: int = 120, seed: int = 0
+                    ) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
+        """The clone as a marker take on the target: ``(vertex_ids (m,), positions (T, m, 3))``.
+
+        ``markers`` face vertices of the target spread out
+        (:func:`~workbench.capture.synthetic.spread_face_vertices`); what the Capture tab tracks
+        onto the target's rig (solve weights) or replays through its shell (drive handles).
+        """
+        from workbench.capture.synthetic import spread_face_vertices
+
+        ids = spread_face_vertices(self.target, markers, seed=seed)
+        meshes = self.clone(frames)
+        return ids, meshes[:, ids]
+
     def clone_face(self, frames: ArrayLike, times: ArrayLike | None = None, *, fps: float = 30.0,
                    progress: Progress = None) -> FaceModel:
         """The target playing the cloned frames on its timeline (baked frames: every exporter writes it).
