@@ -17,7 +17,7 @@ import json
 from typing import Any
 
 import numpy as np
-from harness import NotebookPage, wait_until
+from harness import NotebookPage, pixel_change, wait_until
 
 _CELLS = [
     "import json, numpy as np, tempfile, pathlib\nimport workbench, widgets\n"
@@ -119,3 +119,54 @@ def test_load_track_scrub_apply_and_undo_with_the_mouse(open_notebook) -> None:
     page.locator(".fwb-wb-undo").click()
     wait_until("the undo", lambda: _state(nb), lambda s: len(s["undo"]) == n_undo)
     assert json.dumps(_state(nb)["errors"]) == "[]"
+
+
+_REPLAY_STATE = """
+import json, numpy as np
+_c = wb.capture
+print(json.dumps({
+    "loaded": _c.take is not None, "replayed": _c.replayed is not None, "mode": _c.mode.value,
+    "handles": int(len(model.handles)), "markers_are_handles": bool(
+        _c.take is not None and len(model.handles) == len(_c.take['vertex_ids'])
+        and np.array_equal(model.handles.vertices, _c.take['vertex_ids'])),
+    "undo": model.history.undo_labels, "status": _c.progress.label.value,
+    "errors": [o.get("text", "") for o in wb.errors.outputs]}))
+"""
+
+
+def test_drive_handles_replays_the_markers_through_the_shell_with_the_mouse(open_notebook) -> None:
+    """Capture ▸ markers: drive handles (shell) ▸ Track ▸ Apply: the face follows the markers, one undo step."""
+    nb = open_notebook(_CELLS, viewport_size=(1500, 1200))
+    page = nb.page
+    page.evaluate("() => { const s = window.jupyterapp.shell; if (!s.leftCollapsed) s.collapseLeft(); }")
+    nb.wait_viewports(1)
+    paths = nb.kernel_eval("print(json.dumps([str(d / 'take.csv'), str(d / 'map.json')]))")
+    page.locator(".fwb-workbench").evaluate("e => e.scrollIntoView({block: 'start'})")
+    page.locator(".fwb-tabs .lm-TabBar-tab", has_text="Capture").click()
+    page.locator(".fwb-capture-path input").fill(paths[0])
+    page.locator(".fwb-capture-map input").fill(paths[1])
+    page.locator(".fwb-capture-load").click()
+    state = lambda: nb.kernel_eval(_REPLAY_STATE)  # noqa: E731
+    st = wait_until("the take", state, lambda s: s["loaded"] or s["errors"])
+    assert st["loaded"] and not st["errors"], st
+    page.locator(".fwb-capture-mode button", has_text="drive handles").click()
+    wait_until("the mode", state, lambda s: s["mode"] == "shell")
+    page.locator(".fwb-capture-track").click()
+    st = wait_until("the replay", state, lambda s: s["replayed"] or s["errors"], timeout=180)
+    assert st["replayed"] and not st["errors"], st
+    wait_until("the status line", page.locator(".fwb-capture-status").inner_text,
+               lambda t: "through the shell" in t)
+    page.mouse.move(5, 5)
+    before = nb.canvas_shot("replayed")
+    frame = nb.frame(0)
+    n_undo = len(st["undo"])
+    page.locator(".fwb-capture-apply").click()
+    st = wait_until("the apply", state, lambda s: len(s["undo"]) == n_undo + 1)
+    assert st["markers_are_handles"], st
+    nb.wait_frame_after(0, frame)
+    after = nb.canvas_shot("applied")
+    # the face now plays the replay's frame 0 (its expression and head pose): the picture changed
+    assert pixel_change(before, after) > 0.002
+    page.locator(".fwb-wb-undo").click()
+    st = wait_until("the undo", state, lambda s: len(s["undo"]) == n_undo)
+    assert not st["markers_are_handles"] and not st["errors"], st
