@@ -12,7 +12,9 @@ every other shape (so the take lies partly outside the rig's span):
 * **track** — blendshape tracking (Bouaziz 2013, λ's chosen from the take);
 * **replay exact** — the markers drive the shell, interpolated exactly
   (``smoothing=0``);
-* **replay** — with the default offset smoothing (two frames).
+* **smooth** — offsets smoothed over two frames (``denoise=False``);
+* **replay** — the default: smoothed, and each marker's offsets shrunk by its
+  Wiener gain (noise measured from its own second differences).
 
 Faces: the sample head (5,084 vertices, dm), the same head at 25k, and
 :func:`workbench.testing.foreign_face` (remeshed, other proportions, open
@@ -58,7 +60,7 @@ def main() -> None:
              ("foreign face", foreign_face(head, seed=3).model)]
     print(f"take: {args.frames} frames, {args.markers} markers, realistic weights of the full rig, replayed on a rig "
           "with every other shape; error = mean skin error (mm)")
-    print(f"{'face':16s} {'verts':>6s} {'noise':>6s} {'LS':>7s} {'track':>7s} {'exact':>7s} {'replay':>7s} "
+    print(f"{'face':16s} {'verts':>6s} {'noise':>6s} {'LS':>7s} {'track':>7s} {'exact':>7s} {'smooth':>7s} {'replay':>7s} "
           f"{'replay/track':>12s} {'seconds':>8s} {'frames/s':>8s}")
     for name, face in faces:
         skin = skin_or_all_mask(face)
@@ -76,11 +78,13 @@ def main() -> None:
             e_tr = err(tracked(rig, perf))
             e_ex = err(replay(rig, perf.markers, vertex_ids=perf.marker_ids, fps=perf.fps, smoothing=0.0,
                               wrinkles=False).meshes)
+            e_sm = err(replay(rig, perf.markers, vertex_ids=perf.marker_ids, fps=perf.fps, denoise=False,
+                              wrinkles=False).meshes)
             t0 = time.perf_counter()
             rep = replay(rig, perf.markers, vertex_ids=perf.marker_ids, fps=perf.fps)
             dt = time.perf_counter() - t0
             e_rp = err(rep.meshes)
-            print(f"{name:16s} {face.n_vertices:6d} {noise:6.2f} {e_ls:7.3f} {e_tr:7.3f} {e_ex:7.3f} {e_rp:7.3f} "
+            print(f"{name:16s} {face.n_vertices:6d} {noise:6.2f} {e_ls:7.3f} {e_tr:7.3f} {e_ex:7.3f} {e_sm:7.3f} {e_rp:7.3f} "
                   f"{e_rp / e_tr:12.2f} {dt:8.1f} {args.frames / dt:8.1f}", flush=True)
 
 

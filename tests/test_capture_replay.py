@@ -141,3 +141,18 @@ def test_bad_input_is_named(head, change, match) -> None:
         replay(_plain(head), Y, vertex_ids=ids)
     with pytest.raises(TrackError, match="smoothing"):
         replay(_plain(head), perf.markers, vertex_ids=perf.marker_ids, smoothing=-1.0)
+
+
+def test_wiener_gains_keep_a_clean_offset_and_drop_pure_noise() -> None:
+    from scipy.ndimage import gaussian_filter1d
+
+    from workbench.capture.replay import _wiener_gains
+
+    rng = np.random.default_rng(0)
+    t = np.linspace(0, 3, 90)[:, None]
+    clean = np.stack([np.sin(2 * t + k) * 0.01 for k in range(4)], axis=1).repeat(3, 2)  # (T, 4, 3) smooth
+    noise = rng.normal(0, 0.003, (90, 4, 3))
+    raw = np.concatenate([clean, noise], axis=1)
+    g = _wiener_gains(raw, gaussian_filter1d(raw, 2.0, axis=0, mode="nearest"), 2.0)
+    assert (g[:4] > 0.95).all(), g
+    assert (g[4:] < 0.5).all() and g[4:].mean() < 0.35, g

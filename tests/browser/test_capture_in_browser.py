@@ -55,7 +55,8 @@ def _overlay(nb: NotebookPage) -> np.ndarray:
     return np.array(nb.viewport(0).evaluate("e => e.fwbOverlayProject ? e.fwbOverlayProject() : []"), float)
 
 
-def test_load_track_scrub_apply_and_undo_with_the_mouse(open_notebook) -> None:
+def _load_the_take(open_notebook: Any) -> NotebookPage:
+    """Open the notebook, then with the mouse: the Capture tab, the take's two paths, *Load take*."""
     nb = open_notebook(_CELLS, viewport_size=(1500, 1200))
     page = nb.page
     page.evaluate("() => { const s = window.jupyterapp.shell; if (!s.leftCollapsed) s.collapseLeft(); }")
@@ -66,6 +67,12 @@ def test_load_track_scrub_apply_and_undo_with_the_mouse(open_notebook) -> None:
     page.locator(".fwb-capture-path input").fill(paths[0])
     page.locator(".fwb-capture-map input").fill(paths[1])
     page.locator(".fwb-capture-load").click()
+    return nb
+
+
+def test_load_track_scrub_apply_and_undo_with_the_mouse(open_notebook) -> None:
+    nb = _load_the_take(open_notebook)
+    page = nb.page
     st = wait_until("the take", lambda: _state(nb), lambda s: s["loaded"] or s["errors"])
     assert st["loaded"] and not st["errors"], st
     wait_until("the markers over the face", lambda: int(nb.viewport(0).get_attribute("data-overlay-points") or 0),
@@ -136,16 +143,8 @@ print(json.dumps({
 
 def test_drive_handles_replays_the_markers_through_the_shell_with_the_mouse(open_notebook) -> None:
     """Capture ▸ markers: drive handles (shell) ▸ Track ▸ Apply: the face follows the markers, one undo step."""
-    nb = open_notebook(_CELLS, viewport_size=(1500, 1200))
+    nb = _load_the_take(open_notebook)
     page = nb.page
-    page.evaluate("() => { const s = window.jupyterapp.shell; if (!s.leftCollapsed) s.collapseLeft(); }")
-    nb.wait_viewports(1)
-    paths = nb.kernel_eval("print(json.dumps([str(d / 'take.csv'), str(d / 'map.json')]))")
-    page.locator(".fwb-workbench").evaluate("e => e.scrollIntoView({block: 'start'})")
-    page.locator(".fwb-tabs .lm-TabBar-tab", has_text="Capture").click()
-    page.locator(".fwb-capture-path input").fill(paths[0])
-    page.locator(".fwb-capture-map input").fill(paths[1])
-    page.locator(".fwb-capture-load").click()
     state = lambda: nb.kernel_eval(_REPLAY_STATE)  # noqa: E731
     st = wait_until("the take", state, lambda s: s["loaded"] or s["errors"])
     assert st["loaded"] and not st["errors"], st

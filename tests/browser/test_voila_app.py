@@ -111,11 +111,19 @@ def test_app_serves_the_workbench_without_code(app: VoilaApp, browser) -> None:
     page = browser.new_page(viewport={"width": 1500, "height": 1100})
     try:
         page.goto(app.url, timeout=120_000)
-        page.wait_for_function(
-            "() => { const e = document.querySelector('.fwb-viewport');"
-            " return e && e.getAttribute('data-ready') === '1'; }",
-            timeout=180_000,
-        )
+        try:
+            page.wait_for_function(
+                "() => { const e = document.querySelector('.fwb-viewport');"
+                " return e && e.getAttribute('data-ready') === '1'; }",
+                timeout=180_000,
+            )
+        except Exception:
+            # say where the app stood: the page as drawn, its text and the server's log
+            page.screenshot(path=str(out / "not-ready.png"))
+            (out / "not-ready-page.txt").write_text(page.inner_text("body")[-4000:])
+            (out / "server.log").write_text(app.log())
+            raise AssertionError(f"the workbench app drew no ready viewport within 180 s; the page says "
+                                 f"{page.inner_text('body')[-300:]!r}; server log tail: {app.log()[-1500:]}") from None
         assert page.locator(".fwb-workbench").count() == 1
         # app mode: the notebook's code is not on the page
         assert "open_workbench" not in page.content()

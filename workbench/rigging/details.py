@@ -93,6 +93,19 @@ class DetailMap:
         #: (n_target, 3) the target's rest vertices (model units)
         self.target_rest = np.asarray(t.target.vertices, np.float64)
 
+    @classmethod
+    def between(cls, correspondence: RigTransfer | DetailMap, source: FaceModel, target: FaceModel,
+                what: str) -> DetailMap:
+        """The map of ``correspondence``, checked to go from ``source``'s mesh to ``target``'s (``what`` names the caller)."""
+        dm = correspondence if isinstance(correspondence, DetailMap) else cls(correspondence)
+        if not isinstance(source, FaceModel) or not isinstance(target, FaceModel):
+            raise TypeError(f"{what}: source and target must be FaceModels")
+        if target.n_vertices != dm.n_target or source.n_vertices != dm.n_source:
+            raise ValueError(
+                f"{what}: the correspondence maps {dm.n_source} template vertices to {dm.n_target} target "
+                f"vertices, got a template of {source.n_vertices} and a target of {target.n_vertices}")
+        return dm
+
     def interpolate(self, field: NDArray[np.float64]) -> NDArray[np.float64]:
         """A per-template-vertex field ``(n_source, c)`` at the mapped target vertices ``(p, c)``."""
         return np.einsum("pk,pkc->pc", self.bary, np.asarray(field, np.float64)[self.source_corners])
@@ -171,14 +184,7 @@ def transfer_details(
     from workbench.methods.wrinkles.family import fit_sample_wrinkles
     from workbench.methods.wrinkles.layer import blend_weights
 
-    dm = correspondence if isinstance(correspondence, DetailMap) else DetailMap(correspondence)
-    if not isinstance(source, FaceModel) or not isinstance(rig, FaceModel):
-        raise TypeError("transfer_details: source and rig must be FaceModels")
-    if rig.n_vertices != dm.n_target or source.n_vertices != dm.n_source:
-        raise ValueError(
-            f"transfer_details: the correspondence maps {dm.n_source} template vertices to {dm.n_target} target "
-            f"vertices, got a template of {source.n_vertices} and a rig of {rig.n_vertices}"
-        )
+    dm = DetailMap.between(correspondence, source, rig, "transfer_details")
     src = source
     if not src.wrinkles.fitted:
         src = _bare_copy(source)

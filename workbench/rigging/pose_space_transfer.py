@@ -130,13 +130,7 @@ def transfer_pose_space(
     ValueError
         The correspondence is not between these meshes, or no feature edge maps.
     """
-    dm = correspondence if isinstance(correspondence, DetailMap) else DetailMap(correspondence)
-    if not isinstance(source, FaceModel) or not isinstance(target, FaceModel):
-        raise TypeError("transfer_pose_space: source and target must be FaceModels")
-    if target.n_vertices != dm.n_target or source.n_vertices != dm.n_source:
-        raise ValueError(
-            f"transfer_pose_space: the correspondence maps {dm.n_source} template vertices to {dm.n_target} "
-            f"target vertices, got a template of {source.n_vertices} and a target of {target.n_vertices}")
+    dm = DetailMap.between(correspondence, source, target, "transfer_pose_space")
     st = _source_state(source)
     ps = st.pose_space
     assert ps is not None
