@@ -55,8 +55,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from workbench.capture.adapt import AdaptiveModel, adaptive_model
+from workbench.capture.frame_step import FrameStepper
 from workbench.capture.pose import PoseError, fit_rigid_robust
-from workbench.capture.result import FLAG_HELD, FLAG_POSE_ALL, TrackError, TrackResult
+from workbench.capture.result import FLAG_HELD, TrackError, TrackResult
 from workbench.capture.rig import ExpressionSpace
 from workbench.capture.solver import WeightSolver
 
@@ -73,8 +74,6 @@ DEFAULT_L1 = 0.01
 DEFAULT_TEMPORAL = 0.25
 #: markers moving less than this share of the head size under any one shape count as rigid
 RIGID_MOTION = 0.01
-#: the reweighted pose stops when it moves the markers by less than this share of their extent
-POSE_TOL = 1e-6
 #: the markers must spread within this factor of the model's vertices, else they are in other units
 UNITS_FACTOR = 4.0
 
@@ -400,15 +399,9 @@ def track_markers(
     poses = np.tile(np.eye(4), (T, 1, 1))
     errors = np.full(T, np.nan)
     flags = [""] * T
-    w = np.zeros(kp)
-    wf = space.full_weights(w)
-    w_prev: NDArray[np.float64] | None = None
-    w_prev2: NDArray[np.float64] | None = None
-    M = np.eye(4)
-    solver = setup.solver
+    stepper = FrameStepper(setup, int(iterations), am, rows)
     every = max(1, T // 100)
     first = int(np.argmax(good))
-    sweeps = 0
     for f in range(T):
         if progress is not None and f % every == 0:
             progress(f / T, f"tracking frame {f + 1} of {T}")
@@ -416,50 +409,10 @@ def track_markers(
             flags[f] = FLAG_HELD
             if f > first:  # hold the previous frame
                 W[f], poses[f] = W[f - 1], poses[f - 1]
-                w_prev2, w_prev = w_prev, W[f].copy()
+                stepper.hold(W[f])
             continue
-        vis: NDArray[np.bool_] = visible[f]
-        Yv = Y[f, vis]
-        Dv = setup.D[vis].reshape(-1, kp)
-        nv = int(vis.sum())
-        G = (setup.G_all if nv == m else setup.Gm[vis].sum(0)) * (setup.norm / nv)
-        rig = vis & setup.is_rigid
-        for _it in range(int(iterations)):
-            X = setup.marker_positions(w, wf)
-            pose = None
-            if rig.sum() >= 3:
-                try:
-                    pose = fit_rigid_robust(X[rig], Y[f, rig], max_iter=10, tol=POSE_TOL)
-                except PoseError:
-                    pose = None
-            if pose is None:
-                flags[f] = FLAG_POSE_ALL
-                try:
-                    pose = fit_rigid_robust(X[vis], Yv, max_iter=10, tol=POSE_TOL)
-                except PoseError:
-                    pose = None
-            if pose is not None:
-                M = pose.matrix
-            R, t = M[:3, :3], M[:3, 3]
-            local = (Yv - t) @ R  # Rᵀ (y − t), row-wise
-            c = local - setup.X0[vis]
-            if space.derived:
-                c = c - setup.derived_offset(wf, vis)
-            h = Dv.T @ c.reshape(-1) * (setup.norm / nv)
-            w = solver.solve_gram(G, h, w_prev, w_prev2, w0=w)
-            sweeps += solver.n_iter_
-            if space.derived:
-                wf = space.full_weights(w)
-        wf = space.full_weights(w)
-        X = setup.marker_positions(w, wf)
-        r = X[vis] @ M[:3, :3].T + M[:3, 3] - Yv
-        errors[f] = float(np.sqrt((r * r).sum(1).mean()))
-        W[f], poses[f] = w, M
-        w_prev2, w_prev = w_prev, w.copy()
-        if am is not None:  # the frame's markers refine the rig for the next frames
-            local = (Yv - M[:3, 3]) @ M[:3, :3]
-            am.update_planes(np.repeat(rows[vis], 3), np.tile(np.eye(3), (nv, 1)), local.reshape(-1), wf)
-            setup.adopt(am, rows)
+        W[f], poses[f], errors[f], flags[f] = stepper.step(Y[f], visible[f])
+    sweeps = stepper.sweeps
     # frames before the first solvable one take its values
     W[:first], poses[:first] = W[first], poses[first]
     if progress is not None:

@@ -1,0 +1,111 @@
+"""One frame of the marker tracker: rigid pose and weights, alternated (Bouaziz et al. 2013, §3.1).
+
+:class:`FrameStepper` holds what carries from frame to frame — the last weights
+(the warm start and the temporal prior's two past frames), the last pose and the
+adapting rig — so the offline tracker (:func:`~workbench.capture.track.track_markers`,
+a loop over the take) and the live one (:class:`~workbench.capture.live.LiveTracker`,
+a frame as it arrives) run the same step. Hand-written glue over the robust pose
+(:mod:`.pose`) and the weight solver (:mod:`.solver`).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numpy.typing import NDArray
+
+from workbench.capture.pose import PoseError, fit_rigid_robust
+from workbench.capture.result import FLAG_POSE_ALL
+
+if TYPE_CHECKING:
+    from workbench.capture.adapt import AdaptiveModel
+    from workbench.capture.track import _MarkerSetup
+
+#: the reweighted pose stops when it moves the markers by less than this share of their extent
+POSE_TOL = 1e-6
+
+
+class FrameStepper:
+    """Track frame after frame on a marker set-up (see the module docstring).
+
+    Parameters
+    ----------
+    setup : _MarkerSetup
+        The take's fixed part (rig at the markers, Gram blocks, solver, rigid markers).
+    iterations : int
+        Pose / weight alternations per frame.
+    adaptive : AdaptiveModel, optional
+        Refined by every solved frame's markers; the set-up adopts it.
+    rows : (m,) int, optional
+        The markers' rows in ``adaptive.vertex_ids_``.
+    """
+
+    def __init__(self, setup: _MarkerSetup, iterations: int, adaptive: AdaptiveModel | None = None,
+                 rows: NDArray[np.intp] | None = None) -> None:
+        self.setup = setup
+        self.iterations = int(iterations)
+        self.adaptive = adaptive
+        self.rows = rows
+        kp = setup.space.plain.size
+        self.w = np.zeros(kp)
+        self.wf = setup.space.full_weights(self.w)
+        self.w_prev: NDArray[np.float64] | None = None
+        self.w_prev2: NDArray[np.float64] | None = None
+        self.M = np.eye(4)
+        self.sweeps = 0
+
+    def hold(self, w: NDArray[np.float64]) -> None:
+        """A frame that was not solved, holding weights ``w``: it still counts in the temporal prior."""
+        self.w_prev2, self.w_prev = self.w_prev, np.array(w, np.float64)
+
+    def step(self, Yf: NDArray[np.float64], vis: NDArray[np.bool_]) -> tuple[NDArray[np.float64],
+                                                                              NDArray[np.float64], float, str]:
+        """Solve one frame: ``(plain weights, pose (4, 4), RMS error, flag)`` for markers ``Yf`` (m, 3) seen at ``vis``."""
+        setup, space, solver = self.setup, self.setup.space, self.setup.solver
+        m, kp = vis.size, space.plain.size
+        flag = ""
+        Yv = Yf[vis]
+        Dv = setup.D[vis].reshape(-1, kp)
+        nv = int(vis.sum())
+        G = (setup.G_all if nv == m else setup.Gm[vis].sum(0)) * (setup.norm / nv)
+        rig = vis & setup.is_rigid
+        w, wf, M = self.w, self.wf, self.M
+        for _it in range(self.iterations):
+            X = setup.marker_positions(w, wf)
+            pose = None
+            if rig.sum() >= 3:
+                try:
+                    pose = fit_rigid_robust(X[rig], Yf[rig], max_iter=10, tol=POSE_TOL)
+                except PoseError:
+                    pose = None
+            if pose is None:
+                flag = FLAG_POSE_ALL
+                try:
+                    pose = fit_rigid_robust(X[vis], Yv, max_iter=10, tol=POSE_TOL)
+                except PoseError:
+                    pose = None
+            if pose is not None:
+                M = pose.matrix
+            R, t = M[:3, :3], M[:3, 3]
+            local = (Yv - t) @ R  # Rᵀ (y − t), row-wise
+            c = local - setup.X0[vis]
+            if space.derived:
+                c = c - setup.derived_offset(wf, vis)
+            h = Dv.T @ c.reshape(-1) * (setup.norm / nv)
+            w = solver.solve_gram(G, h, self.w_prev, self.w_prev2, w0=w)
+            self.sweeps += solver.n_iter_
+            if space.derived:
+                wf = space.full_weights(w)
+        wf = space.full_weights(w)
+        X = setup.marker_positions(w, wf)
+        r = X[vis] @ M[:3, :3].T + M[:3, 3] - Yv
+        error = float(np.sqrt((r * r).sum(1).mean()))
+        self.w, self.wf, self.M = w, wf, M
+        self.w_prev2, self.w_prev = self.w_prev, w.copy()
+        am = self.adaptive
+        if am is not None and self.rows is not None:  # the frame's markers refine the rig for the next frames
+            local = (Yv - M[:3, 3]) @ M[:3, :3]
+            am.update_planes(np.repeat(self.rows[vis], 3), np.tile(np.eye(3), (nv, 1)), local.reshape(-1), wf)
+            setup.adopt(am, self.rows)
+        return w, M, error, flag
