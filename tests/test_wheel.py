@@ -13,14 +13,17 @@ this venv's editable install of the repository is not seen (checked below).
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import os
+import shutil
 import subprocess
 import sys
 import sysconfig
 import tomllib
 import zipfile
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -158,3 +161,36 @@ def test_console_script_from_the_wheel(venv: Path) -> None:
     )
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert "vertices    5084" in proc.stdout and "shapes      52" in proc.stdout
+
+
+def _hatch_build() -> Any:
+    spec = importlib.util.spec_from_file_location("face_workbench_hatch_build", ROOT / "hatch_build.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_build_hook_rebuilds_a_stale_bundle_and_refuses_without_npm(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    hook = _hatch_build()
+    js = tmp_path / "widgets" / "js"
+    shutil.copytree(ROOT / "widgets" / "js", js, ignore=shutil.ignore_patterns("node_modules"))
+    static = tmp_path / "widgets" / "static"
+    static.mkdir()
+    # no bundle: both entries are stale
+    assert sorted(hook.stale_bundles(tmp_path)) == ["widgets/static/timeline.js",
+                                                    "widgets/static/viewport.js"]
+    for name in ("viewport.js", "timeline.js"):
+        (static / name).write_text("// bundle")
+    assert hook.stale_bundles(tmp_path) == []
+    # a source edited after the bundle was built makes it stale again
+    src = js / "src" / "viewport" / "scene.js"
+    later = (static / "viewport.js").stat().st_mtime + 10
+    os.utime(src, (later, later))
+    assert set(hook.stale_bundles(tmp_path)) == {"widgets/static/timeline.js",
+                                                 "widgets/static/viewport.js"}
+    # without npm the build stops with a message instead of shipping an old or missing bundle
+    monkeypatch.setenv("PATH", str(tmp_path / "no-npm-here"))
+    with pytest.raises(RuntimeError, match="npm is not on PATH"):
+        hook.build_frontend(tmp_path)
