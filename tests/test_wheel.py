@@ -96,6 +96,7 @@ def test_wheel_carries_bundle_and_sample_head(wheel: Path, dist: Path) -> None:
     assert len(bundle) > 100_000 and b"three" in bundle.lower()
     head = "workbench/_sample_models/head/"
     assert {head + "head.obj", head + "manifest.json", head + "LICENSE.txt"} <= names
+    assert "workbench/_app/workbench.ipynb" in names  # what `workbench app` serves
     assert sum(n.startswith(head + "targets/") for n in names) == 52
     assert sum(n.startswith(head + "identity/") for n in names) > 100
     # sources of the bundle, node_modules and the build cache stay out of the wheel
@@ -151,6 +152,18 @@ from workbench.samples import cache_dir
 print(json.dumps({"cache": str(cache_dir())}))
 """, HOME=str(home))
     assert got["cache"] == str(home / ".cache" / "face-workbench")
+
+
+def test_workbench_app_serves_the_notebook_the_wheel_carries(venv: Path) -> None:
+    got = _run(venv, """
+import json
+from workbench.cli import app_command
+print(json.dumps({"cmd": app_command(9001)}))
+""")
+    notebook = Path(got["cmd"][3])
+    assert notebook.is_file() and str(notebook).startswith(str(venv)), got["cmd"]
+    assert notebook.read_bytes() == (ROOT / "notebooks" / "workbench.ipynb").read_bytes()
+    assert got["cmd"][1:3] == ["-m", "voila"] and "--Voila.ip=127.0.0.1" in got["cmd"]
 
 
 def test_console_script_from_the_wheel(venv: Path) -> None:
