@@ -9,11 +9,15 @@
   order, in one fresh interpreter, in an empty tmp dir (``console``, ``toml`` and ``text``
   blocks are shown, not run). A block that only includes a repository file
   (``--8<-- "path"``: the add-a-family page's listing of ``tests/example_family/``) is that
-  file, run by its own test (``tests/consumers/test_add_a_family.py``).
+  file, run by its own test (``tests/consumers/test_add_a_family.py``);
+* every docstring example (``>>>``) in ``workbench/`` and ``widgets/`` — the API pages show
+  them — passes as a doctest.
 """
 
 from __future__ import annotations
 
+import doctest
+import importlib
 import importlib.util
 import os
 import re
@@ -120,3 +124,22 @@ def test_code_blocks_run(page: Path, tmp_path: Path) -> None:
     proc = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=env,
                           capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, f"{page.name}:\n{proc.stderr[-4000:]}"
+
+
+def _modules_with_examples() -> list[str]:
+    out = []
+    for top in ("workbench", "widgets"):
+        for path in sorted((ROOT / top).rglob("*.py")):
+            if ">>> " in path.read_text(encoding="utf-8"):
+                rel = path.with_suffix("").relative_to(ROOT)
+                parts = rel.parts[:-1] if rel.name == "__init__" else rel.parts
+                out.append(".".join(parts))
+    return out
+
+
+@pytest.mark.parametrize("module", _modules_with_examples())
+def test_docstring_examples_run(module: str) -> None:
+    mod = importlib.import_module(module)
+    result = doctest.testmod(mod, optionflags=doctest.NORMALIZE_WHITESPACE | doctest.ELLIPSIS,
+                             report=True)
+    assert result.attempted > 0 and result.failed == 0, result
