@@ -207,3 +207,11 @@ def test_build_hook_rebuilds_a_stale_bundle_and_refuses_without_npm(
     monkeypatch.setenv("PATH", str(tmp_path / "no-npm-here"))
     with pytest.raises(RuntimeError, match="npm is not on PATH"):
         hook.build_frontend(tmp_path)
+
+
+def test_version_of_a_checkout_that_was_never_installed() -> None:
+    from workbench._version import DISTRIBUTION, _source_version
+
+    assert DISTRIBUTION == "face-workbench"
+    # what __version__ falls back to without package metadata: pyproject.toml's version
+    assert _source_version() == _project_version()
