@@ -424,12 +424,23 @@ def _markers_info(path: str) -> int:
     return 0
 
 
+def default_app_notebook() -> Path:
+    """The workbench notebook ``workbench app`` serves by default.
+
+    A checkout's ``notebooks/workbench.ipynb``; in an installed wheel, the copy the wheel
+    carries (``workbench/_app/workbench.ipynb``, put there by the wheel build).
+    """
+    here = Path(__file__).resolve().parent
+    checkout = here.parent / "notebooks" / "workbench.ipynb"
+    return checkout if checkout.is_file() else here / "_app" / "workbench.ipynb"
+
+
 def app_command(port: int, *, token: bool = True, notebook: str | Path | None = None) -> list[str]:
     """The Voila command line that serves ``notebook`` on 127.0.0.1:``port`` (sources hidden).
 
     Raises ValueError naming the notebook when it does not exist.
     """
-    nb = Path(notebook) if notebook is not None else Path(__file__).resolve().parents[1] / "notebooks" / "workbench.ipynb"
+    nb = Path(notebook) if notebook is not None else default_app_notebook()
     if not nb.is_file():
         raise ValueError(f"{nb}: no such notebook (expected the workbench notebook, notebooks/workbench.ipynb)")
     cmd = [

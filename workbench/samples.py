@@ -6,6 +6,14 @@ is committed; the subdivided variants are built on first use by Loop
 subdivision — one linear operator applied to the neutral and to every delta,
 so every expression is subdivided exactly like the neutral — and cached as
 workbench files.
+
+Where the head is found: ``$WORKBENCH_SAMPLE_MODELS`` if set; else the copy a
+wheel carries inside the package (``workbench/_sample_models/head``, put there by
+the wheel build); else the repository's ``sample_models/`` beside a source
+checkout. The cache is ``sample_models/_cache`` in a checkout and
+``~/.cache/face-workbench`` for an installed wheel (never site-packages);
+``$WORKBENCH_CACHE_DIR`` overrides both. No network is used: a wheel builds the
+25k, 100k and 300k heads from its own base head on first use.
 """
 
 from __future__ import annotations
@@ -23,10 +31,27 @@ RESOLUTIONS = {"base": 0, "25k": 1, "100k": 2, "300k": 3}
 _BUILDER_VERSION = "1"
 
 
+#: the sample models inside an installed wheel (absent in a source checkout)
+PACKAGED_SAMPLES = Path(__file__).resolve().parent / "_sample_models"
+
+
 def sample_models_dir() -> Path:
-    """Folder holding the committed sample models (``$WORKBENCH_SAMPLE_MODELS`` overrides)."""
+    """Folder holding the sample models (``$WORKBENCH_SAMPLE_MODELS`` overrides).
+
+    Returns
+    -------
+    Path
+        The folder whose ``head/`` is the base sample head: the override, the copy
+        inside an installed wheel, or the repository's ``sample_models/``.
+
+    Raises
+    ------
+    FileNotFoundError
+        When none of them holds ``head/head.obj``.
+    """
     env = os.environ.get("WORKBENCH_SAMPLE_MODELS")
     candidates = [Path(env)] if env else []
+    candidates.append(PACKAGED_SAMPLES)
     candidates.append(Path(__file__).resolve().parent.parent / "sample_models")
     for c in candidates:
         if (c / "head" / "head.obj").is_file():
@@ -39,14 +64,23 @@ def sample_models_dir() -> Path:
 
 
 def cache_dir() -> Path:
-    """Where subdivided samples are cached (``$WORKBENCH_CACHE_DIR`` overrides)."""
+    """Where subdivided samples are cached (``$WORKBENCH_CACHE_DIR`` overrides).
+
+    Returns
+    -------
+    Path
+        ``sample_models/_cache`` beside a writable source checkout, else
+        ``~/.cache/face-workbench`` (always for an installed wheel); created if missing.
+    """
     env = os.environ.get("WORKBENCH_CACHE_DIR")
+    user_cache = Path.home() / ".cache" / "face-workbench"
     if env:
         d = Path(env)
     else:
-        d = sample_models_dir() / "_cache"
-        if not os.access(d.parent, os.W_OK):
-            d = Path.home() / ".cache" / "face-workbench"
+        models = sample_models_dir()
+        d = models / "_cache"
+        if models == PACKAGED_SAMPLES or not os.access(d.parent, os.W_OK):
+            d = user_cache
     d.mkdir(parents=True, exist_ok=True)
     return d
 

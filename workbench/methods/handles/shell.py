@@ -426,7 +426,10 @@ class ShellDeformer:
         displacement : (3,) float
             New displacement of that handle from its rest position.
 
-        Returns the current (n, 3) displacement (a view; copy before keeping it).
+        Returns
+        -------
+        (n, 3) float32
+            The current displacement (a view; copy before keeping it).
         """
         self._d_all[handle_index] = np.asarray(displacement, dtype=np.float64).reshape(3)
         j = int(self._handle_column[handle_index])
