@@ -34,3 +34,33 @@ def warped_actor(head):
         amplitudes=np.array([[0.0, -0.01, 0.015], [0.0, 0.0, 0.02]]) * size,
         scale=np.array([1.03, 0.98, 1.01]),
     )
+
+
+# ----------------------------------------------------------------- a rendered video take (ui)
+#: the rendered take: 480×480 frames of the sample head, jawOpen ramp 0 → 1, a blink, yaw ±10°, nod 4°
+SIZE = (480, 480)
+T = 30
+JAW = np.linspace(0.0, 1.0, T)
+BLINK = np.zeros(T)
+BLINK[12:18] = [0.5, 1.0, 1.0, 1.0, 1.0, 0.5]
+YAW = np.deg2rad(10.0) * np.sin(np.linspace(0.0, 2.0 * np.pi, T))
+PITCH = np.deg2rad(4.0) * np.sin(np.linspace(0.0, np.pi, T))
+
+
+def render_take(model):
+    """(T, 480, 480, 3) uint8 frames of ``model`` playing the take above (needs pyvista)."""
+    from widgets.render import png_to_array, render_png
+
+    names = list(model.shape_names)
+    V0 = np.asarray(model.vertices, np.float64)
+    centre = V0.mean(0)
+    deltas = {k: np.asarray(model.shapes[names.index(k)].delta, np.float64)
+              for k in ("jawOpen", "eyeBlinkLeft", "eyeBlinkRight")}
+    frames = []
+    for f in range(T):
+        X = V0 + JAW[f] * deltas["jawOpen"] + BLINK[f] * (deltas["eyeBlinkLeft"] + deltas["eyeBlinkRight"])
+        cy, sy, cp, sp = np.cos(YAW[f]), np.sin(YAW[f]), np.cos(PITCH[f]), np.sin(PITCH[f])
+        R = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]]) @ np.array([[1, 0, 0], [0, cp, -sp], [0, sp, cp]])
+        png = render_png(model, points=(X - centre) @ R.T + centre, size=SIZE, camera="front", antialias=False)
+        frames.append(png_to_array(png))
+    return np.stack(frames)

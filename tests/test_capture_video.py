@@ -15,6 +15,7 @@ import sys
 
 import numpy as np
 import pytest
+from capture_takes import BLINK, JAW, PITCH, SIZE, YAW, T, render_take  # noqa: F401  (the rendered take's truth)
 
 import workbench
 from workbench.capture.video import (
@@ -31,14 +32,6 @@ from workbench.capture.video import (
     track_video,
     video_landmarks,
 )
-
-SIZE = (480, 480)
-T = 30
-JAW = np.linspace(0.0, 1.0, T)
-BLINK = np.zeros(T)
-BLINK[12:18] = [0.5, 1.0, 1.0, 1.0, 1.0, 0.5]
-YAW = np.deg2rad(10.0) * np.sin(np.linspace(0.0, 2.0 * np.pi, T))
-PITCH = np.deg2rad(4.0) * np.sin(np.linspace(0.0, np.pi, T))
 
 
 # --------------------------------------------------------------------------- no extra needed
@@ -99,30 +92,12 @@ def test_sequence_points_are_pixels_y_up_z_toward_the_camera():
 
 
 # ----------------------------------------------------------------- rendered take (ui + mediapipe)
-def _render_take(model):
-    from widgets.render import png_to_array, render_png
-
-    names = list(model.shape_names)
-    V0 = np.asarray(model.vertices, np.float64)
-    centre = V0.mean(0)
-    deltas = {k: np.asarray(model.shapes[names.index(k)].delta, np.float64)
-              for k in ("jawOpen", "eyeBlinkLeft", "eyeBlinkRight")}
-    frames = []
-    for f in range(T):
-        X = V0 + JAW[f] * deltas["jawOpen"] + BLINK[f] * (deltas["eyeBlinkLeft"] + deltas["eyeBlinkRight"])
-        cy, sy, cp, sp = np.cos(YAW[f]), np.sin(YAW[f]), np.cos(PITCH[f]), np.sin(PITCH[f])
-        R = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]]) @ np.array([[1, 0, 0], [0, cp, -sp], [0, sp, cp]])
-        png = render_png(model, points=(X - centre) @ R.T + centre, size=SIZE, camera="front", antialias=False)
-        frames.append(png_to_array(png))
-    return np.stack(frames)
-
-
 @pytest.fixture(scope="module")
 def take():
     pytest.importorskip("pyvista")
     pytest.importorskip("mediapipe")
     model = workbench.load_sample("head")
-    frames = _render_take(model)
+    frames = render_take(model)
     calls = []
     seq = video_landmarks(frames, progress=lambda f, msg: calls.append((f, msg)))
     return model, frames, seq, calls

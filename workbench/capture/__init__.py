@@ -18,6 +18,8 @@ temporal prior (§3.1), optionally adapting the rig to the actor (§2, §3.2).
 * :func:`track_clouds` / :class:`AdaptiveModel` — point clouds and the dynamic
   expression model (:mod:`.clouds`, :mod:`.adapt`); :class:`IdentityModel` /
   :func:`sample_identity_model` — the identity PCA (:mod:`.identity`);
+* :class:`LiveTracker` — camera frames as they arrive (the ``video`` extra's FaceMesh,
+  the marker tracker's step, the rig adapting online; :mod:`.live`);
 * :mod:`.inputs` — C3D, marker CSV, NPY/NPZ, PLY/NPZ clouds, depth PNGs;
 * :func:`track_video` and friends — video through MediaPipe FaceMesh (the
   ``video`` extra; :mod:`.video`, imported on first use).
@@ -33,6 +35,7 @@ from typing import Any
 from workbench.capture.adapt import AdaptiveModel
 from workbench.capture.clouds import CloudTrackError, track_clouds
 from workbench.capture.identity import IdentityModel, sample_identity_model
+from workbench.capture.live import LiveFrame, LiveTracker
 from workbench.capture.replay import ReplayResult, replay
 from workbench.capture.result import TrackError, TrackResult
 from workbench.capture.solver import WeightSolver
@@ -44,6 +47,8 @@ __all__ = [
     "CloudTrackError",
     "IdentityModel",
     "LandmarkSequence",
+    "LiveFrame",
+    "LiveTracker",
     "ReplayResult",
     "SyntheticPerformance",
     "TrackError",

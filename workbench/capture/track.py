@@ -271,6 +271,28 @@ def _calibrate(setup: _MarkerSetup, Y: NDArray[np.float64], neutral: Any) -> NDA
     return np.where(vis[:, None], local - setup.X0, 0.0)
 
 
+def start_from_neutral(setup: _MarkerSetup, Y: NDArray[np.float64], neutral: Any, am: AdaptiveModel | None,
+                       rows: NDArray[np.intp]) -> NDArray[np.float64]:
+    """Calibrate on the actor at rest; returns the ``(m, 3)`` rest offsets (see :func:`track_markers`).
+
+    Without adaptation the offsets are added to the set-up's neutral; with it, the identity is
+    fitted to the rest markers (the paper's eq. 1), alternated with the pose, and adopted.
+    """
+    if am is None:
+        offsets = _calibrate(setup, Y, neutral)
+        setup.X0 = setup.X0 + offsets
+        return offsets
+    rest = _rest(setup, Y, neutral)  # the paper's neutral start: the identity from the rest markers
+    seen: NDArray[np.bool_] = np.asarray(np.isfinite(rest).all(1))
+    for _it in range(3):
+        offsets = _calibrate(setup, Y, neutral)
+        n_seen = int(seen.sum())
+        am.fit_neutral_planes(np.repeat(rows[seen], 3), np.tile(np.eye(3), (n_seen, 1)),
+                              (setup.X0[seen] + offsets[seen]).reshape(-1))
+        setup.adopt(am, rows)
+    return _calibrate(setup, Y, neutral)
+
+
 def _adaptive(adapt: Any, model: FaceState, ids: NDArray[np.intp], progress: Progress | None) -> tuple[
     AdaptiveModel | None, NDArray[np.intp]
 ]:
@@ -358,21 +380,7 @@ def track_markers(
     space = setup.space
     _check_units(Y, setup.X0, model)
     am, rows = _adaptive(adapt, model, ids, progress)
-    offsets = None
-    if neutral is not None:
-        if am is None:
-            offsets = _calibrate(setup, Y, neutral)
-            setup.X0 = setup.X0 + offsets
-        else:  # the paper's neutral start: the identity from the rest markers, alternated with the pose
-            rest = _rest(setup, Y, neutral)
-            seen: NDArray[np.bool_] = np.asarray(np.isfinite(rest).all(1))
-            for _it in range(3):
-                offsets = _calibrate(setup, Y, neutral)
-                n_seen = int(seen.sum())
-                am.fit_neutral_planes(np.repeat(rows[seen], 3), np.tile(np.eye(3), (n_seen, 1)),
-                                      (setup.X0[seen] + offsets[seen]).reshape(-1))
-                setup.adopt(am, rows)
-            offsets = _calibrate(setup, Y, neutral)
+    offsets = None if neutral is None else start_from_neutral(setup, Y, neutral, am, rows)
     visible: NDArray[np.bool_] = np.asarray(np.isfinite(Y).all(2))
     good: NDArray[np.bool_] = np.asarray(visible.sum(1) >= int(min_markers))
     if not good.any():

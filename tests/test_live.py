@@ -1,0 +1,106 @@
+"""Live tracking from camera frames (``workbench.capture.LiveTracker``; issue 30, the kernel side).
+
+The rendered take of ``tests/capture_takes.py`` (the sample head: jawOpen ramp, a
+blink, a head turn) is pushed frame by frame as a camera would deliver it. The
+input checks run everywhere; the rendered tests need pyvista (``ui``) and
+mediapipe (``video``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from capture_takes import BLINK, JAW, render_take
+
+import workbench
+from workbench.capture.facemesh import VideoError
+from workbench.capture.live import LiveTracker
+
+
+def test_bad_frames_and_arguments_are_named() -> None:
+    model = workbench.load_sample("head")
+    with pytest.raises(VideoError, match="l1"):
+        LiveTracker(model, l1=-1.0)
+    with pytest.raises(VideoError, match="min_confidence"):
+        LiveTracker(model, min_confidence=1.0)
+    live = LiveTracker(model)
+    with pytest.raises(VideoError, match=r"\(h, w, 3\)"):
+        live.push(np.zeros((64, 64), np.uint8), 0.0)
+    with pytest.raises(VideoError, match="uint8"):
+        live.push(np.zeros((64, 64, 3), np.float32), 0.0)
+    with pytest.raises(VideoError, match="no frame"):
+        live.take()
+
+
+@pytest.fixture(scope="module")
+def frames():
+    pytest.importorskip("pyvista")
+    pytest.importorskip("mediapipe")
+    model = workbench.load_sample("head")
+    return model, render_take(model)
+
+
+@pytest.mark.ui
+def test_pushing_the_take_frame_by_frame_gives_the_offline_tracking(frames) -> None:
+    from workbench.capture.track import DEFAULT_L1, DEFAULT_TEMPORAL
+    from workbench.capture.video import track_video
+
+    model, F = frames
+    offline = track_video(model, F, l1=DEFAULT_L1, temporal=DEFAULT_TEMPORAL)
+    with LiveTracker(model, adapt=False) as live:
+        got = [live.push(img, f / 30.0) for f, img in enumerate(F)]
+    assert all(g.ok for g in got) and got[0].note.startswith("registered")
+    take = live.take()
+    assert take.n_frames == len(F) and take.fps == pytest.approx(30.0)
+    np.testing.assert_allclose(take.weights, offline.weights, atol=1e-6)
+    np.testing.assert_allclose(take.poses, offline.poses, atol=1e-6)
+    names = list(model.shape_names)
+    jaw = take.weights[:, names.index("jawOpen")]
+    assert np.corrcoef(jaw, JAW)[0, 1] > 0.95
+    blink = take.weights[:, names.index("eyeBlinkLeft")]
+    assert blink[BLINK == 1.0].mean() > blink[BLINK == 0.0].mean() + 0.3
+    assert set(got[5].seconds) >= {"landmarks", "solve"}
+
+
+@pytest.mark.ui
+def test_no_face_holds_the_last_pose_and_the_take_survives_a_stop(frames) -> None:
+    model, F = frames
+    live = LiveTracker(model)
+    blank = np.full_like(F[0], 40)
+    first = live.push(blank, 0.0)  # nothing yet: the rest pose, not ok
+    assert not first.ok and "no face" in first.note and np.array_equal(first.pose, np.eye(4))
+    with pytest.raises(VideoError, match="no face was seen"):
+        live.take()
+    for f in range(1, 12):
+        last = live.push(F[f], f / 30.0)
+    assert last.ok
+    held = live.push(blank, 12 / 30.0)
+    assert not held.ok and "no face" in held.note
+    np.testing.assert_array_equal(held.weights, last.weights)
+    np.testing.assert_array_equal(held.pose, last.pose)
+    with pytest.raises(VideoError, match="timestamp"):
+        live.push(F[13], 12 / 30.0)
+    with pytest.raises(VideoError, match="like the first"):
+        live.push(F[13][:240], 13 / 30.0)
+    live.close()  # the camera stops mid-take: what was recorded is kept
+    take = live.take()
+    assert take.n_frames == 13 and take.held.tolist() == [True] + [False] * 11 + [True]
+    np.testing.assert_array_equal(take.weights[0], take.weights[1])  # before the first face: its values
+    assert np.isnan(live.landmarks[0]).all() and np.isfinite(live.landmarks[5]).all()
+
+
+@pytest.mark.ui
+def test_two_faces_track_the_larger(frames) -> None:
+    from PIL import Image
+
+    model, F = frames
+    big = F[0]
+    small = np.asarray(Image.fromarray(F[0]).resize((160, 160)))
+    scene = np.full((480, 720, 3), 40, np.uint8)
+    scene[:, :480] = big
+    scene[20:180, 540:700] = small
+    with LiveTracker(model, adapt=False) as live:
+        got = live.push(scene, 0.0)
+    assert got.ok and got.landmarks is not None
+    xs = got.landmarks[:, 0] * 720
+    assert xs.mean() < 480, "the larger face (left) is tracked"

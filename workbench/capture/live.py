@@ -1,0 +1,304 @@
+"""Live tracking: camera frames in as they come, weights and head pose out (Bouaziz et al. 2013, online).
+
+:class:`LiveTracker` is the kernel side of the Live tab (issue 30): each
+:meth:`~LiveTracker.push` of an RGB camera frame runs MediaPipe FaceMesh in its
+tracking mode (the ``video`` extra), brings the landmarks into the model's frame
+and solves that frame alone — the same step as the offline marker tracker
+(:class:`~workbench.capture.frame_step.FrameStepper`: robust head pose, bounded
+L1 + temporal weights, warm-started), so a take pushed frame by frame gives what
+:func:`~workbench.capture.video.track_video` gives it offline with the same λ's.
+
+* **Start.** The first frame with a face registers the landmarks onto the rig
+  (:func:`~workbench.capture.video.register_landmarks`: the landmark → vertex map)
+  and calibrates on it as the actor's rest face (``track(..., neutral=0)``).
+  There is no calibration session: with ``adapt`` (the default) the rig adapts to
+  the actor as frames arrive (the dynamic expression model, §4 — identity from
+  the rest frame, correctives from every solved frame, :mod:`.adapt`).
+* **No face** in view: the frame holds the last weights and pose, ``ok`` is
+  False and ``note`` says so. **Two faces**: the largest is tracked.
+* :meth:`~LiveTracker.take` is everything pushed so far as a
+  :class:`~workbench.capture.TrackResult` (timestamps kept); the take survives
+  the camera stopping mid-way.
+
+The λ's cannot be chosen from a take that has not happened: defaults are the
+marker tracker's fixed ones (:data:`~workbench.capture.track.DEFAULT_L1`,
+``DEFAULT_TEMPORAL``). Hand-written glue over the kept modules.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import warnings
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from workbench.capture.facemesh import N_LANDMARKS, VideoError, _mediapipe_face_mesh
+from workbench.capture.frame_step import FrameStepper
+from workbench.capture.result import FLAG_HELD, TrackResult
+
+if TYPE_CHECKING:
+    from workbench.capture.landmark_registration import LandmarkRegistration
+    from workbench.core.state import FaceState
+
+__all__ = ["LiveFrame", "LiveTracker"]
+
+
+@dataclass(frozen=True, eq=False)
+class LiveFrame:
+    """What one pushed camera frame gave.
+
+    Attributes
+    ----------
+    weights : (k,) float
+        Every shape's weight, in ``model.shape_names`` order (held when ``ok`` is False).
+    pose : (4, 4) float
+        Head pose: ``observed ≈ R x + t`` in the model's units (held when ``ok`` is False).
+    landmarks : (478, 3) float or None
+        MediaPipe's normalized landmarks of the tracked face; None without a face.
+    ok : bool
+        A face was found and solved.
+    timestamp : float
+        Seconds, as pushed.
+    note : str
+        Empty, or why the frame holds (``"no face in view"``), or what happened
+        (``"registered: …"`` on the first face).
+    seconds : mapping of str to float
+        Time per stage: ``"landmarks"``, ``"solve"`` (and ``"register"`` on the first face).
+    """
+
+    weights: NDArray[np.float64]
+    pose: NDArray[np.float64]
+    landmarks: NDArray[np.float64] | None
+    ok: bool
+    timestamp: float
+    note: str = ""
+    seconds: dict[str, float] = field(default_factory=dict)
+
+
+def _check_image(image: Any) -> NDArray[np.uint8]:
+    img = np.asarray(image)
+    if img.ndim != 3 or img.shape[2] not in (3, 4) or img.shape[0] < 16 or img.shape[1] < 16:
+        raise VideoError(f"image must be an (h, w, 3) RGB frame, got shape {img.shape}")
+    if img.dtype != np.uint8:
+        raise VideoError(f"image must be uint8 RGB, got dtype {img.dtype}")
+    return np.ascontiguousarray(img[..., :3])
+
+
+class LiveTracker:
+    """Track a face from camera frames as they arrive (see the module docstring).
+
+    Parameters
+    ----------
+    model : FaceModel
+        The rig (ARKit-named shapes: the registration finds its landmarks by them).
+    adapt : bool or dict
+        Adapt the rig to the actor while tracking (True: the default options; a dict:
+        :class:`~workbench.capture.AdaptiveModel` options; False: off).
+    l1, temporal : float, optional
+        The tracker's relative λ's (default: the marker tracker's fixed ones).
+    iterations : int
+        Pose / weight alternations per frame.
+    min_markers : int
+        Fewer landmarks in the model's frame hold the frame.
+    min_confidence : float
+        FaceMesh's detection and tracking confidence, in (0, 1).
+
+    Attributes
+    ----------
+    registration_ : LandmarkRegistration or None
+        The landmark → vertex map, made on the first face.
+    adapted_ : AdaptiveModel or None
+        The rig adapting to the actor (``.to_model()``).
+    n_frames_ : int
+        Frames pushed.
+    """
+
+    def __init__(self, model: FaceState, *, adapt: bool | dict[str, Any] = True, l1: float | None = None,
+                 temporal: float | None = None, iterations: int = 2, min_markers: int = 4,
+                 min_confidence: float = 0.5) -> None:
+        from workbench.capture.track import DEFAULT_L1, DEFAULT_TEMPORAL
+
+        if not model.shapes:
+            raise VideoError("model: it has no blendshapes to track")
+        for name, v in (("l1", l1), ("temporal", temporal)):
+            if v is not None and not (isinstance(v, int | float) and math.isfinite(v) and v >= 0):
+                raise VideoError(f"{name} must be a number ≥ 0 (or None), got {v!r}")
+        if not (0.0 < float(min_confidence) < 1.0):
+            raise VideoError(f"min_confidence must be in (0, 1), got {min_confidence!r}")
+        self.model = model
+        self.adapt = adapt
+        self.l1 = DEFAULT_L1 if l1 is None else float(l1)
+        self.temporal = DEFAULT_TEMPORAL if temporal is None else float(temporal)
+        self.iterations = int(iterations)
+        self.min_markers = int(min_markers)
+        self.min_confidence = float(min_confidence)
+        self.registration_: LandmarkRegistration | None = None
+        self.adapted_: Any = None
+        self.n_frames_ = 0
+        self._mesh: Any = None
+        self._stepper: FrameStepper | None = None
+        self._image_size: tuple[int, int] | None = None
+        self._times: list[float] = []
+        self._weights: list[NDArray[np.float64]] = []
+        self._poses: list[NDArray[np.float64]] = []
+        self._errors: list[float] = []
+        self._flags: list[str] = []
+        self._landmarks: list[NDArray[np.float64]] = []
+        self._last_w = np.zeros(len(model.shape_names))
+        self._last_pose = np.eye(4)
+
+    # ------------------------------------------------------------------ frames
+    def _face_landmarks(self, img: NDArray[np.uint8]) -> NDArray[np.float64] | None:
+        """The largest face's (478, 3) normalized landmarks, or None."""
+        if self._mesh is None:
+            fm = _mediapipe_face_mesh()
+            self._mesh = fm.FaceMesh(static_image_mode=False, max_num_faces=2, refine_landmarks=True,
+                                     min_detection_confidence=self.min_confidence,
+                                     min_tracking_confidence=self.min_confidence)
+        with warnings.catch_warnings():
+            warnings.filterwarnings("ignore", message=r"SymbolDatabase\.GetPrototype\(\) is deprecated")
+            res = self._mesh.process(img)
+        faces = res.multi_face_landmarks or []
+        if not faces:
+            return None
+        h, w = img.shape[:2]
+        best, area = None, -1.0
+        for face in faces:
+            L = np.array([(p.x, p.y, p.z) for p in face.landmark], np.float64)
+            if L.shape[0] != N_LANDMARKS:
+                continue
+            a = float(np.ptp(L[:, 0]) * w * np.ptp(L[:, 1]) * h)
+            if a > area:
+                best, area = L, a
+        return best
+
+    def _start(self, L: NDArray[np.float64]) -> str:
+        """Register on the first face (the actor at rest) and set the tracker up on it."""
+        from workbench.capture.landmark_registration import register_landmarks
+        from workbench.capture.track import (
+            _adaptive,
+            _check_units,
+            _MarkerSetup,
+            start_from_neutral,
+        )
+
+        assert self._image_size is not None
+        reg = register_landmarks(self.model, L[None], frame=0, image_size=self._image_size)
+        ids = np.asarray(reg.vertex_ids, np.intp)
+        setup = _MarkerSetup(self.model, ids, self.l1, self.temporal, None)
+        Y0 = reg.to_model(L[None])
+        _check_units(Y0, setup.X0, self.model)
+        am, rows = _adaptive(self.adapt if self.adapt else None, self.model, ids, None)
+        start_from_neutral(setup, Y0, 0, am, rows)
+        self._stepper = FrameStepper(setup, self.iterations, am, rows)
+        self.registration_, self.adapted_ = reg, am
+        return f"registered: {ids.size} landmarks on the rig (rms {reg.rms:.3g})"
+
+    def push(self, image: ArrayLike, timestamp: float) -> LiveFrame:
+        """Track one camera frame: ``image`` (h, w, 3) uint8 RGB taken at ``timestamp`` seconds.
+
+        Raises
+        ------
+        VideoError
+            Not an RGB uint8 frame, a frame of another size than the first, a timestamp
+            not after the last one, or no face to register on (no rig landmarks).
+        """
+        img = _check_image(image)
+        t = float(timestamp)
+        if not math.isfinite(t) or (self._times and t <= self._times[-1]):
+            last = self._times[-1] if self._times else None
+            raise VideoError(f"timestamp must be finite and after the last frame's ({last}), got {timestamp!r}")
+        size = (img.shape[1], img.shape[0])
+        if self._image_size is not None and size != self._image_size:
+            raise VideoError(f"image: every frame must be {self._image_size[0]}×{self._image_size[1]} like the "
+                             f"first, got {size[0]}×{size[1]}")
+        self._image_size = size
+        secs: dict[str, float] = {}
+        t0 = time.perf_counter()
+        L = self._face_landmarks(img)
+        secs["landmarks"] = time.perf_counter() - t0
+        note = ""
+        ok = False
+        err, flag = float("nan"), FLAG_HELD
+        if L is not None:
+            if self._stepper is None:
+                t1 = time.perf_counter()
+                note = self._start(L)
+                secs["register"] = time.perf_counter() - t1
+            assert self._stepper is not None and self.registration_ is not None
+            t1 = time.perf_counter()
+            Y = self.registration_.to_model(L[None])[0]
+            vis = np.asarray(np.isfinite(Y).all(1))
+            if int(vis.sum()) >= self.min_markers:
+                w, M, err, flag = self._stepper.step(Y, vis)
+                self._last_w = self._stepper.setup.space.full_weights(w)
+                self._last_pose = M
+                ok = True
+            else:
+                self._stepper.hold(self._stepper.w)
+                note = f"only {int(vis.sum())} landmarks on the face: holding the last pose"
+            secs["solve"] = time.perf_counter() - t1
+        else:
+            note = "no face in view: holding the last pose"
+            if self._stepper is not None:
+                self._stepper.hold(self._stepper.w)
+        self.n_frames_ += 1
+        self._times.append(t)
+        self._weights.append(self._last_w.copy())
+        self._poses.append(self._last_pose.copy())
+        self._errors.append(err)
+        self._flags.append(flag if ok else FLAG_HELD)
+        self._landmarks.append(L if L is not None else np.full((N_LANDMARKS, 3), np.nan))
+        return LiveFrame(self._last_w.copy(), self._last_pose.copy(), L, ok, t, note, secs)
+
+    # ------------------------------------------------------------------ the take
+    @property
+    def timestamps(self) -> NDArray[np.float64]:
+        """(T,) seconds of the frames pushed so far."""
+        return np.array(self._times, np.float64)
+
+    @property
+    def landmarks(self) -> NDArray[np.float64]:
+        """(T, 478, 3) normalized landmarks pushed so far (NaN without a face): the raw take."""
+        return np.array(self._landmarks, np.float64).reshape(-1, N_LANDMARKS, 3)
+
+    def take(self) -> TrackResult:
+        """Everything pushed so far as a :class:`~workbench.capture.TrackResult` (``info["timestamps"]``).
+
+        The rate is the median frame interval's; frames before the first face take its values.
+        """
+        if not self._times:
+            raise VideoError("take: no frame was pushed")
+        if self._stepper is None:
+            raise VideoError("take: no face was seen in any frame")
+        T = len(self._times)
+        ts = self.timestamps
+        fps = 1.0 / float(np.median(np.diff(ts))) if T > 1 else 30.0
+        W, P = np.array(self._weights), np.array(self._poses)
+        flags = list(self._flags)
+        solved = [i for i, f in enumerate(flags) if f != FLAG_HELD]
+        if solved:
+            W[: solved[0]], P[: solved[0]] = W[solved[0]], P[solved[0]]
+        space = self._stepper.setup.space
+        derived = tuple(space.shape_names[i] for i in sorted(set(space.derived) | set(space.dead.tolist())))
+        return TrackResult(W, P, np.array(self._errors), tuple(flags), fps, space.shape_names, derived,
+                           space.size, "markers",
+                           {"l1": self.l1, "temporal": self.temporal, "live": True, "timestamps": ts,
+                            "vertex_ids": None if self.registration_ is None else self.registration_.vertex_ids,
+                            "adapted": self.adapted_})
+
+    def close(self) -> None:
+        """Release FaceMesh (the take stays readable)."""
+        if self._mesh is not None:
+            self._mesh.close()
+            self._mesh = None
+
+    def __enter__(self) -> LiveTracker:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
