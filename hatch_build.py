@@ -120,7 +120,7 @@ class FrontendBuildHook(BuildHookInterface):  # type: ignore[type-arg]
             stale = stale_bundles(root)
             if stale:
                 raise RuntimeError(f"face-workbench: npm run build did not write {stale}")
-        missing = [n for n in ("viewport.js", "timeline.js")
+        missing = [n for n in ("viewport.js", "timeline.js", "camera.js")
                    if not (root / "widgets" / "static" / n).is_file()]
         if missing:
             raise RuntimeError(f"face-workbench: widgets/static/ lacks {missing}")

@@ -51,7 +51,7 @@ def test_pushing_the_take_frame_by_frame_gives_the_offline_tracking(frames) -> N
         got = [live.push(img, f / 30.0) for f, img in enumerate(F)]
     assert all(g.ok for g in got) and got[0].note.startswith("registered")
     take = live.take()
-    assert take.n_frames == len(F) and take.fps == pytest.approx(30.0)
+    assert take.n_frames == len(F) and take.info["rate"] == pytest.approx(30.0)
     np.testing.assert_allclose(take.weights, offline.weights, atol=1e-6)
     np.testing.assert_allclose(take.poses, offline.poses, atol=1e-6)
     names = list(model.shape_names)
@@ -104,3 +104,18 @@ def test_two_faces_track_the_larger(frames) -> None:
     assert got.ok and got.landmarks is not None
     xs = got.landmarks[:, 0] * 720
     assert xs.mean() < 480, "the larger face (left) is tracked"
+
+
+@pytest.mark.ui
+def test_a_take_with_dropped_frames_keys_them_at_their_own_times(frames) -> None:
+    model, F = frames
+    kept = [0, 1, 2, 5, 6, 9, 10, 11, 15]  # the kernel could not keep up with every camera frame
+    with LiveTracker(model, adapt=True, adapt_every=2) as live:
+        for f in kept:
+            live.push(F[f], 100.0 + f / 30.0)
+    take = live.take()
+    np.testing.assert_allclose(take.times(), (np.array(kept) - kept[0]) / 30.0)
+    tl = take.to_timeline(0.0)
+    jaw_keys = [k.time for k in tl.tracks["weights/jawOpen"].keys]
+    np.testing.assert_allclose(jaw_keys, (np.array(kept) - kept[0]) / 30.0)
+    assert take.info["adapted"] is not None and take.fps == 30.0

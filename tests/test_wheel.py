@@ -92,7 +92,7 @@ def test_wheel_carries_bundle_and_sample_head(wheel: Path, dist: Path) -> None:
     with zipfile.ZipFile(wheel) as zf:
         names = set(zf.namelist())
         bundle = zf.read("widgets/static/viewport.js")
-    assert {"widgets/static/viewport.js", "widgets/static/timeline.js"} <= names
+    assert {"widgets/static/viewport.js", "widgets/static/timeline.js", "widgets/static/camera.js"} <= names
     assert len(bundle) > 100_000 and b"three" in bundle.lower()
     head = "workbench/_sample_models/head/"
     assert {head + "head.obj", head + "manifest.json", head + "LICENSE.txt"} <= names
@@ -192,16 +192,16 @@ def test_build_hook_rebuilds_a_stale_bundle_and_refuses_without_npm(
     static = tmp_path / "widgets" / "static"
     static.mkdir()
     # no bundle: both entries are stale
-    assert sorted(hook.stale_bundles(tmp_path)) == ["widgets/static/timeline.js",
+    assert sorted(hook.stale_bundles(tmp_path)) == ["widgets/static/camera.js", "widgets/static/timeline.js",
                                                     "widgets/static/viewport.js"]
-    for name in ("viewport.js", "timeline.js"):
+    for name in ("viewport.js", "timeline.js", "camera.js"):
         (static / name).write_text("// bundle")
     assert hook.stale_bundles(tmp_path) == []
     # a source edited after the bundle was built makes it stale again
     src = js / "src" / "viewport" / "scene.js"
     later = (static / "viewport.js").stat().st_mtime + 10
     os.utime(src, (later, later))
-    assert set(hook.stale_bundles(tmp_path)) == {"widgets/static/timeline.js",
+    assert set(hook.stale_bundles(tmp_path)) == {"widgets/static/camera.js", "widgets/static/timeline.js",
                                                  "widgets/static/viewport.js"}
     # without npm the build stops with a message instead of shipping an old or missing bundle
     monkeypatch.setenv("PATH", str(tmp_path / "no-npm-here"))

@@ -110,9 +110,12 @@ def open_notebook(
     ``path_or_cells`` is a notebook file (copied into the server root) or a list
     of code-cell sources. The page is 1400x1000 CSS px in a fresh context. The
     server's recovery folder is emptied first unless ``keep_recovery=True``.
+    ``browser_args``: a Chromium of this session launched with these switches too
+    (e.g. a fake camera), once per set of switches.
     """
     opened: list[tuple[Any, NotebookPage]] = []
     before = lab.kernel_ids()
+    other_browsers: dict[tuple[str, ...], Any] = {}
 
     def _open(
         source: Path | list[str],
@@ -120,7 +123,14 @@ def open_notebook(
         run: bool = True,
         viewport_size: tuple[int, int] = (1400, 1000),
         keep_recovery: bool = False,
+        browser_args: tuple[str, ...] = (),
     ) -> NotebookPage:
+        chromium = browser
+        if browser_args:
+            if browser_args not in other_browsers:
+                other_browsers[browser_args] = browser.browser_type.launch(
+                    executable_path=str(CHROMIUM), headless=True, args=[*CHROMIUM_ARGS, *browser_args])
+            chromium = other_browsers[browser_args]
         if not keep_recovery:
             # Kernels of earlier tests were shut down mid-session: their autosaves would
             # make notebooks/workbench.ipynb offer recovery instead of opening the app.
@@ -135,7 +145,7 @@ def open_notebook(
                 write_notebook(target, source)
             else:
                 shutil.copyfile(source, target)
-            context = browser.new_context(
+            context = chromium.new_context(
                 viewport={"width": viewport_size[0], "height": viewport_size[1]}
             )
             context.add_init_script(WATCH_WIDGET_RESTORE)
@@ -184,6 +194,9 @@ def open_notebook(
             (nb.artifacts / "console.log").write_text("\n".join(nb.console))
         with contextlib.suppress(Exception):
             context.close()
+    for b in other_browsers.values():
+        with contextlib.suppress(Exception):
+            b.close()
     lab.shutdown_kernels(lab.kernel_ids() - before)
     if problems:
         pytest.fail("the page and the kernel fell out of step: " + "; ".join(problems))

@@ -55,7 +55,7 @@ def test_exports_the_tool_widgets() -> None:
 
 
 def test_tabs_exist_and_heavy_panels_wait_for_their_tab(wb: Workbench) -> None:
-    assert tuple(wb.tabs.titles) == ("Shapes", "Sculpt", "Regions", "Paint", "Export", "Capture", "Enhance")
+    assert tuple(wb.tabs.titles) == ("Shapes", "Sculpt", "Regions", "Paint", "Export", "Capture", "Live", "Enhance")
     assert not wb.panel_built("regions") and not wb.panel_built("paint")
     assert wb.timeline in wb.children[1].children[0].children  # under the viewport
     _select(wb, "Regions")

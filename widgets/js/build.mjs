@@ -23,11 +23,20 @@ const timelineOptions = {
   outfile: path.join(here, "..", "static", "timeline.js"),
 };
 
+// Third: the webcam of the Live tab (plain DOM, getUserMedia).
+const cameraOptions = {
+  ...options,
+  entryPoints: [path.join(here, "src", "camera.js")],
+  outfile: path.join(here, "..", "static", "camera.js"),
+};
+
 if (process.argv.includes("--watch")) {
   const ctx = await esbuild.context(options);
   await ctx.watch();
   await (await esbuild.context(timelineOptions)).watch();
+  await (await esbuild.context(cameraOptions)).watch();
 } else {
   await esbuild.build(options);
   await esbuild.build(timelineOptions);
+  await esbuild.build(cameraOptions);
 }

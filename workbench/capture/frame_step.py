@@ -59,9 +59,13 @@ class FrameStepper:
         """A frame that was not solved, holding weights ``w``: it still counts in the temporal prior."""
         self.w_prev2, self.w_prev = self.w_prev, np.array(w, np.float64)
 
-    def step(self, Yf: NDArray[np.float64], vis: NDArray[np.bool_]) -> tuple[NDArray[np.float64],
-                                                                              NDArray[np.float64], float, str]:
-        """Solve one frame: ``(plain weights, pose (4, 4), RMS error, flag)`` for markers ``Yf`` (m, 3) seen at ``vis``."""
+    def step(self, Yf: NDArray[np.float64], vis: NDArray[np.bool_], *, adapt: bool = True
+             ) -> tuple[NDArray[np.float64], NDArray[np.float64], float, str]:
+        """Solve one frame: ``(plain weights, pose (4, 4), RMS error, flag)`` for markers ``Yf`` (m, 3) seen at ``vis``.
+
+        ``adapt=False``: this frame does not refine the adapting rig (the live tracker adapts on
+        every few frames only, to keep up with the camera).
+        """
         setup, space, solver = self.setup, self.setup.space, self.setup.solver
         m, kp = vis.size, space.plain.size
         flag = ""
@@ -104,7 +108,7 @@ class FrameStepper:
         self.w, self.wf, self.M = w, wf, M
         self.w_prev2, self.w_prev = self.w_prev, w.copy()
         am = self.adaptive
-        if am is not None and self.rows is not None:  # the frame's markers refine the rig for the next frames
+        if adapt and am is not None and self.rows is not None:  # the frame refines the rig for the next frames
             local = (Yv - M[:3, 3]) @ M[:3, :3]
             am.update_planes(np.repeat(self.rows[vis], 3), np.tile(np.eye(3), (nv, 1)), local.reshape(-1), wf)
             setup.adopt(am, self.rows)

@@ -31,6 +31,7 @@ import math
 import time
 import warnings
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -106,6 +107,10 @@ class LiveTracker:
         Fewer landmarks in the model's frame hold the frame.
     min_confidence : float
         FaceMesh's detection and tracking confidence, in (0, 1).
+    adapt_every : int
+        With ``adapt``: every this many solved frames refine the rig (an update costs
+        ~70 ms at 478 landmarks on one core, a frame without one ~7 ms: the default keeps
+        the kernel at ≥ 20 frames/s while the rig converges over the first seconds).
 
     Attributes
     ----------
@@ -119,7 +124,7 @@ class LiveTracker:
 
     def __init__(self, model: FaceState, *, adapt: bool | dict[str, Any] = True, l1: float | None = None,
                  temporal: float | None = None, iterations: int = 2, min_markers: int = 4,
-                 min_confidence: float = 0.5) -> None:
+                 min_confidence: float = 0.5, adapt_every: int = 5) -> None:
         from workbench.capture.track import DEFAULT_L1, DEFAULT_TEMPORAL
 
         if not model.shapes:
@@ -136,9 +141,13 @@ class LiveTracker:
         self.iterations = int(iterations)
         self.min_markers = int(min_markers)
         self.min_confidence = float(min_confidence)
+        if isinstance(adapt_every, bool) or not isinstance(adapt_every, int) or adapt_every < 1:
+            raise VideoError(f"adapt_every must be an int ≥ 1, got {adapt_every!r}")
+        self.adapt_every = adapt_every
         self.registration_: LandmarkRegistration | None = None
         self.adapted_: Any = None
         self.n_frames_ = 0
+        self._solved = 0
         self._mesh: Any = None
         self._stepper: FrameStepper | None = None
         self._image_size: tuple[int, int] | None = None
@@ -234,7 +243,9 @@ class LiveTracker:
             Y = self.registration_.to_model(L[None])[0]
             vis = np.asarray(np.isfinite(Y).all(1))
             if int(vis.sum()) >= self.min_markers:
-                w, M, err, flag = self._stepper.step(Y, vis)
+                self._solved += 1
+                w, M, err, flag = self._stepper.step(Y, vis, adapt=self._solved % self.adapt_every == 1
+                                                     or self.adapt_every == 1)
                 self._last_w = self._stepper.setup.space.full_weights(w)
                 self._last_pose = M
                 ok = True
@@ -257,6 +268,29 @@ class LiveTracker:
 
     # ------------------------------------------------------------------ the take
     @property
+    def image_size(self) -> tuple[int, int] | None:
+        """``(width, height)`` of the frames (None before the first)."""
+        return self._image_size
+
+    def save_take(self, path: str | Path) -> Path:
+        """Write the raw take — landmarks, timestamps, image size — as ``.npz`` (atomically).
+
+        Re-track it offline with other settings: ``np.load`` it into a
+        :class:`~workbench.capture.LandmarkSequence` for :func:`~workbench.capture.track_video`.
+        """
+        from workbench.export.base import atomic_path
+
+        if not self._times:
+            raise VideoError("save_take: no frame was pushed")
+        out = Path(path)
+        if out.suffix.lower() != ".npz":
+            raise VideoError(f"save_take: {out.name}: expected a .npz path")
+        with atomic_path(out) as tmp, open(tmp, "wb") as fh:
+            np.savez_compressed(fh, landmarks=self.landmarks, timestamps=self.timestamps,
+                                image_size=np.array(self._image_size, np.int64))
+        return out
+
+    @property
     def timestamps(self) -> NDArray[np.float64]:
         """(T,) seconds of the frames pushed so far."""
         return np.array(self._times, np.float64)
@@ -269,7 +303,10 @@ class LiveTracker:
     def take(self) -> TrackResult:
         """Everything pushed so far as a :class:`~workbench.capture.TrackResult` (``info["timestamps"]``).
 
-        The rate is the median frame interval's; frames before the first face take its values.
+        The keys go at the frames' own timestamps (``info["timestamps"]``: a camera drops
+        frames); ``fps`` is the nominal 30 (the timeline's rate when it had none), and
+        ``info["rate"]`` the rate achieved (the median interval's). Frames before the first
+        face take its values.
         """
         if not self._times:
             raise VideoError("take: no frame was pushed")
@@ -277,7 +314,7 @@ class LiveTracker:
             raise VideoError("take: no face was seen in any frame")
         T = len(self._times)
         ts = self.timestamps
-        fps = 1.0 / float(np.median(np.diff(ts))) if T > 1 else 30.0
+        rate = 1.0 / float(np.median(np.diff(ts))) if T > 1 else float("nan")
         W, P = np.array(self._weights), np.array(self._poses)
         flags = list(self._flags)
         solved = [i for i, f in enumerate(flags) if f != FLAG_HELD]
@@ -285,9 +322,9 @@ class LiveTracker:
             W[: solved[0]], P[: solved[0]] = W[solved[0]], P[solved[0]]
         space = self._stepper.setup.space
         derived = tuple(space.shape_names[i] for i in sorted(set(space.derived) | set(space.dead.tolist())))
-        return TrackResult(W, P, np.array(self._errors), tuple(flags), fps, space.shape_names, derived,
+        return TrackResult(W, P, np.array(self._errors), tuple(flags), 30.0, space.shape_names, derived,
                            space.size, "markers",
-                           {"l1": self.l1, "temporal": self.temporal, "live": True, "timestamps": ts,
+                           {"l1": self.l1, "temporal": self.temporal, "live": True, "timestamps": ts, "rate": rate,
                             "vertex_ids": None if self.registration_ is None else self.registration_.vertex_ids,
                             "adapted": self.adapted_})
 

@@ -146,7 +146,12 @@ class TrackResult:
         return np.array([f == FLAG_HELD for f in self.flags], bool)
 
     def times(self, start: float = 0.0) -> NDArray[np.float64]:
-        """(T,) seconds: ``start + f / fps``."""
+        """(T,) seconds: ``start + f / fps``, or the frames' own timestamps (``info["timestamps"]``,
+        a live take's, from its first frame) when the result has them."""
+        ts = self.info.get("timestamps") if self.info else None
+        if ts is not None and len(ts) == self.n_frames:
+            t = np.asarray(ts, np.float64)
+            return float(start) + (t - t[0])
         return float(start) + np.arange(self.n_frames) / self.fps
 
     def to_timeline(self, tolerance: float = 0.01, *, start: float = 0.0, head_pose: bool = True,

@@ -1,0 +1,126 @@
+"""The Live tab in Chromium with a fake camera playing a video rendered from the rig.
+
+Chromium's fake capture device plays ``take.y4m`` (``--use-fake-device-for-media-stream
+--use-file-for-fake-video-capture``; ``--use-fake-ui-for-media-stream`` answers the
+permission prompt as a user clicking *Allow*): the sample head rendered with known
+weights (tests/capture_takes.py: a jawOpen ramp, a blink, a head turn), looped. With
+the mouse: open the Live tab, *Start camera* (the page sends frames, one in flight,
+the kernel acks each), the face follows (the viewport's pixels change with the video
+and jawOpen moves), *Record* / *Stop recording* (one undo step of keys), the take
+exports as .glb and Live Link CSV, *Stop camera* (the page lets the camera go).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from harness import NotebookPage, pixel_change, wait_until
+
+
+def _write_y4m(path: Path, frames: np.ndarray, fps: int = 30) -> None:
+    """RGB (T, h, w, 3) uint8 frames as a 4:2:0 YUV4MPEG2 file (BT.601, full range), what Chromium's fake camera reads."""
+    T, h, w, _ = frames.shape
+    rgb = frames.astype(np.float64)
+    y = 0.299 * rgb[..., 0] + 0.587 * rgb[..., 1] + 0.114 * rgb[..., 2]
+    u = 128.0 - 0.168736 * rgb[..., 0] - 0.331264 * rgb[..., 1] + 0.5 * rgb[..., 2]
+    v = 128.0 + 0.5 * rgb[..., 0] - 0.418688 * rgb[..., 1] - 0.081312 * rgb[..., 2]
+
+    def half(c: np.ndarray) -> np.ndarray:
+        return c.reshape(T, h // 2, 2, w // 2, 2).mean(axis=(2, 4))
+
+    with open(path, "wb") as fh:
+        fh.write(f"YUV4MPEG2 W{w} H{h} F{fps}:1 Ip A1:1 C420jpeg\n".encode())
+        for f in range(T):
+            fh.write(b"FRAME\n")
+            for plane in (y[f], half(u)[f], half(v)[f]):
+                fh.write(np.clip(np.rint(plane), 0, 255).astype(np.uint8).tobytes())
+
+
+@pytest.fixture(scope="module")
+def fake_camera(tmp_path_factory: Any) -> Path:
+    pytest.importorskip("mediapipe")
+    from capture_takes import render_take
+
+    import workbench
+
+    frames = render_take(workbench.load_sample("head"))  # (T, 480, 480, 3)
+    wide = np.full((frames.shape[0], 480, 640, 3), 235, np.uint8)  # a 640×480 camera, the face in the middle
+    wide[:, :, 80:560] = frames
+    path = tmp_path_factory.mktemp("camera") / "take.y4m"
+    _write_y4m(path, wide)
+    return path
+
+
+_CELLS = [
+    "import json, numpy as np, tempfile, pathlib\nimport workbench, widgets\n"
+    "model = workbench.load_sample('head')\nd = pathlib.Path(tempfile.mkdtemp())",
+    "wb = widgets.show_workbench(model)",
+]
+
+_STATE = """
+import json, numpy as np
+_l = wb.live
+print(json.dumps({
+    "active": bool(_l.camera.active), "state": _l.camera.state, "received": _l.camera.frames_received,
+    "tracked": 0 if _l.tracker is None else _l.tracker.n_frames_,
+    "ok": bool(_l.last is not None and _l.last.ok), "jaw": float(model.weights["jawOpen"]),
+    "undo": model.history.undo_labels, "recorded": None if _l.recorded is None else _l.recorded.n_frames,
+    "status": _l.status.value, "errors": [o.get("text", "") for o in wb.errors.outputs]}))
+"""
+
+
+def _state(nb: NotebookPage) -> dict[str, Any]:
+    return nb.kernel_eval(_STATE)  # type: ignore[no-any-return]
+
+
+def test_the_face_follows_the_fake_camera_and_a_recorded_take_exports(open_notebook, fake_camera) -> None:
+    args = ("--use-fake-device-for-media-stream", f"--use-file-for-fake-video-capture={fake_camera}",
+            "--use-fake-ui-for-media-stream")
+    nb = open_notebook(_CELLS, viewport_size=(1500, 1200), browser_args=args)
+    page = nb.page
+    page.evaluate("() => { const s = window.jupyterapp.shell; if (!s.leftCollapsed) s.collapseLeft(); }")
+    nb.wait_viewports(1)
+    page.locator(".fwb-workbench").evaluate("e => e.scrollIntoView({block: 'start'})")
+    page.locator(".fwb-tabs .lm-TabBar-tab", has_text="Live").click()
+    page.locator(".fwb-live-start").click()
+    cam = page.locator(".fwb-camera")
+    wait_until("the camera", lambda: cam.get_attribute("data-camera"), lambda s: s in ("on", "error"), timeout=60)
+    assert cam.get_attribute("data-camera") == "on", cam.get_attribute("data-error")
+    st = wait_until("tracked frames", lambda: _state(nb), lambda s: s["tracked"] >= 15 or s["errors"], timeout=120)
+    assert st["ok"] and not st["errors"], st
+    # one frame in flight: the page never gets more than one ahead of the kernel's acks
+    sent, acked = int(cam.get_attribute("data-sent")), int(cam.get_attribute("data-acked"))
+    assert 0 <= sent - acked <= 1, (sent, acked)
+    page.mouse.move(5, 5)
+    a = nb.canvas_shot("live-1")
+    jaws = [st["jaw"]]
+    for _ in range(6):
+        jaws.append(wait_until("the next frames", lambda: _state(nb), lambda s, n=st["tracked"]: s["tracked"] > n + 3,
+                               timeout=60)["jaw"])
+    b = nb.canvas_shot("live-2")
+    assert max(jaws) - min(jaws) > 0.05, jaws  # the video's jaw ramp moves the face
+    assert pixel_change(a, b) > 0.001
+    # record: one undo step of keys
+    n_undo = len(st["undo"])
+    page.locator(".fwb-live-record").click()
+    n0 = _state(nb)["tracked"]
+    wait_until("recorded frames", lambda: _state(nb), lambda s: s["tracked"] >= n0 + 12, timeout=90)
+    page.locator(".fwb-live-record").click()
+    st = wait_until("the keys", lambda: _state(nb), lambda s: len(s["undo"]) == n_undo + 1 or s["errors"])
+    assert st["recorded"] and st["recorded"] >= 12 and not st["errors"], st
+    out = nb.kernel_eval(
+        "from workbench.export import export\n"
+        "paths = export(model, model.tracks, d / 'live.glb') + export(model, model.tracks, d / 'live.csv')\n"
+        "print(json.dumps([str(p) for p in paths]))")
+    assert any(p.endswith(".glb") for p in out) and any(p.endswith(".csv") for p in out)
+    nb.screenshot("recorded")
+    # stop: the page lets the camera go
+    page.locator(".fwb-live-start").click()
+    wait_until("the camera off", lambda: cam.get_attribute("data-camera"), lambda s: s == "off")
+    st = _state(nb)
+    assert not st["active"] and len(st["undo"]) == n_undo + 1, st
+    assert json.dumps(st["errors"]) == "[]"

@@ -1,0 +1,130 @@
+// Webcam capture front end (anywidget ESM, plain DOM; the Live tab, widgets/live/).
+//
+// While `active` is true the page holds the user's camera (getUserMedia: the browser asks
+// for consent) and sends frames to the kernel as small JPEGs, at the rate the kernel keeps
+// up with: one frame in flight, the next one only after the kernel's {type: "ack"} — a slow
+// kernel makes frames drop, never queue. Turning `active` off, or closing the view, stops
+// the camera (every track of the stream).
+//
+// Messages to the kernel: {type: "frame", t, width, height} with the JPEG as buffer 0;
+// {type: "camera", state: "on" | "off" | "error", message}. From the kernel: {type: "ack"}.
+//
+// Test hooks (attributes on the root): data-camera = "off" | "starting" | "on" | "error",
+// data-sent, data-acked (frames), data-error (the browser's message).
+
+const JPEG_QUALITY = 0.8;
+
+function view({ model, el }) {
+  el.classList.add("fwb-camera");
+  el.style.cssText = "display:flex;flex-direction:column;gap:4px;font:12px sans-serif;";
+  const video = document.createElement("video");
+  video.muted = true;
+  video.playsInline = true;
+  video.style.cssText = "width:100%;max-width:320px;background:#222;border-radius:4px;transform:scaleX(-1);";
+  const status = document.createElement("div");
+  status.className = "fwb-camera-status";
+  el.append(video, status);
+  const canvas = document.createElement("canvas");
+  let stream = null;
+  let inFlight = false;
+  let sent = 0;
+  let acked = 0;
+  let timer = null;
+  let disposed = false;
+
+  const mark = (state, message = "") => {
+    el.setAttribute("data-camera", state);
+    el.setAttribute("data-sent", String(sent));
+    el.setAttribute("data-acked", String(acked));
+    if (message) el.setAttribute("data-error", message);
+    status.textContent = state === "on" ? `camera on: ${sent} frames sent` :
+      state === "error" ? `camera: ${message}` : state === "starting" ? "asking for the camera…" : "camera off";
+  };
+
+  const stop = () => {
+    if (timer !== null) clearTimeout(timer);
+    timer = null;
+    if (stream) stream.getTracks().forEach((t) => t.stop());
+    stream = null;
+    video.srcObject = null;
+    inFlight = false;
+  };
+
+  const sendFrame = () => {
+    timer = null;
+    if (!stream || disposed) return;
+    if (inFlight || video.readyState < 2 || !video.videoWidth) {
+      timer = setTimeout(sendFrame, 10);
+      return;
+    }
+    const w = video.videoWidth;
+    const h = video.videoHeight;
+    canvas.width = w;
+    canvas.height = h;
+    canvas.getContext("2d").drawImage(video, 0, 0, w, h);
+    inFlight = true;
+    const t = performance.now() / 1000;
+    canvas.toBlob(async (blob) => {
+      if (!blob || !stream) { inFlight = false; return; }
+      const buf = await blob.arrayBuffer();
+      sent += 1;
+      model.send({ type: "frame", t, width: w, height: h }, undefined, [buf]);
+      mark("on");
+    }, "image/jpeg", JPEG_QUALITY);
+    timer = setTimeout(sendFrame, 5);
+  };
+
+  const start = async () => {
+    if (stream) return;
+    mark("starting");
+    if (!navigator.mediaDevices || !navigator.mediaDevices.getUserMedia) {
+      const message = "this page cannot open a camera (getUserMedia needs a secure context: https or localhost)";
+      mark("error", message);
+      model.send({ type: "camera", state: "error", message });
+      return;
+    }
+    try {
+      const s = await navigator.mediaDevices.getUserMedia({ video: { width: 640, height: 480 }, audio: false });
+      if (disposed || !model.get("active")) { s.getTracks().forEach((t) => t.stop()); return; }
+      stream = s;
+      s.getVideoTracks().forEach((tr) => tr.addEventListener("ended", () => {
+        stop();
+        mark("error", "the camera stopped (unplugged?)");
+        model.send({ type: "camera", state: "error", message: "the camera stopped (unplugged?)" });
+      }));
+      video.srcObject = s;
+      await video.play().catch(() => {});
+      mark("on");
+      model.send({ type: "camera", state: "on", message: "" });
+      sendFrame();
+    } catch (err) {
+      const message = `${err && err.name ? err.name + ": " : ""}${err && err.message ? err.message : err}`;
+      mark("error", message);
+      model.send({ type: "camera", state: "error", message });
+    }
+  };
+
+  const onActive = () => {
+    if (model.get("active")) start();
+    else { stop(); mark("off"); model.send({ type: "camera", state: "off", message: "" }); }
+  };
+  const onMsg = (msg) => {
+    if (msg && msg.type === "ack") {
+      acked += 1;
+      inFlight = false;
+      el.setAttribute("data-acked", String(acked));
+    }
+  };
+  model.on("change:active", onActive);
+  model.on("msg:custom", onMsg);
+  mark("off");
+  if (model.get("active")) start();
+  return () => {
+    disposed = true;
+    model.off("change:active", onActive);
+    model.off("msg:custom", onMsg);
+    stop();
+  };
+}
+
+export default { render: view };

@@ -1,0 +1,203 @@
+"""The Live tab: the face follows the user's webcam, and Record keys a take (Bouaziz et al. 2013, online).
+
+A view of :class:`workbench.capture.LiveTracker`: *Start camera* asks the page for the
+webcam (:class:`~widgets.live.camera.CameraWidget`), each frame the kernel keeps up
+with goes through the tracker, and the face shows the frame's weights at once — inside
+one open interaction (``kind="live"``), so watching yourself adds nothing to the undo
+history and *Stop* puts the sliders back as they were. *Record* / *Stop recording*
+keys what was tracked in between onto the timeline as one undo step
+(``model.capture.apply``, reduced to keys within the tolerance); *Save take* writes
+the raw landmarks and timestamps (``.npz``) to re-track offline with other settings
+(:func:`workbench.capture.track_video` on a :class:`~workbench.capture.LandmarkSequence`).
+
+The head pose is tracked and recorded (``head_pose`` keys) but not shown while live:
+the face stays frontal in the viewport until the take is applied.
+"""
+
+from __future__ import annotations
+
+import html
+import time
+from pathlib import Path
+from typing import Any
+
+import ipywidgets as W
+import numpy as np
+from numpy.typing import NDArray
+
+from widgets.live.camera import CameraWidget
+from widgets.panels.base import ModelPanel, button
+
+__all__ = ["LivePanel"]
+
+
+class LivePanel(ModelPanel):
+    """The Live tab's panel (see the module docstring).
+
+    Attributes
+    ----------
+    camera : CameraWidget
+    tracker : workbench.capture.LiveTracker or None
+        The tracker of the current camera session.
+    last : LiveFrame or None
+        What the last frame gave.
+    recorded : TrackResult or None
+        The last take recorded (applied to the timeline).
+    """
+
+    def __init__(self, model: Any, *, errors: Any = None, before_edit: Any = ()) -> None:
+        super().__init__(model, errors=errors, before_edit=before_edit, layout=W.Layout(width="100%"))
+        self.tracker: Any = None
+        self.last: Any = None
+        self.recorded: Any = None
+        self._token: Any = None
+        self._record_from: int | None = None
+        self._seconds: list[float] = []
+        self.camera = CameraWidget(on_frame=self.errors.guard("live frame")(self.push))
+        self.camera.on_state = self.errors.guard("camera state")(self._on_camera_state)
+        self.start_button = button("Start camera", "fwb-live-start", "Open the webcam (the browser asks first)",
+                                   "video-camera")
+        self.record_button = button("Record", "fwb-live-record", "Record a take onto the timeline", "circle")
+        self.adapt = W.Checkbox(value=True, description="adapt the rig to me while tracking", indent=False)
+        self.adapt.add_class("fwb-live-adapt")
+        self.tolerance = W.BoundedFloatText(value=0.01, min=0.0, max=0.5, step=0.005, description="key tolerance",
+                                            style={"description_width": "90px"}, layout=W.Layout(width="190px"))
+        self.take_path = W.Text(placeholder="take.npz", layout=W.Layout(width="200px"))
+        self.save_button = button("Save take", "fwb-live-save", "Save the raw landmarks and timestamps", "save")
+        self.status = W.HTML("<i>Camera off.</i>")
+        self.status.add_class("fwb-live-status")
+        g = self.guard
+        self.start_button.on_click(g("camera")(lambda _b: self.toggle_camera()))
+        self.record_button.on_click(g("record")(lambda _b: self.toggle_record()))
+        self.save_button.on_click(g("save take")(lambda _b: self.save_take(self.take_path.value)))
+        self.children = [
+            W.HTML("<b>Live</b> — the face follows your webcam"), self.camera,
+            W.HBox([self.start_button, self.adapt]), W.HBox([self.record_button, self.tolerance]),
+            W.HBox([self.take_path, self.save_button]), self.status,
+        ]
+        self.on_close(self.stop_camera)
+        self.refresh()
+
+    # ------------------------------------------------------------------ camera
+    def toggle_camera(self) -> None:
+        if self.camera.active:
+            self.stop_camera()
+        else:
+            self.start_camera()
+
+    def start_camera(self) -> None:
+        """Ask the page for the webcam; frames then drive the face."""
+        from workbench.capture import LiveTracker
+
+        self.flush()
+        self.tracker = LiveTracker(self.model, adapt=bool(self.adapt.value))
+        self.last, self._seconds = None, []
+        self.camera.active = True
+        self.status.value = "<i>asking the browser for the camera…</i>"
+        self.refresh()
+
+    def stop_camera(self) -> None:
+        """Stop the webcam (a take being recorded is applied first); the sliders go back."""
+        if self._record_from is not None:
+            self.toggle_record()
+        self.camera.active = False
+        self._end_live()
+        if self.tracker is not None:
+            self.tracker.close()
+        self.refresh()
+
+    def _end_live(self) -> None:
+        tok, self._token = self._token, None
+        if tok is not None and self.model.interaction_token == tok:
+            self.model.cancel_interaction(tok)
+
+    def _on_camera_state(self, state: str, message: str) -> None:
+        if state == "error":
+            self.status.value = f"<b>Camera:</b> {html.escape(message)}"
+            if self._record_from is not None:  # unplugged mid-take: keep what was recorded
+                self.toggle_record()
+            self._end_live()
+            self.camera.active = False
+        elif state == "on":
+            self.status.value = "<i>camera on: looking for a face…</i>"
+        self.refresh()
+
+    def push(self, image: NDArray[np.uint8], t: float) -> Any:
+        """One camera frame: track it and show its weights (the Live tab's frame callback)."""
+        if self.tracker is None:
+            return None
+        t0 = time.perf_counter()
+        frame = self.tracker.push(image, t)
+        self.last = frame
+        if frame.ok:
+            m = self.model
+            if self._token is None or m.interaction_token != self._token:
+                self._token = m.begin_interaction("Live camera", on_close=self._lost_live, kind="live")
+            m.set_weights(dict(zip(m.shape_names, frame.weights.tolist(), strict=True)))
+        self._seconds.append(time.perf_counter() - t0)
+        n = self.tracker.n_frames_
+        if n % 5 == 1 or not frame.ok:
+            ms = 1000 * float(np.median(self._seconds[-30:]))
+            rec = f"; recording {n - self._record_from} frames" if self._record_from is not None else ""
+            note = f" — {html.escape(frame.note)}" if frame.note else ""
+            self.status.value = (f"{n} frames, {ms:.0f} ms each in the kernel (≤ {1000 / max(ms, 1e-3):.0f} "
+                                 f"frames/s){rec}{note}")
+        return frame
+
+    def _lost_live(self) -> None:
+        """Another edit closed the live interaction (its weights stay); the next frame opens a new one."""
+        self._token = None
+
+    # ------------------------------------------------------------------ record
+    def toggle_record(self) -> Any:
+        """Start recording, or stop and key the recorded frames on the timeline (one undo step)."""
+        if self._record_from is None:
+            if self.tracker is None or not self.camera.active:
+                raise ValueError("Record: start the camera first")
+            self._record_from = self.tracker.n_frames_
+            self.refresh()
+            return None
+        a, self._record_from = self._record_from, None
+        self.refresh()
+        take = self.tracker.take() if self.tracker is not None else None
+        if take is None or take.n_frames - a < 2:
+            self.status.value = "<i>nothing recorded (fewer than two frames)</i>"
+            return None
+        part = _frames_from(take, a)
+        self._end_live()
+        self.flush()
+        self.model.capture.apply(part, tolerance=float(self.tolerance.value),
+                                 label=f"Record live take ({part.n_frames} frames)")
+        self.recorded = part
+        rate = float(part.info.get("rate", part.fps))
+        self.status.value = (f"recorded {part.n_frames} frames ({rate:.1f} frames/s from the camera) onto the "
+                             "timeline at their own times (undo: one step)")
+        return part
+
+    def save_take(self, path: str) -> Path:
+        """Save the raw take (landmarks, timestamps, image size) as ``.npz``."""
+        if self.tracker is None or self.tracker.n_frames_ == 0:
+            raise ValueError("Save take: nothing was tracked yet")
+        out = self.tracker.save_take(Path(str(path).strip() or "take.npz"))
+        self.status.value = f"saved {self.tracker.n_frames_} frames to {html.escape(str(out))}"
+        return Path(out)
+
+    def refresh(self) -> None:
+        on = bool(self.camera.active)
+        self.start_button.description = "Stop camera" if on else "Start camera"
+        self.record_button.description = "Stop recording" if self._record_from is not None else "Record"
+        self.record_button.disabled = not on
+        self.adapt.disabled = on
+
+
+def _frames_from(take: Any, a: int) -> Any:
+    """The take from frame ``a`` on, starting at time 0."""
+    from workbench.capture.result import TrackResult
+
+    info = dict(take.info)
+    if "timestamps" in info:
+        ts = np.asarray(info["timestamps"])[a:]
+        info["timestamps"] = ts - ts[0]
+        info["rate"] = 1.0 / float(np.median(np.diff(ts))) if ts.size > 1 else float("nan")
+    return TrackResult(take.weights[a:], take.poses[a:], take.errors[a:], take.flags[a:], take.fps,
+                       take.shape_names, take.derived, take.head_size, take.kind, info)
