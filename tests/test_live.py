@@ -119,3 +119,24 @@ def test_a_take_with_dropped_frames_keys_them_at_their_own_times(frames) -> None
     jaw_keys = [k.time for k in tl.tracks["weights/jawOpen"].keys]
     np.testing.assert_allclose(jaw_keys, (np.array(kept) - kept[0]) / 30.0)
     assert take.info["adapted"] is not None and take.fps == 30.0
+
+
+@pytest.mark.ui
+def test_a_range_calibration_on_the_extremes_restores_the_amplitude(frames) -> None:
+    model, F = frames
+    names = list(model.shape_names)
+    jaw = names.index("jawOpen")
+    with LiveTracker(model) as live:
+        with pytest.raises(VideoError, match="begin_range"):
+            live.end_range()
+        live.begin_range()  # the actor's extremes: the take's jaw goes to 1, the blink to 1
+        for f, img in enumerate(F):
+            live.push(img, f / 30.0)
+        gains = live.end_range()
+        assert gains[jaw] > 1.3 and (gains >= 1.0).all()
+        raw_peak = live.take().weights[:, jaw].max()
+        again = [live.push(img, (len(F) + f) / 30.0) for f, img in enumerate(F)]
+    peak = max(g.weights[jaw] for g in again)
+    assert raw_peak < 0.7 and abs(peak - 1.0) <= 0.15, (raw_peak, peak)  # within 15 % of the true 1.0
+    lo, hi = model.shape(names[jaw]).slider_min, model.shape(names[jaw]).slider_max
+    assert all(lo <= g.weights[jaw] <= hi for g in again)

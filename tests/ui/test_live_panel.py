@@ -60,11 +60,21 @@ def test_live_frames_drive_the_face_record_keys_a_take_and_stop_restores(jpegs, 
         assert np.corrcoef(jaw[1:], JAW[1:12])[0, 1] > 0.9  # the face follows the video
         assert len(model.history.undo_labels) == n_undo  # watching adds no undo step
         assert "ms each" in live.status.value
+        # the range calibration on frames 6..12 (the jaw ramp's upper part) scales the jaw up
+        assert live.range_button.description == "Calibrate range" and not live.range_button.disabled
+        live.range_button.click()
+        assert live.range_button.description == "End calibration"
+        for f in range(6, 12):
+            _page_sends(live.camera, {"type": "frame", "t": (100 + f) / 30.0}, [jpegs[f]])
+        live.range_button.click()
+        assert live.tracker.gains_ is not None and "range set" in live.status.value, live.status.value
+        assert len(model.history.undo_labels) == n_undo
         # record frames 12..24: one undo step with their keys
         live.record_button.click()
         assert live.record_button.description == "Stop recording"
         for f in range(12, 24):
-            _page_sends(live.camera, {"type": "frame", "t": f / 30.0, "width": 480, "height": 480}, [jpegs[f]])
+            _page_sends(live.camera, {"type": "frame", "t": (200 + f) / 30.0, "width": 480, "height": 480},
+                        [jpegs[f]])
         live.record_button.click()
         assert len(model.history.undo_labels) == n_undo + 1 and "Record live take" in model.history.undo_labels[-1]
         take = live.recorded
@@ -75,7 +85,7 @@ def test_live_frames_drive_the_face_record_keys_a_take_and_stop_restores(jpegs, 
         # the raw take saves; stopping the camera leaves the sliders as they were
         out = live.save_take(str(tmp_path / "take.npz"))
         saved = np.load(out)
-        assert saved["landmarks"].shape == (24, 478, 3) and saved["timestamps"].shape == (24,)
+        assert saved["landmarks"].shape == (30, 478, 3) and saved["timestamps"].shape == (30,)
         live.start_button.click()
         assert not live.camera.active and len(model.history.undo_labels) == n_undo + 1
         # no permission: a clear message, the camera off

@@ -52,13 +52,17 @@ class LivePanel(ModelPanel):
         self.recorded: Any = None
         self._token: Any = None
         self._record_from: int | None = None
+        self._calibrating = False
         self._seconds: list[float] = []
         self.camera = CameraWidget(on_frame=self.errors.guard("live frame")(self.push))
         self.camera.on_state = self.errors.guard("camera state")(self._on_camera_state)
         self.start_button = button("Start camera", "fwb-live-start", "Open the webcam (the browser asks first)",
                                    "video-camera")
         self.record_button = button("Record", "fwb-live-record", "Record a take onto the timeline", "circle")
-        self.adapt = W.Checkbox(value=True, description="adapt the rig to me while tracking", indent=False)
+        self.range_button = button("Calibrate range", "fwb-live-range",
+                                   "Press, make your extremes for a few seconds (jaw wide open, blinks, smiles, "
+                                   "brows), press again: each shape's range is set from them", "arrows-v")
+        self.adapt = W.Checkbox(value=False, description="adapt the rig to me while tracking", indent=False)
         self.adapt.add_class("fwb-live-adapt")
         self.tolerance = W.BoundedFloatText(value=0.01, min=0.0, max=0.5, step=0.005, description="key tolerance",
                                             style={"description_width": "90px"}, layout=W.Layout(width="190px"))
@@ -69,10 +73,12 @@ class LivePanel(ModelPanel):
         g = self.guard
         self.start_button.on_click(g("camera")(lambda _b: self.toggle_camera()))
         self.record_button.on_click(g("record")(lambda _b: self.toggle_record()))
+        self.range_button.on_click(g("calibrate range")(lambda _b: self.toggle_range()))
         self.save_button.on_click(g("save take")(lambda _b: self.save_take(self.take_path.value)))
         self.children = [
             W.HTML("<b>Live</b> — the face follows your webcam"), self.camera,
-            W.HBox([self.start_button, self.adapt]), W.HBox([self.record_button, self.tolerance]),
+            W.HBox([self.start_button, self.adapt]), W.HBox([self.range_button]),
+            W.HBox([self.record_button, self.tolerance]),
             W.HBox([self.take_path, self.save_button]), self.status,
         ]
         self.on_close(self.stop_camera)
@@ -91,7 +97,7 @@ class LivePanel(ModelPanel):
 
         self.flush()
         self.tracker = LiveTracker(self.model, adapt=bool(self.adapt.value))
-        self.last, self._seconds = None, []
+        self.last, self._seconds, self._calibrating = None, [], False
         self.camera.active = True
         self.status.value = "<i>asking the browser for the camera…</i>"
         self.refresh()
@@ -148,6 +154,25 @@ class LivePanel(ModelPanel):
         """Another edit closed the live interaction (its weights stay); the next frame opens a new one."""
         self._token = None
 
+    # ------------------------------------------------------------------ range
+    def toggle_range(self) -> Any:
+        """Start the range calibration, or end it and show the gains it set."""
+        if self.tracker is None or not self.camera.active:
+            raise ValueError("Calibrate range: start the camera first")
+        if not self._calibrating:
+            self.tracker.begin_range()
+            self._calibrating = True
+            self.status.value = "<i>make your extremes now (jaw wide open, blinks, smiles, brows), then press again</i>"
+        else:
+            self._calibrating = False
+            gains = self.tracker.end_range()
+            names = list(self.model.shape_names)
+            top = np.argsort(-gains)[:4]
+            self.status.value = "range set: " + ", ".join(f"{html.escape(names[i])} ×{gains[i]:.2f}" for i in top
+                                                          if gains[i] > 1.0)
+        self.refresh()
+        return self.tracker.gains_
+
     # ------------------------------------------------------------------ record
     def toggle_record(self) -> Any:
         """Start recording, or stop and key the recorded frames on the timeline (one undo step)."""
@@ -187,6 +212,8 @@ class LivePanel(ModelPanel):
         self.start_button.description = "Stop camera" if on else "Start camera"
         self.record_button.description = "Stop recording" if self._record_from is not None else "Record"
         self.record_button.disabled = not on
+        self.range_button.disabled = not on
+        self.range_button.description = "End calibration" if self._calibrating else "Calibrate range"
         self.adapt.disabled = on
 
 

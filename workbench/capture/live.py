@@ -11,9 +11,14 @@ L1 + temporal weights, warm-started), so a take pushed frame by frame gives what
 * **Start.** The first frame with a face registers the landmarks onto the rig
   (:func:`~workbench.capture.video.register_landmarks`: the landmark → vertex map)
   and calibrates on it as the actor's rest face (``track(..., neutral=0)``).
-  There is no calibration session: with ``adapt`` (the default) the rig adapts to
-  the actor as frames arrive (the dynamic expression model, §4 — identity from
-  the rest frame, correctives from every solved frame, :mod:`.adapt`).
+  No calibration session is needed. With ``adapt`` the rig adapts to the actor as
+  frames arrive (the dynamic expression model, §4 — identity from the rest frame,
+  correctives every few solved frames, :mod:`.adapt`); off by default (measured
+  below).
+* **Range** (optional, the half-amplitude problem: FaceMesh reports about half of
+  the jaw's motion): :meth:`~LiveTracker.begin_range` … :meth:`~LiveTracker.end_range`
+  around a few seconds of the actor's extremes sets a gain per shape (1 / its peak
+  there, for shapes that moved), applied to every later frame.
 * **No face** in view: the frame holds the last weights and pose, ``ok`` is
   False and ``note`` says so. **Two faces**: the largest is tracked.
 * :meth:`~LiveTracker.take` is everything pushed so far as a
@@ -98,7 +103,10 @@ class LiveTracker:
         The rig (ARKit-named shapes: the registration finds its landmarks by them).
     adapt : bool or dict
         Adapt the rig to the actor while tracking (True: the default options; a dict:
-        :class:`~workbench.capture.AdaptiveModel` options; False: off).
+        :class:`~workbench.capture.AdaptiveModel` options). Off by default: on FaceMesh
+        landmarks the adaptation raised the weight error instead of lowering it, on the
+        rig's own face (RMSE 0.16 → 0.37) and on a warped actor (0.19 → 0.41;
+        ``benchmarks/bench_live.py``) — it was built for markers and depth.
     l1, temporal : float, optional
         The tracker's relative λ's (default: the marker tracker's fixed ones).
     iterations : int
@@ -120,9 +128,11 @@ class LiveTracker:
         The rig adapting to the actor (``.to_model()``).
     n_frames_ : int
         Frames pushed.
+    gains_ : (k,) float or None
+        Per-shape gains of the range calibration (:meth:`end_range`).
     """
 
-    def __init__(self, model: FaceState, *, adapt: bool | dict[str, Any] = True, l1: float | None = None,
+    def __init__(self, model: FaceState, *, adapt: bool | dict[str, Any] = False, l1: float | None = None,
                  temporal: float | None = None, iterations: int = 2, min_markers: int = 4,
                  min_confidence: float = 0.5, adapt_every: int = 5) -> None:
         from workbench.capture.track import DEFAULT_L1, DEFAULT_TEMPORAL
@@ -147,6 +157,11 @@ class LiveTracker:
         self.registration_: LandmarkRegistration | None = None
         self.adapted_: Any = None
         self.n_frames_ = 0
+        self.gains_: NDArray[np.float64] | None = None
+        self._range_from: int | None = None
+        self._raw: list[NDArray[np.float64]] = []
+        self._lo = np.array([sh.slider_min for sh in model.shapes], np.float64)
+        self._hi = np.array([sh.slider_max for sh in model.shapes], np.float64)
         self._solved = 0
         self._mesh: Any = None
         self._stepper: FrameStepper | None = None
@@ -158,6 +173,7 @@ class LiveTracker:
         self._flags: list[str] = []
         self._landmarks: list[NDArray[np.float64]] = []
         self._last_w = np.zeros(len(model.shape_names))
+        self._raw_last = np.zeros(len(model.shape_names))  # before the range gains
         self._last_pose = np.eye(4)
 
     # ------------------------------------------------------------------ frames
@@ -246,7 +262,9 @@ class LiveTracker:
                 self._solved += 1
                 w, M, err, flag = self._stepper.step(Y, vis, adapt=self._solved % self.adapt_every == 1
                                                      or self.adapt_every == 1)
-                self._last_w = self._stepper.setup.space.full_weights(w)
+                raw_w = self._stepper.setup.space.full_weights(w)
+                self._raw_last = raw_w
+                self._last_w = self._scaled(raw_w)
                 self._last_pose = M
                 ok = True
             else:
@@ -258,6 +276,7 @@ class LiveTracker:
             if self._stepper is not None:
                 self._stepper.hold(self._stepper.w)
         self.n_frames_ += 1
+        self._raw.append(self._raw_last.copy())
         self._times.append(t)
         self._weights.append(self._last_w.copy())
         self._poses.append(self._last_pose.copy())
@@ -265,6 +284,34 @@ class LiveTracker:
         self._flags.append(flag if ok else FLAG_HELD)
         self._landmarks.append(L if L is not None else np.full((N_LANDMARKS, 3), np.nan))
         return LiveFrame(self._last_w.copy(), self._last_pose.copy(), L, ok, t, note, secs)
+
+    # ------------------------------------------------------------------ range
+    def begin_range(self) -> None:
+        """Start a range calibration: the actor now makes their extremes (jaw wide open, blinks, smiles…)."""
+        self._range_from = self.n_frames_
+
+    def end_range(self, *, min_peak: float = 0.15, max_gain: float = 3.0) -> NDArray[np.float64]:
+        """End it: each shape whose weight peaked above ``min_peak`` gets the gain ``1 / peak`` (≤ ``max_gain``).
+
+        Returns the gains (``gains_``, (k,), 1 for shapes that did not move); later frames are
+        scaled by them (clamped to the sliders' range).
+        """
+        a = self._range_from
+        if a is None:
+            raise VideoError("end_range: begin_range first")
+        self._range_from = None
+        raw = np.array(self._raw[a:])
+        if raw.shape[0] < 2:
+            raise VideoError("end_range: fewer than two frames were tracked since begin_range")
+        peak = raw.max(0)
+        gains = np.where(peak > float(min_peak), np.minimum(1.0 / np.maximum(peak, 1e-9), float(max_gain)), 1.0)
+        self.gains_ = np.maximum(gains, 1.0)
+        return self.gains_
+
+    def _scaled(self, wf: NDArray[np.float64]) -> NDArray[np.float64]:
+        if self.gains_ is None:
+            return wf
+        return np.clip(wf * self.gains_, self._lo, self._hi)
 
     # ------------------------------------------------------------------ the take
     @property
