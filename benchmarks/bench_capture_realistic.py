@@ -39,7 +39,7 @@ import workbench
 from workbench.capture import synthetic_performance, track
 from workbench.capture.lambdas import paper_lambdas
 from workbench.capture.rig import ExpressionSpace
-from workbench.capture.track import DEFAULT_L1, DEFAULT_TEMPORAL, _MarkerSetup
+from workbench.capture.track import DEFAULT_L1, DEFAULT_TEMPORAL, MarkerSetup
 from workbench.testing import (
     compose,
     foreign_face,
@@ -111,7 +111,7 @@ def table(face, name: str, args: argparse.Namespace, seed: int, sparse: bool = F
 
     Wp, dtp = peer(face, perf)
     ref = (rm(Wp), rm(Wp, seen), jitter(Wp))
-    setup = _MarkerSetup(face, perf.marker_ids, 0.0, 0.0, None)
+    setup = MarkerSetup(face, perf.marker_ids, 0.0, 0.0, None)
     pl1, pt = paper_lambdas(setup, face.metadata.metres_per_unit)
     rows = [("core `track`, defaults (λ's chosen by held-out markers)", {}),
             (f"core `track`, the old defaults (l1 = {DEFAULT_L1:g}, temporal = {DEFAULT_TEMPORAL:g})",

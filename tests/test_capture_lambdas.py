@@ -108,11 +108,11 @@ def test_l1_still_sparser_than_l2_on_sparse_takes(head, sparse, sparse_default):
 
 def test_the_papers_values_scale_with_the_units(head, dense):
     """The paper's λ's are on a fit term in mm²: the same markers in other units give the same relative λ's."""
-    from workbench.capture.track import _MarkerSetup
+    from workbench.capture.track import MarkerSetup
     from workbench.testing import in_units
 
     cm = in_units(head, "cm")
-    a = paper_lambdas(_MarkerSetup(head, dense.marker_ids, 0.0, 0.0, None), head.metadata.metres_per_unit)
-    b = paper_lambdas(_MarkerSetup(cm, dense.marker_ids, 0.0, 0.0, None), cm.metadata.metres_per_unit)
+    a = paper_lambdas(MarkerSetup(head, dense.marker_ids, 0.0, 0.0, None), head.metadata.metres_per_unit)
+    b = paper_lambdas(MarkerSetup(cm, dense.marker_ids, 0.0, 0.0, None), cm.metadata.metres_per_unit)
     assert a == pytest.approx(b, rel=1e-6)  # float32 vertices
     assert a[0] == pytest.approx(2 * a[1])  # λ₂ = 20, λ₁ = 10

@@ -55,7 +55,7 @@ class VideoError(ValueError):
 
 
 # ----------------------------------------------------------------------------- the extra
-def _mediapipe_face_mesh() -> Any:
+def mediapipe_face_mesh() -> Any:
     """``mediapipe.solutions.face_mesh`` or :class:`VideoExtraMissing`."""
     try:
         import mediapipe
@@ -296,7 +296,7 @@ def video_landmarks(
         if not path.is_file():
             raise FileNotFoundError(f"{path}: no such video file")
         src = str(path)
-        face_mesh = _mediapipe_face_mesh()
+        face_mesh = mediapipe_face_mesh()
         items, native, total, cap = _video_frames(path, fps)
         rate = float(fps) if fps is not None and fps < native else native
         if fps is not None and fps < native:
@@ -305,7 +305,7 @@ def video_landmarks(
         src = "<frames>"
         items, total = _array_frames(source)
         rate = float(fps) if fps is not None else 30.0
-        face_mesh = _mediapipe_face_mesh()
+        face_mesh = mediapipe_face_mesh()
     if max_frames is not None:
         total = min(total, int(max_frames)) if total else int(max_frames)
     rows: list[NDArray[np.float64]] = []

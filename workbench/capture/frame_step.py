@@ -20,7 +20,7 @@ from workbench.capture.result import FLAG_POSE_ALL
 
 if TYPE_CHECKING:
     from workbench.capture.adapt import AdaptiveModel
-    from workbench.capture.track import _MarkerSetup
+    from workbench.capture.track import MarkerSetup
 
 #: the reweighted pose stops when it moves the markers by less than this share of their extent
 POSE_TOL = 1e-6
@@ -31,7 +31,7 @@ class FrameStepper:
 
     Parameters
     ----------
-    setup : _MarkerSetup
+    setup : MarkerSetup
         The take's fixed part (rig at the markers, Gram blocks, solver, rigid markers).
     iterations : int
         Pose / weight alternations per frame.
@@ -41,7 +41,7 @@ class FrameStepper:
         The markers' rows in ``adaptive.vertex_ids_``.
     """
 
-    def __init__(self, setup: _MarkerSetup, iterations: int, adaptive: AdaptiveModel | None = None,
+    def __init__(self, setup: MarkerSetup, iterations: int, adaptive: AdaptiveModel | None = None,
                  rows: NDArray[np.intp] | None = None) -> None:
         self.setup = setup
         self.iterations = int(iterations)

@@ -43,7 +43,7 @@ from workbench.capture.pose import PoseError, fit_rigid_robust
 from workbench.capture.solver import NUMBA, _prediction, _shoot_nb, _shoot_py
 
 if TYPE_CHECKING:
-    from workbench.capture.track import _MarkerSetup
+    from workbench.capture.track import MarkerSetup
 
 __all__ = ["FOLDS", "L1_GRID", "PAPER_SMOOTH", "PAPER_SPARSE", "STRETCHES", "STRETCH_FRAMES", "TEMPORAL_GRID",
            "LambdaChoice", "choose_lambdas", "paper_lambdas"]
@@ -98,7 +98,7 @@ class LambdaChoice:
                 "heldout": self.heldout, "frames": self.frames, "folds": self.folds, "seconds": self.seconds}
 
 
-def paper_lambdas(setup: _MarkerSetup, metres_per_unit: float) -> tuple[float, float]:
+def paper_lambdas(setup: MarkerSetup, metres_per_unit: float) -> tuple[float, float]:
     """The paper's ``(λ₂ sparse, λ₁ smooth) = (20, 10)`` in the tracker's relative units for these markers.
 
     The paper adds them to ``E_fit`` in its own units; read here as a fit term in mm²
@@ -184,7 +184,7 @@ def _stretches(good: NDArray[np.bool_]) -> list[NDArray[np.intp]]:
     return [idx[s : s + STRETCH_FRAMES] for s in starts]
 
 
-def choose_lambdas(setup: _MarkerSetup, Y: NDArray[np.float64], visible: NDArray[np.bool_],
+def choose_lambdas(setup: MarkerSetup, Y: NDArray[np.float64], visible: NDArray[np.bool_],
                    good: NDArray[np.bool_], *, metres_per_unit: float = 1.0, fix_l1: float | None = None,
                    fix_temporal: float | None = None, iterations: int = 2) -> LambdaChoice:
     """Choose ``(l1, temporal)`` by held-out markers (the module docstring); ``fix_*`` keep one of them given.

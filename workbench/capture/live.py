@@ -42,7 +42,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from workbench.capture.facemesh import N_LANDMARKS, VideoError, _mediapipe_face_mesh
+from workbench.capture.facemesh import N_LANDMARKS, VideoError, mediapipe_face_mesh
 from workbench.capture.frame_step import FrameStepper
 from workbench.capture.result import FLAG_HELD, TrackResult
 
@@ -180,7 +180,7 @@ class LiveTracker:
     def _face_landmarks(self, img: NDArray[np.uint8]) -> NDArray[np.float64] | None:
         """The largest face's (478, 3) normalized landmarks, or None."""
         if self._mesh is None:
-            fm = _mediapipe_face_mesh()
+            fm = mediapipe_face_mesh()
             self._mesh = fm.FaceMesh(static_image_mode=False, max_num_faces=2, refine_landmarks=True,
                                      min_detection_confidence=self.min_confidence,
                                      min_tracking_confidence=self.min_confidence)
@@ -205,19 +205,19 @@ class LiveTracker:
         """Register on the first face (the actor at rest) and set the tracker up on it."""
         from workbench.capture.landmark_registration import register_landmarks
         from workbench.capture.track import (
-            _adaptive,
-            _check_units,
-            _MarkerSetup,
+            MarkerSetup,
+            adaptive_for_markers,
+            check_marker_units,
             start_from_neutral,
         )
 
         assert self._image_size is not None
         reg = register_landmarks(self.model, L[None], frame=0, image_size=self._image_size)
         ids = np.asarray(reg.vertex_ids, np.intp)
-        setup = _MarkerSetup(self.model, ids, self.l1, self.temporal, None)
+        setup = MarkerSetup(self.model, ids, self.l1, self.temporal, None)
         Y0 = reg.to_model(L[None])
-        _check_units(Y0, setup.X0, self.model)
-        am, rows = _adaptive(self.adapt if self.adapt else None, self.model, ids, None)
+        check_marker_units(Y0, setup.X0, self.model)
+        am, rows = adaptive_for_markers(self.adapt if self.adapt else None, self.model, ids, None)
         start_from_neutral(setup, Y0, 0, am, rows)
         self._stepper = FrameStepper(setup, self.iterations, am, rows)
         self.registration_, self.adapted_ = reg, am

@@ -136,7 +136,7 @@ def _lam(value: Any, what: str) -> float | None:
     return v
 
 
-def _check_units(Y: NDArray[np.float64], X0: NDArray[np.float64], model: FaceState) -> float:
+def check_marker_units(Y: NDArray[np.float64], X0: NDArray[np.float64], model: FaceState) -> float:
     """Median ratio of the markers' spread to the model's at the same vertices; raises when it is far from 1."""
     ratios = []
     step = max(1, Y.shape[0] // 50)
@@ -165,7 +165,7 @@ def _check_units(Y: NDArray[np.float64], X0: NDArray[np.float64], model: FaceSta
 
 
 # ------------------------------------------------------------------ the marker tracker
-class _MarkerSetup:
+class MarkerSetup:
     """Everything per take that does not change per frame."""
 
     def __init__(self, model: FaceState, ids: NDArray[np.intp], l1: float, temporal: float,
@@ -241,7 +241,7 @@ def _spread_ok(P: NDArray[np.float64]) -> bool:
     return bool(ev[2] > 0 and ev[1] > 1e-6 * ev[2])
 
 
-def _rest(setup: _MarkerSetup, Y: NDArray[np.float64], neutral: Any) -> NDArray[np.float64]:
+def _rest(setup: MarkerSetup, Y: NDArray[np.float64], neutral: Any) -> NDArray[np.float64]:
     """The actor's ``(m, 3)`` rest markers (NaN: not seen) from ``neutral``, a frame index or positions."""
     m = setup.ids.size
     if isinstance(neutral, int | np.integer) and not isinstance(neutral, bool):
@@ -257,7 +257,7 @@ def _rest(setup: _MarkerSetup, Y: NDArray[np.float64], neutral: Any) -> NDArray[
     return rest
 
 
-def _calibrate(setup: _MarkerSetup, Y: NDArray[np.float64], neutral: Any) -> NDArray[np.float64]:
+def _calibrate(setup: MarkerSetup, Y: NDArray[np.float64], neutral: Any) -> NDArray[np.float64]:
     """``(m, 3)`` model-frame offsets of the actor's rest markers from the rig's neutral at ``vertex_ids``."""
     rest = _rest(setup, Y, neutral)
     vis: NDArray[np.bool_] = np.asarray(np.isfinite(rest).all(1))
@@ -271,7 +271,7 @@ def _calibrate(setup: _MarkerSetup, Y: NDArray[np.float64], neutral: Any) -> NDA
     return np.where(vis[:, None], local - setup.X0, 0.0)
 
 
-def start_from_neutral(setup: _MarkerSetup, Y: NDArray[np.float64], neutral: Any, am: AdaptiveModel | None,
+def start_from_neutral(setup: MarkerSetup, Y: NDArray[np.float64], neutral: Any, am: AdaptiveModel | None,
                        rows: NDArray[np.intp]) -> NDArray[np.float64]:
     """Calibrate on the actor at rest; returns the ``(m, 3)`` rest offsets (see :func:`track_markers`).
 
@@ -293,7 +293,7 @@ def start_from_neutral(setup: _MarkerSetup, Y: NDArray[np.float64], neutral: Any
     return _calibrate(setup, Y, neutral)
 
 
-def _adaptive(adapt: Any, model: FaceState, ids: NDArray[np.intp], progress: Progress | None) -> tuple[
+def adaptive_for_markers(adapt: Any, model: FaceState, ids: NDArray[np.intp], progress: Progress | None) -> tuple[
     AdaptiveModel | None, NDArray[np.intp]
 ]:
     """The AdaptiveModel for ``adapt`` (None: off) and each marker's row in its ``vertex_ids_``."""
@@ -376,10 +376,10 @@ def track_markers(
         raise TrackError("model: it has no blendshapes to track")
     Y, ids = prepare_markers(model, frames, vertex_ids)
     T, m = Y.shape[:2]
-    setup = _MarkerSetup(model, ids, l1_, temporal_, rigid)
+    setup = MarkerSetup(model, ids, l1_, temporal_, rigid)
     space = setup.space
-    _check_units(Y, setup.X0, model)
-    am, rows = _adaptive(adapt, model, ids, progress)
+    check_marker_units(Y, setup.X0, model)
+    am, rows = adaptive_for_markers(adapt, model, ids, progress)
     offsets = None if neutral is None else start_from_neutral(setup, Y, neutral, am, rows)
     visible: NDArray[np.bool_] = np.asarray(np.isfinite(Y).all(2))
     good: NDArray[np.bool_] = np.asarray(visible.sum(1) >= int(min_markers))
