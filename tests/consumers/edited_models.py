@@ -132,3 +132,19 @@ def enhanced_head() -> FaceModel:
         m.set_weights(w)
         m.timeline.key_weights(t, list(w))
     return m
+
+
+def replayed_head() -> FaceModel:
+    """A marker take replayed through the shell (``capture.replay``): the markers are the handles,
+    their offsets keyed with the weights and head pose, wrinkles on the marker graph (issue 29)."""
+    from workbench.capture import synthetic_performance
+
+    full = load_sample("head")
+    perf = synthetic_performance(full, 31, fps=30.0, seed=7, markers=60)
+    # replayed on a rig with every other shape: the shell carries what the rig cannot make
+    m = FaceModel(full.vertices, full.faces, full.shapes[::2], polygons=full.polygons,
+                  component_labels=full.component_labels, component_names=list(full.component_names),
+                  metadata=full.metadata)
+    rep = m.capture.replay(perf.markers, vertex_ids=perf.marker_ids, fps=30.0)
+    m.capture.apply_replay(rep, tolerance=0.01)
+    return m

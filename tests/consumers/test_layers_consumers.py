@@ -20,16 +20,18 @@ from edited_models import (
     fitted_head,
     painted_head,
     regions_head,
+    replayed_head,
     wrinkled_head,
 )
 from test_usd_consumer import usdskel_points
 
 from workbench.export import export
 
-MODELS = {"painted": painted_head, "regions": regions_head, "wrinkles": wrinkled_head, "enhanced": enhanced_head}
+MODELS = {"painted": painted_head, "regions": regions_head, "wrinkles": wrinkled_head, "enhanced": enhanced_head,
+          "replayed": replayed_head}
 #: three.js sample times per model: the wrinkle and enhance layers are baked per frame, so frames only
 THREE_TIMES = {"painted": SAMPLE_TIMES, "regions": SAMPLE_TIMES, "wrinkles": [0.0, 0.2, 0.5, 0.8, 1.0],
-               "enhanced": [0.0, 0.2, 0.5, 0.8, 1.0]}
+               "enhanced": [0.0, 0.2, 0.5, 0.8, 1.0], "replayed": [0.0, 0.2, 0.5, 0.8, 1.0]}
 FRAMES = [0, 6, 11, 15, 24, 30]
 
 
@@ -51,7 +53,7 @@ def files(models, tmp_path_factory):
 def test_the_layers_really_move_the_face(models):
     # without them the consumer checks below would not prove the layers are exported
     for name, layers in (("painted", ["handles", "paint"]), ("regions", ["regions", "handles", "paint"]),
-                         ("wrinkles", ["wrinkles"]), ("enhanced", ["enhance"])):
+                         ("wrinkles", ["wrinkles"]), ("enhanced", ["enhance"]), ("replayed", ["handles", "wrinkles"])):
         m = models[name]
         for layer, d in m.layers_at(0.5, layers).items():
             assert d is not None and np.abs(d).max() * m.metadata.metres_per_unit > 5e-4, (name, layer)
@@ -66,6 +68,7 @@ def test_reports_say_how_each_layer_was_written(files):
                               "enhance": "inactive"}
     assert enc["wrinkles"]["wrinkles"] == "baked"
     assert enc["enhanced"]["enhance"] == "baked"
+    assert enc["replayed"]["handles"] == "linear" and enc["replayed"]["wrinkles"] == "baked"
     assert {r.name: r.encoding for r in files["painted", ".pc2"].layers}["paint"] == "baked"
 
 
@@ -104,7 +107,8 @@ def test_three_js_positions_equal_evaluate_at(node_tools, models, files, name):
 def test_usdskel_points_equal_evaluate_at(usd, models, files, name):
     m = models[name]
     _, pts = usdskel_points(usd, files[name, ".usda"][0], FRAMES)
-    ours = expected_points(m, m.tracks, np.array(FRAMES) / m.tracks.fps)
+    # UsdSkel evaluates the mesh; a keyed head pose (the replay's) is on the root prim's xform
+    ours = expected_points(m, m.tracks, np.array(FRAMES) / m.tracks.fps, head_pose=False)
     np.testing.assert_allclose(pts, ours, atol=1e-5, rtol=0)
 
 
