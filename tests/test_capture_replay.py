@@ -156,3 +156,22 @@ def test_wiener_gains_keep_a_clean_offset_and_drop_pure_noise() -> None:
     g = _wiener_gains(raw, gaussian_filter1d(raw, 2.0, axis=0, mode="nearest"), 2.0)
     assert (g[:4] > 0.95).all(), g
     assert (g[4:] < 0.5).all() and g[4:].mean() < 0.35, g
+
+
+def test_a_neutral_frame_takes_markers_glued_above_the_skin_as_rest(head) -> None:
+    """Markers 2 mm off their vertices (glued on the skin's surface, another actor): with ``neutral_frame`` the
+    constant offsets are the rest, not an expression."""
+    rng = np.random.default_rng(3)
+    plain = _plain(head)
+    ids = np.sort(rng.choice(np.flatnonzero(skin_or_all_mask(head)), 50, replace=False))
+    glued = head.vertices[ids] + rng.normal(0, 0.02, (50, 3))  # 2 mm in dm
+    ang = np.radians(np.linspace(0, 8, 10))
+    frames = np.stack([glued @ np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]]).T
+                       + [0.01 * k, 0, 0] for k, a in enumerate(ang)])
+    off = replay(plain, frames, vertex_ids=ids, wrinkles=False, smoothing=0.0)
+    rest = replay(plain, frames, vertex_ids=ids, wrinkles=False, smoothing=0.0, neutral_frame=0)
+    moved = np.abs(off.meshes - head.vertices).max()
+    assert moved > 0.01  # without: the glue offsets deform the face
+    assert np.abs(rest.meshes - head.vertices).max() < 0.05 * moved
+    with pytest.raises(TrackError, match="neutral_frame"):
+        replay(plain, frames, vertex_ids=ids, neutral_frame=10)

@@ -297,7 +297,7 @@ def replay(
         With ``smoothing``: shrink each marker's offsets by its Wiener gain (signal power
         over signal + noise power, the noise measured from the marker's own second
         differences), so a marker the rig already explains adds its noise to nothing
-        (at 0.5 mm noise the replay's error falls from 0.9× to about 0.73× tracking's).
+        (at 0.5 mm noise the replay's error falls from 0.9× to 0.74–0.75× tracking's).
     progress : callable, optional
         ``progress(fraction, message)``.
     **track_options
