@@ -121,3 +121,25 @@ def test_a_frame_without_a_face_holds_the_face_and_says_so(jpegs) -> None:
         assert not live.camera.active
     finally:
         wb.close()
+
+
+def test_a_frame_arriving_after_stop_is_dropped(jpegs) -> None:
+    """The page may have a frame on its way when the camera stops: it must not reopen the live preview."""
+    from widgets import Workbench
+
+    model = workbench.load_sample("head")
+    wb = Workbench(model, height=240)
+    try:
+        live = wb.live
+        acks = []
+        live.camera.send = lambda content, buffers=None: acks.append(content)
+        live.start_button.click()
+        _page_sends(live.camera, {"type": "frame", "t": 0.0}, [jpegs[0]])
+        assert model.interacting
+        live.start_button.click()  # stop
+        assert not model.interacting
+        n = live.tracker.n_frames_
+        _page_sends(live.camera, {"type": "frame", "t": 1.0}, [jpegs[5]])
+        assert not model.interacting and live.tracker.n_frames_ == n and acks[-1] == {"type": "ack"}
+    finally:
+        wb.close()

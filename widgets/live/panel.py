@@ -130,8 +130,8 @@ class LivePanel(ModelPanel):
 
     def push(self, image: NDArray[np.uint8], t: float) -> Any:
         """One camera frame: track it and show its weights (the Live tab's frame callback)."""
-        if self.tracker is None:
-            return None
+        if self.tracker is None or not self.camera.active:
+            return None  # a frame already on its way when the camera was stopped: dropped
         t0 = time.perf_counter()
         frame = self.tracker.push(image, t)
         self.last = frame

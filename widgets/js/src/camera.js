@@ -64,9 +64,12 @@ function view({ model, el }) {
     canvas.getContext("2d").drawImage(video, 0, 0, w, h);
     inFlight = true;
     const t = performance.now() / 1000;
+    const session = stream;
     canvas.toBlob(async (blob) => {
-      if (!blob || !stream) { inFlight = false; return; }
+      if (!blob || stream !== session) { inFlight = false; return; }
       const buf = await blob.arrayBuffer();
+      // stopped (or restarted) while the JPEG was made: drop it, and never mark a stopped camera "on"
+      if (stream !== session || disposed) { inFlight = false; return; }
       sent += 1;
       model.send({ type: "frame", t, width: w, height: h }, undefined, [buf]);
       mark("on");
