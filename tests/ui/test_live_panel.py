@@ -143,3 +143,24 @@ def test_a_frame_arriving_after_stop_is_dropped(jpegs) -> None:
         assert not model.interacting and live.tracker.n_frames_ == n and acks[-1] == {"type": "ack"}
     finally:
         wb.close()
+
+
+def test_a_camera_unplugged_mid_take_keeps_the_take_so_far(jpegs) -> None:
+    from widgets import Workbench
+
+    model = workbench.load_sample("head")
+    wb = Workbench(model, height=240)
+    try:
+        live = wb.live
+        live.camera.send = lambda content, buffers=None: None
+        live.start_button.click()
+        n_undo = len(model.history.undo_labels)
+        live.record_button.click()
+        for f in range(8):
+            _page_sends(live.camera, {"type": "frame", "t": f / 30.0}, [jpegs[f]])
+        _page_sends(live.camera, {"type": "camera", "state": "error", "message": "the camera stopped (unplugged?)"})
+        assert not live.camera.active and "unplugged" in live.status.value
+        assert live.recorded is not None and live.recorded.n_frames == 8
+        assert len(model.history.undo_labels) == n_undo + 1 and not model.interacting
+    finally:
+        wb.close()

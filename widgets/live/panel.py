@@ -119,11 +119,13 @@ class LivePanel(ModelPanel):
 
     def _on_camera_state(self, state: str, message: str) -> None:
         if state == "error":
-            self.status.value = f"<b>Camera:</b> {html.escape(message)}"
+            kept = ""
             if self._record_from is not None:  # unplugged mid-take: keep what was recorded
                 self.toggle_record()
+                kept = f"; the take so far is kept — {self.status.value}"
             self._end_live()
             self.camera.active = False
+            self.status.value = f"<b>Camera:</b> {html.escape(message)}{kept}"
         elif state == "on":
             self.status.value = "<i>camera on: looking for a face…</i>"
         self.refresh()
