@@ -313,3 +313,15 @@ def test_gltf_animation_without_target_names_uses_the_readers_names(arkit_model,
     t = np.linspace(0, 1, 5)
     got = tl.weight_matrix(names, t)[:, jaw]
     assert got == pytest.approx(ref.weight_matrix(SHAPES, t)[:, jaw], abs=1e-6)
+
+
+def test_reduce_keys_jointly_is_the_union_over_columns_each_with_its_tolerance() -> None:
+    from workbench.animation.importers import reduce_keys_jointly
+
+    t = np.arange(6.0)
+    straight = 2.0 * t  # a line: only its ends
+    kinked = np.array([0.0, 1.0, 2.0, 0.0, 0.0, 0.0])  # a corner at 2 and at 3
+    V = np.stack([straight, kinked], axis=1)
+    assert reduce_keys_jointly(t, V, 0.1).tolist() == [0, 2, 3, 5]
+    # a tolerance wider than the corners: only the ends, for that column
+    assert reduce_keys_jointly(t, V, [0.1, 5.0]).tolist() == [0, 5]

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import html
 import time
+from collections import deque
 from pathlib import Path
 from typing import Any
 
@@ -53,7 +54,8 @@ class LivePanel(ModelPanel):
         self._token: Any = None
         self._record_from: int | None = None
         self._calibrating = False
-        self._seconds: list[float] = []
+        #: the kernel's seconds for the last frames (the status line's median)
+        self._seconds: deque[float] = deque(maxlen=30)
         self.camera = CameraWidget(on_frame=self.errors.guard("live frame")(self.push))
         self.camera.on_state = self.errors.guard("camera state")(self._on_camera_state)
         self.start_button = button("Start camera", "fwb-live-start", "Open the webcam (the browser asks first)",
@@ -97,7 +99,8 @@ class LivePanel(ModelPanel):
 
         self.flush()
         self.tracker = LiveTracker(self.model, adapt=bool(self.adapt.value))
-        self.last, self._seconds, self._calibrating = None, [], False
+        self.last, self._calibrating = None, False
+        self._seconds.clear()
         self.camera.active = True
         self.status.value = "<i>asking the browser for the camera…</i>"
         self.refresh()
@@ -119,12 +122,9 @@ class LivePanel(ModelPanel):
 
     def _on_camera_state(self, state: str, message: str) -> None:
         if state == "error":
-            kept = ""
-            if self._record_from is not None:  # unplugged mid-take: keep what was recorded
-                self.toggle_record()
-                kept = f"; the take so far is kept — {self.status.value}"
-            self._end_live()
-            self.camera.active = False
+            recording = self._record_from is not None
+            self.stop_camera()  # unplugged mid-take: stopping keys what was recorded
+            kept = f"; the take so far is kept — {self.status.value}" if recording else ""
             self.status.value = f"<b>Camera:</b> {html.escape(message)}{kept}"
         elif state == "on":
             self.status.value = "<i>camera on: looking for a face…</i>"
@@ -145,7 +145,7 @@ class LivePanel(ModelPanel):
         self._seconds.append(time.perf_counter() - t0)
         n = self.tracker.n_frames_
         if n % 5 == 1 or not frame.ok:
-            ms = 1000 * float(np.median(self._seconds[-30:]))
+            ms = 1000 * float(np.median(self._seconds))
             rec = f"; recording {n - self._record_from} frames" if self._record_from is not None else ""
             note = f" — {html.escape(frame.note)}" if frame.note else ""
             self.status.value = (f"{n} frames, {ms:.0f} ms each in the kernel (≤ {1000 / max(ms, 1e-3):.0f} "

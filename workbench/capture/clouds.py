@@ -421,7 +421,7 @@ def track_clouds(
     if progress is not None:
         progress(1.0, f"tracked {T} clouds")
     names = space.shape_names
-    derived_names = tuple(names[i] for i in sorted(set(space.derived) | set(space.dead.tolist())))
+    derived_names = space.unsolved_names
     total = time.perf_counter() - t_start
     return TrackResult(
         space.full_weights(W), poses, errors, tuple(flags), fps_, names, derived_names, size, "clouds",

@@ -260,8 +260,7 @@ class LiveTracker:
             vis = np.asarray(np.isfinite(Y).all(1))
             if int(vis.sum()) >= self.min_markers:
                 self._solved += 1
-                w, M, err, flag = self._stepper.step(Y, vis, adapt=self._solved % self.adapt_every == 1
-                                                     or self.adapt_every == 1)
+                w, M, err, flag = self._stepper.step(Y, vis, adapt=(self._solved - 1) % self.adapt_every == 0)
                 raw_w = self._stepper.setup.space.full_weights(w)
                 self._raw_last = raw_w
                 self._last_w = self._scaled(raw_w)
@@ -281,7 +280,7 @@ class LiveTracker:
         self._weights.append(self._last_w.copy())
         self._poses.append(self._last_pose.copy())
         self._errors.append(err)
-        self._flags.append(flag if ok else FLAG_HELD)
+        self._flags.append(flag)  # FLAG_HELD unless the frame was solved
         self._landmarks.append(L if L is not None else np.full((N_LANDMARKS, 3), np.nan))
         return LiveFrame(self._last_w.copy(), self._last_pose.copy(), L, ok, t, note, secs)
 
@@ -368,7 +367,7 @@ class LiveTracker:
         if solved:
             W[: solved[0]], P[: solved[0]] = W[solved[0]], P[solved[0]]
         space = self._stepper.setup.space
-        derived = tuple(space.shape_names[i] for i in sorted(set(space.derived) | set(space.dead.tolist())))
+        derived = space.unsolved_names
         return TrackResult(W, P, np.array(self._errors), tuple(flags), 30.0, space.shape_names, derived,
                            space.size, "markers",
                            {"l1": self.l1, "temporal": self.temporal, "live": True, "timestamps": ts, "rate": rate,

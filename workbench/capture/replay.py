@@ -43,7 +43,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from workbench.animation.curves.keys import Key
 from workbench.animation.curves.track import Track
-from workbench.animation.importers.keys import reduce_keys
+from workbench.animation.importers.keys import reduce_keys_jointly
 from workbench.animation.tracks import Timeline
 from workbench.capture.pose import PoseError, fit_rigid_robust, pose_matrix
 from workbench.capture.result import TrackError, TrackResult, pose_keys
@@ -149,14 +149,9 @@ class ReplayResult:
             tl = self.tracked.to_timeline(tol, start=start, head_pose=False)
         else:
             tl = Timeline(fps=self.fps, start=float(times[0]), end=float(times[-1]), tracks={})
-        U = self.offsets.reshape(self.n_frames, -1)
-        keep = np.zeros(self.n_frames, bool)
-        if otol > 0:
-            for c in range(U.shape[1]):
-                keep[reduce_keys(times, U[:, c], otol)] = True
-        else:
-            keep[:] = True
-        idx = np.flatnonzero(keep)
+        # tolerance 0 keys every frame (not only the non-collinear ones): the model then plays the meshes bit for bit
+        idx = (reduce_keys_jointly(times, self.offsets.reshape(self.n_frames, -1), otol) if otol > 0
+               else np.arange(self.n_frames))
         tl = tl.with_track(Track("handles", tuple(Key(float(times[i]), self.offsets[i], "linear") for i in idx)))
         if head_pose:
             if tol > 0:

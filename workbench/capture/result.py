@@ -19,7 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from workbench.animation.curves import HEAD_POSE, Key, Track
-from workbench.animation.importers import reduce_keys, timeline_from_samples
+from workbench.animation.importers import reduce_keys_jointly, timeline_from_samples
 from workbench.animation.tracks import Timeline
 
 __all__ = ["FLAG_HELD", "FLAG_POSE_ALL", "TrackResult", "pose_keys"]
@@ -48,11 +48,7 @@ def pose_keys(poses: NDArray[np.float64], times: NDArray[np.float64], translatio
         if q[f] @ q[f - 1] < 0:
             q[f] = -q[f]
     values = np.concatenate([P[:, :3, 3], q], axis=1)
-    keep = np.zeros(len(times), bool)
-    for c in range(7):
-        tol = translation_tol if c < 3 else np.radians(rotation_tol_deg) / 4.0
-        keep[reduce_keys(times, values[:, c], tol)] = True
-    idx = np.flatnonzero(keep)
+    idx = reduce_keys_jointly(times, values, [translation_tol] * 3 + [np.radians(rotation_tol_deg) / 4.0] * 4)
     return Track(HEAD_POSE, tuple(Key(float(times[i]), values[i], "linear") for i in idx))
 
 

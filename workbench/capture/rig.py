@@ -131,6 +131,12 @@ class ExpressionSpace:
         return len(self.shape_names)
 
     @property
+    def unsolved_names(self) -> tuple[str, ...]:
+        """Names of the shapes that are not unknowns (derived ones follow their drivers, dead ones stay 0),
+        in model order: a :class:`~workbench.capture.TrackResult`'s ``derived``."""
+        return tuple(self.shape_names[i] for i in sorted(set(self.derived) | set(self.dead.tolist())))
+
+    @property
     def n_vertices(self) -> int:
         return int(self.neutral.shape[0])
 

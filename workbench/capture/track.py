@@ -425,7 +425,7 @@ def track_markers(
     W[:first], poses[:first] = W[first], poses[first]
     if progress is not None:
         progress(1.0, f"tracked {T} frames")
-    derived = tuple(space.shape_names[i] for i in sorted(set(space.derived) | set(space.dead.tolist())))
+    derived = space.unsolved_names
     return TrackResult(
         space.full_weights(W), poses, errors, tuple(flags), fps_, space.shape_names, derived, space.size,
         "markers",

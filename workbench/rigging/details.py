@@ -146,6 +146,18 @@ def _bare_copy(model: FaceModel) -> FaceModel:
                      metadata=model.metadata)
 
 
+def wrinkled_template(source: FaceModel) -> FaceModel:
+    """``source`` when its wrinkles are fitted, else a copy of it with the procedural sample examples fitted
+    (the template itself is never changed)."""
+    if source.wrinkles.fitted:
+        return source
+    from workbench.methods.wrinkles.family import fit_sample_wrinkles
+
+    copy = _bare_copy(source)
+    fit_sample_wrinkles(copy)
+    return copy
+
+
 def transfer_details(
     source: FaceModel,
     rig: FaceModel,
@@ -181,14 +193,10 @@ def transfer_details(
         example uses, or fewer than two examples are left.
     """
     from workbench.methods.handles.handle_set import HandleSet
-    from workbench.methods.wrinkles.family import fit_sample_wrinkles
     from workbench.methods.wrinkles.layer import blend_weights
 
     dm = DetailMap.between(correspondence, source, rig, "transfer_details")
-    src = source
-    if not src.wrinkles.fitted:
-        src = _bare_copy(source)
-        fit_sample_wrinkles(src)
+    src = wrinkled_template(source)
     facet = src.wrinkles
     names = facet.example_names if examples is None else list(examples)
     unknown = [n for n in names if n not in facet.example_names]

@@ -50,24 +50,12 @@ from workbench.methods.wrinkles.features import (
 from workbench.methods.wrinkles.layer import WrinkleState
 from workbench.methods.wrinkles.pose_space import PoseSpace
 from workbench.model import FaceModel
-from workbench.rigging.details import DetailMap, _bare_copy
+from workbench.rigging.details import DetailMap, wrinkled_template
 
 if TYPE_CHECKING:
     from workbench.rigging.transfer import RigTransfer
 
 __all__ = ["transfer_pose_space"]
-
-
-def _source_state(source: FaceModel) -> WrinkleState:
-    if source.wrinkles.fitted:
-        st: WrinkleState = source.slot("wrinkles")
-        return st
-    from workbench.methods.wrinkles.family import fit_sample_wrinkles
-
-    copy = _bare_copy(source)
-    fit_sample_wrinkles(copy)
-    st = copy.slot("wrinkles")
-    return st
 
 
 def _mapped_graph(st: WrinkleState, dm: DetailMap, V_t: NDArray[np.float64]
@@ -131,7 +119,7 @@ def transfer_pose_space(
         The correspondence is not between these meshes, or no feature edge maps.
     """
     dm = DetailMap.between(correspondence, source, target, "transfer_pose_space")
-    st = _source_state(source)
+    st: WrinkleState = wrinkled_template(source).slot("wrinkles")
     ps = st.pose_space
     assert ps is not None
     V_s = np.asarray(source.vertices, np.float64)

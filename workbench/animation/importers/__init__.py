@@ -25,7 +25,11 @@ from typing import Any
 
 from workbench.animation.importers.errors import AnimationImportError
 from workbench.animation.importers.gltf import read_gltf_animation
-from workbench.animation.importers.keys import reduce_keys, timeline_from_samples
+from workbench.animation.importers.keys import (
+    reduce_keys,
+    reduce_keys_jointly,
+    timeline_from_samples,
+)
 from workbench.animation.importers.livelink import (
     LIVELINK_ANGLE_UNIT,
     LIVELINK_EYE_COLUMNS,
@@ -56,6 +60,7 @@ __all__ = [
     "read_gltf_animation",
     "read_weights_csv",
     "reduce_keys",
+    "reduce_keys_jointly",
     "timeline_from_samples",
 ]
 

@@ -17,7 +17,7 @@ from workbench.animation.curves import Key, Track, weight_track_name
 from workbench.animation.importers.errors import AnimationImportError
 from workbench.animation.tracks import Timeline
 
-__all__ = ["reduce_keys", "timeline_from_samples"]
+__all__ = ["reduce_keys", "reduce_keys_jointly", "timeline_from_samples"]
 
 
 def reduce_keys(times: ArrayLike, values: ArrayLike, tolerance: float) -> NDArray[np.intp]:
@@ -58,6 +58,30 @@ def reduce_keys(times: ArrayLike, values: ArrayLike, tolerance: float) -> NDArra
             keep[m] = True
             stack.append((a, m))
             stack.append((m, b))
+    return np.flatnonzero(keep)
+
+
+def reduce_keys_jointly(times: ArrayLike, values: ArrayLike, tolerances: ArrayLike) -> NDArray[np.intp]:
+    """Samples to keep so every column of ``values`` stays within its tolerance (a vector track's keys).
+
+    Parameters
+    ----------
+    times : (F,) float
+    values : (F, c) float
+    tolerances : float or (c,) float
+        Per column (one number: all columns).
+
+    Returns
+    -------
+    (K,) int
+        The union of :func:`reduce_keys` over the columns, sorted.
+    """
+    V = np.asarray(values, np.float64)
+    V = V.reshape(V.shape[0], -1)
+    tol = np.broadcast_to(np.asarray(tolerances, np.float64), (V.shape[1],))
+    keep = np.zeros(V.shape[0], bool)
+    for c in range(V.shape[1]):
+        keep[reduce_keys(times, V[:, c], float(tol[c]))] = True
     return np.flatnonzero(keep)
 
 
