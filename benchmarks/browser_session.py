@@ -42,6 +42,7 @@ def each_resolution(
     measure: Callable[[str, NotebookPage], list[tuple[Any, ...]]],
     *,
     viewport: dict[str, int] | None = None,
+    browser_args: Sequence[str] = (),
 ) -> list[tuple[Any, ...]]:
     """Run ``measure(res, nb)`` in a fresh notebook for every sample resolution.
 
@@ -57,13 +58,15 @@ def each_resolution(
         ``measure(res, nb) -> rows``; its rows are concatenated in order.
     viewport : dict, optional
         Browser window size, default 1400 x 1000.
+    browser_args : sequence of str
+        More Chromium switches (e.g. a fake camera).
 
     Returns
     -------
     rows : list of tuple
     """
     rows: list[tuple[Any, ...]] = []
-    with lab_and_browser("fwb-bench-") as (lab, browser):
+    with lab_and_browser("fwb-bench-", browser_args) as (lab, browser):
         for res in resolutions:
             name = f"bench_{tag}_{res}.ipynb"
             write_notebook(lab.root / name, [setup_cell(res)])
@@ -86,7 +89,7 @@ def each_resolution(
 
 
 @contextlib.contextmanager
-def lab_and_browser(prefix: str) -> Iterator[tuple[LabServer, Any]]:
+def lab_and_browser(prefix: str, browser_args: Sequence[str] = ()) -> Iterator[tuple[LabServer, Any]]:
     """A JupyterLab of our own (temporary dirs, 127.0.0.1) and Debian's headless Chromium.
 
     Both are stopped on exit, whatever happened inside.
@@ -99,7 +102,7 @@ def lab_and_browser(prefix: str) -> Iterator[tuple[LabServer, Any]]:
         try:
             with sync_playwright() as pw:
                 browser = pw.chromium.launch(
-                    executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS
+                    executable_path=str(CHROMIUM), headless=True, args=[*CHROMIUM_ARGS, *browser_args]
                 )
                 try:
                     yield lab, browser

@@ -32,7 +32,8 @@ PACKAGES = ("workbench", "widgets")
 TUTORIAL_ORDER = [
     "quick_start", "workbench", "handles_and_wrinkles", "wrinkles_comparison",
     "regions_and_markers", "painterly_blending", "timeline_export", "rig_your_face",
-    "clone_a_performance", "transfer_details", "capture", "replay_markers", "performance_enhancement", "batch",
+    "clone_a_performance", "transfer_details", "capture", "live_capture", "replay_markers",
+    "performance_enhancement", "batch",
 ]
 
 

@@ -64,3 +64,22 @@ def render_take(model):
         png = render_png(model, points=(X - centre) @ R.T + centre, size=SIZE, camera="front", antialias=False)
         frames.append(png_to_array(png))
     return np.stack(frames)
+
+
+def write_y4m(path, frames, fps=30):
+    """RGB (T, h, w, 3) uint8 frames as a 4:2:0 YUV4MPEG2 file (BT.601, full range), what Chromium's fake camera reads."""
+    T, h, w, _ = frames.shape
+    rgb = frames.astype(np.float64)
+    y = 0.299 * rgb[..., 0] + 0.587 * rgb[..., 1] + 0.114 * rgb[..., 2]
+    u = 128.0 - 0.168736 * rgb[..., 0] - 0.331264 * rgb[..., 1] + 0.5 * rgb[..., 2]
+    v = 128.0 + 0.5 * rgb[..., 0] - 0.418688 * rgb[..., 1] - 0.081312 * rgb[..., 2]
+
+    def half(c):
+        return c.reshape(T, h // 2, 2, w // 2, 2).mean(axis=(2, 4))
+
+    with open(path, "wb") as fh:
+        fh.write(f"YUV4MPEG2 W{w} H{h} F{fps}:1 Ip A1:1 C420jpeg\n".encode())
+        for f in range(T):
+            fh.write(b"FRAME\n")
+            for plane in (y[f], half(u)[f], half(v)[f]):
+                fh.write(np.clip(np.rint(plane), 0, 255).astype(np.uint8).tobytes())

@@ -140,3 +140,40 @@ def test_a_range_calibration_on_the_extremes_restores_the_amplitude(frames) -> N
     assert raw_peak < 0.7 and abs(peak - 1.0) <= 0.15, (raw_peak, peak)  # within 15 % of the true 1.0
     lo, hi = model.shape(names[jaw]).slider_min, model.shape(names[jaw]).slider_max
     assert all(lo <= g.weights[jaw] <= hi for g in again)
+
+
+@pytest.mark.ui
+def test_a_saved_take_re_tracks_offline_as_it_was_tracked_live(frames, tmp_path) -> None:
+    """Save take → ``track_video(model, "take.npz")``: the same landmarks, so the same weights with the same λ's."""
+    from workbench.capture.facemesh import LandmarkSequence
+    from workbench.capture.track import DEFAULT_L1, DEFAULT_TEMPORAL
+    from workbench.capture.video import track_video
+
+    model, F = frames
+    with LiveTracker(model) as live:
+        for f, img in enumerate(F[:12]):
+            live.push(img, 5.0 + f / 24.0)
+    path = live.save_take(tmp_path / "take.npz")
+    seq = LandmarkSequence.load_take(path)
+    assert seq.n_frames == 12 and seq.fps == pytest.approx(24.0) and seq.image_size == live.image_size
+    np.testing.assert_array_equal(seq.landmarks, live.landmarks)
+    offline = track_video(model, str(path), l1=DEFAULT_L1, temporal=DEFAULT_TEMPORAL)
+    np.testing.assert_allclose(offline.weights, live.take().weights, atol=1e-6)
+
+
+def test_a_file_that_is_not_a_saved_take_is_named(tmp_path) -> None:
+    from workbench.capture.facemesh import LandmarkSequence
+
+    bad = tmp_path / "other.npz"
+    np.savez(bad, landmarks=np.zeros((2, 478, 3)))
+    with pytest.raises(VideoError, match=r"other\.npz: a saved live take has .*missing \['image_size', 'timestamps'\]"):
+        LandmarkSequence.load_take(bad)
+    np.savez(bad, landmarks=np.zeros((2, 478, 3)), timestamps=[1.0, 1.0], image_size=[640, 480])
+    with pytest.raises(VideoError, match="timestamps must be increasing"):
+        LandmarkSequence.load_take(bad)
+    np.savez(bad, landmarks=np.zeros((2, 10, 3)), timestamps=[0.0, 0.1], image_size=[640, 480])
+    with pytest.raises(VideoError, match=r"other\.npz: LandmarkSequence: landmarks must be"):
+        LandmarkSequence.load_take(bad)
+    (tmp_path / "junk.npz").write_bytes(b"not a zip")
+    with pytest.raises(VideoError, match=r"junk\.npz: not a saved live take"):
+        LandmarkSequence.load_take(tmp_path / "junk.npz")

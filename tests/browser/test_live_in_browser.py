@@ -21,29 +21,10 @@ import pytest
 from harness import NotebookPage, pixel_change, wait_until
 
 
-def _write_y4m(path: Path, frames: np.ndarray, fps: int = 30) -> None:
-    """RGB (T, h, w, 3) uint8 frames as a 4:2:0 YUV4MPEG2 file (BT.601, full range), what Chromium's fake camera reads."""
-    T, h, w, _ = frames.shape
-    rgb = frames.astype(np.float64)
-    y = 0.299 * rgb[..., 0] + 0.587 * rgb[..., 1] + 0.114 * rgb[..., 2]
-    u = 128.0 - 0.168736 * rgb[..., 0] - 0.331264 * rgb[..., 1] + 0.5 * rgb[..., 2]
-    v = 128.0 + 0.5 * rgb[..., 0] - 0.418688 * rgb[..., 1] - 0.081312 * rgb[..., 2]
-
-    def half(c: np.ndarray) -> np.ndarray:
-        return c.reshape(T, h // 2, 2, w // 2, 2).mean(axis=(2, 4))
-
-    with open(path, "wb") as fh:
-        fh.write(f"YUV4MPEG2 W{w} H{h} F{fps}:1 Ip A1:1 C420jpeg\n".encode())
-        for f in range(T):
-            fh.write(b"FRAME\n")
-            for plane in (y[f], half(u)[f], half(v)[f]):
-                fh.write(np.clip(np.rint(plane), 0, 255).astype(np.uint8).tobytes())
-
-
 @pytest.fixture(scope="module")
 def fake_camera(tmp_path_factory: Any) -> Path:
     pytest.importorskip("mediapipe")
-    from capture_takes import render_take
+    from capture_takes import render_take, write_y4m
 
     import workbench
 
@@ -51,7 +32,7 @@ def fake_camera(tmp_path_factory: Any) -> Path:
     wide = np.full((frames.shape[0], 480, 640, 3), 235, np.uint8)  # a 640×480 camera, the face in the middle
     wide[:, :, 80:560] = frames
     path = tmp_path_factory.mktemp("camera") / "take.y4m"
-    _write_y4m(path, wide)
+    write_y4m(path, wide)
     return path
 
 
@@ -95,6 +76,13 @@ def test_the_face_follows_the_fake_camera_and_a_recorded_take_exports(open_noteb
     # one frame in flight: the page never gets more than one ahead of the kernel's acks
     sent, acked = int(cam.get_attribute("data-sent")), int(cam.get_attribute("data-acked"))
     assert 0 <= sent - acked <= 1, (sent, acked)
+    # the page's latency report, camera frame to drawn face (numbers: benchmarks/bench_live_page.py)
+    lat = wait_until("the latency report", lambda: cam.get_attribute("data-latency"), bool, timeout=30)
+    report = json.loads(lat)
+    print("live latency, ms (median, p90):", report)
+    stages = report["stages"]
+    assert report["n"] >= 1 and all(len(v) == 2 for v in stages.values()), report
+    assert stages["total"][0] >= stages["kernel"][0] > 0 and stages["draw"][0] > 0, report
     page.mouse.move(5, 5)
     a = nb.canvas_shot("live-1")
     jaws = [st["jaw"]]

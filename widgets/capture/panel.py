@@ -214,9 +214,8 @@ class CapturePanel(ModelPanel):
             raise ValueError("Clone: give the performance's file")
         if not p.exists():
             raise ValueError(f"Clone: {p}: no such file")
-        self.progress.start(f"<i>cloning {html.escape(p.name)} ...</i>")
-        t0 = time.perf_counter()
-        try:
+
+        def clone() -> tuple[Any, ...]:
             perf = load(p)
             timeline = perf.tracks
             if not timeline.tracks:
@@ -224,13 +223,12 @@ class CapturePanel(ModelPanel):
             times = timeline.frame_times()
             frames = np.stack([perf.evaluate_at(float(t)) for t in times])
             cloner = ExpressionCloner(perf, self.model, progress=lambda f, m: self.progress(0.9 * f, m))
-            ids, take = cloner.marker_take(frames, markers=markers)
-        except Exception as exc:
-            self.progress.fail(f"cloning failed: {exc}")
-            raise
+            return (timeline, times, cloner, *cloner.marker_take(frames, markers=markers))
+
+        (timeline, times, cloner, ids, take), dt = self._timed(f"cloning {html.escape(p.name)}", clone)
         out = self.set_take(take, vertex_ids=ids, fps=float(timeline.fps), name=f"clone of {p.name}")
         self.progress.finish(f"cloned {len(times)} frames of {html.escape(p.name)} onto this face in "
-                             f"{time.perf_counter() - t0:.1f} s ({ids.size} markers); Track or drive handles next"
+                             f"{dt:.1f} s ({ids.size} markers); Track or drive handles next"
                              + "".join(f"<br>warning: {html.escape(w)}" for w in cloner.transfer_.warnings[:3]))
         return out
 
@@ -273,25 +271,32 @@ class CapturePanel(ModelPanel):
             raise ValueError("Track: load a take first")
         if self.mode.value == "shell" and self.take["kind"] == "markers":
             return self.replay()
-        self.progress.start("<i>tracking ...</i>")
-        t0 = time.perf_counter()
-        try:
-            res = self._track(self.take["frames"], self.progress,
-                              auto=bool(self.auto.value) and self.take["kind"] == "markers")
-        except Exception as exc:
-            self.progress.fail(f"tracking failed: {exc}")
-            raise
-        dt = time.perf_counter() - t0
+        auto = bool(self.auto.value) and self.take["kind"] == "markers"
+        res, dt = self._timed("tracking", lambda: self._track(self.take["frames"], self.progress, auto=auto))
         self.result, self.replayed = res, None
         held = int(np.asarray(res.held).sum())
-        self.progress.finish(
+        self._finished(
             f"{res.n_frames} frames in {dt:.2f} s ({res.n_frames / max(dt, 1e-9):.0f} frames/s); median error "
             f"{np.nanmedian(res.errors):.3g} {html.escape(self.model.metadata.units)}"
             + (f"; {held} frames held (too few points)" if held else "") + self._chosen(res)
         )
+        return res
+
+    def _timed(self, what: str, work: Any) -> tuple[Any, float]:
+        """Run ``work()`` behind the progress bar; a failure says what failed. Returns (result, seconds)."""
+        self.progress.start(f"<i>{what} ...</i>")
+        t0 = time.perf_counter()
+        try:
+            out = work()
+        except Exception as exc:
+            self.progress.fail(f"{what} failed: {exc}")
+            raise
+        return out, time.perf_counter() - t0
+
+    def _finished(self, message: str) -> None:
+        self.progress.finish(message)
         self.refresh()
         self.show_frame()
-        return res
 
     def replay(self) -> Any:
         """Replay the marker take through the shell with wrinkles (mode "drive handles"); progress bar.
@@ -302,25 +307,15 @@ class CapturePanel(ModelPanel):
         t = self.take
         if t is None or t["kind"] != "markers":
             raise ValueError("Drive handles: load a marker take first (point clouds have no marker vertices)")
-        self.progress.start("<i>replaying the markers through the shell ...</i>")
-        t0 = time.perf_counter()
         auto = bool(self.auto.value)
-        try:
-            rep = self.model.capture.replay(t["frames"], vertex_ids=t["vertex_ids"], fps=t["fps"],
-                                            l1="auto" if auto else float(self.l1.value),
-                                            temporal="auto" if auto else float(self.temporal.value),
-                                            progress=self.progress)
-        except Exception as exc:
-            self.progress.fail(f"replay failed: {exc}")
-            raise
-        dt = time.perf_counter() - t0
+        rep, dt = self._timed("replaying the markers through the shell", lambda: self.model.capture.replay(
+            t["frames"], vertex_ids=t["vertex_ids"], fps=t["fps"], l1="auto" if auto else float(self.l1.value),
+            temporal="auto" if auto else float(self.temporal.value), progress=self.progress))
         self.replayed, self.result = rep, rep.tracked
-        self.progress.finish(
+        self._finished(
             f"{rep.n_frames} frames through the shell in {dt:.2f} s, {rep.vertex_ids.size} markers as handles; "
             f"wrinkles: {html.escape(str(rep.info.get('wrinkles')))}"
             + (self._chosen(rep.tracked) if rep.tracked is not None else ""))
-        self.refresh()
-        self.show_frame()
         return rep
 
     def retrack_window(self) -> None:

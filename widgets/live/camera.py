@@ -3,14 +3,15 @@
 While :attr:`CameraWidget.active` is True the page holds the camera and sends JPEG
 frames, one in flight: :attr:`on_frame` gets each as an ``(h, w, 3)`` uint8 RGB
 array with the page's timestamp, on the kernel's main thread (comm messages arrive
-there), and the widget acks it afterwards, so a slow kernel drops frames instead of
-queueing them. :attr:`state` follows the camera (``"off"``, ``"on"``, ``"error"``)
+there), and the widget acks it afterwards (with the milliseconds it took, for the
+page's latency report), so a slow kernel drops frames instead of queueing them. :attr:`state` follows the camera (``"off"``, ``"on"``, ``"error"``)
 and :attr:`error` says why it failed (no camera, no permission, unplugged).
 """
 
 from __future__ import annotations
 
 import io
+import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -62,12 +63,14 @@ class CameraWidget(anywidget.AnyWidget):
     def _on_frontend_msg(self, _w: Any, content: Any, buffers: list[Any]) -> None:
         kind = content.get("type") if isinstance(content, dict) else None
         if kind == "frame":
+            t0 = time.perf_counter()
             try:
                 if buffers and self.on_frame is not None:
                     self.frames_received += 1
                     self.on_frame(decode_jpeg(bytes(buffers[0])), float(content.get("t", 0.0)))
             finally:
-                self.send({"type": "ack"})  # the next frame may come
+                # the next frame may come; the page's latency report splits its round trip with this
+                self.send({"type": "ack", "kernel_ms": round(1e3 * (time.perf_counter() - t0), 2)})
         elif kind == "camera":
             self.state = str(content.get("state", "off"))
             self.error = str(content.get("message", "")) if self.state == "error" else ""

@@ -8,14 +8,17 @@ history and *Stop* puts the sliders back as they were. *Record* / *Stop recordin
 keys what was tracked in between onto the timeline as one undo step
 (``model.capture.apply``, reduced to keys within the tolerance); *Save take* writes
 the raw landmarks and timestamps (``.npz``) to re-track offline with other settings
-(:func:`workbench.capture.track_video` on a :class:`~workbench.capture.LandmarkSequence`).
+(``track_video(model, "take.npz", ...)``).
 
-The head pose is tracked and recorded (``head_pose`` keys) but not shown while live:
-the face stays frontal in the viewport until the take is applied.
+With *show my head's turn* (on by default) the viewport draws the face under the
+tracked head pose (:meth:`~widgets.viewport.Viewport.show_head_pose`, a view-only
+preview: nothing is keyed until *Record*); *Stop* puts the model's pose back. The
+recorded take keys the same poses (``head_pose``).
 """
 
 from __future__ import annotations
 
+import contextlib
 import html
 import time
 from collections import deque
@@ -46,8 +49,9 @@ class LivePanel(ModelPanel):
         The last take recorded (applied to the timeline).
     """
 
-    def __init__(self, model: Any, *, errors: Any = None, before_edit: Any = ()) -> None:
+    def __init__(self, model: Any, viewport: Any = None, *, errors: Any = None, before_edit: Any = ()) -> None:
         super().__init__(model, errors=errors, before_edit=before_edit, layout=W.Layout(width="100%"))
+        self.viewport = viewport
         self.tracker: Any = None
         self.last: Any = None
         self.recorded: Any = None
@@ -66,6 +70,9 @@ class LivePanel(ModelPanel):
                                    "brows), press again: each shape's range is set from them", "arrows-v")
         self.adapt = W.Checkbox(value=False, description="adapt the rig to me while tracking", indent=False)
         self.adapt.add_class("fwb-live-adapt")
+        self.follow_head = W.Checkbox(value=True, description="show my head's turn", indent=False,
+                                      layout=W.Layout(width="auto"))
+        self.follow_head.add_class("fwb-live-follow-head")
         self.tolerance = W.BoundedFloatText(value=0.01, min=0.0, max=0.5, step=0.005, description="key tolerance",
                                             style={"description_width": "90px"}, layout=W.Layout(width="190px"))
         self.take_path = W.Text(placeholder="take.npz", layout=W.Layout(width="200px"))
@@ -73,13 +80,14 @@ class LivePanel(ModelPanel):
         self.status = W.HTML("<i>Camera off.</i>")
         self.status.add_class("fwb-live-status")
         g = self.guard
+        self.follow_head.observe(g("show head pose")(lambda _c: self._show_pose(self._last_pose())), "value")
         self.start_button.on_click(g("camera")(lambda _b: self.toggle_camera()))
         self.record_button.on_click(g("record")(lambda _b: self.toggle_record()))
         self.range_button.on_click(g("calibrate range")(lambda _b: self.toggle_range()))
         self.save_button.on_click(g("save take")(lambda _b: self.save_take(self.take_path.value)))
         self.children = [
             W.HTML("<b>Live</b> — the face follows your webcam"), self.camera,
-            W.HBox([self.start_button, self.adapt]), W.HBox([self.range_button]),
+            W.HBox([self.start_button, self.adapt, self.follow_head]), W.HBox([self.range_button]),
             W.HBox([self.record_button, self.tolerance]),
             W.HBox([self.take_path, self.save_button]), self.status,
         ]
@@ -111,6 +119,7 @@ class LivePanel(ModelPanel):
             self.toggle_record()
         self.camera.active = False
         self._end_live()
+        self._show_pose(None)
         if self.tracker is not None:
             self.tracker.close()
         self.refresh()
@@ -141,7 +150,9 @@ class LivePanel(ModelPanel):
             m = self.model
             if self._token is None or m.interaction_token != self._token:
                 self._token = m.begin_interaction("Live camera", on_close=self._lost_live, kind="live")
-            m.set_weights(dict(zip(m.shape_names, frame.weights.tolist(), strict=True)))
+            with self._one_view_update():
+                self._show_pose(frame.pose)
+                m.set_weights(dict(zip(m.shape_names, frame.weights.tolist(), strict=True)))
         self._seconds.append(time.perf_counter() - t0)
         n = self.tracker.n_frames_
         if n % 5 == 1 or not frame.ok:
@@ -151,6 +162,19 @@ class LivePanel(ModelPanel):
             self.status.value = (f"{n} frames, {ms:.0f} ms each in the kernel (≤ {1000 / max(ms, 1e-3):.0f} "
                                  f"frames/s){rec}{note}")
         return frame
+
+    def _one_view_update(self) -> Any:
+        return contextlib.nullcontext() if self.viewport is None else self.viewport.sync.held()
+
+    def _show_pose(self, pose: Any) -> None:
+        """The viewport draws the tracked head pose while the camera runs and the box is ticked."""
+        if self.viewport is None:
+            return
+        show = pose is not None and self.camera.active and bool(self.follow_head.value)
+        self.viewport.show_head_pose(pose if show else None)
+
+    def _last_pose(self) -> Any:
+        return self.last.pose if self.last is not None and self.last.ok else None
 
     def _lost_live(self) -> None:
         """Another edit closed the live interaction (its weights stay); the next frame opens a new one."""

@@ -20,7 +20,7 @@ TAB = register_tab(TabSpec("Capture", 60, _build, on_show=lambda wb: wb.capture.
 
 
 def _build_live(wb: Any) -> tuple[Any, dict[str, Any]]:
-    panel = LivePanel(wb.model, errors=wb.errors, before_edit=[wb.panel.grouper.flush])
+    panel = LivePanel(wb.model, wb.viewport, errors=wb.errors, before_edit=[wb.panel.grouper.flush])
     return panel, {"live": panel}
 
 

@@ -131,16 +131,45 @@ class GestureAPI:
         """A point picked on the shown mesh, in model space.
 
         The view draws :meth:`FaceModel.evaluate`, which applies the keyed head pose
-        last; handle offsets and region pins live before it, so a pointer position
-        is mapped back with the inverse rigid transform (a no-op without a pose).
+        last (or the unposed face under the pose :meth:`show_head_pose` set); handle
+        offsets and region pins live before it, so a pointer position is mapped back
+        with the inverse rigid transform (a no-op without a pose).
         """
-        M = self._model.head_matrix()
+        M = self.sync.shown_matrix()
         if np.array_equal(M, np.eye(4)):
             return position
         p = np.asarray(position, dtype=np.float64).reshape(-1)
         if p.shape != (3,):
             raise ValueError(f"Viewport: a position must be 3 numbers, got {position!r}")
         return np.linalg.solve(M, np.append(p, 1.0))[:3]
+
+    def show_head_pose(self, pose: Any) -> None:
+        """Draw the face under ``pose`` instead of the timeline's head pose; None draws the model's again.
+
+        A view-only preview (the Live tab shows the actor's head turning while nothing is
+        keyed): the model does not change, picking maps through the shown pose, and the
+        view updates once (inside ``sync.held()``, once with the edits made there).
+
+        Parameters
+        ----------
+        pose : (4, 4) float or None
+            A rigid transform ``p -> R p + t`` in model units.
+        """
+        if pose is None:
+            M = None
+        else:
+            M = np.array(pose, dtype=np.float64)
+            if M.shape != (4, 4) or not np.all(np.isfinite(M)):
+                raise ValueError(f"show_head_pose: pose must be a finite (4, 4) matrix, got shape {M.shape}")
+            R = M[:3, :3]
+            if not (np.allclose(R @ R.T, np.eye(3), atol=1e-6) and np.allclose(M[3], [0, 0, 0, 1])):
+                raise ValueError("show_head_pose: pose must be rigid (a rotation and a translation)")
+        old = self.sync.view_pose
+        if (M is None and old is None) or (M is not None and old is not None and np.array_equal(M, old)):
+            return
+        self.sync.view_pose = M
+        if self._connected:
+            self.sync.push_geometry_event(False)
 
     def _resolve_handle(self, index: int, vertex: int | None) -> int | None:
         """The model handle ``index`` if it sits on ``vertex``, else the handle on ``vertex``."""

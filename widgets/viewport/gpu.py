@@ -308,8 +308,14 @@ class GpuSync:
 
     # --------------------------------------------------------------- parameters
     def params(self, view: Any) -> np.ndarray:
-        """f32: the k weights, the H_u x 3 offsets per basis column, the head matrix (column-major)."""
-        return self.frame_params(view)
+        """f32: the k weights, the H_u x 3 offsets per basis column, the head matrix (column-major).
+
+        The head matrix is the view's pose when one is shown (the Live tab), else the model's.
+        """
+        params = self.frame_params(view)
+        if self.sync.view_pose is not None:
+            params[-16:] = self.sync.view_pose.T.reshape(-1)
+        return params
 
     def linear(self, view: Any) -> np.ndarray:
         """The kernel's float32 version of the part the GPU evaluates (before the head pose)."""

@@ -90,6 +90,8 @@ class SceneSync:
         self.patch_seq: Any = None
         self._hold = 0
         self._pending = False
+        #: (4, 4) head pose drawn instead of the model's (:meth:`Viewport.show_head_pose`), or None
+        self.view_pose: np.ndarray | None = None
         # paint overlay
         self.paint_last: np.ndarray | None = None  # weights the front end has (None = empty)
         self.paint_last_ref: Any = None  # the array they came from
@@ -139,13 +141,25 @@ class SceneSync:
         self.last_push_ms = ms
         self.push_ms.append(ms)
 
+    def shown_positions(self) -> np.ndarray:
+        """(n, 3) float32 the view draws: ``evaluate()``, or the unposed face under :attr:`view_pose`."""
+        M = self.view_pose
+        if M is None:
+            return np.asarray(self.model.evaluate(), dtype=np.float32)
+        local = np.asarray(self.model.evaluate(posed=False), dtype=np.float64)
+        return np.asarray(local @ M[:3, :3].T + M[:3, 3], dtype=np.float32)
+
+    def shown_matrix(self) -> np.ndarray:
+        """(4, 4) rigid transform the view applies last (the view pose, else the model's head pose)."""
+        return self.model.head_matrix() if self.view_pose is None else self.view_pose.copy()
+
     def push_geometry(self, force_full: bool, tolerance: float = 0.0) -> None:
         model, w = self.model, self.widget
         # Model lock: read a consistent evaluate() (the UI thread makes updates one at a time).
         with model.lock:
             if not self.connected:
                 return
-            pos = np.asarray(model.evaluate(), dtype=np.float32)
+            pos = self.shown_positions()
             faces = model.faces
             topo_changed = (
                 self.last is None

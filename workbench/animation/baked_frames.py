@@ -43,15 +43,25 @@ def baked_frames_timeline(times: ArrayLike, fps: float) -> Timeline:
     return Timeline(fps=fps, tracks=tracks).fit_range()
 
 
-def baked_frames_model(frames: NDArray[np.float64], faces: ArrayLike, times: ArrayLike, fps: float, *,
+def baked_frames_model(frames: NDArray[np.float64], faces: ArrayLike | None, times: ArrayLike, fps: float, *,
                        metadata: ModelMetadata | None = None, component_labels: ArrayLike | None = None,
-                       component_names: list[str] | None = None, what: str = "Baked frames") -> FaceModel:
+                       component_names: list[str] | None = None, what: str = "Baked frames",
+                       like: Any = None) -> FaceModel:
     """A face whose neutral is ``frames[0]`` and whose timeline plays ``frames`` ((T, n, 3)) at ``times``.
 
-    ``what`` names the timeline's undo step.
+    ``what`` names the timeline's undo step. ``like``: a model on the same mesh whose faces,
+    metadata and parts the new face keeps (``faces`` None); the explicit arguments win.
     """
     from workbench.core.shapes import BlendShape
     from workbench.model import FaceModel
+
+    if like is not None:
+        faces = like.faces if faces is None else faces
+        metadata = like.metadata if metadata is None else metadata
+        if component_labels is None:
+            component_labels, component_names = like.component_labels, list(like.component_names)
+    if faces is None:
+        raise ValueError("baked_frames_model: give the faces, or a model on the same mesh as like=")
 
     base = frames[0]
     shapes = [BlendShape(frame_shape_name(k), (frames[k] - base).astype(np.float32)) for k in range(1, len(frames))]

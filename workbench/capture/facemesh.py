@@ -127,6 +127,34 @@ class LandmarkSequence:
         object.__setattr__(self, "frame_numbers", n)
         object.__setattr__(self, "image_size", (int(self.image_size[0]), int(self.image_size[1])))
 
+    @classmethod
+    def load_take(cls, path: str | Path) -> LandmarkSequence:
+        """A live take saved by :meth:`LiveTracker.save_take` (``.npz``: landmarks, timestamps, image size).
+
+        ``fps`` is the take's achieved rate (its median frame interval); ``frame_numbers``
+        count the frames pushed. No pickle is read.
+        """
+        p = Path(path)
+        try:
+            with np.load(p, allow_pickle=False) as z:
+                arrays = {k: np.asarray(z[k]) for k in ("landmarks", "timestamps", "image_size") if k in z.files}
+                missing = sorted({"landmarks", "timestamps", "image_size"} - set(z.files))
+        except (OSError, ValueError) as exc:
+            raise VideoError(f"{p.name}: not a saved live take ({exc})") from None
+        if missing:
+            raise VideoError(f"{p.name}: a saved live take has landmarks, timestamps and image_size; "
+                             f"missing {missing}")
+        ts, size = arrays["timestamps"].astype(np.float64), arrays["image_size"]
+        if ts.ndim != 1 or ts.size < 1 or not np.all(np.isfinite(ts)) or np.any(np.diff(ts) <= 0):
+            raise VideoError(f"{p.name}: timestamps must be increasing seconds, got shape {ts.shape}")
+        if size.shape != (2,) or not np.all(size > 0):
+            raise VideoError(f"{p.name}: image_size must be (width, height) > 0, got {size.tolist()}")
+        fps = 1.0 / float(np.median(np.diff(ts))) if ts.size > 1 else 30.0
+        try:
+            return cls(arrays["landmarks"], (int(size[0]), int(size[1])), fps, np.arange(ts.size), str(p))
+        except ValueError as exc:
+            raise VideoError(f"{p.name}: {exc}") from None
+
     @property
     def n_frames(self) -> int:
         return int(self.landmarks.shape[0])

@@ -170,9 +170,7 @@ class ReplayResult:
         M = self.meshes.astype(np.float64)
         if posed:
             M = np.einsum("tij,tnj->tni", self.poses[:, :3, :3], M) + self.poses[:, None, :3, 3]
-        return baked_frames_model(M, model.faces, self.times(), self.fps, metadata=model.metadata,
-                                  component_labels=model.component_labels,
-                                  component_names=list(model.component_names), what="Marker replay")
+        return baked_frames_model(M, None, self.times(), self.fps, like=model, what="Marker replay")
 
 
 def _fill_occluded(U: NDArray[np.float64], times: NDArray[np.float64]) -> NDArray[np.float64]:

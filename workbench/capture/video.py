@@ -125,7 +125,11 @@ def track_video(
     progress: Progress | None = None,
     **track_options: Any,
 ) -> TrackResult:
-    """Video (or frames, or landmarks) → :class:`~workbench.capture.TrackResult`, all steps at once.
+    """Video (or frames, or landmarks, or a saved live take) → :class:`~workbench.capture.TrackResult`.
+
+    ``source``: a video file, (T, h, w, 3) frames, a :class:`LandmarkSequence`, or a
+    live take's ``.npz`` (:meth:`LiveTracker.save_take`, read by
+    :meth:`LandmarkSequence.load_take`) to re-track with other settings.
 
     :func:`video_landmarks` (unless ``source`` is a :class:`LandmarkSequence`), then
     :func:`register_landmarks` on ``rest_frame`` (the actor at rest), then
@@ -144,6 +148,8 @@ def track_video(
 
     if isinstance(source, LandmarkSequence):
         seq = source
+    elif isinstance(source, str | Path) and Path(source).suffix.lower() == ".npz":
+        seq = LandmarkSequence.load_take(source)  # a live take saved by LiveTracker.save_take
     else:
         seq = video_landmarks(source, fps=fps, max_frames=max_frames, static=static, progress=part(0.0, 0.7))
     reg = register_landmarks(model, seq, frame=rest_frame)

@@ -316,10 +316,7 @@ class ExpressionCloner:
         t = np.arange(len(meshes)) / float(fps) if times is None else np.asarray(times, np.float64).reshape(-1)
         if t.size != len(meshes):
             raise ValueError(f"clone_face: times has {t.size} entries for {len(meshes)} frames")
-        tgt = self.target
-        return baked_frames_model(meshes, tgt.faces, t, fps, metadata=tgt.metadata,
-                                  component_labels=tgt.component_labels,
-                                  component_names=list(tgt.component_names), what="Cloned performance")
+        return baked_frames_model(meshes, None, t, fps, like=self.target, what="Cloned performance")
 
 
 def _check_frames(frames: ArrayLike, n: int) -> NDArray[np.float64]:

@@ -7,12 +7,28 @@
 // the camera (every track of the stream).
 //
 // Messages to the kernel: {type: "frame", t, width, height} with the JPEG as buffer 0;
-// {type: "camera", state: "on" | "off" | "error", message}. From the kernel: {type: "ack"}.
+// {type: "camera", state: "on" | "off" | "error", message}. From the kernel: {type: "ack",
+// kernel_ms} (the kernel's time on the frame: decode, tracking, the face's update sent).
+//
+// Latency, camera frame to drawn face, per stage (the last LATENCY_SAMPLES frames): "grab"
+// (the video frame into a canvas and JPEG-encoded), "kernel" (as the ack says), "transport"
+// (the rest of the send → ack round trip: websocket, server, queueing), "draw" (ack → the
+// second animation frame after it: the face's update reached the page before the ack, on
+// the same kernel channel, so the first animation frame draws it and the second one starts
+// only after that one was painted — a bound, up to one frame late), "total" (grab → draw).
 //
 // Test hooks (attributes on the root): data-camera = "off" | "starting" | "on" | "error",
-// data-sent, data-acked (frames), data-error (the browser's message).
+// data-sent, data-acked (frames), data-error (the browser's message), data-latency (JSON:
+// {n, stages: {name: [median, p90] ms}}).
 
 const JPEG_QUALITY = 0.8;
+const LATENCY_SAMPLES = 120;
+const STAGES = ["grab", "kernel", "transport", "draw", "total"];
+
+function quantile(sorted, q) {
+  if (!sorted.length) return NaN;
+  return sorted[Math.min(sorted.length - 1, Math.floor(q * sorted.length))];
+}
 
 function view({ model, el }) {
   el.classList.add("fwb-camera");
@@ -31,13 +47,26 @@ function view({ model, el }) {
   let acked = 0;
   let timer = null;
   let disposed = false;
+  let pending = null; // {grab, sent} times (ms) of the frame in flight
+  const latency = []; // the last frames' {stage: ms}
+
+  const latencySummary = () => {
+    const stages = {};
+    for (const k of STAGES) {
+      const v = latency.map((r) => r[k]).filter(Number.isFinite).sort((a, b) => a - b);
+      stages[k] = [quantile(v, 0.5), quantile(v, 0.9)];
+    }
+    return { n: latency.length, stages };
+  };
 
   const mark = (state, message = "") => {
     el.setAttribute("data-camera", state);
     el.setAttribute("data-sent", String(sent));
     el.setAttribute("data-acked", String(acked));
     if (message) el.setAttribute("data-error", message);
-    status.textContent = state === "on" ? `camera on: ${sent} frames sent` :
+    const total = latency.length ? latencySummary().stages.total[0] : NaN;
+    const lat = Number.isFinite(total) ? `, camera → face ${Math.round(total)} ms` : "";
+    status.textContent = state === "on" ? `camera on: ${sent} frames sent${lat}` :
       state === "error" ? `camera: ${message}` : state === "starting" ? "asking for the camera…" : "camera off";
   };
 
@@ -48,6 +77,7 @@ function view({ model, el }) {
     stream = null;
     video.srcObject = null;
     inFlight = false;
+    pending = null;
   };
 
   const sendFrame = () => {
@@ -61,6 +91,7 @@ function view({ model, el }) {
     const h = video.videoHeight;
     canvas.width = w;
     canvas.height = h;
+    const grabbed = performance.now();
     canvas.getContext("2d").drawImage(video, 0, 0, w, h);
     inFlight = true;
     const t = performance.now() / 1000;
@@ -71,6 +102,7 @@ function view({ model, el }) {
       // stopped (or restarted) while the JPEG was made: drop it, and never mark a stopped camera "on"
       if (stream !== session || disposed) { inFlight = false; return; }
       sent += 1;
+      pending = { grab: grabbed, sent: performance.now() };
       model.send({ type: "frame", t, width: w, height: h }, undefined, [buf]);
       mark("on");
     }, "image/jpeg", JPEG_QUALITY);
@@ -116,6 +148,20 @@ function view({ model, el }) {
       acked += 1;
       inFlight = false;
       el.setAttribute("data-acked", String(acked));
+      const p = pending;
+      pending = null;
+      if (!p) return;
+      const ack = performance.now();
+      const kernel = Number(msg.kernel_ms);
+      requestAnimationFrame(() => requestAnimationFrame(() => {
+        if (disposed) return;
+        const drawn = performance.now();
+        const trip = ack - p.sent;
+        latency.push({ grab: p.sent - p.grab, kernel, transport: Number.isFinite(kernel) ? trip - kernel : NaN,
+                       draw: drawn - ack, total: drawn - p.grab });
+        if (latency.length > LATENCY_SAMPLES) latency.shift();
+        el.setAttribute("data-latency", JSON.stringify(latencySummary()));
+      }));
     }
   };
   model.on("change:active", onActive);
