@@ -109,7 +109,7 @@ class FrameStepper:
         self.w_prev2, self.w_prev = self.w_prev, w.copy()
         am = self.adaptive
         if adapt and am is not None and self.rows is not None:  # the frame refines the rig for the next frames
-            local = (Yv - M[:3, 3]) @ M[:3, :3]
+            local = (Yv - M[:3, 3]) @ M[:3, :3] - setup.rest_offsets[vis]
             am.update_planes(np.repeat(self.rows[vis], 3), np.tile(np.eye(3), (nv, 1)), local.reshape(-1), wf)
             setup.adopt(am, self.rows)
         return w, M, error, flag

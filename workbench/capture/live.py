@@ -104,9 +104,11 @@ class LiveTracker:
     adapt : bool or dict
         Adapt the rig to the actor while tracking (True: the default options; a dict:
         :class:`~workbench.capture.AdaptiveModel` options). Off by default: on FaceMesh
-        landmarks the adaptation raised the weight error instead of lowering it, on the
-        rig's own face (RMSE 0.16 → 0.37) and on a warped actor (0.19 → 0.41;
-        ``benchmarks/bench_live.py``) — it was built for markers and depth.
+        landmarks of an actor who is not the rig (a warped head) it lowers the weight error
+        over the first three seconds (RMSE 0.18 → 0.13) but drifts back up over the next
+        ones (0.17 against 0.19 without by the ninth second), and on the rig's own face it
+        raises it (0.16 → 0.18); the landmark error falls only 11 %
+        (``benchmarks/bench_live.py``).
     l1, temporal : float, optional
         The tracker's relative λ's (default: the marker tracker's fixed ones).
     iterations : int

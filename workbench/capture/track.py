@@ -205,11 +205,14 @@ class MarkerSetup:
         self.is_rigid = np.zeros(m, bool)
         self.is_rigid[self.rigid] = True
         self.D_derived: NDArray[np.float64] | None = None  # (k, m, 3) every shape's adapted deltas, once adapted
+        #: (m, 3) where each marker sits off its vertex on the actor at rest beyond what the adapted
+        #: identity explains (the rest calibration's residual): kept through every adoption
+        self.rest_offsets = np.zeros((m, 3))
 
     def adopt(self, am: AdaptiveModel, rows: NDArray[np.intp]) -> None:
         """Track the adapted rig from now on: its neutral and deltas at the markers (``rows`` in ``am.vertex_ids_``)."""
         D_all = am.deltas_at()[:, rows]  # (k, m, 3)
-        self.X0 = am.neutral_at()[rows]
+        self.X0 = am.neutral_at()[rows] + self.rest_offsets
         self.D = np.ascontiguousarray(np.moveaxis(D_all[self.space.plain], 0, -1))
         self.Gm = np.einsum("mck,mcl->mkl", self.D, self.D)
         self.G_all = self.Gm.sum(0)
@@ -276,7 +279,10 @@ def start_from_neutral(setup: MarkerSetup, Y: NDArray[np.float64], neutral: Any,
     """Calibrate on the actor at rest; returns the ``(m, 3)`` rest offsets (see :func:`track_markers`).
 
     Without adaptation the offsets are added to the set-up's neutral; with it, the identity is
-    fitted to the rest markers (the paper's eq. 1), alternated with the pose, and adopted.
+    fitted to the rest markers (the paper's eq. 1), alternated with the pose, and adopted, and
+    what it leaves is kept as offsets (``setup.rest_offsets``) through every later adoption
+    and out of the rig's updates. Dropping that residual (as before) let the correctives chase
+    a constant landmark-to-vertex offset: on FaceMesh landmarks the weight error doubled.
     """
     if am is None:
         offsets = _calibrate(setup, Y, neutral)
@@ -290,7 +296,12 @@ def start_from_neutral(setup: MarkerSetup, Y: NDArray[np.float64], neutral: Any,
         am.fit_neutral_planes(np.repeat(rows[seen], 3), np.tile(np.eye(3), (n_seen, 1)),
                               (setup.X0[seen] + offsets[seen]).reshape(-1))
         setup.adopt(am, rows)
-    return _calibrate(setup, Y, neutral)
+    # what the identity cannot explain (a marker or landmark that sits off its vertex) stays a
+    # per-marker offset, as without adaptation; the rig adapts to the motion beyond it
+    offsets = _calibrate(setup, Y, neutral)
+    setup.rest_offsets = offsets
+    setup.X0 = setup.X0 + offsets
+    return offsets
 
 
 def adaptive_for_markers(adapt: Any, model: FaceState, ids: NDArray[np.intp], progress: Progress | None) -> tuple[
