@@ -153,7 +153,7 @@ def open_notebook(
             nb = NotebookPage(page, lab, artifacts_dir, name)
             opened.append((context, nb))
             kernels = lab.kernel_ids()
-            page.goto(f"{lab.url}/lab/workspaces/{uuid.uuid4().hex[:12]}/tree/{name}?reset")
+            page.goto(lab.notebook_url(name))
             try:
                 nb.wait_kernel_idle()
                 if run:

@@ -59,16 +59,54 @@ def _free_port() -> int:
 
 
 # --------------------------------------------------------------------------- JupyterLab
-class LabServer:
-    """A JupyterLab process started by this harness (and the only one it stops)."""
+#: the Jupyter front ends LabServer can start (``python -m <app>``) and the config classes that
+#: get the private dirs: Notebook 7's pages read their settings (overrides.json) from
+#: /lab/api/settings, which the JupyterLab extension in the same server answers from LabApp's
+#: dirs, so both get them
+APPS = {"jupyterlab": ("LabApp",), "notebook": ("LabApp", "JupyterNotebookApp")}
 
-    def __init__(self, base: Path) -> None:
+
+class LabServer:
+    """A JupyterLab (or Notebook 7) process started by this harness (and the only one it stops).
+
+    By default: JupyterLab from this interpreter with the checkout on ``PYTHONPATH``.
+    ``python``: the interpreter whose ``-m <app>`` serves (and whose kernels run);
+    ``app``: ``"jupyterlab"`` or ``"notebook"`` (Notebook 7, same private dirs and
+    settings); ``repo_on_path=False``: no ``PYTHONPATH`` at all and the working
+    directory ``base`` (an installed package is served, not the checkout);
+    ``settings``: the overrides.json put into the app settings dir; ``env``: more
+    environment variables for the server and its kernels.
+    """
+
+    def __init__(
+        self,
+        base: Path,
+        *,
+        python: str | Path = sys.executable,
+        app: str = "jupyterlab",
+        repo_on_path: bool = True,
+        settings: Path = OVERRIDES,
+        env: dict[str, str] | None = None,
+    ) -> None:
+        if app not in APPS:
+            raise ValueError(f"app must be one of {sorted(APPS)}, not {app!r}")
         self.base = base
         self.root = base / "root"
+        self.python = str(python)
+        self.app = app
+        self.repo_on_path = repo_on_path
+        self.settings = settings
+        self.extra_env = dict(env or {})
         self.port = _free_port()
         self.url = f"http://127.0.0.1:{self.port}"
-        self.log_path = base / "jupyterlab.log"
+        self.log_path = base / f"{app}.log"
         self.proc: subprocess.Popen[bytes] | None = None
+
+    def notebook_url(self, name: str) -> str:
+        """The page that opens notebook ``name`` of the root (JupyterLab: in a fresh workspace)."""
+        if self.app == "notebook":
+            return f"{self.url}/notebooks/{name}"
+        return f"{self.url}/lab/workspaces/{uuid.uuid4().hex[:12]}/tree/{name}?reset"
 
     def start(self, timeout: float = 90.0) -> None:
         b = self.base
@@ -87,7 +125,7 @@ class LabServer:
         }
         for d in dirs.values():
             d.mkdir(parents=True, exist_ok=True)
-        settings = json.loads(OVERRIDES.read_text())
+        settings = json.loads(self.settings.read_text())
         for plugin, values in TEST_SETTINGS.items():
             settings.setdefault(plugin, {}).update(values)
         (dirs["app_settings"] / "overrides.json").write_text(json.dumps(settings, indent=1))
@@ -98,18 +136,22 @@ class LabServer:
             JUPYTER_RUNTIME_DIR=str(dirs["runtime"]),
             IPYTHONDIR=str(dirs["ipython"]),
             JUPYTER_PLATFORM_DIRS="1",
-            PYTHONPATH=os.pathsep.join(p for p in (str(REPO), env.get("PYTHONPATH", "")) if p),
             VTK_DEFAULT_OPENGL_WINDOW="vtkEGLRenderWindow",
             # autosave/recovery files of test kernels stay in this server's temp dirs
             WORKBENCH_RECOVERY_DIR=str(self.base / "recovery"),
             # kernels raise, and record, any widget change off their UI thread (HEALTH)
             WORKBENCH_UI_THREAD_GUARD="1",
         )
+        if self.repo_on_path:
+            env["PYTHONPATH"] = os.pathsep.join(p for p in (str(REPO), env.get("PYTHONPATH", "")) if p)
+        else:
+            env.pop("PYTHONPATH", None)
+        env.update(self.extra_env)
         # notebooks/workbench.ipynb opens the 25k head by default; the tests that drive it
         # check features on the 5k one (test_run_command checks the default, not via this)
         env.setdefault("WORKBENCH_RESOLUTION", "base")
         cmd = [
-            sys.executable, "-m", "jupyterlab",
+            self.python, "-m", self.app,
             "--no-browser",
             "--ServerApp.ip=127.0.0.1",
             f"--ServerApp.port={self.port}",
@@ -119,15 +161,21 @@ class LabServer:
             "--ServerApp.disable_check_xsrf=True",
             "--allow-root",
             f"--ServerApp.root_dir={dirs['root']}",
-            f"--LabApp.workspaces_dir={dirs['workspaces']}",
-            f"--LabApp.user_settings_dir={dirs['user_settings']}",
-            f"--LabApp.app_settings_dir={dirs['app_settings']}",
-            "--LabApp.expose_app_in_browser=True",
             "--LabApp.news_url=None",
             "--LabApp.check_for_updates_class=jupyterlab.NeverCheckForUpdate",
         ]  # fmt: skip
+        for cls in APPS[self.app]:
+            cmd += [
+                f"--{cls}.workspaces_dir={dirs['workspaces']}",
+                f"--{cls}.user_settings_dir={dirs['user_settings']}",
+                f"--{cls}.app_settings_dir={dirs['app_settings']}",
+                f"--{cls}.expose_app_in_browser=True",
+            ]
         self._log = open(self.log_path, "wb")
-        self.proc = subprocess.Popen(cmd, stdout=self._log, stderr=subprocess.STDOUT, env=env)
+        self.proc = subprocess.Popen(
+            cmd, stdout=self._log, stderr=subprocess.STDOUT, env=env,
+            cwd=None if self.repo_on_path else self.base,
+        )  # fmt: skip
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             if self.proc.poll() is not None:

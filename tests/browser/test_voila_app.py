@@ -27,25 +27,41 @@ pytestmark = pytest.mark.browser
 
 
 class VoilaApp:
-    def __init__(self, base: Path) -> None:
+    """``workbench app`` on a free port, started here (and the only process stopped here).
+
+    By default the checkout's (``python -m workbench.cli`` with the repository on
+    ``PYTHONPATH``); ``command``: another way to start it (e.g. an installed
+    ``venv/bin/workbench``, to which ``app --port=N`` is appended), run with no
+    ``PYTHONPATH`` and the working directory ``base``; ``env``: more variables.
+    """
+
+    def __init__(self, base: Path, *, command: list[str] | None = None,
+                 env: dict[str, str] | None = None) -> None:
         self.base = base
         self.port = _free_port()
         self.log_path = base / "voila.log"
-        env = dict(os.environ)
-        env.update(
+        environ = dict(os.environ)
+        environ.update(
             JUPYTER_CONFIG_DIR=str(base / "config"),
             JUPYTER_RUNTIME_DIR=str(base / "runtime"),
             JUPYTER_DATA_DIR=str(base / "data"),
             JUPYTER_PLATFORM_DIRS="1",
             WORKBENCH_RECOVERY_DIR=str(base / "recovery"),
-            PYTHONPATH=os.pathsep.join(p for p in (str(REPO), env.get("PYTHONPATH", "")) if p),
         )
+        checkout = command is None
+        if command is None:
+            command = [sys.executable, "-m", "workbench.cli"]
+            environ["PYTHONPATH"] = os.pathsep.join(p for p in (str(REPO), environ.get("PYTHONPATH", "")) if p)
+        else:
+            environ.pop("PYTHONPATH", None)
+        environ.update(env or {})
         self._log = open(self.log_path, "wb")
         self.proc = subprocess.Popen(
-            [sys.executable, "-m", "workbench.cli", "app", f"--port={self.port}"],
+            [*command, "app", f"--port={self.port}"],
             stdout=self._log,
             stderr=subprocess.STDOUT,
-            env=env,
+            env=environ,
+            cwd=None if checkout else base,
         )
         self.url = self._wait_url()
 
