@@ -3,9 +3,10 @@
 ipywidgets keeps per-widget state with no lock (``hold_sync``,
 ``_states_to_send``, ``_property_lock``) and expects every trait change and
 comm message on the kernel's main thread, the thread whose asyncio loop
-handles the comm messages (``widgets/jupyter_settings/overrides.json`` keeps
-JupyterLab from sending them over a subshell thread). Everything here keeps
-the widgets on that one *UI thread*, as napari keeps Qt on its main thread:
+handles the comm messages (:func:`route_widget_comms_to_main_thread` keeps
+ipykernel from handling them on a subshell thread, whatever the page asks).
+Everything here keeps the widgets on that one *UI thread*, as napari keeps Qt
+on its main thread:
 
 * :class:`UiTimer` / :func:`ui_loop`: timers on the kernel's event loop
   (``loop.call_later``), never ``threading.Timer``; :func:`call_on_ui_thread`
@@ -191,6 +192,47 @@ def install_thread_guard() -> None:
 
 if os.environ.get("WORKBENCH_UI_THREAD_GUARD", "") not in ("", "0"):
     install_thread_guard()
+
+
+#: the comm target of every ipywidgets widget
+WIDGET_COMM_TARGET = "jupyter.widget"
+
+
+def route_widget_comms_to_main_thread() -> bool:
+    """Have ipykernel deliver every widget's comm messages on the kernel's main thread.
+
+    ipykernel 7 can run a front end's comm messages on *subshell* threads; JupyterLab 4.4+
+    asks for one per comm target unless *Kernel Comms over subshells* is *Disabled*, and
+    Notebook 7.6 asks whatever that setting says (it does not load the plugin that applies
+    it). ipykernel's shell-channel thread picks the subshell of an incoming
+    ``comm_msg`` / ``comm_close`` by asking the comm (``_reply_subshell_for``, ipykernel
+    7.4); this answers "the main shell" for widget comms, so the messages queue for the
+    main thread as they did before subshells, whatever the page asked. Other comms keep
+    ipykernel's routing. Returns False where ipykernel has no such hook (before 7.4;
+    before 7.0 there are no subshells at all).
+    """
+    try:
+        from ipykernel.comm.comm import BaseComm
+    except ImportError:  # not in an ipykernel kernel
+        return False
+    routed = getattr(BaseComm, "_reply_subshell_for", None)
+    if routed is None:
+        return False
+    if getattr(routed, "_fwb_main_thread", False):
+        return True
+
+    @functools.wraps(routed)
+    def _reply_subshell_for(self: Any, data: Any, default: Any) -> Any:
+        if getattr(self, "target_name", None) == WIDGET_COMM_TARGET:
+            return None  # the main shell: the kernel's main thread
+        return routed(self, data, default)
+
+    _reply_subshell_for._fwb_main_thread = True  # type: ignore[attr-defined]
+    BaseComm._reply_subshell_for = _reply_subshell_for  # type: ignore[method-assign]
+    return True
+
+
+route_widget_comms_to_main_thread()
 
 
 class ErrorSink:

@@ -21,14 +21,13 @@ directory and the server root are outside the repository, no ``PYTHONPATH`` — 
   carries) draws the head, a jawOpen drag changes it, and its Export tab writes a .glb
   the validator accepts.
 
-The servers get the setting the README tells a user to set (the wheel's
-``widgets/jupyter_settings/overrides.json``: kernel comms not over subshells, so widget
-messages reach the kernel's main thread; the kernels' UI-thread guard checks it).
-JupyterLab applies it; Notebook 7.6 does not (it loads no
-``@jupyterlab/apputils-extension:subshell-settings`` plugin, so its pages keep one subshell
-per comm target whatever the setting says): there the test applies the setting in the page
-as that plugin does before the cells run, and says so in the test output. Screenshots, the
-.glb files, validator reports and server logs are kept in ``test-artifacts/<test>/``.
+The servers keep the front ends' own defaults, as in a user's Jupyter: their pages ask
+ipykernel to run comm messages on subshell threads (JupyterLab 4.4+: one per comm target
+unless *Kernel Comms over subshells* is *Disabled*; Notebook 7.6 asks that whatever its
+settings say). The widgets route their comms to the kernel's main thread themselves
+(``widgets._threading.route_widget_comms_to_main_thread``), and the kernels' UI-thread
+guard checks that every widget change and message happens there. Screenshots, the .glb
+files, validator reports and server logs are kept in ``test-artifacts/<test>/``.
 """
 
 from __future__ import annotations
@@ -79,22 +78,13 @@ print(json.dumps({"workbench": workbench.__file__, "widgets": widgets.__file__,
 
 _JS_APP = "() => ({name: window.jupyterapp.name, version: window.jupyterapp.version})"
 
-#: The served "Kernel Comms over subshells" setting (overrides.json) and whether the page's kernel
-#: connections follow it. JupyterLab applies it in its plugin
-#: ``@jupyterlab/apputils-extension:subshell-settings``; Notebook 7.6 does not load that plugin, so
-#: its pages keep the default (one subshell per comm target) whatever the setting says, and ipykernel
-#: >= 7 then handles widget messages on subshell threads. Where the page did not apply the setting,
-#: this applies it as that plugin does (``serviceManager.kernels.commsOverSubshells``: every open
-#: kernel connection and comm follows) and says so.
-_JS_COMMS_SETTING = """async () => {
+#: How the page asks for comm messages to be run: "disabled" (the main shell) or over subshells
+#: (``@jupyterlab/apputils-extension:kernels-settings``' ``commsOverSubshells``, read from the page's
+#: kernel manager and its kernel connection).
+_JS_COMMS_MODE = """() => {
   const app = window.jupyterapp, km = app.serviceManager.kernels;
-  const plugin = "@jupyterlab/apputils-extension:subshell-settings";
-  const r = await app.serviceManager.settings.fetch("@jupyterlab/apputils-extension:kernels-settings");
-  const wanted = (r.settings && r.settings.commsOverSubshells) || r.schema.properties.commsOverSubshells.default;
-  const out = {plugin: app.hasPlugin(plugin), served: wanted, page: km.commsOverSubshells};
-  if (km.commsOverSubshells !== wanted) km.commsOverSubshells = wanted;
-  out.kernel = app.shell.currentWidget.sessionContext.session.kernel.commsOverSubshells;
-  return out;
+  const kernel = app.shell.currentWidget.sessionContext.session.kernel;
+  return {page: km.commsOverSubshells, kernel: kernel.commsOverSubshells};
 }"""
 
 
@@ -160,6 +150,13 @@ def wheel_venv(browser: Any, wheel: Path, tmp_path_factory: pytest.TempPathFacto
     return venv
 
 
+def _defaults_only(base: Path) -> Path:
+    """An empty overrides.json: the front end's own defaults (a user's Jupyter as installed)."""
+    path = base / "no-overrides.json"
+    path.write_text("{}")
+    return path
+
+
 @pytest.fixture(scope="module", params=["jupyterlab", "notebook"])
 def lab(request: pytest.FixtureRequest, wheel_venv: Path,
         tmp_path_factory: pytest.TempPathFactory) -> Iterator[LabServer]:
@@ -172,7 +169,7 @@ def lab(request: pytest.FixtureRequest, wheel_venv: Path,
         python=wheel_venv / "bin" / "python",
         app=request.param,
         repo_on_path=False,
-        settings=_installed_file(wheel_venv, "widgets/jupyter_settings/overrides.json"),
+        settings=_defaults_only(base),
         env={"WORKBENCH_CACHE_DIR": str(base / "sample-cache"), "VIRTUAL_ENV": str(wheel_venv),
              "PATH": f"{wheel_venv / 'bin'}{os.pathsep}{os.environ.get('PATH', '')}"},
     )
@@ -181,11 +178,6 @@ def lab(request: pytest.FixtureRequest, wheel_venv: Path,
         yield server
     finally:
         server.stop()
-
-
-def _installed_file(venv: Path, relative: str) -> Path:
-    (path,) = venv.glob(f"lib/python*/site-packages/{relative}")
-    return path
 
 
 @contextlib.contextmanager
@@ -244,16 +236,12 @@ def test_notebook_from_the_wheel_draws_drags_and_exports(
         assert app["name"] == want[0] and app["version"].startswith(want[1]), app
         if lab.app == "notebook":
             assert "/notebooks/" in page.url and "/lab" not in page.url, page.url
-        comms = page.evaluate(_JS_COMMS_SETTING)
+        comms = page.evaluate(_JS_COMMS_MODE)
         (artifacts_dir / "comms-over-subshells.json").write_text(json.dumps(comms, indent=1))
-        assert comms["served"] == "disabled" and comms["kernel"] == "disabled", comms
-        if lab.app == "jupyterlab":  # JupyterLab follows the setting by itself
-            assert comms["plugin"] and comms["page"] == "disabled", comms
-        elif comms["page"] != "disabled":
-            _say(request, f"wheel in the browser: {app['name']} {app['version']} does not apply the served "
-                          "'Kernel Comms over subshells' setting (it loads no @jupyterlab/apputils-extension:"
-                          f"subshell-settings plugin; the page kept {comms['page']!r}): the test applied it "
-                          "as that plugin does")
+        # the page asks for subshells: the widgets' own routing keeps their messages on the main thread
+        assert comms["kernel"] not in (None, "disabled"), comms
+        _say(request, f"wheel in the browser: {app['name']} {app['version']} runs kernel comms over subshells "
+                      f"({comms['kernel']!r}); the UI-thread guard checks the widgets stay on the main thread")
         # ---- run the cells (as open_notebook does)
         nb.wait_widgets_restored()
         nb.install_comm_log()
