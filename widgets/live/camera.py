@@ -50,6 +50,9 @@ class CameraWidget(anywidget.AnyWidget):
     _esm = t.Unicode("").tag(sync=True)
     #: the page holds the camera while True
     active = t.Bool(False).tag(sync=True)
+    #: the face model it drives (``widgets.viewport.common.scene_key``): while frames flow, the
+    #: page counts that model as playing (its viewports draw at draft resolution on software WebGL)
+    _scene = t.Unicode("").tag(sync=True)
 
     def __init__(self, on_frame: FrameCallback | None = None, **kwargs: Any) -> None:
         super().__init__(_esm=load_camera_bundle(), **kwargs)

@@ -31,6 +31,7 @@ from numpy.typing import NDArray
 
 from widgets.live.camera import CameraWidget
 from widgets.panels.base import ModelPanel, button
+from widgets.viewport.common import scene_key
 
 __all__ = ["LivePanel"]
 
@@ -60,7 +61,7 @@ class LivePanel(ModelPanel):
         self._calibrating = False
         #: the kernel's seconds for the last frames (the status line's median)
         self._seconds: deque[float] = deque(maxlen=30)
-        self.camera = CameraWidget(on_frame=self.errors.guard("live frame")(self.push))
+        self.camera = CameraWidget(on_frame=self.errors.guard("live frame")(self.push), _scene=scene_key(model))
         self.camera.on_state = self.errors.guard("camera state")(self._on_camera_state)
         self.start_button = button("Start camera", "fwb-live-start", "Open the webcam (the browser asks first)",
                                    "video-camera")

@@ -2,7 +2,8 @@
 //
 // While `active` is true the page holds the user's camera (getUserMedia: the browser asks
 // for consent) and sends frames to the kernel as small JPEGs, at the rate the kernel keeps
-// up with: one frame in flight, the next one only after the kernel's {type: "ack"} — a slow
+// up with (at most MAX_SEND_WIDTH wide): one frame in flight, the next one only after the
+// kernel's {type: "ack"} — a slow
 // kernel makes frames drop, never queue. Turning `active` off, or closing the view, stops
 // the camera (every track of the stream).
 //
@@ -17,11 +18,22 @@
 // the same kernel channel, so the first animation frame draws it and the second one starts
 // only after that one was painted — a bound, up to one frame late), "total" (grab → draw).
 //
+// While frames flow, the face animates like a playing timeline: the camera announces itself
+// in the playback registry (./shared/playback.js) under its face model's scene key (the
+// `_scene` trait), so that model's viewports draw at draft resolution on software WebGL.
+//
 // Test hooks (attributes on the root): data-camera = "off" | "starting" | "on" | "error",
 // data-sent, data-acked (frames), data-error (the browser's message), data-latency (JSON:
 // {n, stages: {name: [median, p90] ms}}).
 
+import { announcePlayback } from "./shared/playback.js";
+
 const JPEG_QUALITY = 0.8;
+// Frames go out at most this wide (the camera's aspect kept): FaceMesh crops the face and
+// resizes it to 192 px anyway, and the weights it gives were the same at 320×240 as at
+// 640×480 on the rendered take (RMSE 0.144 / 0.148); a quarter of the pixels to draw,
+// encode, send and decode.
+const MAX_SEND_WIDTH = 320;
 const LATENCY_SAMPLES = 120;
 const STAGES = ["grab", "kernel", "transport", "draw", "total"];
 
@@ -48,6 +60,7 @@ function view({ model, el }) {
   let timer = null;
   let disposed = false;
   let pending = null; // {grab, sent} times (ms) of the frame in flight
+  const source = `camera-${Math.random().toString(36).slice(2)}`; // this view, in the playback registry
   const latency = []; // the last frames' {stage: ms}
 
   const latencySummary = () => {
@@ -78,6 +91,7 @@ function view({ model, el }) {
     video.srcObject = null;
     inFlight = false;
     pending = null;
+    announcePlayback(source, model.get("_scene"), false);
   };
 
   const sendFrame = () => {
@@ -87,8 +101,9 @@ function view({ model, el }) {
       timer = setTimeout(sendFrame, 10);
       return;
     }
-    const w = video.videoWidth;
-    const h = video.videoHeight;
+    const scale = Math.min(1, MAX_SEND_WIDTH / video.videoWidth);
+    const w = Math.round(video.videoWidth * scale);
+    const h = Math.round(video.videoHeight * scale);
     canvas.width = w;
     canvas.height = h;
     const grabbed = performance.now();
@@ -131,6 +146,7 @@ function view({ model, el }) {
       await video.play().catch(() => {});
       mark("on");
       model.send({ type: "camera", state: "on", message: "" });
+      announcePlayback(source, model.get("_scene"), true);
       sendFrame();
     } catch (err) {
       const message = `${err && err.name ? err.name + ": " : ""}${err && err.message ? err.message : err}`;
