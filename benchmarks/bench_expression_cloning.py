@@ -35,9 +35,14 @@ at 27k on a quieter day):
     remesh + warp + bust      26951   0.090   0.405   0.126       0.22     18.5       268      22
     foreign                   16235   0.120   0.305   0.126       0.39     14.1       182      21
 
+Measured again 2026-11-29 on a quiet machine (errors identical): set-up 1.1 /
+1.2 / 2.1 / 1.6 s, clone 987 / 944 / 421 / 690 frames/s, DT 839 / 1234 / 163 /
+253 frames/s.
+
 Cloning beats both peers on every face. Met: the issue's 10 % on a warped,
-re-triangulated, renumbered head (5.7 %); >= 100 frames/s at 27k (268). Not
-met: 5 % on every generated face, and the set-up under load (18.5 s at 27k).
+re-triangulated, renumbered head (5.7 %); >= 100 frames/s at 27k (421 quiet,
+268 under load) after <= 10 s of set-up (2.1 s quiet). Not met: 5 % on every
+generated face.
 The proportions face misses most: where the jaw grew 1.25x the local scales
 measured on the fitted source reach ~1.18 (the non-rigid fit is stiffer than
 the warp), and with every T set to the identity the error is the same (0.27),
