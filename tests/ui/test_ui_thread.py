@@ -157,12 +157,12 @@ def test_playback_needs_the_kernels_loop(tiny_model) -> None:
 
 def test_widget_comm_messages_are_routed_to_the_main_shell_whatever_the_page_asks() -> None:
     """ipykernel 7.4 asks a comm which subshell its incoming messages go to: widget comms answer the main one."""
-    from ipykernel.comm.comm import BaseComm, Comm
+    from ipykernel.comm.comm import BaseComm
 
     assert ui.route_widget_comms_to_main_thread()
     assert ui.route_widget_comms_to_main_thread()  # once is enough; again changes nothing
-    widget_comm = Comm(target_name=ui.WIDGET_COMM_TARGET, data={})
-    other = Comm(target_name="some.other.target", data={})
+    widget_comm = BaseComm(target_name=ui.WIDGET_COMM_TARGET, data={})
+    other = BaseComm(target_name="some.other.target", data={})
     # a message the page sent on subshell "s-1": the widget's goes to the main shell (None)
     assert widget_comm._reply_subshell_for({"method": "update"}, "s-1") is None
     # other comms keep ipykernel's own routing (here: back to where the page asked)
