@@ -4,8 +4,9 @@ While :attr:`CameraWidget.active` is True the page holds the camera and sends JP
 frames, one in flight: :attr:`on_frame` gets each as an ``(h, w, 3)`` uint8 RGB
 array with the page's timestamp, on the kernel's main thread (comm messages arrive
 there), and the widget acks it afterwards (with the milliseconds it took, for the
-page's latency report), so a slow kernel drops frames instead of queueing them. :attr:`state` follows the camera (``"off"``, ``"on"``, ``"error"``)
-and :attr:`error` says why it failed (no camera, no permission, unplugged).
+page's latency report), so a slow kernel drops frames instead of queueing them.
+:attr:`state` follows the camera (``"off"``, ``"on"``, ``"error"``) and
+:attr:`error` says why it failed (no camera, no permission, unplugged).
 """
 
 from __future__ import annotations

@@ -135,10 +135,11 @@ class LandmarkSequence:
         count the frames pushed. No pickle is read.
         """
         p = Path(path)
+        fields = ("landmarks", "timestamps", "image_size")
         try:
             with np.load(p, allow_pickle=False) as z:
-                arrays = {k: np.asarray(z[k]) for k in ("landmarks", "timestamps", "image_size") if k in z.files}
-                missing = sorted({"landmarks", "timestamps", "image_size"} - set(z.files))
+                arrays = {k: np.asarray(z[k]) for k in fields if k in z.files}
+                missing = sorted(set(fields) - set(z.files))
         except (OSError, ValueError) as exc:
             raise VideoError(f"{p.name}: not a saved live take ({exc})") from None
         if missing:

@@ -278,26 +278,24 @@ def start_from_neutral(setup: MarkerSetup, Y: NDArray[np.float64], neutral: Any,
                        rows: NDArray[np.intp]) -> NDArray[np.float64]:
     """Calibrate on the actor at rest; returns the ``(m, 3)`` rest offsets (see :func:`track_markers`).
 
-    Without adaptation the offsets are added to the set-up's neutral; with it, the identity is
-    fitted to the rest markers (the paper's eq. 1), alternated with the pose, and adopted, and
-    what it leaves is kept as offsets (``setup.rest_offsets``) through every later adoption
-    and out of the rig's updates. Dropping that residual (as before) let the correctives chase
-    a constant landmark-to-vertex offset: on FaceMesh landmarks the weight error doubled.
+    With adaptation the identity is first fitted to the rest markers (the paper's eq. 1),
+    alternated with the pose, and adopted. What is left (all of it without adaptation) is
+    added to the set-up's neutral as per-marker offsets (``setup.rest_offsets``), kept through
+    every later adoption and out of the rig's updates. Dropping that residual with adaptation
+    (as before) let the correctives chase a constant landmark-to-vertex offset: on FaceMesh
+    landmarks the weight error doubled.
     """
-    if am is None:
-        offsets = _calibrate(setup, Y, neutral)
-        setup.X0 = setup.X0 + offsets
-        return offsets
-    rest = _rest(setup, Y, neutral)  # the paper's neutral start: the identity from the rest markers
-    seen: NDArray[np.bool_] = np.asarray(np.isfinite(rest).all(1))
-    for _it in range(3):
-        offsets = _calibrate(setup, Y, neutral)
-        n_seen = int(seen.sum())
-        am.fit_neutral_planes(np.repeat(rows[seen], 3), np.tile(np.eye(3), (n_seen, 1)),
-                              (setup.X0[seen] + offsets[seen]).reshape(-1))
-        setup.adopt(am, rows)
+    if am is not None:
+        rest = _rest(setup, Y, neutral)  # the paper's neutral start: the identity from the rest markers
+        seen: NDArray[np.bool_] = np.asarray(np.isfinite(rest).all(1))
+        for _it in range(3):
+            offsets = _calibrate(setup, Y, neutral)
+            n_seen = int(seen.sum())
+            am.fit_neutral_planes(np.repeat(rows[seen], 3), np.tile(np.eye(3), (n_seen, 1)),
+                                  (setup.X0[seen] + offsets[seen]).reshape(-1))
+            setup.adopt(am, rows)
     # what the identity cannot explain (a marker or landmark that sits off its vertex) stays a
-    # per-marker offset, as without adaptation; the rig adapts to the motion beyond it
+    # per-marker offset; the rig adapts to the motion beyond it
     offsets = _calibrate(setup, Y, neutral)
     setup.rest_offsets = offsets
     setup.X0 = setup.X0 + offsets

@@ -3,8 +3,7 @@
 // While `active` is true the page holds the user's camera (getUserMedia: the browser asks
 // for consent) and sends frames to the kernel as small JPEGs, at the rate the kernel keeps
 // up with (at most MAX_SEND_WIDTH wide): one frame in flight, the next one only after the
-// kernel's {type: "ack"} — a slow
-// kernel makes frames drop, never queue. Turning `active` off, or closing the view, stops
+// kernel's {type: "ack"} — a slow kernel makes frames drop, never queue. Turning `active` off, or closing the view, stops
 // the camera (every track of the stream).
 //
 // Messages to the kernel: {type: "frame", t, width, height} with the JPEG as buffer 0;
@@ -62,6 +61,7 @@ function view({ model, el }) {
   let pending = null; // {grab, sent} times (ms) of the frame in flight
   const source = `camera-${Math.random().toString(36).slice(2)}`; // this view, in the playback registry
   const latency = []; // the last frames' {stage: ms}
+  let summary = null; // latencySummary() of `latency`, made once per measured frame
 
   const latencySummary = () => {
     const stages = {};
@@ -77,7 +77,7 @@ function view({ model, el }) {
     el.setAttribute("data-sent", String(sent));
     el.setAttribute("data-acked", String(acked));
     if (message) el.setAttribute("data-error", message);
-    const total = latency.length ? latencySummary().stages.total[0] : NaN;
+    const total = summary ? summary.stages.total[0] : NaN;
     const lat = Number.isFinite(total) ? `, camera → face ${Math.round(total)} ms` : "";
     status.textContent = state === "on" ? `camera on: ${sent} frames sent${lat}` :
       state === "error" ? `camera: ${message}` : state === "starting" ? "asking for the camera…" : "camera off";
@@ -176,7 +176,8 @@ function view({ model, el }) {
         latency.push({ grab: p.sent - p.grab, kernel, transport: Number.isFinite(kernel) ? trip - kernel : NaN,
                        draw: drawn - ack, total: drawn - p.grab });
         if (latency.length > LATENCY_SAMPLES) latency.shift();
-        el.setAttribute("data-latency", JSON.stringify(latencySummary()));
+        summary = latencySummary();
+        el.setAttribute("data-latency", JSON.stringify(summary));
       }));
     }
   };
