@@ -21,14 +21,16 @@ import numpy as np
 import pytest
 from grid_meshes import grid_polygons
 
-from workbench.animation.curves import HANDLES, Key, Track, region_track_name
+from workbench.animation.curves import Key, Track
 from workbench.animation.tracks import Timeline
 from workbench.core.pipeline import FunctionLayer
 from workbench.export import ExportResult, export
 from workbench.export.encoding import MeshEncoding, crossing_times, curve_range
 from workbench.export.gltf import Curve, merge_curves
+from workbench.methods.handles.facet import HANDLES_TRACK as HANDLES
 from workbench.methods.paint.painting import Brush
 from workbench.methods.regions.blend import RegionWeights
+from workbench.methods.regions.tracks import region_track_name
 from workbench.model import BlendShape, FaceModel, ModelMetadata
 
 TIMES = np.linspace(-0.2, 2.2, 49)  # before, inside and after the keys, on and off frames
@@ -75,11 +77,11 @@ def add_layers(model: FaceModel, *, keyed_handles: bool, regions: bool = True) -
     model.handles.add(50)
     model.handles.set_offsets([[0.0, 0.0, 0.4], [0.2, -0.1, 0.0]])
     if keyed_handles:
-        model.timeline.key_handles(0.0, "linear")
+        model.handles.key(0.0, "linear")
         model.handles.set_offsets([[0.1, 0.0, -0.3], [0.0, 0.0, 0.0]])
-        model.timeline.key_handles(1.5)
+        model.handles.key(1.5)
         model.handles.set_offsets([[0.0, 0.2, 0.1], [0.1, 0.1, 0.1]])
-        model.timeline.key_handles(2.0)
+        model.handles.key(2.0)
     model.set_weights({"a": 0.8, "c": 1.0})
     model.expressions.save("smile")
     model.set_weights({"a": 0.0, "c": 0.25})  # c stays unkeyed at 0.25
@@ -185,6 +187,21 @@ def test_baked_layer_is_reported_and_logged(tmp_path, caplog):
     assert names[3:] == [f"layer:frame{f:04d}" for f in range(1, 9)]
     res = export(m, m.tracks, tmp_path / "f.csv")
     assert res.by_encoding("omitted") == ["wobble"]
+
+
+def test_region_weights_made_before_a_shape_was_added_export_as_the_global_blend():
+    """Stale region weights (the shape list changed since) play the global blend in every path."""
+    m = make_model()
+    add_layers(m, keyed_handles=False)
+    keyed(m)
+    st = m.regions.state
+    assert st.weights is not None and np.abs(m.layers_at(0.5, ["regions"])["regions"]).max() > 0
+    m.add_shape("late", np.full((m.n_vertices, 3), 0.01, np.float32))
+    assert tuple(m.regions.state.weights.shape_names) != tuple(m.shape_names)
+    assert m.layers_at(0.5, ["regions"])["regions"] is None
+    enc = MeshEncoding(m, m.tracks)
+    assert {r.name: r.encoding for r in enc.layers}["regions"] == "inactive"
+    np.testing.assert_allclose(enc.points(TIMES), _evaluate_at(m, TIMES), atol=2e-6, rtol=0)
 
 
 def test_keyed_region_weights_are_baked_per_frame_and_reported(tmp_path):

@@ -84,7 +84,9 @@ def apply(m: FaceModel, e: tuple) -> None:
         m.end_interaction(tok)
     elif kind == "region":
         st_ = m.regions.state
-        rw = st_.weights or RegionWeights.from_global(m, st_.regions, st_.level)
+        rw = st_.weights
+        if rw is None or tuple(rw.shape_names) != tuple(m.shape_names):  # none yet, or stale after a bake
+            rw = RegionWeights.from_global(m, st_.regions, st_.level)
         r = e[1] % len(rw.region_names)
         m.regions.set_weights(rw.with_region(rw.region_names[r], {e[2]: e[3]}))
     elif kind == "paint":
@@ -98,7 +100,7 @@ def apply(m: FaceModel, e: tuple) -> None:
         if e[1] == "weights":
             m.timeline.key_weights(t, names=SHAPES[:3])
         elif e[1] == "handles":
-            m.timeline.key_handles(t)
+            m.handles.key(t)
         elif e[1] == "head":
             m.timeline.key_head_pose(t, head_rotation_from_euler(20 * t - 15, 5 * t, 0), [0, 0.05 * t, 0])
         elif "saved" in m.expressions:

@@ -341,7 +341,7 @@ def test_mirror_expression_moves_recipe_displacement_and_handles() -> None:
     # and it plays back as keyed from its recipe: the mirrored face
     m.reset_weights()
     m.handles.reset_offsets()
-    m.timeline.key_expression(0.0, "smirkRight")
+    m.expressions.key(0.0, "smirkRight")
     np.testing.assert_allclose(m.evaluate_at(0.0) - m.vertices32, new.displacement, atol=1e-5)
     while m.undo() != "Mirror expression smirkLeft to smirkRight":
         assert "smirkRight" in m.expressions

@@ -13,7 +13,8 @@ import json
 import numpy as np
 import pytest
 
-from workbench.animation.curves import HEAD_POSE, region_track_name
+from workbench.animation.curves import HEAD_POSE
+from workbench.methods.regions.tracks import region_level, region_track_name
 from workbench.model import FaceModel, HandleSet, ModelError
 
 UP, LEFT = "weights/up", "weights/left"
@@ -92,7 +93,7 @@ def test_add_key_of_handles(keyed: FaceModel) -> None:
     _refused(m, lambda: m.timeline.add_key("handles", 0.0, np.zeros((1, 3))), "no handles")
     m.handles.set(HandleSet([4], np.zeros((1, 3), np.float32)), label="Handles")
     tl = _one_step(m, lambda: m.timeline.add_key("handles", 0.5, [[0.0, 0.0, 0.1]]))
-    np.testing.assert_array_equal(tl.handles.evaluate(0.5), [[0.0, 0.0, 0.1]])
+    np.testing.assert_array_equal(tl.tracks["handles"].evaluate(0.5), [[0.0, 0.0, 0.1]])
 
 
 def test_add_key_refuses_bad_arguments(keyed: FaceModel) -> None:
@@ -122,7 +123,7 @@ def test_add_key_of_a_region_track() -> None:
     values = np.linspace(0.0, 1.0, k)
     tl = _one_step(m, lambda: m.timeline.add_key(name, 0.5, values))
     np.testing.assert_array_equal(tl.tracks[name].evaluate(0.5), values)
-    assert tl.region_level == 0 and tl.end == 0.5
+    assert region_level(tl) == 0 and tl.end == 0.5
 
 
 # ------------------------------------------------------------------ delete_keys

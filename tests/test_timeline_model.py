@@ -87,15 +87,15 @@ def test_a_baked_expression_holds_keyed_handles_at_rest(tiny_model: FaceModel) -
     m = tiny_model
     m.handles.set(HandleSet([4], [[0, 0, 0]], ("c",), [-1]))
     m.move_handle(0, [0.0, 0.0, 0.4])
-    m.timeline.key_handles(0.0, interpolation="linear")
+    m.handles.key(0.0, interpolation="linear")
     m.handles.reset_offsets()
     m.paint.flood("up", 0.25)
     painted = m.evaluate().copy()
     m.expressions.save("quarter_up")
     m.paint.clear()
     m.key_expression(1.0, "quarter_up", interpolation="linear")
-    assert m.tracks.evaluate(1.0).handle_offsets is not None
-    np.testing.assert_array_equal(m.tracks.evaluate(1.0).handle_offsets, [[0.0, 0.0, 0.0]])
+    assert "handles" in m.tracks.evaluate(1.0).others
+    np.testing.assert_array_equal(m.tracks.evaluate(1.0).others["handles"], [[0.0, 0.0, 0.0]])
     np.testing.assert_allclose(m.evaluate_at(1.0), painted, rtol=0, atol=1e-7)
 
 
@@ -114,9 +114,9 @@ def test_a_plain_expression_keys_its_recipe_without_a_new_shape(tiny_model: Face
 def test_handle_keys_animate_the_shell_layer(tiny_model: FaceModel) -> None:
     m = tiny_model
     m.handles.set(HandleSet([4], [[0, 0, 0]], ("c",), [-1]))
-    m.timeline.key_handles(0.0, interpolation="linear")
+    m.handles.key(0.0, interpolation="linear")
     m.move_handle(0, [0.0, 0.0, 0.4])
-    m.timeline.key_handles(1.0, interpolation="linear")
+    m.handles.key(1.0, interpolation="linear")
     m.handles.reset_offsets()
     assert m.evaluate_at(0.5)[4, 2] == pytest.approx(0.2, abs=1e-6)
     m.set_time(1.0)
@@ -129,7 +129,7 @@ def test_bad_time_and_timeline(tiny_model: FaceModel) -> None:
     with pytest.raises(ModelError, match="Timeline"):
         tiny_model.timeline.set({"x": 1})  # type: ignore[arg-type]
     with pytest.raises(ModelError, match="no handles"):
-        tiny_model.timeline.key_handles(0.0)
+        tiny_model.handles.key(0.0)
 
 
 # ------------------------------------------------------------------ head pose

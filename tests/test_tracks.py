@@ -9,7 +9,6 @@ import pytest
 
 from workbench import load_sample
 from workbench.animation.curves import (
-    HANDLES,
     HEAD_POSE,
     Key,
     Track,
@@ -17,10 +16,8 @@ from workbench.animation.curves import (
     auto_clamped_slopes,
     head_euler_from_rotation,
     head_rotation_from_euler,
-    parse_region_track,
     quat_slerp,
     quaternion_to_matrix,
-    region_track_name,
 )
 from workbench.animation.tracks import (
     Timeline,
@@ -30,6 +27,16 @@ from workbench.animation.tracks import (
     move_key,
     set_interpolation,
     set_tangents,
+)
+from workbench.core.shapes import ModelError
+from workbench.methods.handles.facet import HANDLES_TRACK as HANDLES
+from workbench.methods.regions.tracks import (
+    check_region_tracks,
+    parse_region_track,
+    region_level,
+    region_track_name,
+    region_tracks,
+    sampled_region_weights,
 )
 
 W = "weights/up"
@@ -187,7 +194,7 @@ def test_nan_values_and_tangents_are_rejected():
 
 
 def test_bad_names_interpolations_and_shapes():
-    for bad in ("weights/", "regions/one/a", "jaw open", "/x", ""):
+    for bad in ("weights/", "regions/0/", "jaw open", "/x", ""):
         with pytest.raises(TrackError, match="track name"):
             Track(bad, (Key(0.0, 0.0),))
     # a bare name is a method family's own track: the model refuses it unless a family keys it
@@ -198,6 +205,10 @@ def test_bad_names_interpolations_and_shapes():
         Key(0.0, 0.0, "cubic")  # type: ignore[arg-type]
     with pytest.raises(TrackError, match="value shape"):
         Track(HANDLES, (Key(0.0, np.zeros((2, 3))), Key(1.0, np.zeros((3, 3)))))
+    # a family track's name is the family's to judge, against the model
+    tl = Timeline().add_key("regions/one/a", 0.0, [1.0, 2.0])
+    with pytest.raises(TrackError, match=r"'regions/one/a': a region track is named 'regions/<level>/<region>'"):
+        tl.check_model(load_sample("head"))
     with pytest.raises(TrackError, match="values must have shape"):
         Track(W, (Key(0.0, [1.0, 2.0]),))
 
@@ -212,7 +223,7 @@ def test_unknown_shape_names_are_reported(tiny_model):
 
 def test_handle_count_must_match_model(tiny_model):
     tl = Timeline().add_key(HANDLES, 0.0, np.zeros((2, 3)))
-    with pytest.raises(TrackError, match="keys 2 handles but the model has 0"):
+    with pytest.raises(TrackError, match="'handles': the model has no handles"):
         tl.check_model(tiny_model)
 
 
@@ -338,10 +349,8 @@ def test_region_track_names_round_trip_and_are_validated():
         assert parse_region_track(bad) is None
     with pytest.raises(TrackError, match="level must be an int >= 0"):
         region_track_name(-1, "a")
-    with pytest.raises(TrackError, match="track name must be"):
-        Track("regions/one/a", (Key(0.0, [1.0, 2.0]),))
-    with pytest.raises(TrackError, match=r"values must be \(k,\) shape weights"):
-        Track("regions/0/a", (Key(0.0, 1.0),))
+    # the timeline keeps any family track; the regions family judges name and shape on a model
+    Track("regions/0/a", (Key(0.0, 1.0),))
 
 
 def test_region_tracks_interpolate_per_shape_and_stay_on_one_level():
@@ -349,15 +358,17 @@ def test_region_tracks_interpolate_per_shape_and_stay_on_one_level():
     tl = tl.add_key("regions/0/a", 2.0, [1.0, 0.0], interpolation="linear")
     tl = tl.add_key("regions/0/b", 0.0, [0.5, 0.5])
     s = tl.evaluate(0.5)
-    assert s.region_level == 0 and sorted(s.region_weights) == ["a", "b"]
-    np.testing.assert_allclose(s.region_weights["a"], [0.25, 0.75])
-    np.testing.assert_allclose(s.region_weights["b"], [0.5, 0.5])
-    assert tl.tracks["regions/0/a"].kind == "region" and tl.tracks["regions/0/a"].region == (0, "a")
-    with pytest.raises(TrackError, match=r"one region level, got levels \[0, 1\]"):
-        tl.add_key("regions/1/a", 0.0, [0.0, 0.0])
-    with pytest.raises(TrackError, match=r"one weight per model shape, got lengths \[2, 3\]"):
-        tl.add_key("regions/0/c", 0.0, [0.0, 0.0, 0.0])
-    assert Timeline().evaluate(0.0).region_level is None
+    level, keyed = sampled_region_weights(s.others)
+    assert level == 0 and sorted(keyed) == ["a", "b"]
+    np.testing.assert_allclose(keyed["a"], [0.25, 0.75])
+    np.testing.assert_allclose(keyed["b"], [0.5, 0.5])
+    assert region_level(tl) == 0 and sorted(region_tracks(tl)) == ["a", "b"]
+    assert tl.tracks["regions/0/a"].is_family_track and tl.tracks["regions/0/a"].shape_name is None
+    check_region_tracks(None, tl.tracks)  # type: ignore[arg-type]
+    with pytest.raises(ModelError, match=r"one region level, got levels \[0, 1\]"):
+        check_region_tracks(None, tl.add_key("regions/1/a", 0.0, [0.0, 0.0]).tracks)  # type: ignore[arg-type]
+    assert region_level(Timeline()) is None
+    assert sampled_region_weights(Timeline().evaluate(0.0).others) == (None, {})
     back = Timeline.from_json(tl.to_json())
     np.testing.assert_array_equal(back.tracks["regions/0/a"].values, tl.tracks["regions/0/a"].values)
 

@@ -9,7 +9,7 @@ method family registers its slots, layer, file part and facet
     model.paint.stroke("smile", ids, brush)   # workbench.methods.paint
     model.expressions.save("smile")
     model.wrinkles.set_strength(2.0)          # workbench.methods.wrinkles
-    model.timeline.key_expression(1.0, "jawOpen")   # workbench.animation
+    model.expressions.key(1.0, "jawOpen")     # keyed on model.timeline (workbench.animation)
     model.shape_tools.split("browInnerUp")    # workbench.methods.shapes
 
 The annotations below only tell type checkers what the registered facets
@@ -108,8 +108,8 @@ class FaceModel(FaceState):
         self.paint.stroke(expression, centers, brush)
 
     def key_expression(self, time: float, expression: str, interpolation: Interpolation = "bezier") -> None:
-        """``model.timeline.key_expression``: key an expression at ``time`` (one undo step)."""
-        self.timeline.key_expression(time, expression, interpolation)
+        """``model.expressions.key``: key an expression at ``time`` (one undo step)."""
+        self.expressions.key(time, expression, interpolation)
 
     # -- files and other libraries
     def save(self, path: Any) -> None:

@@ -6,8 +6,9 @@ import math
 
 import numpy as np
 
-from workbench.animation.curves import HANDLES, HEAD_POSE
+from workbench.animation.curves import HEAD_POSE
 from workbench.animation.tracks import Timeline
+from workbench.methods.handles.facet import HANDLES_TRACK as HANDLES
 
 
 def expression_timeline(kind: str) -> Timeline:

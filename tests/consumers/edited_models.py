@@ -61,13 +61,13 @@ def regions_head(interpolation: str = "bezier") -> FaceModel:
     rw = RegionWeights.from_global(m, st.regions, st.level)
     m.regions.set_weights(rw.with_region(0, {"mouthPucker": 0.7, "jawOpen": 0.3}))
     rest = m.handles.offsets.copy()
-    m.timeline.key_handles(0.0, interpolation)  # type: ignore[arg-type]
+    m.handles.key(0.0, interpolation)  # type: ignore[arg-type]
     up = rest.copy()
     up[_brow_handles(m)] += [0.0, 0.05, 0.0]
     m.handles.set_offsets(up)
-    m.timeline.key_handles(0.5, interpolation)  # type: ignore[arg-type]
+    m.handles.key(0.5, interpolation)  # type: ignore[arg-type]
     m.handles.set_offsets(0.5 * up)
-    m.timeline.key_handles(1.0, interpolation)  # type: ignore[arg-type]
+    m.handles.key(1.0, interpolation)  # type: ignore[arg-type]
     return m
 
 

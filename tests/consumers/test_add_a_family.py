@@ -72,6 +72,13 @@ lin = (enc.neutral[None] + np.einsum("fk,knc->fnc", enc.weights(times), enc.shap
        + np.stack([np.zeros((m.n_vertices, 3)) if enc.baked(t) is None else enc.baked(t) for t in times]))
 out["keyed_linear_err"] = float(np.abs(lin - np.stack([m.evaluate_at(t) for t in times])).max())
 
+# the timeline keys "what the track shows now" by asking the family (TrackSpec.current), labels it by its title
+from workbench.animation.timeline import track_title
+m.mouth_gain.set(1.25)
+m.timeline.key_track("mouth_gain", 2.0)
+out["key_track"] = [float(m.tracks.tracks["mouth_gain"].evaluate(2.0)[0]), track_title("mouth_gain"),
+                    m.history.undo_labels[-1]]
+
 # saves and opens again: the gain, its mask and its keys
 m.save(tmp / "face.fwb")
 m2 = load_model(tmp / "face.fwb")
@@ -101,8 +108,9 @@ def test_a_family_in_one_folder_evaluates_exports_keys_and_saves(node_tools, tmp
     assert out["keyed_gain"] == 1.5
     assert out["report_keyed"]["mouth_gain"] == "baked", out["report_keyed"]
     assert out["keyed_points_err"] == 0.0 and out["keyed_linear_err"] < 1e-5, out
+    assert out["key_track"] == [1.25, "mouth gain", "Key mouth gain at 2s"]
     gain, mask_err, tracks = out["saved"]
-    assert gain == 1.5 and mask_err == 0.0 and "mouth_gain" in tracks
+    assert gain == 1.25 and mask_err == 0.0 and "mouth_gain" in tracks
     assert out["reopened_err"] == 0.0
 
 

@@ -385,7 +385,7 @@ def test_keys_go_on_the_drivers_never_on_the_corrective(tab: Tab) -> None:
     assert sorted(m.tracks.weight_tracks) == ["jawOpen", "mouthSmileLeft"]
     m.set_weight("mouthSmileLeft", 1.0)
     m.expressions.save("wide")
-    m.timeline.key_expression(1.0, "wide")  # an expression chip dropped on the timeline
+    m.expressions.key(1.0, "wide")  # an expression chip dropped on the timeline
     assert sorted(m.tracks.weight_tracks) == ["jawOpen", "mouthSmileLeft"]
     assert m.tracks.evaluate(1.0).weights["mouthSmileLeft"] == pytest.approx(1.0)
     m.set_time(1.0)

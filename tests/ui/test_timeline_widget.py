@@ -367,7 +367,7 @@ def test_region_tracks_are_vector_rows_with_a_readable_label(keyed):
     st = timeline_state(tl)
     assert [d["name"] for d in st["tracks"]] == [UP, "regions/1/mouth_L"]
     row = st["tracks"][1]
-    assert row["kind"] == "region" and row["label"] == "region mouth_L (L1)" and row["values"] is None
+    assert row["kind"] == "regions" and row["label"] == "region mouth_L (L1)" and row["values"] is None
     assert curve_samples(tl, "regions/1/mouth_L") == {"track": "regions/1/mouth_L", "times": [], "values": []}
 
 

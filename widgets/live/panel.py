@@ -165,7 +165,7 @@ class LivePanel(ModelPanel):
         return frame
 
     def _one_view_update(self) -> Any:
-        return contextlib.nullcontext() if self.viewport is None else self.viewport.sync.held()
+        return contextlib.nullcontext() if self.viewport is None else self.viewport.batch()
 
     def _show_pose(self, pose: Any) -> None:
         """The viewport draws the tracked head pose while the camera runs and the box is ticked."""

@@ -19,15 +19,15 @@ front end                      model call
 drag the playhead / ruler      ``set_time(t)``: a "scrub" gesture (one message in flight)
 drag a key diamond, release    ``timeline.move_key(track, i, t)`` — one undo step per drag
 Delete / Backspace / button    ``timeline.delete_keys([(track, i), ...])`` — one undo step
-double-click a row             ``timeline.key_weights(t, [shape])`` / ``key_handles(t)`` /
-                               ``add_key(track, t, value at the playhead)``
-"Key" / "Key handles"          ``timeline.key_weights(time)`` / ``key_handles(time)``
+double-click a row             ``timeline.key_track(track, t)`` (the weight, what the
+                               track's family records now, or its value at the playhead)
+"Key" / "Key handles"          ``timeline.key_weights(time)`` / ``handles.key(time)``
 yaw/pitch/roll, "Key head pose" ``timeline.key_head_pose(time, rotation)`` (translation kept)
 interpolation selector         ``timeline.set_interpolations([(track, i), ...], kind)``
 drag a tangent handle          ``timeline.set_tangents(track, i, in_tangent=, out_tangent=)``
 double-click a tangent handle  ``timeline.set_tangents(track, i, mode="auto_clamped")``
-drop an expression chip        ``timeline.key_expression(t, name)`` (HTML5 drag and drop)
-"Key selected expression"      ``timeline.key_expression(time, gallery.selected)``
+drop an expression chip        ``expressions.key(t, name)`` (HTML5 drag and drop)
+"Key selected expression"      ``expressions.key(time, gallery.selected)``
 fps field                      ``timeline.set_fps(fps)``
 Play / Pause / Loop            kernel-side asyncio task calling ``set_time``
 =============================  ==========================================================

@@ -5,7 +5,7 @@ by :meth:`TimelineWidget.handle_message
 <widgets.timeline.widget.TimelineWidget.handle_message>` after it ended the
 interactions other widgets hold open (except for :data:`NOT_EDITS`). Every
 edit is one named method of the ``model.timeline`` facet (one undo step each:
-``move_key``, ``delete_keys``, ``add_key`` / ``key_weights`` / ``key_handles``,
+``move_key``, ``delete_keys``, ``add_key`` / ``key_weights`` / ``handles.key``,
 ``set_interpolations``, ``set_tangents``, ``set_fps``, ...) or
 ``model.set_time``; the widget never builds timelines nor touches the history.
 
@@ -23,7 +23,6 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 from widgets.timeline.state import track_label
-from workbench.animation.curves import HANDLES, WEIGHTS_PREFIX
 
 if TYPE_CHECKING:
     from widgets.timeline.widget import TimelineWidget
@@ -111,15 +110,7 @@ def delete_keys(w: TimelineWidget, c: dict[str, Any]) -> None:
 def add_key(w: TimelineWidget, c: dict[str, Any]) -> None:
     track, when = str(c["track"]), float(c["time"])
     m = w.model
-    if track.startswith(WEIGHTS_PREFIX):
-        m.timeline.key_weights(when, [track[len(WEIGHTS_PREFIX) :]])
-    elif track == HANDLES:
-        m.timeline.key_handles(when)
-    else:  # a region or the head pose: the value it has at the playhead
-        tracks = m.timeline.value.tracks
-        if track not in tracks:
-            raise ValueError(f"add_key: track {track!r} has no keys to take a value from")
-        m.timeline.add_key(track, when, tracks[track].evaluate(m.time))
+    m.timeline.key_track(track, when)  # what the track shows now: weight, layer state, or value at the playhead
     _select(w, track, when)
     w.status = f"keyed {track_label(track)} at {when:.2f} s"
 
@@ -142,7 +133,7 @@ def key(w: TimelineWidget, c: dict[str, Any]) -> None:
 def key_handles(w: TimelineWidget, c: dict[str, Any]) -> None:
     m = w.model
     when = float(c.get("time", m.time))
-    m.timeline.key_handles(when)
+    m.handles.key(when)
     w.status = f"keyed handles at {when:.2f} s"
 
 
@@ -158,7 +149,7 @@ def key_head_pose(w: TimelineWidget, c: dict[str, Any]) -> None:
 @handles("key_expression")
 def key_expression(w: TimelineWidget, c: dict[str, Any]) -> None:
     name, when = str(c["name"]), float(c["time"])
-    w.model.timeline.key_expression(when, name)
+    w.model.expressions.key(when, name)
     w.status = f"keyed {name} at {when:.2f} s"
 
 

@@ -11,21 +11,26 @@ from typing import Any
 
 import numpy as np
 
-from workbench.animation.curves import HANDLES, HEAD_POSE, WEIGHTS_PREFIX, parse_region_track
+from workbench.animation.curves import WEIGHTS_PREFIX
+from workbench.animation.timeline import track_title
 from workbench.animation.tracks import Timeline
+from workbench.core.families import track_owner
 
 #: samples of the curve view over the visible range (plus two per key for steps)
 CURVE_SAMPLES = 240
 
 
 def track_label(name: str) -> str:
-    """The row label of track ``name`` ("jawOpen", "handles (pose)", "region 3 (L0)" ...)."""
+    """The row label of track ``name`` ("jawOpen", "head pose", a family's title of its track)."""
+    return track_title(name)
+
+
+def track_kind(name: str) -> str:
+    """"weight", "head_pose", or the name of the method family keying the track."""
     if name.startswith(WEIGHTS_PREFIX):
-        return name[len(WEIGHTS_PREFIX) :]
-    region = parse_region_track(name)
-    if region is not None:
-        return f"region {region[1]} (L{region[0]})"
-    return {HANDLES: "handles (pose)", HEAD_POSE: "head pose"}.get(name, name)
+        return "weight"
+    owner = track_owner(name)
+    return name if owner is None else owner[0].name
 
 
 def view_range(tl: Timeline) -> tuple[float, float]:
@@ -44,12 +49,12 @@ def timeline_state(tl: Timeline) -> dict[str, Any]:
     """
     tracks = []
     for name, tr in tl.tracks.items():
-        scalar = tr.kind == "weight"
+        scalar = tr.shape_name is not None
         tracks.append(
             {
                 "name": name,
                 "label": track_label(name),
-                "kind": tr.kind,
+                "kind": track_kind(name),
                 "times": [float(x) for x in tr.times],
                 "values": [float(k.value) for k in tr.keys] if scalar else None,
                 "in": [float(k.in_tangent) for k in tr.keys] if scalar else None,
@@ -58,7 +63,7 @@ def timeline_state(tl: Timeline) -> dict[str, Any]:
                 "mode": [k.tangent_mode for k in tr.keys],
             }
         )
-    # weights first (alphabetical, as Timeline sorts them), then handles, head pose
+    # weights first (alphabetical, as Timeline sorts them), then the others by name
     tracks.sort(key=lambda d: (d["kind"] != "weight", d["name"]))
     return {
         "fps": tl.fps,
@@ -77,7 +82,7 @@ def curve_samples(tl: Timeline, track: str, n: int = CURVE_SAMPLES) -> dict[str,
     step keys draw as vertical jumps.
     """
     tr = tl.tracks.get(track)
-    if tr is None or tr.kind != "weight":
+    if tr is None or tr.shape_name is None:
         return {"track": track, "times": [], "values": []}
     v0, v1 = view_range(tl)
     ts = np.linspace(v0, v1, n)

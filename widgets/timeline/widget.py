@@ -219,12 +219,12 @@ class TimelineWidget(anywidget.AnyWidget):
                 self._error = ""
 
     def key_selected_expression(self) -> None:
-        """Key the gallery's selected expression at the playhead (``model.timeline.key_expression``)."""
+        """Key the gallery's selected expression at the playhead (``model.expressions.key``)."""
         name = getattr(self.gallery, "selected", None)
         if not name:
             raise ValueError("no expression is selected in the gallery")
         self._flush()
-        self._model.timeline.key_expression(self._model.time, name)
+        self._model.expressions.key(self._model.time, name)
         self.status = f"keyed {name} at {self._model.time:.2f} s"
 
     @property

@@ -143,12 +143,16 @@ class GestureAPI:
             raise ValueError(f"Viewport: a position must be 3 numbers, got {position!r}")
         return np.linalg.solve(M, np.append(p, 1.0))[:3]
 
+    def batch(self) -> Any:
+        """A context: edits made inside update the view once, after the last (a panel's several edits of one frame)."""
+        return self.sync.held()
+
     def show_head_pose(self, pose: Any) -> None:
         """Draw the face under ``pose`` instead of the timeline's head pose; None draws the model's again.
 
         A view-only preview (the Live tab shows the actor's head turning while nothing is
         keyed): the model does not change, picking maps through the shown pose, and the
-        view updates once (inside ``sync.held()``, once with the edits made there).
+        view updates once (inside :meth:`batch`, once with the edits made there).
 
         Parameters
         ----------

@@ -27,15 +27,9 @@ if TYPE_CHECKING:
 
 
 def check_timeline(model: FaceState, value: Any) -> Timeline:
-    """Slot check: a Timeline that fits the model (its region tracks need regions)."""
+    """Slot check: a Timeline that fits the model (:meth:`Timeline.check_model`)."""
     if not isinstance(value, Timeline):
         raise ModelError(f"set_timeline expects a Timeline, got {type(value).__name__}")
-    if value.region_tracks and model.slot("regions") is None:
-        raise ModelError(
-            "set_timeline: the timeline keys region weights "
-            f"({len(value.region_tracks)} region tracks) but the model has no regions; "
-            "call segment_regions() first"
-        )
     value.check_model(model)
     return value
 

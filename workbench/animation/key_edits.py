@@ -113,8 +113,8 @@ def add_keys(
     times : (K,) float
         Seconds, distinct (more than ``tol`` apart).
     values : (K, ...) float
-        One key value per time (``(K,)`` for a weight track, ``(K, k)`` for a
-        region track, ...).
+        One key value per time (``(K,)`` for a weight track, ``(K, 7)`` for the
+        head pose, ``(K, *shape)`` for a family track of that value shape).
     interpolation : {"step", "linear", "bezier"}
     tol : float
         Existing keys within ``tol`` seconds of a new time are replaced.

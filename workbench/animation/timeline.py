@@ -1,26 +1,22 @@
 """``model.timeline``: keying (Pighin et al. 1998 §5) — the undoable edits of the ``tracks`` slot.
 
-Keys of weights, handle offsets, region weights and the rigid head pose; a
-saved expression is keyed by its recipe when that plays back its look, or
-baked once into a ``<name>_baked`` shape otherwise; a marker fit is keyed
-frame by frame. The timeline itself is an immutable
-:class:`~workbench.animation.tracks.Timeline`; sampling it (``set_time``,
-``evaluate_at``) is the state's, through the hooks in :mod:`.family`.
+Keys of weights, the rigid head pose and the method families' own tracks
+(registered by each family, :class:`workbench.core.families.TrackSpec`). The
+timeline itself is an immutable :class:`~workbench.animation.tracks.Timeline`;
+sampling it (``set_time``, ``evaluate_at``) is the state's, through the hooks in
+:mod:`.family`. What a family keys from its own state is its facet's (e.g. keying a saved
+look, or a fit frame by frame).
 
 Every edit a view makes has a named method here, each one undo step:
-``key_weights`` / ``key_handles`` / ``key_head_pose`` / ``key_expression``
-and ``add_key`` (any track, a given value) add keys (a family keys what is its
-own, e.g. ``model.regions.key_marker_fit``);
-``move_key``, ``delete_key`` / ``delete_keys``, ``set_interpolation`` /
-``set_interpolations``, ``set_tangents`` and ``set_fps`` edit them. Arguments
-are checked before anything changes, and errors (:class:`ModelError`) name the
-method and the argument.
+``key_weights`` / ``key_track`` / ``key_head_pose`` and ``add_key`` (any track,
+a given value) add keys; ``move_key``, ``delete_key`` / ``delete_keys``,
+``set_interpolation`` / ``set_interpolations``, ``set_tangents`` and
+``set_fps`` edit them. Arguments are checked before anything changes, and
+errors (:class:`ModelError`) name the method and the argument.
 """
 
 from __future__ import annotations
 
-import dataclasses
-import itertools
 import math
 from collections.abc import Iterable
 from typing import TYPE_CHECKING, Any, cast
@@ -37,27 +33,21 @@ from workbench.animation.curves import (
     Interpolation,
     TangentMode,
     Track,
-    parse_region_track,
     weight_track_name,
 )
 from workbench.animation.tracks import Timeline
 from workbench.core.families import (
-    families,
+    family_track_title,
     track_names,
+    track_owner,
     track_value_shape,
     weight_product_reads,
     weight_products,
 )
-from workbench.core.pipeline import StateView
 from workbench.core.shapes import ModelError
 
 if TYPE_CHECKING:
     from workbench.core.state import FaceState
-    from workbench.methods.paint.expressions import Expression
-
-#: Tolerance, relative to (1 + the largest neutral coordinate), within which a
-#: saved expression's recipe counts as playing back its look (float32 round-off).
-_PLAYBACK_ATOL = 1e-6
 
 
 def as_quaternion(rotation: ArrayLike, what: str) -> NDArray[np.float64]:
@@ -77,18 +67,23 @@ def as_quaternion(rotation: ArrayLike, what: str) -> NDArray[np.float64]:
     )
 
 
-def _grow(tl: Timeline, time: float) -> Timeline:
+def grow_range(tl: Timeline, time: float) -> Timeline:
+    """``tl`` with its playback range grown to include ``time``."""
     return tl.replace(start=min(tl.start, time), end=max(tl.end, time))
 
 
+def derived_shapes(model: FaceState) -> frozenset[str]:
+    """Shapes whose weight is derived (correctives: the product of their drivers'); never keyed."""
+    return frozenset(weight_products({r: model.slot(r) for r in weight_product_reads()}))
+
+
 def track_title(track: str) -> str:
-    """A short name of ``track`` for undo labels ("jawOpen", "region lip (L0)", "head pose")."""
+    """A short name of ``track`` for labels ("jawOpen", "head pose", a family's title of its track)."""
     if track.startswith(WEIGHTS_PREFIX):
         return track[len(WEIGHTS_PREFIX) :]
-    region = parse_region_track(track)
-    if region is not None:
-        return f"region {region[1]} (L{region[0]})"
-    return {HEAD_POSE: "head pose"}.get(track, track)
+    if track == HEAD_POSE:
+        return "head pose"
+    return family_track_title(track)
 
 
 def _finite(x: Any, what: str, name: str) -> float:
@@ -121,7 +116,7 @@ class TimelineFacet:
         return f"<timeline: {self.value!r}>"
 
     def set(self, timeline: Timeline, label: str = "Edit keys") -> None:
-        """Replace the timeline (undoable); checked against the model's shapes, handles and regions."""
+        """Replace the timeline (undoable); checked against the model (:meth:`Timeline.check_model`)."""
         self._model.set_slot("tracks", timeline, label)
 
     @property
@@ -145,23 +140,40 @@ class TimelineFacet:
             tl = self.value
             w = m.weights
             if names is None:
-                keyed, derived = set(tl.weight_tracks), self._derived_shapes()
+                keyed, derived = set(tl.weight_tracks), derived_shapes(m)
                 names = [n for n in m.shape_names if (w[n] != 0.0 or n in keyed) and n not in derived]
             names = list(names)
             for n in names:
                 m.shape(n)
                 tl = tl.add_key(weight_track_name(n), time, w[n], interpolation=interpolation)
-            self.set(_grow(tl, time), f"Key {len(names)} weights at {time:g}s")
+            self.set(grow_range(tl, time), f"Key {len(names)} weights at {time:g}s")
 
-    def key_handles(self, time: float, interpolation: Interpolation = "bezier") -> None:
-        """Key the handle offsets at ``time`` (undoable)."""
+    def key_track(self, track: str, time: float, interpolation: Interpolation = "bezier") -> None:
+        """Key what ``track`` shows now at ``time`` (one undo step).
+
+        A weight track keys the shape's current weight; the head pose its value
+        at the model's time; a family's track what its family records now
+        (:attr:`TrackSpec.current <workbench.core.families.TrackSpec.current>`,
+        e.g. the current offsets of a layer), else its value at the model's time.
+        """
+        what = "key_track"
         m = self._model
         with m.lock:
-            h = m.slot("handles")
-            if not len(h):
-                raise ModelError("key_handles: the model has no handles")
-            tl = self.value.add_key("handles", time, h.offsets, interpolation=interpolation)
-            self.set(_grow(tl, time), f"Key handles at {time:g}s")
+            if isinstance(track, str) and track.startswith(WEIGHTS_PREFIX):
+                self._value_shape(what, track)
+                self.key_weights(time, [track[len(WEIGHTS_PREFIX):]], interpolation)
+                return
+            self._value_shape(what, track)
+            owner = track_owner(track)
+            if owner is not None and owner[1].current is not None:
+                value = owner[1].current(m, track)
+            elif track in self.value.tracks:
+                value = self.value.tracks[track].evaluate(m.time)
+            elif track == HEAD_POSE:
+                value = IDENTITY_POSE
+            else:
+                raise ModelError(f"{what}: track {track!r} has no keys to take a value from")
+            self.add_key(track, time, value, interpolation)
 
     def key_head_pose(self, time: float, rotation: ArrayLike | None = None,
                       translation: ArrayLike | None = None, interpolation: Interpolation = "bezier") -> None:
@@ -190,17 +202,17 @@ class TimelineFacet:
                         f"got {np.asarray(translation).tolist()!r}"
                     )
             tl = tl.add_key(HEAD_POSE, t, np.concatenate([tr, q]), interpolation=interpolation)
-            self.set(_grow(tl, t), f"Key head pose at {t:g}s")
+            self.set(grow_range(tl, t), f"Key head pose at {t:g}s")
 
     def add_key(self, track: str, time: float, value: ArrayLike,
                 interpolation: Interpolation = "bezier") -> None:
         """Key ``value`` on ``track`` at ``time`` (one undo step); extends the range to ``time``.
 
         For any track, with the value given: ``"weights/<shape>"`` a number,
-        ``"head_pose"`` (7,) translation + quaternion (x, y, z, w),
-        ``"regions/<level>/<region>"`` (k,) shape weights, ``"handles"`` (h, 3)
-        offsets. A key already at ``time`` is replaced. (``key_weights``,
-        ``key_handles`` and ``key_head_pose`` key the model's current values.)
+        ``"head_pose"`` (7,) translation + quaternion (x, y, z, w), a family's
+        track the shape its family gives it. A key already at ``time`` is
+        replaced. (``key_weights``, ``key_track`` and ``key_head_pose`` key the
+        model's current values.)
         """
         what = "add_key"
         t = _finite(time, what, "time")
@@ -221,7 +233,7 @@ class TimelineFacet:
             if track == HEAD_POSE and np.linalg.norm(v[3:]) < 1e-12:
                 raise ModelError(f"{what}: value for 'head_pose' has a zero quaternion (x, y, z, w)")
             tl = self.value.add_key(track, t, v, interpolation=kind)
-            self.set(_grow(tl, t), f"Key {track_title(track)} at {t:g}s")
+            self.set(grow_range(tl, t), f"Key {track_title(track)} at {t:g}s")
 
     def delete_key(self, track: str, index: int) -> None:
         """Delete key ``index`` of ``track`` (undoable)."""
@@ -265,7 +277,7 @@ class TimelineFacet:
         """Move key ``index`` of ``track`` to ``time`` (and ``value``), undoable."""
         with self._model.lock:
             tl = self.value.move_key(track, index, time, value)
-            self.set(_grow(tl, time), f"Move key of {track}")
+            self.set(grow_range(tl, time), f"Move key of {track}")
 
     def set_interpolation(self, track: str, index: int | None, interpolation: Interpolation) -> None:
         """Interpolation of key ``index`` of ``track`` (None: every key of it); one undo step.
@@ -397,103 +409,3 @@ class TimelineFacet:
         names = ", ".join(repr(n + "<...>" if n.endswith("/") else n) for n in track_names())
         raise ModelError(f"{what}: track must be 'weights/<shape>', 'head_pose' or one of the "
                          f"families' tracks ({names}), got {track!r}")
-
-    # ------------------------------------------------------------- expressions
-    def key_expression(self, time: float, expression: str, interpolation: Interpolation = "bezier") -> None:
-        """Key an expression at ``time`` (drop from the gallery onto the timeline); one undo step.
-
-        A blendshape keys itself at 1. A saved expression whose recipe plays back
-        its look keys its recipe weights and, when the handle set matches, its
-        handle offsets. Any other saved expression (its look comes from painting,
-        region weights, another handle set, or shapes since removed or edited)
-        is, as in Pighin et al. 1998 §4, a new expression of its own: its
-        displacement becomes the blendshape ``<expression>_baked`` (added once in
-        the same undo step, reused when it already holds exactly that
-        displacement) keyed at 1; keyed handles are keyed at rest there.
-
-        Every other already-keyed shape is keyed at 0, and a shape keyed for the
-        first time gets 0-keys at the earlier key times, so at its time a keyed
-        expression plays back exactly as saved, in ``evaluate_at`` and in every
-        export, as long as the unkeyed state is at rest.
-        """
-        m = self._model
-        with m.lock:
-            label = f"Key {expression} at {time:g}s"
-            with m.undo_group(label):
-                handle_key: NDArray[np.float32] | None = None
-                library = m.slot("expressions")
-                handles = m.slot("handles")
-                if expression in library:
-                    expr = library[expression]
-                    if self._recipe_plays_back(expr):
-                        values = dict(expr.weights)
-                        same = np.array_equal(expr.handle_vertices, handles.vertices)
-                        if same and len(handles) and np.any(expr.handle_offsets):
-                            handle_key = expr.handle_offsets
-                    else:
-                        values = {self._baked_expression_shape(expr): 1.0}
-                        if len(handles) and self.value.handles is not None:
-                            handle_key = np.zeros_like(handles.offsets)
-                elif expression in m.shape_names:
-                    values = {expression: 1.0}
-                else:
-                    raise KeyError(f"no expression named {expression!r}")
-                tl = self.value
-                keyed = set(tl.weight_tracks)
-                earlier = sorted({float(t) for tr in tl.weight_tracks.values() for t in tr.times})
-                for n in (keyed | {k for k, v in values.items() if v != 0.0}) - self._derived_shapes():
-                    if n not in keyed:  # a newly keyed shape was 0 in the expressions keyed before
-                        for t in earlier:
-                            tl = tl.add_key(weight_track_name(n), t, 0.0, interpolation=interpolation)
-                    tl = tl.add_key(weight_track_name(n), time, values.get(n, 0.0), interpolation=interpolation)
-                if handle_key is not None:
-                    tl = tl.add_key("handles", time, handle_key, interpolation=interpolation)
-                self.set(_grow(tl, time), label)
-
-    def _derived_shapes(self) -> frozenset[str]:
-        """Shapes whose weight is derived (correctives: the product of their drivers'); never keyed."""
-        m = self._model
-        return frozenset(weight_products({r: m.slot(r) for r in weight_product_reads()}))
-
-    def _recipe_plays_back(self, expr: Expression) -> bool:
-        """True if keying ``expr``'s weights and handle offsets reproduces its displacement.
-
-        Evaluated as the timeline plays it: its weights (0 for shapes it does not
-        name), its handle offsets when the handle set is the one it was saved
-        with, no paint and no region weights, every other layer as it is — on a
-        view of the state, so the model itself is untouched.
-        """
-        m = self._model
-        if any(v != 0.0 and k not in m.shape_names for k, v in expr.weights.items()):
-            return False  # a shape of the recipe is gone
-        h = m.slot("handles")
-        same = np.array_equal(expr.handle_vertices, h.vertices)
-        if not same and np.any(expr.handle_offsets):
-            return False
-        weights = {s.name: min(max(expr.weights.get(s.name, 0.0), s.slider_min), s.slider_max) for s in m.shapes}
-        slots = dict(m.view().slots)
-        slots["handles"] = dataclasses.replace(h, offsets=expr.handle_offsets if same else np.zeros_like(h.offsets))
-        for fam in families():  # what a recipe does not record is off (painting, region weights)
-            if fam.recipe_slots is not None:
-                slots.update(fam.recipe_slots(slots))
-        versions = {name: -1 - i for i, name in enumerate(("shapes", "weights", *slots))}
-        view = StateView(m, weights, slots, versions, m.time)
-        played = m.pipeline.run(view, cache=False).mesh - m.vertices32
-        atol = _PLAYBACK_ATOL * (1.0 + float(np.abs(m.vertices32).max()))
-        return bool(np.allclose(played, expr.displacement, rtol=0.0, atol=atol))
-
-    def _baked_expression_shape(self, expr: Expression) -> str:
-        """Name of a blendshape holding exactly ``expr.displacement`` (added at weight 0 if none does)."""
-        m = self._model
-        stem = f"{expr.name}_baked"
-        for i in itertools.count(1):
-            name = stem if i == 1 else f"{stem}_{i}"
-            if name not in m.shape_names:
-                m.add_shape(name, expr.displacement)
-                return name
-            s = m.shape(name)
-            if (s.vertex_mask is None and not s.mute and s.slider_min <= 1.0 <= s.slider_max
-                    and np.array_equal(s.delta, expr.displacement)):
-                return name
-        raise AssertionError("unreachable")  # itertools.count never ends
-

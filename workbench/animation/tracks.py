@@ -3,13 +3,11 @@
 A :class:`Timeline` holds a frame rate, a playback range and named
 :class:`~workbench.animation.curves.Track` objects (the track names, keys,
 interpolation and tangents are in :mod:`workbench.animation.curves`);
-:class:`TimelineSample` is what it gives at one time. All region tracks
-(``"regions/<level>/<region>"``) of a timeline are on one level and hold the
-same number of shape weights; while a timeline has region tracks, they
-define the region weights of that level: keyed regions take their keyed
-values and every other region of the level follows the global weights (no
-correction there), whatever static region weights the model holds.
-``model.regions.key_marker_fit`` writes them from a marker fit.
+:class:`TimelineSample` is what it gives at one time. The timeline knows two
+kinds of track, blendshape weights and the rigid head pose; every other track
+belongs to a method family, which registers its name, value shape and checks
+(:class:`workbench.core.families.TrackSpec`) and reads its values from the
+sample (``sample.others``) in its ``animate``.
 
 Everything is immutable: the edit functions (:func:`add_key`,
 :func:`add_keys`, :func:`delete_key`, :func:`move_key`,
@@ -34,7 +32,6 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from workbench.animation.curves import (
-    HANDLES,
     HEAD_POSE,
     Interpolation,
     Key,
@@ -51,7 +48,7 @@ from workbench.animation.key_edits import (
     set_interpolation,
     set_tangents,
 )
-from workbench.core.families import track_names, track_value_shape
+from workbench.core.families import check_family_tracks, track_names, track_value_shape
 
 if TYPE_CHECKING:
     from workbench.core.state import FaceState as FaceModel
@@ -76,27 +73,18 @@ class TimelineSample:
     ----------
     weights : dict of str to float
         Weight of every keyed shape.
-    handle_offsets : (h, 3) float or None
-        Handle-layer offsets (model units), None if the handles are not keyed.
     head_translation : (3,) float or None
         Model units.
     head_rotation : (4,) float or None
         Unit quaternion (x, y, z, w).
-    region_level : int or None
-        Level of the region tracks, None without region tracks.
-    region_weights : dict of str to (k,) float
-        Shape weights of every keyed region (empty without region tracks).
     others : dict of str to ndarray
-        Every other track's value by track name: what a family keys under a
-        name of its own (its ``animate`` reads it; see :mod:`workbench.core.families`).
+        Every family track's value by track name (its ``animate`` reads them;
+        see :mod:`workbench.core.families`).
     """
 
     weights: dict[str, float]
-    handle_offsets: NDArray[np.float64] | None
     head_translation: NDArray[np.float64] | None
     head_rotation: NDArray[np.float64] | None
-    region_level: int | None = None
-    region_weights: dict[str, NDArray[np.float64]] = field(default_factory=dict)
     others: dict[str, NDArray[np.float64]] = field(default_factory=dict)
 
     def head_matrix(self) -> NDArray[np.float64]:
@@ -121,9 +109,8 @@ class Timeline:
         Playback/export range in seconds, ``start <= end``. :meth:`fit_range`
         sets it to the keyed range.
     tracks : mapping of str to Track
-        By track name (``"weights/<shape>"``, ``"handles"``, ``"head_pose"``,
-        ``"regions/<level>/<region>"``). Region tracks must all be on one
-        level and hold the same number of shape weights.
+        By track name (``"weights/<shape>"``, ``"head_pose"`` and the method
+        families' own tracks; :meth:`check_model` checks them against a model).
     """
 
     fps: float = 30.0
@@ -143,17 +130,6 @@ class Timeline:
                 raise TrackError(f"tracks[{name!r}] must be a Track, got {type(tr).__name__}")
             if tr.name != name:
                 raise TrackError(f"tracks[{name!r}] holds a track named {tr.name!r}")
-        regions = [tr for tr in tracks.values() if tr.kind == "region"]
-        levels = sorted({tr.region[0] for tr in regions if tr.region is not None})
-        if len(levels) > 1:
-            raise TrackError(
-                f"region tracks must all be on one region level, got levels {levels}"
-            )
-        lengths = sorted({tr.value_shape[0] for tr in regions})
-        if len(lengths) > 1:
-            raise TrackError(
-                f"region tracks must all hold one weight per model shape, got lengths {lengths}"
-            )
         object.__setattr__(self, "fps", fps)
         object.__setattr__(self, "start", start)
         object.__setattr__(self, "end", end)
@@ -172,31 +148,13 @@ class Timeline:
         return {tr.shape_name: tr for tr in self.tracks.values() if tr.shape_name is not None}
 
     @property
-    def handles(self) -> Track | None:
-        return self.tracks.get(HANDLES)
-
-    @property
     def head_pose(self) -> Track | None:
         return self.tracks.get(HEAD_POSE)
 
     @property
-    def region_tracks(self) -> dict[str, Track]:
-        """Region tracks by *region* name (all on :attr:`region_level`)."""
-        out = {}
-        for tr in self.tracks.values():
-            r = tr.region
-            if r is not None:
-                out[r[1]] = tr
-        return out
-
-    @property
-    def region_level(self) -> int | None:
-        """The hierarchy level the region tracks key, None without region tracks."""
-        for tr in self.tracks.values():
-            r = tr.region
-            if r is not None:
-                return r[0]
-        return None
+    def family_tracks(self) -> dict[str, Track]:
+        """Every track that is neither a weight nor the head pose, by name: the families' own."""
+        return {n: tr for n, tr in self.tracks.items() if tr.is_family_track}
 
     @property
     def key_range(self) -> tuple[float, float] | None:
@@ -234,19 +192,12 @@ class Timeline:
     def check_model(self, model: FaceModel) -> None:
         """Raise :class:`TrackError` if the tracks do not fit ``model``.
 
-        Checks that every weight track names a shape of the model, that the
-        handle track has one offset per model handle and that region tracks
-        hold one weight per model shape. When the model has regions, region
-        tracks must name a level and regions of them; a model without regions
-        (yet) is not checked for that, because
-        :func:`workbench.fileformat.load_model` checks the timeline before it
-        installs the regions (``FaceModel.set_timeline`` and ``export`` require
-        the regions).
+        Every weight track names a shape of the model; every other track (but
+        the head pose) is keyed by a registered method family, has the value
+        shape that family gives it on this model, and the family's tracks pass
+        its ``check_tracks`` together.
         """
-        known = ("weight", "region", HANDLES, HEAD_POSE)
-        for name, tr in self.tracks.items():
-            if tr.kind in known:
-                continue
+        for name, tr in self.family_tracks.items():
             try:
                 want = track_value_shape(model, name)
             except ValueError as exc:
@@ -263,62 +214,27 @@ class Timeline:
                 f"timeline keys unknown shape names {unknown}; the model's shapes are "
                 f"{sorted(names)[:8]}{'...' if len(names) > 8 else ''}"
             )
-        h = self.handles
-        n_handles = len(model.slot("handles"))
-        if h is not None and h.value_shape[0] != n_handles:
-            raise TrackError(
-                f"the 'handles' track keys {h.value_shape[0]} handles but the model has "
-                f"{n_handles}"
-            )
-        rt = self.region_tracks
-        if not rt:
-            return
-        k = len(model.shape_names)
-        bad_k = sorted(n for n, tr in rt.items() if tr.value_shape != (k,))
-        if bad_k:
-            raise TrackError(
-                f"region tracks {bad_k[:4]} hold {rt[bad_k[0]].value_shape[0]} shape weights "
-                f"but the model has {k} shapes (shapes were added or removed after keying)"
-            )
-        state = model.slot("regions")
-        regions = getattr(state, "regions", None)
-        if regions is None:
-            return
-        level = self.region_level
-        assert level is not None
-        if level >= regions.n_levels:
-            raise TrackError(
-                f"region tracks key level {level} but the model's regions have "
-                f"{regions.n_levels} levels"
-            )
-        names = set(regions.names[level])
-        unknown = sorted(n for n in rt if n not in names)
-        if unknown:
-            raise TrackError(
-                f"region tracks key regions {unknown[:4]} that level {level} does not have; "
-                f"its regions are {sorted(names)[:8]}{'...' if len(names) > 8 else ''}"
-            )
+        try:
+            check_family_tracks(model, self.family_tracks)
+        except ValueError as exc:  # ModelError: the family says what is expected
+            raise TrackError(str(exc)) from None
 
     # ------------------------------------------------------------ evaluation
     def evaluate(self, time: float) -> TimelineSample:
-        """Weights, handle offsets, head transform and region weights at ``time`` (seconds)."""
+        """Weights, head transform and every family track's value at ``time`` (seconds)."""
         pre = self.__dict__.get("_prefetched")
         hit = None if pre is None else pre.get(float(time))
         if hit is not None:
             weights = dict(hit)
         else:
             weights = {s: float(tr.sample([time])[0, 0]) for s, tr in self.weight_tracks.items()}
-        h = self.handles
-        offsets = None if h is None else h.evaluate(time)
         hp = self.head_pose
         tr_, rot = None, None
         if hp is not None:
             p = hp.sample([time])[0]
             tr_, rot = p[:3].copy(), p[3:].copy()
-        regions = {r: tr.sample([time])[0] for r, tr in self.region_tracks.items()}
-        others = {name: tr.evaluate(time) for name, tr in self.tracks.items()
-                  if tr.kind not in ("weight", "region", HANDLES, HEAD_POSE)}
-        return TimelineSample(weights, offsets, tr_, rot, self.region_level, regions, others)
+        others = {name: tr.evaluate(time) for name, tr in self.family_tracks.items()}
+        return TimelineSample(weights, tr_, rot, others)
 
     def prefetch_weights(self, times: ArrayLike) -> None:
         """Sample every weight track at all ``times`` in one go; :meth:`evaluate` then looks them up.

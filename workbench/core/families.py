@@ -16,8 +16,10 @@ rigging, capture, enhancement) lives in its own folder and registers one
   :meth:`FaceState.evaluate_at`);
 * ``tab`` — optionally, the module (in a UI package) that registers its tab of
   the Workbench (:mod:`widgets.tabs`);
-* ``tracks`` — the timeline tracks it keys (name and value shape); its
-  ``animate`` reads them from the sample (``sample.others``);
+* ``tracks`` — the timeline tracks it keys (:class:`TrackSpec`: value shape,
+  title, what keying it now records); its ``animate`` reads them from the
+  sample (``sample.others``); ``check_tracks`` checks its tracks together (the
+  timeline itself knows only weights and the head pose);
 * ``weight_products`` — shapes whose weight is not set or keyed but derived:
   the product of other shapes' weights (combination / corrective shapes,
   :class:`WeightProducts`). :func:`derive_weights` applies every family's
@@ -121,6 +123,30 @@ class WeightProducts:
 
 
 @dataclass(frozen=True)
+class TrackSpec:
+    """One kind of timeline track a family keys (a name, or names under a prefix).
+
+    Parameters
+    ----------
+    value_shape : callable
+        ``value_shape(model, track) -> shape`` of a key's value on ``model``;
+        raises ``ModelError`` (saying what is expected) when the model cannot
+        take ``track``.
+    title : callable, optional
+        ``title(track) -> str``: a short name for undo labels and timeline rows
+        (default: the track name).
+    current : callable, optional
+        ``current(model, track) -> value``: what keying the track "now" records
+        (the model's current value, e.g. the handle offsets); without it, the
+        value the track has at the model's time.
+    """
+
+    value_shape: Callable[[FaceState, str], tuple[int, ...]]
+    title: Callable[[str], str] | None = None
+    current: Callable[[FaceState, str], Any] | None = None
+
+
+@dataclass(frozen=True)
 class Family:
     """What one method family registers (see the module docstring)."""
 
@@ -135,9 +161,12 @@ class Family:
     animate: Callable[[StateView, Any], Mapping[str, Any]] | None = None
     #: optional: shapes whose weight is the product of other weights (see :class:`WeightProducts`)
     weight_products: WeightProducts | None = None
-    #: timeline tracks it keys: ``{name: value_shape(model, track) -> shape}`` (a name ending in
-    #: "/" is a prefix); ``value_shape`` raises ``ModelError`` when the model cannot take the track
-    tracks: Mapping[str, Callable[[FaceState, str], tuple[int, ...]]] = field(default_factory=dict)
+    #: timeline tracks it keys: ``{name: TrackSpec}`` (a name ending in "/" is a prefix; a bare
+    #: ``value_shape`` callable stands for ``TrackSpec(value_shape)``)
+    tracks: Mapping[str, TrackSpec | Callable[[FaceState, str], tuple[int, ...]]] = field(default_factory=dict)
+    #: optional: ``check_tracks(model, {name: Track})`` checks its keyed tracks together (e.g. all
+    #: on one level); raises ``ModelError``
+    check_tracks: Callable[[FaceState, Mapping[str, Any]], None] | None = None
     #: optional: the module that registers its Workbench tab (imported by the widgets, never by the core)
     tab: str = ""
     #: optional: ``recipe_slots(slots) -> {slot: value}``: its slots as a saved expression's recipe
@@ -204,13 +233,38 @@ def family(name: str) -> Family:
         raise KeyError(f"no method family {name!r}; registered: {sorted(_FAMILIES)}") from None
 
 
+def track_owner(track: str) -> tuple[Family, TrackSpec] | None:
+    """The family keying ``track`` and its :class:`TrackSpec` (None: no family keys it)."""
+    for f in families():
+        for name, spec in f.tracks.items():
+            if track == name or (name.endswith("/") and track.startswith(name)):
+                return f, spec if isinstance(spec, TrackSpec) else TrackSpec(spec)
+    return None
+
+
 def track_value_shape(model: FaceState, track: str) -> tuple[int, ...] | None:
     """The value shape a family gives ``track`` on ``model`` (None: no family keys it)."""
-    for f in families():
-        for name, shape in f.tracks.items():
-            if track == name or (name.endswith("/") and track.startswith(name)):
-                return tuple(shape(model, track))
-    return None
+    owner = track_owner(track)
+    return None if owner is None else tuple(owner[1].value_shape(model, track))
+
+
+def family_track_title(track: str) -> str:
+    """A family track's short name (its :attr:`TrackSpec.title`, else the track name)."""
+    owner = track_owner(track)
+    return track if owner is None or owner[1].title is None else owner[1].title(track)
+
+
+def check_family_tracks(model: FaceState, tracks: Mapping[str, Any]) -> None:
+    """Run every family's ``check_tracks`` on the tracks it keys (``ModelError`` when they do not fit)."""
+    mine: dict[str, dict[str, Any]] = {}
+    for name, tr in tracks.items():
+        owner = track_owner(name)
+        if owner is not None:
+            mine.setdefault(owner[0].name, {})[name] = tr
+    for fam_name, own in mine.items():
+        check = _FAMILIES[fam_name].check_tracks
+        if check is not None:
+            check(model, own)
 
 
 def track_names() -> list[str]:

@@ -140,7 +140,7 @@ def export(
     ----------
     model : FaceModel
     timeline : Timeline
-        Checked against the model (unknown shape names, handle count).
+        Checked against the model (:meth:`Timeline.check_model`: shape names, family tracks).
     path : str or Path
         Output file; the suffix picks the format unless ``format`` is given.
     fps : float, optional

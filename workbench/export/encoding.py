@@ -77,7 +77,7 @@ if TYPE_CHECKING:
 
 __all__ = ["EncodedControls", "MeshEncoding", "crossing_times", "curve_range", "segment_polynomials"]
 
-#: singular values below this fraction of the largest are dropped from the handle basis
+#: singular values below this fraction of the largest are dropped from a controls basis
 _RANK_TOL = 1e-9
 
 
@@ -225,7 +225,7 @@ class MeshEncoding:
                 else np.zeros((0, n, 3), np.float32)
             )
             layers = model.pipeline.layers
-            # a nonlinear layer that says it is off for this model (wrinkles not fitted) is not baked
+            # a nonlinear layer that says it is off for this model (nothing fitted yet) is not baked
             silent = {
                 layer.name for layer in layers
                 if not is_linear(layer) and hasattr(layer, "active") and not layer.active(view)
@@ -234,7 +234,7 @@ class MeshEncoding:
                 dec = decompose(layers, view, timeline, n=n, skip=lambda layer: layer.name in silent)
             except ExportError:
                 raise
-            except ValueError as exc:  # a layer refusing this timeline (e.g. region tracks without regions)
+            except ValueError as exc:  # a layer refusing this timeline (tracks its state cannot play)
                 raise ExportError(str(exc)) from exc
             reports: dict[str, LayerReport] = {nm: LayerReport(nm, "inactive", "off for this model")
                                                for nm in silent}
@@ -244,7 +244,7 @@ class MeshEncoding:
                 if not terms.baked and terms.controls is None:
                     reports[name] = LayerReport(name, "linear" if not terms.empty else "inactive", terms.detail)
 
-            # --- controls layers (handle offsets): constant when not keyed, else a basis of their keyed span
+            # --- controls layers: constant when not keyed, else a basis of their keyed span
             self.controls: list[EncodedControls] = []
             for name, ctl, gain in dec.controls:
                 keep = None if np.all(gain == 1.0) else gain[:, None]

@@ -9,7 +9,7 @@ import numpy as np
 from mouth_gain.facet import MouthGainFacet
 from mouth_gain.layer import TRACK, GainState, MouthGainLayer
 
-from workbench.core.families import Family, SlotSpec, register_family
+from workbench.core.families import Family, SlotSpec, TrackSpec, register_family
 
 
 class GainFilePart:
@@ -54,5 +54,7 @@ FAMILY = register_family(Family(
     order=35,  # after paint, before wrinkles
     file_part=GainFilePart(),
     animate=animate,
-    tracks={TRACK: lambda model, track: (1,)},  # one number per key
+    # one number per key; "Key" on its timeline row records the gain the model has now
+    tracks={TRACK: TrackSpec(lambda model, track: (1,), title=lambda track: "mouth gain",
+                             current=lambda model, track: [model.slot("mouth_gain").gain])},
 ))

@@ -24,13 +24,9 @@ from workbench.animation.curves.keys import (
     auto_clamped_slopes,
 )
 from workbench.animation.curves.names import (
-    HANDLES,
     HEAD_POSE,
-    REGIONS_PREFIX,
     WEIGHTS_PREFIX,
     TrackError,
-    parse_region_track,
-    region_track_name,
     weight_track_name,
 )
 from workbench.animation.curves.rotations import (
@@ -43,11 +39,9 @@ from workbench.animation.curves.rotations import (
 from workbench.animation.curves.track import Track
 
 __all__ = [
-    "HANDLES",
     "HEAD_POSE",
     "IDENTITY_POSE",
     "INTERPOLATIONS",
-    "REGIONS_PREFIX",
     "TANGENT_MODES",
     "WEIGHTS_PREFIX",
     "Interpolation",
@@ -58,9 +52,7 @@ __all__ = [
     "auto_clamped_slopes",
     "head_euler_from_rotation",
     "head_rotation_from_euler",
-    "parse_region_track",
     "quat_slerp",
     "quaternion_to_matrix",
-    "region_track_name",
     "weight_track_name",
 ]

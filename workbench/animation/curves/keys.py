@@ -82,10 +82,9 @@ class Key:
     ----------
     time : float
         Seconds.
-    value : float or (h, 3) or (7,) or (k,) array
-        Scalar for weight tracks, ``(h, 3)`` offsets for the handle track,
-        ``(7,)`` translation + quaternion (x, y, z, w) for the head pose,
-        ``(k,)`` shape weights for a region track.
+    value : float or array
+        Scalar for weight tracks, ``(7,)`` translation + quaternion (x, y, z, w)
+        for the head pose, the shape a method family registers for its tracks.
         Stored as a read-only float64 array (0-d for scalars).
     interpolation : {"step", "linear", "bezier"}
         How the segment starting at this key is interpolated.

@@ -24,22 +24,16 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from workbench.animation.curves.keys import Key, _readonly, auto_clamped_slopes
-from workbench.animation.curves.names import (
-    HANDLES,
-    HEAD_POSE,
-    REGIONS_PREFIX,
-    WEIGHTS_PREFIX,
-    TrackError,
-    parse_region_track,
-)
+from workbench.animation.curves.names import HEAD_POSE, WEIGHTS_PREFIX, TrackError
 from workbench.animation.curves.rotations import quat_slerp
 
 _CODE = {"step": 0, "linear": 1, "bezier": 2}
 
 
-#: a method family's own track (``"mouth_gain"``, ``"my_family/param"``): the
-#: model checks that a registered family keys it (:func:`workbench.core.families.track_value_shape`)
-_FAMILY_TRACK = re.compile(r"[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z0-9_.\-]+)*")
+#: a method family's own track: a name (``"mouth_gain"``), or one under its
+#: prefix (``"my_family/0/upper lip"``); the model checks that a registered
+#: family keys it and the value shape (:func:`workbench.core.families.track_value_shape`)
+_FAMILY_TRACK = re.compile(r"[A-Za-z_][A-Za-z0-9_]*(/.*[^/])?", re.DOTALL)
 
 @dataclass(frozen=True, eq=False)
 class Track:
@@ -48,12 +42,13 @@ class Track:
     Parameters
     ----------
     name : str
-        ``"weights/<shape>"``, ``"handles"``, ``"head_pose"`` or
-        ``"regions/<level>/<region>"``.
+        ``"weights/<shape>"``, ``"head_pose"`` or a method family's own track
+        (see :mod:`~workbench.animation.curves.names`).
     keys : sequence of Key
         At least one key; times strictly increasing; all values the same shape
-        (scalar for weights, ``(h, 3)`` for handles, ``(7,)`` for the head pose,
-        ``(k,)`` with ``k >= 1`` for a region).
+        (scalar for weights, ``(7,)`` for the head pose; a family's tracks have
+        the shape it registers, checked against the model by
+        :meth:`Timeline.check_model <workbench.animation.tracks.Timeline.check_model>`).
 
     Raises
     ------
@@ -72,15 +67,12 @@ class Track:
     def __post_init__(self) -> None:
         name = self.name
         if not isinstance(name, str) or not (
-            name in (HANDLES, HEAD_POSE)
-            or (name.startswith(WEIGHTS_PREFIX) and len(name) > len(WEIGHTS_PREFIX))
-            or parse_region_track(name) is not None
-            or (_FAMILY_TRACK.fullmatch(name) is not None
-                and not name.startswith((WEIGHTS_PREFIX, REGIONS_PREFIX)))
+            (name.startswith(WEIGHTS_PREFIX) and len(name) > len(WEIGHTS_PREFIX))
+            or (_FAMILY_TRACK.fullmatch(name) is not None and not name.startswith(WEIGHTS_PREFIX))
         ):
             raise TrackError(
-                "track name must be 'weights/<shape>', 'handles', 'head_pose', "
-                f"'regions/<level>/<region>' or a method family's own track name, got {name!r}"
+                "track name must be 'weights/<shape>', 'head_pose' or a method family's own "
+                f"track name (a name, or '<prefix>/<...>'), got {name!r}"
             )
         keys = tuple(self.keys)
         if not keys:
@@ -102,13 +94,6 @@ class Track:
             expect = ()
         if expect is not None and shape != expect:
             raise TrackError(f"track {name!r}: values must have shape {expect}, got {shape}")
-        if name == HANDLES and (len(shape) != 2 or shape[1] != 3):
-            raise TrackError(f"track 'handles': values must be (h, 3) offsets, got shape {shape}")
-        if name.startswith(REGIONS_PREFIX) and (len(shape) != 1 or shape[0] < 1):
-            raise TrackError(
-                f"track {name!r}: values must be (k,) shape weights, one per model shape, "
-                f"got shape {shape}"
-            )
         for i, k in enumerate(keys):
             if k.value.shape != shape:
                 raise TrackError(
@@ -158,21 +143,14 @@ class Track:
         return self.keys[0].value.shape
 
     @property
-    def kind(self) -> str:
-        """"weight", "handles", "head_pose" or "region"."""
-        if self.name.startswith(WEIGHTS_PREFIX):
-            return "weight"
-        return "region" if self.name.startswith(REGIONS_PREFIX) else self.name
-
-    @property
-    def region(self) -> tuple[int, str] | None:
-        """``(level, region name)`` of a region track, else None."""
-        return parse_region_track(self.name)
-
-    @property
     def shape_name(self) -> str | None:
         """The blendshape name of a weight track, else None."""
-        return self.name[len(WEIGHTS_PREFIX) :] if self.kind == "weight" else None
+        return self.name[len(WEIGHTS_PREFIX) :] if self.name.startswith(WEIGHTS_PREFIX) else None
+
+    @property
+    def is_family_track(self) -> bool:
+        """Neither a weight nor the head pose: a method family's own track."""
+        return self.name != HEAD_POSE and not self.name.startswith(WEIGHTS_PREFIX)
 
     @property
     def interpolations(self) -> tuple[str, ...]:
@@ -195,8 +173,8 @@ class Track:
         Returns
         -------
         (F, d) float
-            Flattened values (``d = 1`` for weights, ``3h`` for handles, 7 for the
-            head pose with unit quaternions, ``k`` for a region).
+            Flattened values (``d = 1`` for weights, 7 for the head pose with unit
+            quaternions, the size of a family track's values).
         """
         ts = np.asarray(times, np.float64).reshape(-1)
         out, _ = self._eval(ts, derivative=False)

@@ -8,6 +8,7 @@ reader of :mod:`workbench.io.gltf` (pygltflib has no accessor decoding).
 
 from __future__ import annotations
 
+import re
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -18,6 +19,9 @@ from workbench.animation.curves import Interpolation, Key, Track, TrackError, we
 from workbench.animation.importers.errors import AnimationImportError
 from workbench.animation.importers.names import _resolve_columns
 from workbench.animation.tracks import Timeline
+
+#: the morph targets our exporters write for a layer's keyed controls (``"<prefix>:basis<i>"``)
+_CONTROLS_TARGET = re.compile(r"[^:]+:basis[0-9]+")
 
 __all__ = ["read_gltf_animation"]
 
@@ -38,8 +42,8 @@ def read_gltf_animation(
         .glb or .gltf.
     shape_names : sequence of str
         The model's shape names; targets are matched by ``mesh.extras.targetNames``
-        (exact, else ARKit meaning). Targets named ``handle:...`` (the handle
-        layer written by :mod:`workbench.export.gltf`) are skipped.
+        (exact, else ARKit meaning). Targets named ``<prefix>:basis<i>`` (the
+        keyed controls of a layer, written by :mod:`workbench.export.gltf`) are skipped.
     animation : int or str, optional
         Animation index or name (default: the first one with a weights channel).
     fps : float
@@ -173,7 +177,7 @@ def _gltf_timeline(
                 f"({T[i]:.6g} s); times must be strictly increasing",
             )
         out = out.reshape(nk, per, nt)
-        cols = [n for n in tnames if not n.startswith("handle:")]
+        cols = [n for n in tnames if not _CONTROLS_TARGET.fullmatch(n)]
         mapping = _resolve_columns(cols, shape_names, src, on_unknown)
         mode: Interpolation = "step" if interp == "STEP" else "linear"
         for ci, shape in mapping:

@@ -19,6 +19,9 @@ from numpy.typing import ArrayLike, NDArray
 from workbench.core.shapes import BlendShape, ModelError
 from workbench.methods.handles.handle_set import HandleSet
 
+#: the timeline track of the handle offsets: (h, 3) model units, the handle layer's "pose keys"
+HANDLES_TRACK = "handles"
+
 if TYPE_CHECKING:
     from workbench.core.state import FaceState
     from workbench.methods.handles.layer import HandleLayer
@@ -162,6 +165,12 @@ class HandlesFacet:
             if not np.isfinite(o).all():
                 raise ModelError("set_handle_offsets: offsets must be finite")
             self.set(dataclasses.replace(h, offsets=o), label)
+
+    def key(self, time: float, interpolation: str = "bezier") -> None:
+        """Key the current handle offsets at ``time`` on the timeline (its ``"handles"`` track); one undo step."""
+        if not len(self.value):
+            raise ModelError("handles.key: the model has no handles")
+        self._model.timeline.key_track(HANDLES_TRACK, time, interpolation)  # type: ignore[attr-defined]
 
     def move(self, index: int, offset: ArrayLike, *, symmetric: bool = False) -> None:
         """Set one handle's offset (3,); with ``symmetric`` its mirror gets the x-reflected offset.

@@ -8,10 +8,15 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from workbench.core.families import Family, SlotSpec, register_family
+from workbench.core.families import Family, SlotSpec, TrackSpec, register_family
 from workbench.core.manifest import Checker, Spec
 from workbench.core.shapes import ModelError
-from workbench.methods.handles.facet import HandlesFacet, check_handles, check_stiffness
+from workbench.methods.handles.facet import (
+    HANDLES_TRACK,
+    HandlesFacet,
+    check_handles,
+    check_stiffness,
+)
 from workbench.methods.handles.handle_set import HandleSet
 from workbench.methods.handles.layer import HandleLayer
 from workbench.methods.handles.shell import DEFAULT_K_B, DEFAULT_K_S
@@ -87,10 +92,15 @@ def handles_track_shape(model: FaceState, track: str) -> tuple[int, ...]:
     return (n, 3)
 
 
+def current_offsets(model: FaceState, track: str) -> np.ndarray:
+    """What keying the ``"handles"`` track now records: the current offsets."""
+    return np.asarray(model.slot("handles").offsets, np.float64)
+
+
 def animate(view: StateView, sample: Any) -> dict[str, Any]:
     """Keyed handle offsets (when their count matches the handle set)."""
     h = view.slot("handles")
-    o = sample.handle_offsets
+    o = sample.others.get(HANDLES_TRACK)
     if o is None or o.shape != h.offsets.shape:
         return {}
     return {"handles": dataclasses.replace(h, offsets=np.asarray(o, np.float32))}
@@ -109,6 +119,7 @@ FAMILY = register_family(
         tab="widgets.tabs.sculpt",
         file_part=HandlesFilePart(),
         animate=animate,
-        tracks={"handles": handles_track_shape},
+        tracks={HANDLES_TRACK: TrackSpec(handles_track_shape, title=lambda t: "handles (pose)",
+                                         current=current_offsets)},
     )
 )

@@ -23,6 +23,7 @@ from numpy.typing import NDArray
 
 from workbench.core.linear import Controls, LinearTerms
 from workbench.geometry.parts import model_part_roles
+from workbench.methods.handles.facet import HANDLES_TRACK
 from workbench.methods.handles.shell import ShellDeformer
 
 if TYPE_CHECKING:
@@ -101,7 +102,7 @@ class HandleLayer:
         def apply(o: NDArray[np.float64]) -> NDArray[np.float64]:
             return np.asarray(self.deformer(view).displacement(np.asarray(o).reshape(H, 3)), np.float64)
 
-        track = None if timeline is None else timeline.handles
+        track = None if timeline is None else timeline.tracks.get(HANDLES_TRACK)
         return Controls(np.asarray(h.offsets, np.float64), track, apply, f"{H} handles", prefix="handle")
 
     def control_basis(self, view: StateView) -> tuple[Any, NDArray[np.float32], NDArray[np.int64]]:

@@ -28,6 +28,7 @@ from workbench.methods.paint.painting import (
 )
 
 if TYPE_CHECKING:
+    from workbench.animation.curves import Interpolation
     from workbench.core.state import FaceState
 
 
@@ -74,6 +75,16 @@ class ExpressionsFacet(Mapping[str, Expression]):
             lib[name] = expr
             m.set_slot("expressions", lib, f"Save expression {name}")
             return expr
+
+    def key(self, time: float, name: str, interpolation: Interpolation = "bezier") -> None:
+        """Key expression (or blendshape) ``name`` at ``time`` on the timeline; one undo step.
+
+        By its recipe when that plays back its look, else baked once into a
+        ``<name>_baked`` shape: :func:`workbench.methods.paint.keying.key_expression`.
+        """
+        from workbench.methods.paint.keying import key_expression
+
+        key_expression(self._model, time, name, interpolation)
 
     def remove(self, name: str) -> None:
         """Remove a saved expression (undoable); its paint goes with it."""

@@ -28,6 +28,7 @@ from numpy.typing import ArrayLike, NDArray
 from workbench.core.shapes import ModelError
 from workbench.methods.regions.blend import RegionState, RegionWeights
 from workbench.methods.regions.hierarchy import Regions
+from workbench.methods.regions.tracks import region_level, region_track_name
 
 if TYPE_CHECKING:
     from workbench.animation.curves import Interpolation
@@ -321,7 +322,7 @@ class RegionsFacet:
         ``fit.positions(model, regions, f)`` per frame when it is needed.
         ``every`` >= 1 keys every ``every``-th frame (and always the last).
         """
-        from workbench.animation.curves import region_track_name, weight_track_name
+        from workbench.animation.curves import weight_track_name
         from workbench.animation.tracks import add_keys
         from workbench.methods.regions.marker_fit import MarkerFit
 
@@ -350,10 +351,11 @@ class RegionsFacet:
                 )
             timeline: Any = m.timeline  # type: ignore[attr-defined]
             tl = timeline.value
-            if tl.region_level is not None and tl.region_level != L:
+            keyed_level = region_level(tl)
+            if keyed_level is not None and keyed_level != L:
                 raise ModelError(
-                    f"key_marker_fit: the timeline has region keys on level {tl.region_level}, "
-                    f"the fit is on level {L}; delete those keys or fit on level {tl.region_level}"
+                    f"key_marker_fit: the timeline has region keys on level {keyed_level}, "
+                    f"the fit is on level {L}; delete those keys or fit on level {keyed_level}"
                 )
             T = fit.n_frames
             frames = np.arange(0, T, int(every))

@@ -7,12 +7,18 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from workbench.core.families import Family, SlotSpec, register_family
+from workbench.core.families import Family, SlotSpec, TrackSpec, register_family
 from workbench.core.manifest import Checker, Spec
-from workbench.core.shapes import ModelError
 from workbench.methods.regions.blend import RegionLayer, RegionState, RegionWeights
 from workbench.methods.regions.facet import RegionsFacet, check_state
 from workbench.methods.regions.hierarchy import Regions
+from workbench.methods.regions.tracks import (
+    REGIONS_PREFIX,
+    check_region_tracks,
+    region_track_shape,
+    region_track_title,
+    sampled_region_weights,
+)
 
 if TYPE_CHECKING:
     from workbench.core.pipeline import StateView
@@ -191,7 +197,7 @@ def animate(view: StateView, sample: Any) -> dict[str, Any]:
     holding a stale number of shapes, are skipped (``check_model`` reports them).
     """
     st = view.slot("regions")
-    L = sample.region_level
+    L, keyed = sampled_region_weights(sample.others)
     if L is None or not isinstance(st, RegionState) or L >= st.regions.n_levels:
         return {}
     names = st.regions.names[L]
@@ -199,7 +205,7 @@ def animate(view: StateView, sample: Any) -> dict[str, Any]:
     g = np.array([view.weights[s.name] for s in view.shapes], np.float32)
     values = np.tile(g, (len(names), 1))
     index = {nm: i for i, nm in enumerate(names)}
-    for region, v in sample.region_weights.items():
+    for region, v in keyed.items():
         if region in index and v.shape == (k,):
             values[index[region]] = v
     rw = RegionWeights(L, tuple(view.shape_names), names, values)
@@ -214,15 +220,6 @@ def recipe_slots(slots: Mapping[str, Any]) -> dict[str, Any]:
     return {}
 
 
-def region_track_shape(model: FaceState, track: str) -> tuple[int, ...]:
-    """``"regions/<level>/<region>"`` keys (k,) shape weights inside one region."""
-    from workbench.animation.curves import parse_region_track
-
-    if parse_region_track(track) is None:
-        raise ModelError(f"track {track!r}: a region track is named 'regions/<level>/<region>'")
-    return (len(model.shape_names),)
-
-
 FAMILY = register_family(
     Family(
         name="regions",
@@ -233,7 +230,8 @@ FAMILY = register_family(
         tab="widgets.tabs.regions",
         file_part=RegionsFilePart(),
         animate=animate,
-        tracks={"regions/": region_track_shape},
+        tracks={REGIONS_PREFIX: TrackSpec(region_track_shape, title=region_track_title)},
+        check_tracks=check_region_tracks,
         recipe_slots=recipe_slots,
     )
 )

@@ -148,10 +148,12 @@ class ShapeToolsFacet:
         return name
 
     def _refuse_region_tracks(self, what: str) -> None:
-        tl = self._model.slot("tracks")
-        if tl.region_tracks:
+        from workbench.methods.regions.tracks import region_tracks
+
+        keyed = region_tracks(self._model.slot("tracks"))
+        if keyed:
             raise ModelError(
-                f"{what}: the timeline keys region weights ({len(tl.region_tracks)} region tracks, one "
+                f"{what}: the timeline keys region weights ({len(keyed)} region tracks, one "
                 "weight per shape), which a new shape would not fit; delete the region tracks first"
             )
 

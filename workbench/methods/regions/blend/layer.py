@@ -11,6 +11,7 @@ from workbench.core.linear import LinearTerms
 from workbench.methods.regions.blend.evaluate import _mute, region_blend_displacement
 from workbench.methods.regions.blend.weights import RegionState
 from workbench.methods.regions.hierarchy import RegionError
+from workbench.methods.regions.tracks import region_level, region_tracks
 
 if TYPE_CHECKING:
     from workbench.core.pipeline import StateView
@@ -46,8 +47,8 @@ class RegionLayer:
         if not isinstance(state, RegionState) or state.weights is None:
             return None
         R = state.regions
-        if R.n_vertices != view.n_vertices:
-            return None
+        if R.n_vertices != view.n_vertices or tuple(state.weights.shape_names) != tuple(view.shape_names):
+            return None  # stale after a shape edit: the global blend, as displacement() shows
         try:
             level = R.check_level(state.level)
         except (RegionError, IndexError, ValueError):
@@ -67,12 +68,12 @@ class RegionLayer:
 
     def linear_terms(self, view: StateView, timeline: Any) -> LinearTerms:
         """Constant ``C_R = Σ_k (Σ_r W_r w_rk) Δ_k`` and gain ``1 − S_R``; baked when region weights are keyed."""
-        rt = {} if timeline is None else timeline.region_tracks
+        rt = {} if timeline is None else region_tracks(timeline)
         if rt:
             if not isinstance(view.slot("regions"), RegionState):
                 raise RegionError(f"the timeline keys region weights ({len(rt)} region tracks) "
                                   "but the model has no regions")
-            return LinearTerms(baked=f"region weights keyed on level {timeline.region_level} "
+            return LinearTerms(baked=f"region weights keyed on level {region_level(timeline)} "
                                      f"({len(rt)} region tracks) vary over time")
         blend = self._blend(view)
         if blend is None:
