@@ -16,9 +16,11 @@ import pytest
 import scipy.sparse as sp
 
 import workbench
+from workbench.geometry.normals import vertex_normals
 from workbench.model import FaceModel
 from workbench.rigging import ExpressionCloner, clone_animation
 from workbench.rigging.clone import local_scales
+from workbench.rigging.clone_motion import local_deformation
 from workbench.testing import in_units, renumbered, warped
 from workbench.testing.grids import grid_triangles, grid_vertices
 from workbench.testing.takes import realistic_weights
@@ -69,7 +71,10 @@ def test_cloning_onto_a_warped_renumbered_face_follows_its_true_performance(head
     out = cloner.clone(frames)
     assert steps and steps[-1] == 1.0 and steps == sorted(steps)
     err = _error(out, foreign, names, W)
-    assert err <= 0.10, err
+    assert err <= 0.05, err  # the issue: 10 % of the motion, 5 % on generated faces
+    # the paper's motion model as printed, on the same correspondence: the default is closer
+    err_frames = _error(cloner.with_motion("frames").clone(frames), foreign, names, W)
+    assert err < err_frames, (err, err_frames)
     # the naive peer: every target vertex copies the motion of the nearest source vertex
     # (after the same rigid alignment) - cloning must do much better
     copy = cloner.nearest_copy(frames)
@@ -100,6 +105,26 @@ def test_local_scales_of_a_uniformly_grown_surface_are_its_growth() -> None:
     np.testing.assert_allclose(S, 1.5, rtol=1e-9)
     # and the identity leaves every scale at 1
     np.testing.assert_allclose(local_scales(V, V, A, R, frames), 1.0, rtol=1e-12)
+
+
+def test_local_deformation_of_a_similarity_is_the_similarity_and_a_shear_is_kept() -> None:
+    V = grid_vertices(9, x=(0.0, 1.0), y=(0.0, 1.0), height=lambda x, y: 0.05 * np.sin(6 * x) * np.cos(5 * y))
+    F = grid_triangles(9)
+    A = sp.csr_matrix(igl.adjacency_matrix(F)).astype(float)
+    c, s_ = np.cos(0.4), np.sin(0.4)
+    R = np.array([[c, -s_, 0.0], [s_, c, 0.0], [0.0, 0.0, 1.0]])
+    N0 = vertex_normals(V, F)
+    for M in (np.eye(3), 1.5 * np.eye(3), 0.7 * R):
+        J = local_deformation(V, V @ M.T, F, A, N0, vertex_normals(V @ M.T, F), smoothing=0.0)
+        np.testing.assert_allclose(J, np.broadcast_to(M, J.shape), atol=1e-9)
+        # smoothing keeps a constant field
+        J = local_deformation(V, V @ M.T, F, A, N0, vertex_normals(V @ M.T, F), smoothing=0.05)
+        np.testing.assert_allclose(J, np.broadcast_to(M, J.shape), atol=1e-9)
+    # a shear of a flat sheet: every in-plane edge maps exactly as the shear maps it
+    flat = V * [1.0, 1.0, 0.0]
+    H = np.array([[1.0, 0.3, 0.0], [0.0, 1.2, 0.0], [0.0, 0.0, 1.0]])
+    J = local_deformation(flat, flat @ H.T, F, A, vertex_normals(flat, F), vertex_normals(flat @ H.T, F), 0.0)
+    np.testing.assert_allclose(J[:, :2, :2], np.broadcast_to(H[:2, :2], (len(V), 2, 2)), atol=1e-9)
 
 
 @pytest.mark.parametrize(

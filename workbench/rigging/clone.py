@@ -16,22 +16,19 @@ Neumann's expression cloning:
    their closest point (the two sides of a lip contact line, §2.3) borrow their
    neighbours' points, ring by ring, so a lower-lip vertex never follows an
    upper-lip triangle.
-2. **Direction (§2.2.1).** At each source vertex a local frame on the source and
-   on the deformed source: X the vertex normal averaged over its neighbours (the
-   noise filter), Y the projection of one fixed edge onto the tangent plane,
-   Z = X × Y. ``R = F_deformed F_sourceᵀ`` turns a motion vector with the
-   surface.
-3. **Magnitude (§2.2.2).** The ratio of the deformed to the rotated source
-   one-ring's bounding box, measured along the deformed frame's two tangent
-   axes (a one-ring's extent along its normal is its curvature, not its size:
-   the normal axis takes the tangent ratios' geometric mean); ratios farther
-   than two standard deviations (in log) from the face's mean are replaced by
-   their neighbours' average, then the whole field is smoothed once, as the
-   course prescribes for bumps in either model.
-4. **Animation (eq. 17–18).** ``m' = T m`` with ``T = S R`` at each source
-   vertex, and each target vertex moves by the barycentric blend of its source
-   triangle's ``m'``. Steps 2–4 are one sparse matrix (3 n_target × 3 n_source)
-   built once: a frame costs one sparse product.
+2. **Direction and magnitude (§2.2.1-§2.2.2).** At each source vertex a
+   matrix ``T`` turns a motion vector with the surface and scales it by the
+   local proportions, measured between the source and the deformed source
+   (:mod:`~workbench.rigging.clone_motion`): ``motion="frames"`` is the paper
+   as printed (local frames of the normal and one edge, ``R = F1 F0ᵀ``; one-ring
+   bounding-box ratios with outliers filtered, ``T = S R``);
+   ``motion="affine"``, the default, is the fit's local linear map of each
+   one-ring (rotation, stretch and shear), smoothed — closer to the truth on
+   every generated face of the benchmark.
+3. **Animation (eq. 17–18).** ``m' = T m`` at each source vertex, and each
+   target vertex moves by the barycentric blend of its source triangle's
+   ``m'``. Steps 2–3 are one sparse matrix (3 n_target × 3 n_source) built
+   once: a frame costs one sparse product.
 
 Eyes, teeth and tongue follow as in a rig transfer (matched parts carry the
 source part's motion; others move rigidly with the skin around them).
@@ -42,108 +39,33 @@ correspondence, fit and parts are the rigging step's.
 
 from __future__ import annotations
 
+import copy
 import time
 from collections.abc import Callable, Sequence
 from os import PathLike
 
-import igl
 import numpy as np
 import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 
-from workbench.geometry.normals import vertex_normals
 from workbench.model import FaceModel
+from workbench.rigging.clone_motion import (
+    AFFINE_SMOOTHING,
+    MotionModel,
+    _adjacency,
+    local_scales,
+    motion_transforms,
+)
 from workbench.rigging.correspondence import MAP_DISTANCE, Correspondence
 from workbench.rigging.sides import Side
 from workbench.rigging.transfer import RigTransfer
 
-__all__ = ["ExpressionCloner", "clone_animation"]
+__all__ = ["ExpressionCloner", "clone_animation", "local_scales"]
 
 Progress = Callable[[float, str], None] | None
 
 #: frames cloned per block (bounds the memory of the parts' step)
 _BLOCK = 64
-#: scale ratios beyond this many standard deviations (log) from the mean are outliers (§2.2.2)
-_SCALE_SIGMAS = 2.0
-
-
-def _adjacency(F: NDArray[np.int64], n: int) -> sp.csr_matrix:
-    A = igl.adjacency_matrix(F).tocsr().astype(np.float64)
-    A.resize((n, n))
-    return A
-
-
-def _row_mean(A: sp.csr_matrix, x: NDArray[np.float64]) -> NDArray[np.float64]:
-    deg = np.maximum(np.asarray(A.sum(1)).ravel(), 1.0)
-    return np.asarray(A @ x) / (deg[:, None] if x.ndim == 2 else deg)
-
-
-def _frames(V: NDArray[np.float64], F: NDArray[np.int64], A: sp.csr_matrix, partner: NDArray[np.int64]
-            ) -> NDArray[np.float64]:
-    """(n, 3, 3) local frames, columns X (smoothed normal), Y (edge to ``partner`` in the tangent plane), Z."""
-    N = vertex_normals(V, F)
-    N = _row_mean(A, N) + N  # the noise filter: the vertex's and its neighbours' normals
-    N /= np.maximum(np.linalg.norm(N, axis=1, keepdims=True), 1e-300)
-    e = V[partner] - V
-    Y = e - (e * N).sum(1, keepdims=True) * N
-    Y /= np.maximum(np.linalg.norm(Y, axis=1, keepdims=True), 1e-300)
-    Z = np.cross(N, Y)
-    return np.stack([N, Y, Z], axis=2)
-
-
-def _ring_extent(P: NDArray[np.float64], A: sp.csr_matrix) -> NDArray[np.float64]:
-    """(n,): extent (max - min) over each vertex's one-ring and the vertex itself (at 0).
-
-    ``P`` (nnz,) holds each ring member's coordinate relative to its vertex, in the CSR order of ``A``.
-    """
-    n = A.shape[0]
-    starts = A.indptr[:-1]
-    has = np.diff(A.indptr) > 0
-    hi = np.zeros(n)
-    lo = np.zeros(n)
-    hi[has] = np.maximum.reduceat(P, starts[has])
-    lo[has] = np.minimum.reduceat(P, starts[has])
-    return np.maximum(hi, 0.0) - np.minimum(lo, 0.0)  # the vertex itself sits at 0
-
-
-def local_scales(X0: NDArray[np.float64], X1: NDArray[np.float64], A: sp.csr_matrix, R: NDArray[np.float64],
-                 F1: NDArray[np.float64]) -> NDArray[np.float64]:
-    """(n, 3) scale of the deformed one-ring over the rotated source one-ring along ``F1``'s axes (§2.2.2).
-
-    Parameters
-    ----------
-    X0, X1 : (n, 3) float
-        Source and deformed source vertices.
-    A : (n, n) sparse
-        Vertex adjacency.
-    R : (n, 3, 3) float
-        Per-vertex rotation source -> deformed.
-    F1 : (n, 3, 3) float
-        Deformed frames (columns: normal, tangent, tangent).
-    """
-    rows = np.repeat(np.arange(A.shape[0]), np.diff(A.indptr))
-    cols = A.indices
-    d0 = np.einsum("kij,kj->ki", R[rows], X0[cols] - X0[rows])  # rotated source ring offsets
-    d1 = X1[cols] - X1[rows]
-    S = np.ones((A.shape[0], 3))
-    for a in (1, 2):  # the tangent axes
-        ax = F1[rows, :, a]
-        s0 = _ring_extent((d0 * ax).sum(1), A)
-        s1 = _ring_extent((d1 * ax).sum(1), A)
-        ok = s0 > 1e-12
-        S[ok, a] = s1[ok] / s0[ok]
-    S[:, 0] = np.sqrt(S[:, 1] * S[:, 2])
-    # outliers (a bump in either model) -> their neighbours' average; then one pass of smoothing
-    L = np.log(np.maximum(S, 1e-6))
-    mu, sd = L.mean(0), L.std(0)
-    bad = np.abs(L - mu) > _SCALE_SIGMAS * np.maximum(sd, 1e-12)
-    if bad.any():
-        keep = (~bad).astype(np.float64)
-        num = np.asarray(A @ (L * keep))
-        den = np.asarray(A @ keep)
-        L = np.where(bad, np.where(den > 0, num / np.maximum(den, 1e-300), mu), L)
-    L = 0.5 * (L + _row_mean(A, L))
-    return np.exp(L)
 
 
 class ExpressionCloner:
@@ -157,6 +79,12 @@ class ExpressionCloner:
         Any face: other topology, vertex order, units and proportions.
     landmarks : sequence of (source_vertex, target_vertex), optional
         Corresponding vertex pairs (as :class:`~workbench.rigging.RigTransfer`).
+    motion : {"affine", "frames"}
+        How a motion vector turns and scales (:mod:`~workbench.rigging.clone_motion`):
+        the fit's smoothed local linear map (default), or the paper's frames and
+        one-ring box ratios as printed.
+    smoothing : float
+        The affine model's smoothing length over the source's bounding diagonal.
     progress : callable, optional
         ``progress(fraction, message)`` over the set-up.
 
@@ -167,14 +95,16 @@ class ExpressionCloner:
     operator_ : (3 n_skin_t, 3 n_skin_s) sparse
         Source skin motion (working frame) -> target skin motion (working frame), eq. 17–18.
     scales_ : (n_skin_s, 3) float
-        The local scale factors (normal, tangent, tangent) after the outlier filter.
+        The local scale factors (normal, tangent, tangent): the box ratios after the
+        outlier filter (``"frames"``), the map's stretches (``"affine"``).
     transforms_ : (n_skin_s, 3, 3) float
-        ``T = S R`` per source skin vertex (working frame), eq. 16.
+        ``T`` per source skin vertex (working frame), ``m' = T m`` (eq. 16).
     setup_seconds_ : float
     """
 
     def __init__(self, source: FaceModel, target: FaceModel | str | PathLike[str], *,
-                 landmarks: Sequence[tuple[int, int]] | None = None, progress: Progress = None) -> None:
+                 landmarks: Sequence[tuple[int, int]] | None = None, motion: MotionModel = "affine",
+                 smoothing: float = AFFINE_SMOOTHING, progress: Progress = None) -> None:
         t0 = time.perf_counter()
         say = progress or (lambda f, m: None)
         self.transfer_ = rt = RigTransfer(source, target, landmarks=landmarks,
@@ -185,20 +115,25 @@ class ExpressionCloner:
         X0, X1 = src.skin_X, rt.fit.positions
         F = np.asarray(src.skin_faces, np.int64)
         n_s = X0.shape[0]
-        A = _adjacency(F, n_s)
-        # one fixed edge per vertex (its first neighbour) gives Y on both models
-        partner = np.where(np.diff(A.indptr) > 0, A.indices[np.minimum(A.indptr[:-1], A.indices.size - 1)],
-                           np.arange(n_s))
-        F0, F1 = _frames(X0, F, A, partner), _frames(X1, F, A, partner)
-        R = F1 @ F0.transpose(0, 2, 1)
-        self.scales_ = S = local_scales(X0, X1, A, R, F1)
-        self.transforms_ = T = (F1 * S[:, None, :]) @ F1.transpose(0, 2, 1) @ R  # m' = T m
+        self.motion = motion
+        self.transforms_, self.scales_ = motion_transforms(X0, X1, F, motion, smoothing)
+        T = self.transforms_
         # target skin vertex -> source triangle (barycentric), lip-side safe, far ones held still
-        B = self._barycentric_rows(corr, tgt, F, n_s)
+        self._rows = B = self._barycentric_rows(corr, tgt, F, n_s)
         self.operator_ = self._operator(B, T)
         self._nearest: NDArray[np.int64] | None = None  # for the nearest-copy peer, on first use
         self.setup_seconds_ = time.perf_counter() - t0
         say(1.0, "set up")
+
+    def with_motion(self, motion: MotionModel, smoothing: float = AFFINE_SMOOTHING) -> ExpressionCloner:
+        """A cloner with another motion model on the same correspondence (no second fit)."""
+        other = copy.copy(self)
+        rt = self.transfer_
+        other.motion = motion
+        other.transforms_, other.scales_ = motion_transforms(
+            rt.src.skin_X, rt.fit.positions, np.asarray(rt.src.skin_faces, np.int64), motion, smoothing)
+        other.operator_ = self._operator(self._rows, other.transforms_)
+        return other
 
     @staticmethod
     def _operator(B: sp.csr_matrix, T: NDArray[np.float64]) -> sp.csr_matrix:
@@ -335,8 +270,8 @@ def _check_frames(frames: ArrayLike, n: int) -> NDArray[np.float64]:
 
 
 def clone_animation(frames: ArrayLike, source: FaceModel, target: FaceModel | str | PathLike[str], *,
-                    landmarks: Sequence[tuple[int, int]] | None = None, progress: Progress = None
-                    ) -> NDArray[np.float64]:
+                    landmarks: Sequence[tuple[int, int]] | None = None, motion: MotionModel = "affine",
+                    progress: Progress = None) -> NDArray[np.float64]:
     """Play a performance of ``source`` on ``target`` (expression cloning, Noh & Neumann 2001).
 
     Parameters
@@ -347,6 +282,8 @@ def clone_animation(frames: ArrayLike, source: FaceModel, target: FaceModel | st
     target : FaceModel or path
         Any topology, vertex order and units.
     landmarks : sequence of (source_vertex, target_vertex), optional
+    motion : {"affine", "frames"}
+        The motion model (:class:`ExpressionCloner`).
     progress : callable, optional
         ``progress(fraction, message)``.
 
@@ -357,5 +294,6 @@ def clone_animation(frames: ArrayLike, source: FaceModel, target: FaceModel | st
     """
     say = progress or (lambda f, m: None)
     P = _check_frames(frames, source.n_vertices)  # fail before the set-up
-    cloner = ExpressionCloner(source, target, landmarks=landmarks, progress=lambda f, m: say(0.5 * f, m))
+    cloner = ExpressionCloner(source, target, landmarks=landmarks, motion=motion,
+                              progress=lambda f, m: say(0.5 * f, m))
     return cloner._play(P, say_from=0.5, progress=say)
