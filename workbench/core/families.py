@@ -178,6 +178,8 @@ class Family:
 _FAMILIES: dict[str, Family] = {}
 _HOOKS: dict[str, Any] = {}
 _PRODUCTS: tuple[WeightProducts, ...] = ()
+_ORDERED: tuple[Family, ...] = ()  # _FAMILIES in layer order, made again on every registration
+_OWNERS: dict[str, tuple[Family, TrackSpec] | None] = {}  # track name -> its family, cleared likewise
 
 #: the entry-point group in which other packages name the module that registers their family
 ENTRY_POINT_GROUP = "face_workbench.families"
@@ -213,16 +215,18 @@ def discover() -> None:
 
 def register_family(family: Family) -> Family:
     """Register (or replace, on module reload) a family; returns it."""
-    global _PRODUCTS
+    global _PRODUCTS, _ORDERED
     _FAMILIES[family.name] = family
-    _PRODUCTS = tuple(f.weight_products for f in families() if f.weight_products is not None)
+    _ORDERED = tuple(sorted(_FAMILIES.values(), key=lambda f: f.order))
+    _OWNERS.clear()
+    _PRODUCTS = tuple(f.weight_products for f in _ORDERED if f.weight_products is not None)
     return family
 
 
 def families() -> tuple[Family, ...]:
     """Registered families in layer order (then registration order); discovers them first."""
     discover()
-    return tuple(sorted(_FAMILIES.values(), key=lambda f: f.order))
+    return _ORDERED
 
 
 def family(name: str) -> Family:
@@ -235,11 +239,16 @@ def family(name: str) -> Family:
 
 def track_owner(track: str) -> tuple[Family, TrackSpec] | None:
     """The family keying ``track`` and its :class:`TrackSpec` (None: no family keys it)."""
-    for f in families():
+    fams = families()
+    if track in _OWNERS:
+        return _OWNERS[track]
+    found = None
+    for f in fams:
         for name, spec in f.tracks.items():
-            if track == name or (name.endswith("/") and track.startswith(name)):
-                return f, spec if isinstance(spec, TrackSpec) else TrackSpec(spec)
-    return None
+            if found is None and (track == name or (name.endswith("/") and track.startswith(name))):
+                found = f, spec if isinstance(spec, TrackSpec) else TrackSpec(spec)
+    _OWNERS[track] = found
+    return found
 
 
 def track_value_shape(model: FaceState, track: str) -> tuple[int, ...] | None:
