@@ -177,6 +177,29 @@ def test_double_click_adds_key_with_current_value(keyed):
     assert w.selected_keys == [[UP, 1]]
 
 
+def test_double_click_on_a_family_row_keys_what_its_family_records_now(keyed):
+    """The handles row asks the handle family (TrackSpec.current): the offsets the model has now."""
+    import numpy as np
+
+    from workbench.methods.handles.handle_set import HandleSet
+
+    m = keyed
+    m.handles.set(HandleSet([1], np.zeros((1, 3), np.float32)), label="Handles")
+    m.handles.key(0.0)
+    m.handles.move(0, [0.0, 0.0, 0.25])
+    w = TimelineWidget(m)
+    assert [d["label"] for d in w._tracks["tracks"] if d["name"] == "handles"] == ["handles (pose)"]
+    send(w, type="add_key", track="handles", time=1.5)
+    np.testing.assert_allclose(m.tracks.tracks["handles"].evaluate(1.5), [[0.0, 0.0, 0.25]])
+    assert m.history.undo_labels[-1] == "Key handles (pose) at 1.5s"
+    assert w.selected_keys == [["handles", 1]]
+    # a row no family records "now" (the head pose) keys the value it has at the playhead
+    m.timeline.key_head_pose(0.0, translation=[0.0, 0.1, 0.0])
+    m.set_time(0.0)
+    send(w, type="add_key", track="head_pose", time=0.5)
+    np.testing.assert_allclose(m.tracks.tracks["head_pose"].evaluate(0.5)[:3], [0.0, 0.1, 0.0])
+
+
 def test_key_button_keys_nonzero_weights_at_the_playhead(tiny_model):
     w = TimelineWidget(tiny_model)
     send(w, type="key")
