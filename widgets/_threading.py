@@ -196,6 +196,10 @@ if os.environ.get("WORKBENCH_UI_THREAD_GUARD", "") not in ("", "0"):
 
 #: the comm target of every ipywidgets widget
 WIDGET_COMM_TARGET = "jupyter.widget"
+#: ipywidgets' control comm: its ``request_states`` reads every widget's state (the page's restore)
+WIDGET_CONTROL_TARGET = "jupyter.widget.control"
+#: the comm targets whose messages must run on the main thread
+MAIN_THREAD_TARGETS = frozenset({WIDGET_COMM_TARGET, WIDGET_CONTROL_TARGET})
 
 
 def route_widget_comms_to_main_thread() -> bool:
@@ -206,9 +210,14 @@ def route_widget_comms_to_main_thread() -> bool:
     Notebook 7.6 asks whatever that setting says (it does not load the plugin that applies
     it). ipykernel's shell-channel thread picks the subshell of an incoming
     ``comm_msg`` / ``comm_close`` by asking the comm (``_reply_subshell_for``, ipykernel
-    7.4); this answers "the main shell" for widget comms, so the messages queue for the
-    main thread as they did before subshells, whatever the page asked. Other comms keep
-    ipykernel's routing. Returns False where ipykernel has no such hook (before 7.4;
+    7.4); this answers "the main shell" for widget comms and for ipywidgets' control comm,
+    so the messages queue for the main thread as they did before subshells, whatever the
+    page asked. The control comm matters as much: its ``request_states`` (the page restoring
+    its widgets) walks every live widget and reads its state; on a subshell thread it ran
+    while a cell on the main thread was still building widgets, and the page, given a
+    half-built set, could look up a child model before it existed ("Error displaying
+    widget: model not found", seen once in JupyterLab 4.6 from the wheel). Other comms
+    keep ipykernel's routing. Returns False where ipykernel has no such hook (before 7.4;
     before 7.0 there are no subshells at all).
     """
     try:
@@ -223,7 +232,7 @@ def route_widget_comms_to_main_thread() -> bool:
 
     @functools.wraps(routed)
     def _reply_subshell_for(self: Any, data: Any, default: Any) -> Any:
-        if getattr(self, "target_name", None) == WIDGET_COMM_TARGET:
+        if getattr(self, "target_name", None) in MAIN_THREAD_TARGETS:
             return None  # the main shell: the kernel's main thread
         return routed(self, data, default)
 

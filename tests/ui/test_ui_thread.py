@@ -165,6 +165,9 @@ def test_widget_comm_messages_are_routed_to_the_main_shell_whatever_the_page_ask
     other = BaseComm(target_name="some.other.target", data={})
     # a message the page sent on subshell "s-1": the widget's goes to the main shell (None)
     assert widget_comm._reply_subshell_for({"method": "update"}, "s-1") is None
+    # so does the control comm's request_states (it reads every widget's state)
+    control = BaseComm(target_name=ui.WIDGET_CONTROL_TARGET, data={})
+    assert control._reply_subshell_for({"method": "request_states"}, "s-1") is None
     # other comms keep ipykernel's own routing (here: back to where the page asked)
     assert other._reply_subshell_for({"method": "update"}, "s-1") == "s-1"
     assert BaseComm._reply_subshell_for._fwb_main_thread
