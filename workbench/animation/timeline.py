@@ -159,11 +159,10 @@ class TimelineFacet:
         what = "key_track"
         m = self._model
         with m.lock:
-            if isinstance(track, str) and track.startswith(WEIGHTS_PREFIX):
-                self._value_shape(what, track)
+            self._value_shape(what, track)  # names the track's problem before anything changes
+            if track.startswith(WEIGHTS_PREFIX):
                 self.key_weights(time, [track[len(WEIGHTS_PREFIX):]], interpolation)
                 return
-            self._value_shape(what, track)
             owner = track_owner(track)
             if owner is not None and owner[1].current is not None:
                 value = owner[1].current(m, track)

@@ -240,15 +240,14 @@ def family(name: str) -> Family:
 def track_owner(track: str) -> tuple[Family, TrackSpec] | None:
     """The family keying ``track`` and its :class:`TrackSpec` (None: no family keys it)."""
     fams = families()
-    if track in _OWNERS:
-        return _OWNERS[track]
-    found = None
-    for f in fams:
-        for name, spec in f.tracks.items():
-            if found is None and (track == name or (name.endswith("/") and track.startswith(name))):
-                found = f, spec if isinstance(spec, TrackSpec) else TrackSpec(spec)
-    _OWNERS[track] = found
-    return found
+    if track not in _OWNERS:
+        _OWNERS[track] = next(
+            ((f, spec if isinstance(spec, TrackSpec) else TrackSpec(spec))
+             for f in fams for name, spec in f.tracks.items()
+             if track == name or (name.endswith("/") and track.startswith(name))),
+            None,
+        )
+    return _OWNERS[track]
 
 
 def track_value_shape(model: FaceState, track: str) -> tuple[int, ...] | None:
