@@ -111,16 +111,10 @@ class ExpressionCloner:
                                           progress=lambda f, m: say(0.9 * f, m))
         self.source, self.target = rt.source, rt.target
         say(0.9, "motion-vector frames")
-        src, tgt, corr = rt.src, rt.tgt, rt.correspondence
-        X0, X1 = src.skin_X, rt.fit.positions
-        F = np.asarray(src.skin_faces, np.int64)
-        n_s = X0.shape[0]
-        self.motion = motion
-        self.transforms_, self.scales_ = motion_transforms(X0, X1, F, motion, smoothing)
-        T = self.transforms_
+        F = np.asarray(rt.src.skin_faces, np.int64)
         # target skin vertex -> source triangle (barycentric), lip-side safe, far ones held still
-        self._rows = B = self._barycentric_rows(corr, tgt, F, n_s)
-        self.operator_ = self._operator(B, T)
+        self._rows = self._barycentric_rows(rt.correspondence, rt.tgt, F, rt.src.skin_X.shape[0])
+        self._set_motion(motion, smoothing)
         self._nearest: NDArray[np.int64] | None = None  # for the nearest-copy peer, on first use
         self.setup_seconds_ = time.perf_counter() - t0
         say(1.0, "set up")
@@ -128,12 +122,16 @@ class ExpressionCloner:
     def with_motion(self, motion: MotionModel, smoothing: float = AFFINE_SMOOTHING) -> ExpressionCloner:
         """A cloner with another motion model on the same correspondence (no second fit)."""
         other = copy.copy(self)
-        rt = self.transfer_
-        other.motion = motion
-        other.transforms_, other.scales_ = motion_transforms(
-            rt.src.skin_X, rt.fit.positions, np.asarray(rt.src.skin_faces, np.int64), motion, smoothing)
-        other.operator_ = self._operator(self._rows, other.transforms_)
+        other._set_motion(motion, smoothing)
         return other
+
+    def _set_motion(self, motion: MotionModel, smoothing: float) -> None:
+        """``transforms_``, ``scales_`` and ``operator_`` of ``motion`` on this correspondence."""
+        rt = self.transfer_
+        self.motion = motion
+        self.transforms_, self.scales_ = motion_transforms(
+            rt.src.skin_X, rt.fit.positions, np.asarray(rt.src.skin_faces, np.int64), motion, smoothing)
+        self.operator_ = self._operator(self._rows, self.transforms_)
 
     @staticmethod
     def _operator(B: sp.csr_matrix, T: NDArray[np.float64]) -> sp.csr_matrix:
