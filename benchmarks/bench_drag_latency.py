@@ -100,7 +100,7 @@ def measure(nb: NotebookPage, trials: int) -> dict[str, Any]:
     page.locator(".fwb-workbench").evaluate("e => e.scrollIntoView({block: 'start'})")
     page.wait_for_timeout(500)
     k = nb.kernel_eval("import json; print(json.dumps(HANDLE))")
-    x, y, _front = vp.evaluate("e => e.fwbHandles()")[k]
+    x, y, _front = vp.evaluate("e => e.fwbMarkers()")[k]
     nb.kernel_eval("wb.viewport.drag_ms.clear(); wb.viewport.drag_push_ms.clear()")
     out: dict[str, Any] = {}
 
@@ -137,7 +137,7 @@ def measure(nb: NotebookPage, trials: int) -> dict[str, Any]:
     out["step"] = (lat, render, kernel, (float("nan"), float("nan")), parts)
 
     # --- continuous: as fast as the browser sends moves
-    x, y, _front = vp.evaluate("e => e.fwbHandles()")[k]
+    x, y, _front = vp.evaluate("e => e.fwbMarkers()")[k]
     page.mouse.move(x, y)
     page.mouse.down()
     page.wait_for_timeout(300)

@@ -14,7 +14,7 @@ Part 2, **browser** (JupyterLab + Debian Chromium, software WebGL): a
   waiting for the frame that shows it before the next. Latency = pointer event
   -> raycast -> JSON message -> ``model.paint_dab`` -> weight-overlay patch +
   geometry patch -> three.js colours/positions upload + normals + render (the
-  viewport's ``fwbPaintStats`` hook, page clock).
+  viewport's ``fwbStrokeStats`` hook, page clock).
 * ``continuous``: a 60-event sweep at ~16 ms per event; one message in flight,
   the dabs queued meanwhile go in the next message.
 
@@ -113,15 +113,16 @@ model.set_weights({"mouthSmileLeft": 1.0, "mouthSmileRight": 1.0})
 model.expressions.save("smile")
 model.reset_weights()
 _t = time.perf_counter(); model.paint.surface; SURFACE_S = time.perf_counter() - _t
-vp = widgets.Viewport(model, height=560, tool="paint", paint_expression="smile", brush_opacity=0.3)
+vp = widgets.Viewport(model, height=560, tool="paint", brush_opacity=0.3)
+vp.tools["paint"].expression = "smile"
 display(vp)
 """
 
-_LAST = "(e) => e.fwbPaintStats.length ? e.fwbPaintStats[e.fwbPaintStats.length - 1] : null"
+_LAST = "(e) => e.fwbStrokeStats.length ? e.fwbStrokeStats[e.fwbStrokeStats.length - 1] : null"
 
 
 def _count(nb: NotebookPage) -> int:
-    return int(nb.viewport(0).evaluate("e => e.fwbPaintStats.length"))
+    return int(nb.viewport(0).evaluate("e => e.fwbStrokeStats.length"))
 
 
 def measure(nb: NotebookPage, trials: int, left: int, right: int) -> dict[str, Any]:
@@ -139,7 +140,7 @@ def measure(nb: NotebookPage, trials: int, left: int, right: int) -> dict[str, A
         (a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1]) + up) for f in np.linspace(0.1, 0.9, 8)
     ]
     bounce = path + path[-2:0:-1]  # back and forth along the lip
-    nb.kernel_eval("vp.paint_ms.clear(); vp.dab_ms.clear()")
+    nb.kernel_eval("vp.stroke_ms.clear(); vp.dab_ms.clear()")
     out: dict[str, Any] = {}
 
     # --- step
@@ -154,7 +155,7 @@ def measure(nb: NotebookPage, trials: int, left: int, right: int) -> dict[str, A
         page.mouse.move(x, y + (2 if i % 2 else -2))
         try:
             page.wait_for_function(
-                "([e, n]) => e.fwbPaintStats.length > n",
+                "([e, n]) => e.fwbStrokeStats.length > n",
                 arg=[vp.element_handle(), n0],
                 timeout=5000,
             )
@@ -170,8 +171,8 @@ def measure(nb: NotebookPage, trials: int, left: int, right: int) -> dict[str, A
     page.mouse.up()
     page.wait_for_timeout(500)
     kernel = nb.kernel_eval(
-        "import json; print(json.dumps([list(vp.paint_ms), list(vp.dab_ms)]));"
-        "vp.paint_ms.clear(); vp.dab_ms.clear()"
+        "import json; print(json.dumps([list(vp.stroke_ms), list(vp.dab_ms)]));"
+        "vp.stroke_ms.clear(); vp.dab_ms.clear()"
     )
     out["step"] = (lat, parts, kernel, float("nan"), float("nan"))
 
@@ -192,12 +193,12 @@ def measure(nb: NotebookPage, trials: int, left: int, right: int) -> dict[str, A
     page.wait_for_timeout(800)
     page.mouse.up()
     page.wait_for_timeout(500)
-    stats = vp.evaluate("(e, n) => e.fwbPaintStats.slice(n)", n0)
+    stats = vp.evaluate("(e, n) => e.fwbStrokeStats.slice(n)", n0)
     done = [s for s in stats if s.get("frame") is not None]
     lat = [s["frame"] - s["input"] for s in done]
     span = (done[-1]["frame"] - done[0]["input"]) / 1e3 if len(done) > 1 else float("nan")
     ups = len(done) / span if span and span == span else float("nan")
-    kernel = nb.kernel_eval("import json; print(json.dumps([list(vp.paint_ms), list(vp.dab_ms)]))")
+    kernel = nb.kernel_eval("import json; print(json.dumps([list(vp.stroke_ms), list(vp.dab_ms)]))")
     parts = [(s["send"] - s["input"], s["ack"] - s["send"], s["frame"] - s["ack"]) for s in done]
     out["continuous"] = (lat, parts, kernel, eps, ups)
     return out

@@ -86,7 +86,7 @@ print(json.dumps({"left_corner": int(_l[np.argmax(_V[_l, 0])]),
 """
 
 #: true while a slider drag, handle drag or paint stroke is still open in the kernel
-_BUSY = "bool(model.interacting or wb.viewport.dragging or wb.viewport.painting)"
+_BUSY = "bool(model.interacting or wb.viewport.dragging or wb.viewport.stroking)"
 
 
 class Session:
@@ -227,7 +227,7 @@ class Session:
                 self.wait_frame_after(frame, timeout=5)
 
     def handles_on_screen(self) -> np.ndarray:
-        pts = self.nb.viewport(0).evaluate("e => e.fwbHandles()")
+        pts = self.nb.viewport(0).evaluate("e => e.fwbMarkers()")
         return np.array(pts, dtype=float).reshape(-1, 3)
 
     def drag_handle(self, name: str, dx: float, dy: float) -> None:
@@ -254,7 +254,7 @@ class Session:
         n = self.wait_py("len(model.handles)", lambda n: n > 40, "Default handles")
         self.page.wait_for_function(
             "(n) => JSON.parse(document.querySelector('.fwb-viewport')"
-            ".getAttribute('data-handles') || '[]').length === n",
+            ".getAttribute('data-markers') || '[]').length === n",
             arg=n,
         )
 
@@ -270,7 +270,7 @@ class Session:
     def pick(self, expression: str) -> None:
         self.page.locator(".fwb-paint-palette .fw-thumb-button", has_text=expression).first.click()
         self.wait_py(
-            "wb.viewport.paint_expression", lambda v: v == expression, f"pick {expression}"
+            "wb.viewport.tools['paint'].expression", lambda v: v == expression, f"pick {expression}"
         )
 
     def timeline_hooks(self) -> dict[str, Any]:
@@ -358,7 +358,7 @@ def paint(s: Session, out: Path) -> None:
         s.wait_quiet(f"stroke {expression}")
     painted = s.py("{k: float(v.max()) for k, v in model.paint.items()}")
     assert set(painted) == {"mouthSmileLeft", "mouthSmileRight"}, painted
-    assert s.py("wb.viewport.paint_overlay") is True
+    assert s.py("wb.viewport.tools['paint'].overlay") is True
     s.shot(out / "ui_paint.png")
     # Keep the painted smile as a blendshape (weight 1), as an animator would before keying:
     # a paint layer replaces the other shapes where it is painted, so an opening jaw would
@@ -451,7 +451,7 @@ def wrinkles(s: Session, out: Path) -> None:
     n = s.py("len(model.handles)")
     s.page.wait_for_function(
         "(n) => JSON.parse(document.querySelector('.fwb-viewport')"
-        ".getAttribute('data-handles') || '[]').length === n"
+        ".getAttribute('data-markers') || '[]').length === n"
         " && Number(document.querySelector('.fwb-viewport')"
         ".getAttribute('data-feature-edges')) > 0",
         arg=n,

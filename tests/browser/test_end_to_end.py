@@ -73,7 +73,7 @@ import json, numpy as np
 _h = model.handles
 print(json.dumps({
     "undo": model.history.undo_labels, "interacting": model.interacting,
-    "dragging": wb.viewport.dragging, "painting": wb.viewport.painting,
+    "dragging": wb.viewport.dragging, "painting": wb.viewport.stroking,
     "weights": {k: v for k, v in model.weights.items() if v},
     "handle_names": list(_h.names), "offsets": np.asarray(_h.offsets, float).tolist(),
     "paint": {k: float(np.max(w)) for k, w in model.paint.items()},
@@ -137,7 +137,7 @@ def _pick(nb: NotebookPage, expression: str) -> None:
     nb.page.locator(".fwb-paint-palette .fw-thumb-button", has_text=expression).first.click()
     deadline = time.monotonic() + 15
     while time.monotonic() < deadline:
-        got = nb.kernel_eval("import json; print(json.dumps(wb.viewport.paint_expression))")
+        got = nb.kernel_eval("import json; print(json.dumps(wb.viewport.tools['paint'].expression))")
         if got == expression:
             return
         time.sleep(0.1)
@@ -201,7 +201,7 @@ def test_sculpt_paint_key_export_then_validator_and_three_js(open_notebook) -> N
     st = _wait_state(nb, lambda s: len(s["handle_names"]) > 40, "Default handles")
     names = st["handle_names"]
     page.wait_for_function(
-        "(n) => JSON.parse(document.querySelector('.fwb-viewport').getAttribute('data-handles')"
+        "(n) => JSON.parse(document.querySelector('.fwb-viewport').getAttribute('data-markers')"
         " || '[]').length === n",
         arg=len(names),
     )
@@ -262,7 +262,7 @@ def test_sculpt_paint_key_export_then_validator_and_three_js(open_notebook) -> N
     _top_of_workbench(nb)
     nb.screenshot("2-painted-overlay")
     page.locator(".fwb-paint-overlay").click()  # overlay off: the geometry alone
-    _wait_py_true(nb, "not wb.viewport.paint_overlay")
+    _wait_py_true(nb, "not wb.viewport.tools['paint'].overlay")
     page.wait_for_timeout(400)
     mouth2b = nb.screenshot("2-mouth-painted", clip=mouth_clip)
     brow2b = nb.screenshot("2-brow-painted", clip=brow_clip)

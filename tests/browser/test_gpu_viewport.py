@@ -152,12 +152,12 @@ def _default_handles(nb: NotebookPage) -> tuple[dict, np.ndarray]:
     vp = nb.viewport(0)
     info = nb.kernel_eval(_HANDLES, timeout=120)
     nb.page.wait_for_function(
-        "(n) => JSON.parse(document.querySelector('.fwb-viewport').getAttribute('data-handles')"
+        "(n) => JSON.parse(document.querySelector('.fwb-viewport').getAttribute('data-markers')"
         " || '[]').length === n",
         arg=info["n"],
     )
     wait_until("GPU mode", lambda: vp.get_attribute("data-gpu"), lambda v: v == "1")
-    return info, np.array(vp.evaluate("e => e.fwbHandles()"), float).reshape(-1, 3)[info["index"]]
+    return info, np.array(vp.evaluate("e => e.fwbMarkers()"), float).reshape(-1, 3)[info["index"]]
 
 
 def test_handle_drag_sends_offsets_and_the_gpu_matches_the_kernel(open_notebook):

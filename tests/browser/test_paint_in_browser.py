@@ -62,7 +62,7 @@ _STATE = """
 import json, numpy as np
 _w = model.paint.get("smile")
 print(json.dumps({"undo": model.history.undo_labels, "interacting": model.interacting,
-                  "painting": wb.viewport.painting,
+                  "painting": wb.viewport.stroking,
                   "weights": None if _w is None else np.asarray(_w, float).tolist(),
                   "moved": np.linalg.norm(model.evaluate() - model.vertices.astype(np.float32),
                                           axis=1).tolist()}))
@@ -113,7 +113,7 @@ def test_pick_smile_in_the_palette_paint_the_mouth_then_undo(open_notebook):
     deadline = time.monotonic() + 10
     picked = None
     while time.monotonic() < deadline:
-        picked = nb.kernel_eval("import json; print(json.dumps(wb.viewport.paint_expression))")
+        picked = nb.kernel_eval("import json; print(json.dumps(wb.viewport.tools['paint'].expression))")
         if picked == "smile":
             break
         time.sleep(0.1)
@@ -159,7 +159,7 @@ def test_pick_smile_in_the_palette_paint_the_mouth_then_undo(open_notebook):
     moved = np.array(st["moved"])
     assert moved[info["corner"]] > 0.05, moved[info["corner"]]
     assert moved[info["forehead"]].max() == 0.0
-    stats = nb.viewport(0).evaluate("e => e.fwbPaintStats.length")
+    stats = nb.viewport(0).evaluate("e => e.fwbStrokeStats.length")
     assert stats >= 2, f"only {stats} paint messages were acknowledged"
 
     page.mouse.move(5, 5)  # hides the brush cursor
@@ -173,11 +173,11 @@ def test_pick_smile_in_the_palette_paint_the_mouth_then_undo(open_notebook):
     assert still < 0.01, f"{still:.1%} of the forehead changed"
 
     # Overlay off (the toggle in the panel): the geometry alone still changed the mouth.
-    pv = int(nb.viewport(0).get_attribute("data-paint-version") or 0)
+    pv = int(nb.viewport(0).get_attribute("data-tint-version") or 0)
     page.locator(".fwb-paint-overlay").click()
     page.wait_for_function(
         "(v) => Number(document.querySelector('.fwb-viewport')"
-        ".getAttribute('data-paint-version')) > v",
+        ".getAttribute('data-tint-version')) > v",
         arg=pv,
     )
     page.wait_for_timeout(300)
@@ -261,11 +261,11 @@ def test_debauched_smile_from_python_appears_in_the_palette(open_notebook):
     tile.click()
     deadline = time.monotonic() + 10
     while time.monotonic() < deadline:
-        if nb.kernel_eval("import json; print(json.dumps(wb.viewport.paint_expression))") == (
+        if nb.kernel_eval("import json; print(json.dumps(wb.viewport.tools['paint'].expression))") == (
             "debauched"
         ):
             break
         time.sleep(0.1)
-    assert nb.kernel_eval("import json; print(json.dumps(wb.viewport.paint_expression))") == (
+    assert nb.kernel_eval("import json; print(json.dumps(wb.viewport.tools['paint'].expression))") == (
         "debauched"
     )

@@ -187,7 +187,7 @@ def test_kill_kernel_mid_edit_then_recover_with_the_mouse(open_notebook, lab) ->
     page.locator(".fwb-default-handles").click()
     names = _wait_py(nb, "list(model.handles.names)", lambda v: len(v) > 40, "Default handles")
     page.wait_for_function(
-        "(n) => JSON.parse(document.querySelector('.fwb-viewport').getAttribute('data-handles')"
+        "(n) => JSON.parse(document.querySelector('.fwb-viewport').getAttribute('data-markers')"
         " || '[]').length === n",
         arg=len(names),
     )

@@ -155,7 +155,7 @@ def test_drag_mouth_corner_in_region_mode_moves_only_its_region(open_notebook):
     info = nb.kernel_eval(_FIND)
     assert info["touched"] and all(t.startswith("mouth") for t in info["touched"]), info
     page.wait_for_function(
-        "(n) => JSON.parse(document.querySelector('.fwb-viewport').getAttribute('data-handles')"
+        "(n) => JSON.parse(document.querySelector('.fwb-viewport').getAttribute('data-markers')"
         " || '[]').length === n",
         arg=info["n_pins"],
     )
@@ -168,7 +168,7 @@ def test_drag_mouth_corner_in_region_mode_moves_only_its_region(open_notebook):
     nb.screenshot("page-before")
 
     # Drag the mouth-corner marker up and out (viewer's right = subject's left)
-    start = np.array(page.locator(".fwb-viewport").evaluate("e => e.fwbHandles()"), float)
+    start = np.array(page.locator(".fwb-viewport").evaluate("e => e.fwbMarkers()"), float)
     start = start.reshape(-1, 3)[info["index"]]
     assert start[2] == 1, "the mouth-corner marker is hidden"
     frame0 = nb.frame(0)
@@ -206,7 +206,7 @@ def test_drag_mouth_corner_in_region_mode_moves_only_its_region(open_notebook):
     before = nb.kernel_eval(_SPLIT_STATE)
     page.locator(".fwb-region-split").click()
     page.wait_for_function(
-        "(n) => JSON.parse(document.querySelector('.fwb-viewport').getAttribute('data-handles')"
+        "(n) => JSON.parse(document.querySelector('.fwb-viewport').getAttribute('data-markers')"
         " || '[]').length === n",
         arg=nb.kernel_eval("import json; print(json.dumps(len(panel.edits.markers)))"),
     )
@@ -214,7 +214,7 @@ def test_drag_mouth_corner_in_region_mode_moves_only_its_region(open_notebook):
     page.locator(".fwb-viewport").evaluate("e => e.scrollIntoView({block: 'start'})")
     page.mouse.move(5, 5)
     _drawn(nb)
-    pts = np.array(page.locator(".fwb-viewport").evaluate("e => e.fwbHandles()"), float)
+    pts = np.array(page.locator(".fwb-viewport").evaluate("e => e.fwbMarkers()"), float)
     pts = pts.reshape(-1, 3)
     height = page.viewport_size["height"] if page.viewport_size else 10**6
     # markers on skin facing the camera (+z): a lip region also has markers inside the mouth

@@ -59,7 +59,7 @@ def _state(nb: NotebookPage) -> dict[str, Any]:
 def _markers(nb: NotebookPage, index: int) -> list[Any]:
     import json
 
-    return json.loads(nb.viewport(index).get_attribute("data-handles") or "[]")
+    return json.loads(nb.viewport(index).get_attribute("data-markers") or "[]")
 
 
 def test_click_pairs_orbit_linked_transfer_undo_and_open(open_notebook) -> None:

@@ -59,7 +59,7 @@ def _state(nb: NotebookPage) -> dict[str, Any]:
 
 def _handles_on_screen(nb: NotebookPage) -> np.ndarray:
     """(h, 3) page (x, y, in_front) of the handle markers, computed now."""
-    pts = nb.viewport(0).evaluate("e => e.fwbHandles()")
+    pts = nb.viewport(0).evaluate("e => e.fwbMarkers()")
     return np.array(pts, dtype=float).reshape(-1, 3)
 
 
@@ -85,7 +85,7 @@ def _open_sculpt(nb: NotebookPage) -> dict[str, Any]:
         time.sleep(0.1)
     assert n and n > 40, f"Default handles gave {n} handles"
     page.wait_for_function(
-        "(n) => JSON.parse(document.querySelector('.fwb-viewport').getAttribute('data-handles')"
+        "(n) => JSON.parse(document.querySelector('.fwb-viewport').getAttribute('data-markers')"
         " || '[]').length === n",
         arg=n,
     )
@@ -243,7 +243,7 @@ print(json.dumps(int(_c[np.argmax(_gap)])))
     off = float(np.hypot(added[0] - p[0], added[1] - p[1]))
     assert off < 8.0, f"the new handle is drawn {off:.1f} px from the click"
     page.wait_for_function(
-        "(n) => JSON.parse(document.querySelector('.fwb-viewport').getAttribute('data-handles')"
+        "(n) => JSON.parse(document.querySelector('.fwb-viewport').getAttribute('data-markers')"
         " || '[]').length === n",
         arg=n0 + 2,
     )
@@ -295,7 +295,7 @@ def _hover(nb: NotebookPage, k: int) -> None:
 
 
 def _selected(nb: NotebookPage) -> int:
-    return int(nb.kernel_eval("import json; print(json.dumps(wb.viewport.selected_handle))"))
+    return int(nb.kernel_eval("import json; print(json.dumps(wb.viewport.selected_marker))"))
 
 
 def test_marker_highlight_ends_when_the_pointer_leaves_or_the_tool_changes(open_notebook):
@@ -312,7 +312,7 @@ def test_marker_highlight_ends_when_the_pointer_leaves_or_the_tool_changes(open_
     _wait_hover(nb, -1)
     assert _marker_colour(nb, k) == "idle"
 
-    # Dragged: cyan after the release (selected_handle) until the pointer leaves the view.
+    # Dragged: cyan after the release (selected_marker) until the pointer leaves the view.
     x, y, _ = _handles_on_screen(nb)[k]
     _drag(nb, np.array([x, y]), (0.0, -15.0), steps=6)
     _wait_drag_closed(nb)
@@ -322,7 +322,7 @@ def test_marker_highlight_ends_when_the_pointer_leaves_or_the_tool_changes(open_
     page.mouse.move(5, 5)
     deadline = time.monotonic() + 10
     while _selected(nb) != -1:
-        assert time.monotonic() < deadline, "selected_handle was not cleared"
+        assert time.monotonic() < deadline, "selected_marker was not cleared"
         time.sleep(0.1)
     page.wait_for_timeout(200)
     assert _marker_colour(nb, k) == "idle"

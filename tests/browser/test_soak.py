@@ -236,7 +236,7 @@ def test_random_actions_keep_page_and_kernel_in_step(open_notebook, cpu_hogs) ->
     def drag_a_marker() -> int | None:
         """Drag one visible, grabbable marker 12-30 px in a random direction; its index or None."""
         top()
-        pts = np.array(vp.evaluate("e => e.fwbHandles()"), float).reshape(-1, 3)
+        pts = np.array(vp.evaluate("e => e.fwbMarkers()"), float).reshape(-1, 3)
         box = vp.bounding_box()
         inside = np.flatnonzero(
             (pts[:, 2] == 1) & (pts[:, 0] > box["x"] + 20) & (pts[:, 0] < box["x"] + box["width"] - 20)
@@ -244,7 +244,7 @@ def test_random_actions_keep_page_and_kernel_in_step(open_notebook, cpu_hogs) ->
         )
         # markers a press grabs (not hidden behind the surface, not under another one)
         grabbable = [int(k) for k in inside
-                     if vp.evaluate("(e, p) => e.fwbPickHandle(p[0], p[1])", pts[k, :2].tolist()) == k]
+                     if vp.evaluate("(e, p) => e.fwbPickMarker(p[0], p[1])", pts[k, :2].tolist()) == k]
         if not grabbable:
             return None
         k = int(rng.choice(grabbable))
@@ -291,7 +291,7 @@ def test_random_actions_keep_page_and_kernel_in_step(open_notebook, cpu_hogs) ->
             page.wait_for_function(
                 "(n) => { const v = document.querySelector('.fwb-viewport');"
                 " return v.getAttribute('data-tool') === 'sculpt'"
-                " && JSON.parse(v.getAttribute('data-handles') || '[]').length === n; }", arg=n_pins)
+                " && JSON.parse(v.getAttribute('data-markers') || '[]').length === n; }", arg=n_pins)
             k = drag_a_marker()
             if k is None:
                 continue

@@ -298,7 +298,7 @@ def test_display_options_redraw_without_geometry_updates(open_notebook):
         "import numpy as np\n"
         "wb.viewport.vertex_colors = np.tile([[0.9, 0.1, 0.1]], (model.n_vertices, 1))",
         "handles": "wb.viewport.vertex_colors = None\n"
-        "wb.viewport.handles = model.component_vertices('skin')[::97]",
+        "wb.viewport.markers = model.component_vertices('skin')[::97]",
     }
     for name, code in steps.items():
         renders = int(vp.get_attribute("data-render-count"))

@@ -106,10 +106,10 @@ def test_overlay_and_handles_are_binary_and_validated():
     assert vp._vertex_colors is None
     with pytest.raises(ValueError, match=r"\(9, 3\)"):
         vp.vertex_colors = np.zeros((8, 3))
-    vp.handles = [0, 8]
-    assert vp.handles.tolist() == [0, 8]
+    vp.markers = [0, 8]
+    assert vp.markers.tolist() == [0, 8]
     with pytest.raises(ValueError, match=r"0\.\.8"):
-        vp.handles = [9]
+        vp.markers = [9]
 
 
 def test_callback_errors_go_to_the_output_widget():
@@ -195,7 +195,7 @@ def _head_with_handles():
 
 def _drag_msg(vp, phase, index, position=None, seq=0):
     vertex = int(vp.model.handles.vertices[index]) if index < len(vp.model.handles) else -1
-    content = {"type": "handle", "phase": phase, "index": index, "vertex": vertex, "seq": seq}
+    content = {"type": "drag", "phase": phase, "index": index, "vertex": vertex, "seq": seq}
     content["position"] = None if position is None else [float(x) for x in position]
     vp._on_frontend_msg(vp, content, [])
 
@@ -208,7 +208,7 @@ def test_handle_drag_is_one_undo_step_and_every_message_is_acknowledged():
     v = int(m.handles.vertices[i])
     p0 = m.evaluate()[v].astype(float)
     _drag_msg(vp, "start", i, p0, seq=1)
-    assert m.interacting and vp.dragging and vp.selected_handle == i
+    assert m.interacting and vp.dragging and vp.selected_marker == i
     targets = [p0 + np.array([0.01 * k, 0.005 * k, 0.0]) for k in range(1, 5)]
     for k, p in enumerate(targets):
         _drag_msg(vp, "move", i, p, seq=2 + k)
@@ -220,7 +220,7 @@ def test_handle_drag_is_one_undo_step_and_every_message_is_acknowledged():
     offsets = np.asarray(m.handles.offsets)
     np.testing.assert_allclose(offsets[i], targets[-1] + [0.01, 0, 0] - p0, atol=1e-5)
     assert np.abs(np.delete(offsets, i, axis=0)).max() == 0.0
-    acks = [c for c, _ in spy.messages if c["type"] == "handle_ack"]
+    acks = [c for c, _ in spy.messages if c["type"] == "drag_ack"]
     assert [a["seq"] for a in acks] == [1, 2, 3, 4, 5, 9]
     # drag-frame patches carry the seq of their move (the front end's early ack)
     patch_seqs = [c.get("seq") for c, _ in spy.messages if c["type"] == "patch"]
@@ -298,7 +298,7 @@ def test_a_failed_move_ends_the_interaction_and_cancels_the_drag():
     _drag_msg(vp, "move", 0, [np.nan, 0.0, 0.0])
     assert not m.interacting and not vp.dragging
     assert vp.errors.count == 1 and "finite" in vp._error
-    assert [c["type"] for c, _ in spy.messages][-2:] == ["handle_cancel", "handle_ack"]
+    assert [c["type"] for c, _ in spy.messages][-2:] == ["drag_cancel", "drag_ack"]
     assert len(m.history.undo_labels) == 2  # the part of the drag before the error
     _drag_msg(vp, "move", 0, p0)  # stray moves after the cancel are ignored
     assert not m.interacting
@@ -316,7 +316,7 @@ def test_handle_set_edited_while_dragging_and_close_mid_drag():
     vp._on_frontend_msg(
         vp,
         {
-            "type": "handle",
+            "type": "drag",
             "phase": "move",
             "index": i,
             "vertex": v,
@@ -328,9 +328,9 @@ def test_handle_set_edited_while_dragging_and_close_mid_drag():
     np.testing.assert_allclose(m.evaluate()[v], p0 + np.array([0, 0.03, 0]), atol=1e-5)
     m.handles.remove(9)  # the dragged handle itself goes: the drag is cancelled
     vp._on_frontend_msg(
-        vp, {"type": "handle", "phase": "move", "index": 9, "vertex": v, "position": list(p0)}, []
+        vp, {"type": "drag", "phase": "move", "index": 9, "vertex": v, "position": list(p0)}, []
     )
-    assert not m.interacting and "handle_cancel" in [c["type"] for c, _ in spy.messages]
+    assert not m.interacting and "drag_cancel" in [c["type"] for c, _ in spy.messages]
     # closing the widget mid-drag never leaves the model inside an interaction
     p1 = m.evaluate()[int(m.handles.vertices[3])].astype(float)
     _drag_msg(vp, "start", 3, p1)
@@ -346,18 +346,18 @@ def test_add_and_remove_handles_by_click_messages():
     n0 = len(m.handles)
     skin = m.component_vertices("skin")
     v = int(skin[np.argmax(m.vertices[skin, 0])])  # far off the mid-plane
-    vp._on_frontend_msg(vp, {"type": "add_handle", "vertex": v}, [])
+    vp._on_frontend_msg(vp, {"type": "pick", "vertex": v}, [])
     assert len(m.handles) == n0 + 1 and int(m.handles.vertices[-1]) == v
-    assert vp.handles.tolist() == m.handles.vertices.tolist()  # markers follow the model
+    assert vp.markers.tolist() == m.handles.vertices.tolist()  # markers follow the model
     vp.symmetric = True
-    vp._on_frontend_msg(vp, {"type": "add_handle", "vertex": v}, [])  # a mirrored pair
+    vp._on_frontend_msg(vp, {"type": "pick", "vertex": v}, [])  # a mirrored pair
     h = m.handles
     assert len(h) == n0 + 3 and m.history.undo_labels[-1].startswith("Add handle pair")
     a, b = n0 + 1, n0 + 2
     assert h.mirror[a] == b and h.mirror[b] == a
     assert m.vertices[h.vertices[b], 0] < 0 < m.vertices[h.vertices[a], 0]
-    assert np.frombuffer(vp._handle_mirror, "<i4").tolist() == h.mirror.tolist()
-    vp._on_frontend_msg(vp, {"type": "remove_handle", "index": a, "vertex": int(h.vertices[a])}, [])
+    assert np.frombuffer(vp._marker_mirror, "<i4").tolist() == h.mirror.tolist()
+    vp._on_frontend_msg(vp, {"type": "unpick", "index": a, "vertex": int(h.vertices[a])}, [])
     assert len(m.handles) == n0 + 1  # the pair went in one step
     m.undo()
     assert len(m.handles) == n0 + 3
@@ -407,55 +407,55 @@ def test_paint_stroke_messages_are_one_undo_step_with_overlay_patches_and_acks()
     vp.tool = "paint"
     spy = _Spy(vp)
     # a stroke with nothing picked is refused, acked, cancelled, and leaves no interaction
-    vp._on_frontend_msg(vp, {"type": "paint", "phase": "start", "vertices": [4], "seq": 1}, [])
+    vp._on_frontend_msg(vp, {"type": "stroke", "phase": "start", "vertices": [4], "seq": 1}, [])
     kinds = [c["type"] for c, _ in spy.messages]
-    assert kinds == ["paint_cancel", "paint_ack"] and not m.interacting
+    assert kinds == ["stroke_cancel", "stroke_ack"] and not m.interacting
     assert "pick an expression" in vp._error
 
-    vp.paint_expression = "jawOpen"  # moves vertex 4 by +1 in z
+    vp.tools["paint"].expression = "jawOpen"  # moves vertex 4 by +1 in z
     vp.brush_radius, vp.brush_opacity, vp.brush_falloff = 0.5, 1.0, "constant"
-    assert vp._paint_weights == b""  # nothing painted yet: empty overlay
+    assert vp._tint == b""  # nothing painted yet: empty overlay
     spy.messages.clear()
-    vp._on_frontend_msg(vp, {"type": "paint", "phase": "start", "vertices": [4], "seq": 2}, [])
-    assert m.interacting and vp.painting
+    vp._on_frontend_msg(vp, {"type": "stroke", "phase": "start", "vertices": [4], "seq": 2}, [])
+    assert m.interacting and vp.stroking
     # the first paint of the picked expression goes as a full overlay buffer
-    w = np.frombuffer(vp._paint_weights, "<f4")
+    w = np.frombuffer(vp._tint, "<f4")
     assert w.tolist() == [0, 0, 0, 0, 1, 0, 0, 0, 0]
     (patch, (ids, vals)), (ack, _) = spy.messages
     assert patch["type"] == "patch" and patch["seq"] == 2  # the geometry patch carries the seq
     assert np.frombuffer(ids, "<u4").tolist() == [4]
     assert np.frombuffer(vals, "<f4").tolist() == [1.0, 1.0, 1.0]  # z: 0 + 1 * delta
-    assert ack == {"type": "paint_ack", "seq": 2, "phase": "start", "version": vp._version,
-                   "paint_version": vp._paint_version, "kernel_ms": ack["kernel_ms"]}  # fmt: skip
+    assert ack == {"type": "stroke_ack", "seq": 2, "phase": "start", "version": vp._version,
+                   "tint_version": vp._tint_version, "kernel_ms": ack["kernel_ms"]}  # fmt: skip
     spy.messages.clear()
-    vp._on_frontend_msg(vp, {"type": "paint", "phase": "move", "vertices": [0], "seq": 3}, [])
+    vp._on_frontend_msg(vp, {"type": "stroke", "phase": "move", "vertices": [0], "seq": 3}, [])
     # vertex 0 and its grid neighbours within 0.5 (only itself): a sparse overlay patch
     (pp, (pids, pvals)), (ack, _) = spy.messages
-    assert pp["type"] == "paint_patch" and pp["version"] == vp._paint_version
+    assert pp["type"] == "tint_patch" and pp["version"] == vp._tint_version
     assert np.frombuffer(pids, "<u4").tolist() == [0]
     assert np.frombuffer(pvals, "<f4").tolist() == [1.0]
-    assert ack["type"] == "paint_ack" and ack["seq"] == 3
+    assert ack["type"] == "stroke_ack" and ack["seq"] == 3
     # the silent full state follows, so a reloaded page gets the current overlay
-    assert np.frombuffer(vp._paint_weights, "<f4")[[0, 4]].tolist() == [1.0, 1.0]
-    vp._on_frontend_msg(vp, {"type": "paint", "phase": "end", "vertices": [], "seq": 4}, [])
-    assert not m.interacting and not vp.painting
+    assert np.frombuffer(vp._tint, "<f4")[[0, 4]].tolist() == [1.0, 1.0]
+    vp._on_frontend_msg(vp, {"type": "stroke", "phase": "end", "vertices": [], "seq": 4}, [])
+    assert not m.interacting and not vp.stroking
     assert m.history.undo_labels == ["Paint jawOpen"]
     assert vp.last_stroke["dabs"] == 2 and vp.last_stroke["messages"] == 2
     np.testing.assert_array_equal(np.frombuffer(vp._positions, "<f4").reshape(-1, 3), m.evaluate())
 
     # undo: the overlay goes back to empty, the geometry to the neutral
     m.undo()
-    assert vp._paint_weights == b"" and len(m.paint) == 0
+    assert vp._tint == b"" and len(m.paint) == 0
     np.testing.assert_array_equal(np.frombuffer(vp._positions, "<f4").reshape(-1, 3), m.vertices)
     # overlay off: nothing is sent for the picked expression
-    vp.paint_overlay = False
+    vp.tools["paint"].overlay = False
     m.paint.flood("jawOpen", 0.5)
-    assert vp._paint_weights == b""
-    vp.paint_overlay = True
-    assert np.frombuffer(vp._paint_weights, "<f4").tolist() == [0.5] * 9
+    assert vp._tint == b""
+    vp.tools["paint"].overlay = True
+    assert np.frombuffer(vp._tint, "<f4").tolist() == [0.5] * 9
 
     # closing mid-stroke ends the interaction (one undo step)
-    vp._on_frontend_msg(vp, {"type": "paint", "phase": "start", "vertices": [8], "seq": 5}, [])
+    vp._on_frontend_msg(vp, {"type": "stroke", "phase": "start", "vertices": [8], "seq": 5}, [])
     assert m.interacting
     vp.close()
     assert not m.interacting and m.history.undo_labels[-1] == "Paint jawOpen"
@@ -468,8 +468,9 @@ def test_paint_watchdog_ends_an_abandoned_stroke(monkeypatch):
     m = _grid()
 
     async def abandon():
-        vp = widgets.Viewport(m, paint_expression="jawOpen")
-        vp._on_frontend_msg(vp, {"type": "paint", "phase": "start", "vertices": [4], "seq": 1}, [])
+        vp = widgets.Viewport(m)
+        vp.tools["paint"].expression = "jawOpen"
+        vp._on_frontend_msg(vp, {"type": "stroke", "phase": "start", "vertices": [4], "seq": 1}, [])
         assert m.interacting
         deadline = time.monotonic() + 5
         while m.interacting and time.monotonic() < deadline:
@@ -477,7 +478,7 @@ def test_paint_watchdog_ends_an_abandoned_stroke(monkeypatch):
         return vp
 
     vp = in_kernel_loop(abandon)
-    assert not m.interacting and not vp.painting
+    assert not m.interacting and not vp.stroking
     assert m.history.undo_labels == ["Paint jawOpen"]
     vp.close()
 
@@ -492,14 +493,15 @@ def test_paint_panel_brush_links_blends_save_and_bake():
     # brush controls drive the viewport's brush
     p.radius.value, p.opacity.value, p.falloff.value = 0.6, 0.25, "linear"
     p.mode.value, p.mirror.value = "subtract", True
-    assert vp.brush == type(vp.brush)(0.6, 0.25, "linear", "subtract", True)
-    assert p.brush == vp.brush
+    brush = vp.tools["paint"].brush
+    assert brush == type(brush)(0.6, 0.25, "linear", "subtract", True)
+    assert p.brush == brush
     p.mode.value = "add"
     # picking in the palette sets the viewport's expression
     p.pick("jawOpen")
-    assert vp.paint_expression == "jawOpen"
+    assert vp.tools["paint"].expression == "jawOpen"
     p.overlay.value = False
-    assert vp.paint_overlay is False
+    assert vp.tools["paint"].overlay is False
     p.overlay.value = True
     # global blend: one region, weight 0.5 everywhere, one undo step
     assert list(p.region_sliders) == ["all"]

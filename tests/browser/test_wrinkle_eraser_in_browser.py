@@ -136,7 +136,7 @@ def test_erase_the_brow_raise_furrows_with_the_brush_then_undo(open_notebook) ->
     nb.screenshot("page-before")
 
     # --- One stroke across the furrows
-    pv0 = int(nb.viewport(0).get_attribute("data-paint-version") or 0)
+    pv0 = int(nb.viewport(0).get_attribute("data-tint-version") or 0)
     frame0 = nb.frame(0)
     page.mouse.move(pts[0, 0], pts[0, 1])
     page.mouse.down()
@@ -146,7 +146,7 @@ def test_erase_the_brow_raise_furrows_with_the_brush_then_undo(open_notebook) ->
             page.wait_for_timeout(25)
     page.wait_for_timeout(400)  # the last dab's overlay patch
     # while painting: the stroke's mask is the magenta overlay, nothing is edited yet
-    assert int(nb.viewport(0).get_attribute("data-paint-version") or 0) > pv0
+    assert int(nb.viewport(0).get_attribute("data-tint-version") or 0) > pv0
     nb.screenshot("forehead-mask-while-painting", clip=forehead_clip)
     assert len(_state(nb)["undo"]) == len(before["undo"])
     page.mouse.up()
@@ -185,7 +185,7 @@ def test_erase_the_brow_raise_furrows_with_the_brush_then_undo(open_notebook) ->
         st["furrow_detail"],
         before["furrow_detail"],
     )
-    pv = int(nb.viewport(0).get_attribute("data-paint-version") or 0)
+    pv = int(nb.viewport(0).get_attribute("data-tint-version") or 0)
     assert pv > pv0  # the overlay went with the stroke (an empty one was sent)
     fh1 = nb.screenshot("forehead-erased", clip=forehead_clip)
     band1 = nb.screenshot("band-erased", clip=band_clip)

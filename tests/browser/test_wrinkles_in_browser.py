@@ -99,7 +99,7 @@ def _state(nb: NotebookPage) -> dict[str, Any]:
 
 
 def _handles_on_screen(nb: NotebookPage) -> np.ndarray:
-    pts = nb.viewport(0).evaluate("e => e.fwbHandles()")
+    pts = nb.viewport(0).evaluate("e => e.fwbMarkers()")
     return np.array(pts, dtype=float).reshape(-1, 3)
 
 
@@ -190,7 +190,7 @@ def test_brow_drag_wrinkles_the_forehead_then_undo(open_notebook) -> None:
     fit_s = nb.kernel_eval("import json; print(json.dumps(wb.wrinkles.last_fit_s))")
     n_handles = nb.kernel_eval("import json; print(json.dumps(len(model.handles)))")
     page.wait_for_function(
-        "(n) => JSON.parse(document.querySelector('.fwb-viewport').getAttribute('data-handles')"
+        "(n) => JSON.parse(document.querySelector('.fwb-viewport').getAttribute('data-markers')"
         " || '[]').length === n",
         arg=n_handles,
     )

@@ -43,3 +43,47 @@ def test_an_unknown_linear_layer_is_drawn_by_the_page_not_the_residual(tmp_path)
     # the page's own evaluation is the kernel's to float rounding: the residual stays empty
     assert out["0.2"] < 1e-5 and out["0.9"] < 1e-5, out
     assert out["controls"] is None  # the sample head has no handles: no shell basis to send
+
+
+TOOL_SCRIPT = r"""
+import json, numpy as np, workbench, widgets
+from widgets.viewport.tools import tool_names
+m = workbench.load_sample("head")
+vp = widgets.Viewport(m)
+out = {"names": list(tool_names()), "kinds": vp._tool_kinds}
+vp.tool = "gain_brush"
+out["target"] = vp.stroke_target
+sent = []
+vp.send = lambda content, buffers=None: sent.append(content)
+# the page's messages for one stroke: press, one move, release
+ids = np.flatnonzero(np.linalg.norm(m.shape("jawOpen").delta, axis=1) > 0)[:12].tolist()
+for seq, (phase, v) in enumerate((("start", ids[:4]), ("move", ids[4:8]), ("end", ids[8:]))):
+    vp._on_frontend_msg(vp, {"type": "stroke", "phase": phase, "vertices": v, "seq": seq}, [])
+mask = m.slot("mouth_gain").mask
+out["painted"] = sorted(np.flatnonzero(mask).tolist()) == sorted(ids)
+out["undo"] = list(m.history.undo_labels)
+out["acks"] = [c["seq"] for c in sent if c.get("type") == "stroke_ack"]
+tint = np.frombuffer(vp._tint, "<f4")
+out["tint"] = bool(tint.size == m.n_vertices and np.array_equal(tint, mask))
+vp.tool = "paint"  # another tool: its tint (none: no expression picked) is drawn
+out["tint_after"] = len(vp._tint)
+m.history.undo()
+out["undone"] = m.slot("mouth_gain").mask is None or not np.any(m.slot("mouth_gain").mask)
+vp.close()
+print(json.dumps(out))
+"""
+
+
+def test_a_family_adds_a_viewport_tool_without_editing_the_viewport(tmp_path):
+    env = install(tmp_path)
+    run = subprocess.run([sys.executable, "-c", TOOL_SCRIPT], env=env, capture_output=True, text=True, timeout=600)
+    assert run.returncode == 0, run.stderr[-3000:]
+    out = json.loads(run.stdout.strip().splitlines()[-1])
+    assert out["names"][0] == "orbit" and {"sculpt", "paint", "gain_brush"} <= set(out["names"])
+    assert out["kinds"]["gain_brush"] == "stroke" and out["kinds"]["sculpt"] == "drag"
+    assert out["target"] == "mouth gain mask"  # the page strokes only while there is a target
+    assert out["painted"], out  # the brushed vertices, and only those, are in the mask
+    assert out["undo"] == ["Brush mouth gain mask"]  # one stroke, one undo step
+    assert out["acks"] == [0, 1, 2]  # every message of the stroke acknowledged
+    assert out["tint"] and out["tint_after"] == 0
+    assert out["undone"]

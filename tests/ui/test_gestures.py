@@ -56,7 +56,7 @@ class FakeFrontEnd:
 
     def _send(self, phase: str, **body) -> None:
         self.seq += 1
-        msg = {"type": "handle", "phase": phase, "gesture": self.gesture, "seq": self.seq,
+        msg = {"type": "drag", "phase": phase, "gesture": self.gesture, "seq": self.seq,
                "index": 0, "vertex": 4, **body}  # fmt: skip
         self.sent.append(msg)
         if phase in ("start", "move"):
@@ -80,7 +80,7 @@ class FakeFrontEnd:
         """The browser receives what the kernel sent: acks free the channel."""
         got, self.inbox = self.inbox, []
         for c in got:
-            if c.get("seq") == self.in_flight and c["type"] in ("handle_ack", "patch"):
+            if c.get("seq") == self.in_flight and c["type"] in ("drag_ack", "patch"):
                 self.in_flight = 0
                 if self.pending is not None:
                     p, self.pending = self.pending, None
@@ -105,7 +105,7 @@ def test_one_message_in_flight_every_message_acked_with_seq_and_timing_one_undo_
     got += fe.deliver()
     fe.release(up(p0, 0.6))
     got += fe.deliver()
-    acks = [c for c in got if c["type"] == "handle_ack"]
+    acks = [c for c in got if c["type"] == "drag_ack"]
     assert [a["seq"] for a in acks] == [s["seq"] for s in fe.sent]
     assert [a["phase"] for a in acks] == ["start", "move", "end"]
     for a in acks:
@@ -133,7 +133,7 @@ def test_cancel_puts_everything_back_without_an_undo_step():
     assert m.evaluate()[4][2] == pytest.approx(0.3, abs=1e-5)
     fe._send("cancel")
     got = fe.deliver()
-    assert [c["phase"] for c in got if c["type"] == "handle_ack"] == ["cancel"]
+    assert [c["phase"] for c in got if c["type"] == "drag_ack"] == ["cancel"]
     assert not m.interacting and not vp.dragging
     np.testing.assert_allclose(m.evaluate()[4], p0, atol=1e-6)
     assert m.history.undo_labels == steps  # no undo step
@@ -160,7 +160,7 @@ def test_a_gesture_closed_by_another_widget_refuses_its_late_messages():
     assert not m.interacting and not vp.dragging
     assert m.history.undo_labels[-1] == "Drag handle centre"  # its edits kept: one step
     got = fe.deliver()
-    assert {"type": "handle_cancel", "gesture": "g-1"} in got  # the front end is told to stop
+    assert {"type": "drag_cancel", "gesture": "g-1"} in got  # the front end is told to stop
     # the stale token is refused by the model ...
     with pytest.raises(ModelError):
         m.end_interaction(token)
@@ -170,7 +170,7 @@ def test_a_gesture_closed_by_another_widget_refuses_its_late_messages():
     fe.move(up(p0, 0.9))
     fe.release(up(p0, 0.9))
     got = fe.deliver()
-    acks = [c for c in got if c["type"] == "handle_ack"]
+    acks = [c for c in got if c["type"] == "drag_ack"]
     assert [a.get("stale") for a in acks] == [True, True]
     assert vp.gestures.refused == 2
     assert not m.interacting and len(m.history.undo_labels) == n_steps
@@ -187,7 +187,7 @@ def test_messages_of_another_press_are_refused():
     fe.gesture = "g-old"  # e.g. a second view's stray message
     fe.move(up(p0, 0.5))
     got = fe.deliver()
-    assert got[-1]["type"] == "handle_ack" and got[-1]["stale"] is True
+    assert got[-1]["type"] == "drag_ack" and got[-1]["stale"] is True
     assert m.evaluate()[4][2] == pytest.approx(0.0, abs=1e-6) and vp.dragging
     fe.gesture = "g-1"
     fe.release(up(p0, 0.1))
@@ -220,7 +220,7 @@ def test_the_dispatcher_runs_any_gesture():
     """A Gesture subclass gets begin / update / end and the token bookkeeping for free."""
 
     class Nudge(Gesture):
-        kind = "handle"
+        kind = "drag"
 
         def start(self, content):
             self.open_interaction("Nudge")
@@ -250,10 +250,10 @@ def test_the_dispatcher_runs_any_gesture():
         def send(self, content, buffers=None):
             sent.append(content)
 
-    d = GestureDispatcher(FakeView(), {"handle": lambda c: Nudge(FakeView())})
-    d.on_message("handle", {"phase": "start", "seq": 1})
-    d.on_message("handle", {"phase": "move", "seq": 2, "dz": 0.25})
-    d.on_message("handle", {"phase": "end", "seq": 3, "dz": 0.5})
+    d = GestureDispatcher(FakeView(), {"drag": lambda c: Nudge(FakeView())})
+    d.on_message("drag", {"phase": "start", "seq": 1})
+    d.on_message("drag", {"phase": "move", "seq": 2, "dz": 0.25})
+    d.on_message("drag", {"phase": "end", "seq": 3, "dz": 0.5})
     assert [c["seq"] for c in sent] == [1, 2, 3]
     assert m.history.undo_labels[-1] == "Nudge" and not m.interacting
     assert float(m.handles.offsets[0, 2]) == pytest.approx(0.5)

@@ -174,7 +174,7 @@ def test_the_viewport_shows_the_tracked_head_turn_without_keying_it(jpegs, live_
     # a pointer position on the shown face maps back through the shown pose
     p = np.array([1.0, 2.0, 3.0])
     M = vp.sync.view_pose
-    np.testing.assert_allclose(vp._unposed(M[:3, :3] @ p + M[:3, 3]), p, atol=1e-9)
+    np.testing.assert_allclose(vp.unposed(M[:3, :3] @ p + M[:3, 3]), p, atol=1e-9)
     # unticked: the model's pose (none keyed: the identity); ticked again: the last tracked pose
     live.follow_head.value = False
     assert vp.sync.view_pose is None

@@ -46,7 +46,7 @@ def mouth_corner_pin(model, panel) -> tuple[int, int]:
 
 
 def drag(vp, k, v, targets):
-    msg = {"type": "handle", "index": k, "vertex": v}
+    msg = {"type": "drag", "index": k, "vertex": v}
     vp._on_frontend_msg(vp, {**msg, "phase": "start", "seq": 1}, [])
     for i, p in enumerate(targets[:-1]):
         vp._on_frontend_msg(vp, {**msg, "phase": "move", "position": list(p), "seq": 2 + i}, [])
@@ -174,7 +174,7 @@ def test_drag_handler_solves_and_moves_the_dragged_point_toward_the_target(setup
     panel.find_button.click()
     panel.drag_mode.value = True
     assert vp.tool == "sculpt" and vp.drag_handler is panel.drag_handler
-    np.testing.assert_array_equal(vp.handles, panel.pins)
+    np.testing.assert_array_equal(vp.markers, panel.pins)
     k, v = mouth_corner_pin(model, panel)
     st = model.regions.state
     R, lv = st.regions, st.level
@@ -202,7 +202,7 @@ def test_drag_handler_solves_and_moves_the_dragged_point_toward_the_target(setup
     outside = np.setdiff1d(np.arange(model.n_vertices), inside)
     assert np.abs(X1[outside] - X0[outside]).max() == 0.0
     # every message was acknowledged; the status shows the solve time
-    acks = [c for c in sent if c.get("type") == "handle_ack"]
+    acks = [c for c in sent if c.get("type") == "drag_ack"]
     assert [a["seq"] for a in acks] == [1, 2, 3, 4, 99]
     assert "solve" in panel.status.value and "ms" in panel.status.value
     assert panel.region.label == panel.drag_handler.last_drag["name"]
@@ -230,10 +230,10 @@ def test_drag_in_the_background_is_refused_without_an_open_interaction(setup):
     v = int(bg[0])
     n_err = panel.errors.count + vp.errors.count
     vp._on_frontend_msg(
-        vp, {"type": "handle", "phase": "start", "index": 0, "vertex": v, "seq": 5}, []
+        vp, {"type": "drag", "phase": "start", "index": 0, "vertex": v, "seq": 5}, []
     )
     assert not model.interacting
-    assert {"type": "handle_cancel"} in sent and sent[-1]["type"] == "handle_ack"
+    assert {"type": "drag_cancel"} in sent and sent[-1]["type"] == "drag_ack"
     assert panel.errors.count + vp.errors.count == n_err + 1
 
 
@@ -245,14 +245,14 @@ def test_leaving_drag_mode_gives_the_viewport_back(setup):
     model_handles = np.asarray(model.handles.vertices)
     panel.find_button.click()
     panel.drag_mode.value = True
-    assert len(vp.handles) == len(panel.pins) > len(model_handles)
+    assert len(vp.markers) == len(panel.pins) > len(model_handles)
     # a handle added in drag mode (Shift-click) becomes a pin as well
     free = int(np.setdiff1d(np.arange(model.n_vertices), panel.pins)[0])
     model.handles.add(free)
-    assert free in panel.pins and free in vp.handles
+    assert free in panel.pins and free in vp.markers
     panel.drag_mode.value = False
     assert vp.tool == "orbit" and vp.drag_handler is None
-    np.testing.assert_array_equal(vp.handles, np.asarray(model.handles.vertices))
+    np.testing.assert_array_equal(vp.markers, np.asarray(model.handles.vertices))
 
 
 # --------------------------------------------------------------- region edits
@@ -265,7 +265,7 @@ def select(panel, name: str) -> int:
 
 def click_marker(vp, k: int, v: int, seq: int) -> None:
     """A press and release on marker ``k`` (no motion), as the front end sends it."""
-    msg = {"type": "handle", "index": k, "vertex": v}
+    msg = {"type": "drag", "index": k, "vertex": v}
     vp._on_frontend_msg(vp, {**msg, "phase": "start", "seq": seq}, [])
     vp._on_frontend_msg(vp, {**msg, "phase": "end", "seq": seq + 1}, [])
 
@@ -320,7 +320,7 @@ def test_split_mode_splits_between_two_clicked_markers(setup):
     panel.edits.split_mode.value = True
     assert not panel.drag_mode.value  # one pointer mode at a time
     assert vp.tool == "sculpt" and vp.drag_handler is panel.edits.seed_picker
-    markers = np.asarray(vp.handles)
+    markers = np.asarray(vp.markers)
     assert markers.size >= 2 and (R.labels[0][markers] == r).all()
     V = np.asarray(model.vertices)[markers]
     ka, kb = int(np.argmin(V[:, 1])), int(np.argmax(V[:, 1]))
@@ -337,7 +337,7 @@ def test_split_mode_splits_between_two_clicked_markers(setup):
     assert not model.interacting and panel.errors.count + vp.errors.count == 0
     # the split ends split mode and gives the viewport back
     assert not panel.edits.split_mode.value and vp.drag_handler is None and vp.tool == "orbit"
-    assert [c["seq"] for c in sent if c.get("type") == "handle_ack"] == [10, 11, 12, 13]
+    assert [c["seq"] for c in sent if c.get("type") == "drag_ack"] == [10, 11, 12, 13]
     panel.undo_button.click()
     assert model.regions.regions is R
 
@@ -352,7 +352,7 @@ def test_paint_mode_brush_stroke_grows_the_region_in_one_undo_step(setup):
     panel.edits.paint_mode.value = True
     assert vp.drag_handler is panel.edits.brush_handler and vp.tool == "sculpt"
     panel.edits.paint_radius.value = panel.edits.paint_radius.max / 2  # the markers follow the radius
-    markers = np.asarray(vp.handles)
+    markers = np.asarray(vp.markers)
     topo = region_topology(model)
     outside = [i for i, v in enumerate(markers) if R.labels[0][v] != r]
     assert outside  # markers around the region too
@@ -408,7 +408,7 @@ def test_escape_cancels_a_pin_drag_and_a_brush_stroke_bit_exactly(setup):
     st0 = model.regions.state
     X0 = np.array(model.evaluate())
     n_undo = len(model.history.undo_labels)
-    msg = {"type": "handle", "index": k, "vertex": v, "gesture": 7}
+    msg = {"type": "drag", "index": k, "vertex": v, "gesture": 7}
     vp._on_frontend_msg(vp, {**msg, "phase": "start", "seq": 1}, [])
     vp._on_frontend_msg(vp, {**msg, "phase": "move", "position": list(X0[v] + [0.05, 0.04, 0]), "seq": 2}, [])
     assert panel.drag_handler.dragging and model.regions.state is not st0
@@ -416,14 +416,14 @@ def test_escape_cancels_a_pin_drag_and_a_brush_stroke_bit_exactly(setup):
     assert not panel.drag_handler.dragging and not model.interacting
     assert model.regions.state is st0 and len(model.history.undo_labels) == n_undo
     np.testing.assert_array_equal(model.evaluate(), X0)
-    assert [c["seq"] for c in sent if c.get("type") == "handle_ack"] == [1, 2, 3]
+    assert [c["seq"] for c in sent if c.get("type") == "drag_ack"] == [1, 2, 3]
     # the same for a brush stroke
     select(panel, "mouth_L_2")
     panel.edits.paint_mode.value = True
-    markers = np.asarray(vp.handles)
+    markers = np.asarray(vp.markers)
     R = model.regions.regions
     kb = next(i for i, m in enumerate(markers) if R.labels[0][m] != R.region_index(0, "mouth_L_2"))
-    msg = {"type": "handle", "index": kb, "vertex": int(markers[kb]), "gesture": 8}
+    msg = {"type": "drag", "index": kb, "vertex": int(markers[kb]), "gesture": 8}
     vp._on_frontend_msg(vp, {**msg, "phase": "start", "seq": 4}, [])
     vp._on_frontend_msg(vp, {**msg, "phase": "cancel", "seq": 5}, [])
     assert not panel.edits.brush_handler.dragging and not model.interacting
@@ -440,7 +440,7 @@ def test_another_widgets_edit_mid_drag_keeps_the_drag_as_one_step(setup):
     k, v = mouth_corner_pin(model, panel)
     X0 = np.array(model.evaluate())
     n_undo = len(model.history.undo_labels)
-    msg = {"type": "handle", "index": k, "vertex": v}
+    msg = {"type": "drag", "index": k, "vertex": v}
     vp._on_frontend_msg(vp, {**msg, "phase": "start", "seq": 1}, [])
     vp._on_frontend_msg(vp, {**msg, "phase": "move", "position": list(X0[v] + [0.05, 0.04, 0]), "seq": 2}, [])
     st1 = model.regions.state
@@ -469,7 +469,7 @@ def test_every_offered_pin_lies_in_a_region_of_the_shown_level(setup):
     for level in range(model.regions.state.regions.n_levels):
         model.regions.set_level(level)
         st = model.regions.state
-        np.testing.assert_array_equal(vp.handles, panel.pins)  # the viewport shows this level's pins
+        np.testing.assert_array_equal(vp.markers, panel.pins)  # the viewport shows this level's pins
         assert all(st.regions.regions_at(st.level, int(v)) for v in panel.pins), level
         left_out = [int(v) for v in defaults if int(v) not in set(panel.pins.tolist())]
         assert all(not st.regions.regions_at(st.level, v) for v in left_out), level

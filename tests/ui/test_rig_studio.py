@@ -1,7 +1,7 @@
 """The Rig tab (``widgets.RigStudio``) driven through its widgets in the kernel.
 
 The front end's messages are fed to the viewports as the browser sends them
-(``{"type": "add_handle", "vertex"}`` for a click on the surface, a ``handle``
+(``{"type": "pick", "vertex"}`` for a click on the surface, a ``handle``
 gesture for a marker drag); the browser test (tests/browser/test_rig_in_browser.py)
 clicks with the mouse.
 """
@@ -29,7 +29,7 @@ def actor(head):
 
 
 def click(view, vertex: int) -> None:
-    view._on_frontend_msg(view, {"type": "add_handle", "vertex": int(vertex)}, [])
+    view._on_frontend_msg(view, {"type": "pick", "vertex": int(vertex)}, [])
 
 
 def nearest(actor: Actor, head, v: int) -> int:
@@ -48,14 +48,14 @@ def test_clicks_make_pairs_markers_follow_and_undo_is_per_step(head, actor) -> N
         a = int(skin[np.argmax(head.vertices[skin, 0])])  # the far left of the head
         click(tv, a)
         assert lp.pending["template"] == a and s.landmarks == ()
-        assert list(tv.handles) == [a] and tv.selected_handle == 0
+        assert list(tv.markers) == [a] and tv.selected_marker == 0
         assert "your face" in lp.hint.value
         b = nearest(actor, head, a)
         click(fv, b)
         assert len(s.landmarks) == 2  # mirrored
         assert s.landmarks[0] == (a, b)
-        assert list(tv.handles) == [p[0] for p in s.landmarks]
-        assert list(fv.handles) == [p[1] for p in s.landmarks]
+        assert list(tv.markers) == [p[0] for p in s.landmarks]
+        assert list(fv.markers) == [p[1] for p in s.landmarks]
         assert len(lp.pairs.options) == 2 and lp.pairs.index == 0
         assert studio.stages.buttons["refine"].disabled
         # the template models are never edited
@@ -66,15 +66,15 @@ def test_clicks_make_pairs_markers_follow_and_undo_is_per_step(head, actor) -> N
         click(tv, 9)
         assert s.landmarks[-1] == (9, 7) and len(s.landmarks) == 3
         # Alt-click a marker: its pair goes
-        fv._on_frontend_msg(fv, {"type": "remove_handle", "index": 2, "vertex": 7}, [])
+        fv._on_frontend_msg(fv, {"type": "unpick", "index": 2, "vertex": 7}, [])
         assert len(s.landmarks) == 2
         # drag marker 1 on the target to another vertex: one step "Move landmark 2 (target)"
         target_v = int(s.landmarks[1][1])
         drop = actor.model.vertices[target_v] + [0.3, 0.0, 0.0]
-        fv.gestures.on_message("handle", {"type": "handle", "phase": "start", "index": 1, "vertex": target_v, "seq": 1})
-        fv.gestures.on_message("handle", {"type": "handle", "phase": "move", "index": 1, "position": drop.tolist(),
+        fv.gestures.on_message("drag", {"type": "drag", "phase": "start", "index": 1, "vertex": target_v, "seq": 1})
+        fv.gestures.on_message("drag", {"type": "drag", "phase": "move", "index": 1, "position": drop.tolist(),
                                           "seq": 2})
-        fv.gestures.on_message("handle", {"type": "handle", "phase": "end", "index": 1, "seq": 3})
+        fv.gestures.on_message("drag", {"type": "drag", "phase": "end", "index": 1, "seq": 3})
         moved = s.landmarks[1][1]
         assert moved != target_v
         assert np.linalg.norm(actor.model.vertices[moved] - drop) <= np.linalg.norm(
@@ -82,7 +82,7 @@ def test_clicks_make_pairs_markers_follow_and_undo_is_per_step(head, actor) -> N
         assert s.history.undo_labels[-1] == "Move landmark 2 (target)"
         studio.undo()
         assert s.landmarks[1][1] == target_v
-        assert studio.landmarks.views["target"].handles[1] == target_v
+        assert studio.landmarks.views["target"].markers[1] == target_v
     finally:
         studio.close()
 
@@ -169,13 +169,13 @@ def test_suggest_adds_named_pairs_in_one_step_with_progress(head, actor) -> None
         assert len(s.landmarks) >= 10
         assert s.history.undo_labels == [f"Suggest {len(s.landmarks)} landmarks"]
         assert len(seen) >= 3 and "pairs suggested" in lp.progress.label.value
-        assert len(lp.views["target"].handles) == len(s.landmarks)
+        assert len(lp.views["target"].markers) == len(s.landmarks)
         # each suggested target vertex is near the warped template vertex (ground truth)
         size = np.ptp(actor.model.vertices, axis=0).max()
         for a, b in s.landmarks:
             true = WARP(head.vertices[a][None])[0]
             assert np.linalg.norm(actor.model.vertices[b] - true) < 0.02 * size
         studio.undo()
-        assert s.landmarks == () and len(lp.views["target"].handles) == 0
+        assert s.landmarks == () and len(lp.views["target"].markers) == 0
     finally:
         studio.close()

@@ -382,6 +382,6 @@ def test_changing_the_tool_clears_the_dragged_handle_highlight(wb: Workbench) ->
     _select(wb, "Sculpt")
     wb.viewport.begin_drag(3)
     wb.viewport.end_drag()
-    assert wb.viewport.selected_handle == 3
+    assert wb.viewport.selected_marker == 3
     _select(wb, "Shapes")  # the viewport's tool goes back to orbit
-    assert wb.viewport.tool == "orbit" and wb.viewport.selected_handle == -1
+    assert wb.viewport.tool == "orbit" and wb.viewport.selected_marker == -1

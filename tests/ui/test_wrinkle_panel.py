@@ -426,20 +426,20 @@ def test_eraser_strokes_from_the_viewport_messages(fitted) -> None:
     assert panel.erasing == "smile" and not panel.erase_toggles["brow_raise"].value
     panel.start_erasing("brow_raise")
     depth = len(model.history.undo_labels)
-    sent = dict(vp.paint_updates_sent)
-    msg = {"type": "paint"}
+    sent = dict(vp.tint_updates_sent)
+    msg = {"type": "stroke"}
     vp._on_frontend_msg(vp, {**msg, "phase": "start", "vertices": [v], "seq": 1}, [])
     # the stroke's mask is the viewport's paint overlay while painting; no paint layer
-    w = np.frombuffer(vp._paint_weights, np.float32)
+    w = np.frombuffer(vp._tint, np.float32)
     assert w.size == model.n_vertices and w[v] == pytest.approx(1.0)
     vp._on_frontend_msg(vp, {**msg, "phase": "move", "vertices": [v + 1], "seq": 2}, [])
     vp._on_frontend_msg(vp, {**msg, "phase": "end", "vertices": [], "seq": 3}, [])
     assert _errors(errors) == ""
-    assert vp.paint_updates_sent != sent
+    assert vp.tint_updates_sent != sent
     assert len(model.paint) == 0 and not model.interacting
     assert model.history.undo_labels[-1] == "Erase wrinkles of brow_raise"
     assert len(model.history.undo_labels) == depth + 1
-    assert vp._paint_weights == b""  # the overlay goes with the stroke
+    assert vp._tint == b""  # the overlay goes with the stroke
     assert np.linalg.norm(_detail(model, panel)[v]) < 1e-4
     # a bad message cancels the stroke and reports; no half edit
     vp._on_frontend_msg(vp, {**msg, "phase": "start", "vertices": [model.n_vertices], "seq": 4}, [])

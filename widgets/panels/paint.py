@@ -69,9 +69,10 @@ class PaintPanel(ModelPanel):
         The palette; by default a new gallery of all expressions (saved ones
         first) with small thumbnails.
     viewport : widgets.Viewport, optional
-        The viewport that paints: the brush controls, the overlay toggle and the
-        picked expression are linked to its ``brush_*``, ``paint_overlay`` and
-        ``paint_expression`` traits; the status line shows its stroke timings.
+        The viewport that paints: the brush controls are linked to its ``brush_*``
+        traits, the overlay toggle and the picked expression to its paint tool's
+        ``overlay`` and ``expression`` (:class:`widgets.panels.paint_tool.PaintTool`);
+        the status line shows its stroke timings.
     errors : ipywidgets.Output, optional
         Where callback errors are shown (``Workbench`` passes a shared one).
     before_edit : iterable of callables
@@ -166,7 +167,7 @@ class PaintPanel(ModelPanel):
             layout=W.Layout(width="110px"),
         )
         self.overlay = W.ToggleButton(
-            value=bool(getattr(viewport, "paint_overlay", True)),
+            value=bool(viewport.tools["paint"].overlay) if viewport is not None else True,
             description="overlay",
             icon="eye",
             tooltip="Show the picked expression's painted weights (magenta)",
@@ -279,7 +280,7 @@ class PaintPanel(ModelPanel):
                 t.link((self.falloff, "value"), (viewport, "brush_falloff")),
                 t.link((self.mode, "value"), (viewport, "brush_mode")),
                 t.link((self.mirror, "value"), (viewport, "brush_mirror")),
-                t.link((self.overlay, "value"), (viewport, "paint_overlay")),
+                t.link((self.overlay, "value"), (viewport.tools["paint"], "overlay")),
             ):
                 self.on_close(link.unlink)
             self.add_listener(
@@ -344,7 +345,7 @@ class PaintPanel(ModelPanel):
 
     def _on_select(self, name: str | None) -> None:
         if self.viewport is not None:
-            self.viewport.paint_expression = name or ""
+            self.viewport.tools["paint"].expression = name or ""
         self.picked.value = (
             f"painting with <b>{name}</b>" if name else "<i>pick an expression to paint with</i>"
         )

@@ -296,7 +296,7 @@ class MarkerMode:
             return
         if self.installed():  # another of our handlers: same markers mechanism, same saved tool
             self.handler = vp.drag_handler = handler
-            vp.handles = markers
+            vp.markers = markers
             return
         before()
         end_drag = getattr(vp, "end_drag", None)
@@ -304,13 +304,13 @@ class MarkerMode:
             end_drag()  # an open handle drag of the viewport's own
         self.handler = vp.drag_handler = handler
         self._saved_tool = vp.tool
-        vp.handles = markers
+        vp.markers = markers
         vp.tool = "sculpt"
 
     def show(self, markers: Any) -> None:
         """Show ``markers`` (while installed)."""
         if self.installed():
-            self.viewport.handles = markers
+            self.viewport.markers = markers
 
     def release(self) -> None:
         """Give the viewport its drag hook, handle markers and tool back; no-op if not installed."""
@@ -320,9 +320,8 @@ class MarkerMode:
             return
         vp.drag_handler = None
         self.handler = None
-        # the model's handle markers (with mirror links) back
-        vp.sync.handles_sent = None
-        vp.sync.sync_handles()
+        # the tools' markers (with mirror links) back
+        vp.show_tool_markers()
         if self._saved_tool is not None and vp.tool == "sculpt":
             vp.tool = self._saved_tool
         self._saved_tool = None

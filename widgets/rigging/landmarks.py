@@ -220,8 +220,8 @@ class LandmarkPicker(ModelPanel):
             ids = [p[k] for p in lm]
             pend = self.pending[side]
             vp = self.views[side]
-            vp.handles = [*ids, pend] if pend is not None else ids
-            vp.selected_handle = len(ids) if pend is not None else self._selected
+            vp.markers = [*ids, pend] if pend is not None else ids
+            vp.selected_marker = len(ids) if pend is not None else self._selected
         names = [f"{i + 1}. template {a} \u2194 face {b}" for i, (a, b) in enumerate(lm)]
         self._refreshing = True
         try:

@@ -32,7 +32,7 @@ class TabSpec:
     title: str
     order: float
     build: Callable[[Any], tuple[Any, Mapping[str, Any]]]
-    #: the viewport tool the tab selects ("orbit", "sculpt", "paint")
+    #: the viewport tool the tab selects ("orbit" or a registered tool: widgets.viewport.tools)
     tool: str = "orbit"
     #: built the first time the tab is shown or one of its panels is read; until then this text
     lazy: str = ""

@@ -5,11 +5,11 @@ Layout:
 * :mod:`widgets.viewport.widget` - the ``Viewport`` anywidget: traits, public API,
   message routing;
 * :mod:`widgets.viewport.sync` - what is shipped to the browser (geometry patches,
-  paint overlay, handle markers, feature graph);
+  surface tint, markers, feature graph);
 * :mod:`widgets.viewport.gestures` - the one gesture protocol (begin / update /
   end / cancel, one message in flight, acks, interaction tokens) and its dispatcher;
-* :mod:`widgets.viewport.tools` - the gestures: handle drag, paint stroke, and the
-  hooked drag / stroke other panels install (region pin, region brush, wrinkle eraser);
+* :mod:`widgets.viewport.tools` - the tool registry (the method families' tools:
+  marker drags, brush strokes) and the hooked drag / stroke panels install;
 * :mod:`widgets.viewport.common` - constants, the bundle loader, brush defaults.
 
 The front end is ``widgets/js/src/viewport.js`` and ``widgets/js/src/viewport/``.
@@ -25,7 +25,6 @@ from widgets.viewport.common import (
     SPARSE_FRACTION,
     STRAIN_RANGE,
     STRAIN_TOLERANCE,
-    TOOLS,
     brush_radius_slider,
     default_brush_radius,
     face_height,
@@ -34,6 +33,15 @@ from widgets.viewport.common import (
     scene_key,
 )
 from widgets.viewport.gestures import DRAG_WATCHDOG_S, Gesture, GestureDispatcher
+from widgets.viewport.tools import (
+    DragGesture,
+    StrokeGesture,
+    Tool,
+    ToolSpec,
+    register_tool,
+    tool_names,
+    tool_specs,
+)
 from widgets.viewport.widget import Viewport
 
 __all__ = [
@@ -47,14 +55,20 @@ __all__ = [
     "SPARSE_FRACTION",
     "STRAIN_RANGE",
     "STRAIN_TOLERANCE",
-    "TOOLS",
+    "DragGesture",
     "Gesture",
     "GestureDispatcher",
+    "StrokeGesture",
+    "Tool",
+    "ToolSpec",
     "Viewport",
     "brush_radius_slider",
     "default_brush_radius",
     "face_height",
     "load_bundle",
     "neutral_bounds",
+    "register_tool",
     "scene_key",
+    "tool_names",
+    "tool_specs",
 ]

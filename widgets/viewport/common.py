@@ -25,14 +25,13 @@ SPARSE_FRACTION = 1.0 / 3.0
 #: 1/4 pixel zoomed in 10x); the interaction's final update is exact.
 DRAG_TOLERANCE = 5e-5
 
-TOOLS = ("orbit", "sculpt", "paint")
 FALLOFFS = ("smooth", "linear", "constant", "sphere")
 BRUSH_MODES = ("add", "subtract", "smooth")
 
 #: Default brush radius as a fraction of the face height (the skin's extent along up).
 BRUSH_RADIUS_FRACTION = 0.03
 
-#: Most dabs one "paint" message may carry (the front end sends at most 8).
+#: Most dabs one "stroke" message may carry (the front end sends at most 8).
 MAX_DABS_PER_MESSAGE = 32
 
 #: Relative stretch drawn in full colour by the feature-graph overlay (±20 %).
@@ -125,8 +124,8 @@ def neutral_bounds(model: Any) -> dict[str, Any]:
 
     ``radius``: the largest distance of a vertex from the box centre (what
     three.js's ``computeBoundingSphere`` gives). The front end frames the camera
-    on this box and sizes the handle markers by this radius, so neither depends
-    on the expression shown when the view opened.
+    on this box and sizes the markers by this radius, so neither depends
+    on the pose shown when the view opened.
     """
     V = np.asarray(model.vertices, dtype=np.float64).reshape(-1, 3)
     if not V.size or not np.isfinite(V).all():
@@ -144,7 +143,7 @@ def default_brush_radius(model: Any) -> float:
 def brush_radius_slider(
     model: Any, viewport: Any, description: str, **kwargs: Any
 ) -> ipywidgets.FloatSlider:
-    """The brush-radius slider shared by the paint and wrinkle-erase tools.
+    """The brush-radius slider every brush (a stroke tool, a stroke handler) shows.
 
     Starts at the viewport's brush radius (or :func:`default_brush_radius`) and
     spans 0.5 %–30 % of the face height; ``kwargs`` go to the slider (style, layout).

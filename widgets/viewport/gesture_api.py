@@ -3,9 +3,10 @@
 :class:`GestureAPI` is mixed into :class:`widgets.viewport.widget.Viewport`
 (kept apart so the widget's module stays readable). Each call is a thin
 entry into :mod:`widgets.viewport.gestures` — begin / update / end / cancel of
-a handle drag or a paint stroke, the same protocol the mouse drives — plus the
-two lookups the gestures share (a picked point back in model space, a handle
-found again by its vertex).
+a marker drag or a brush stroke, the same protocol the mouse drives — routed
+to a panel's hook or to the registered tool of that kind
+(:mod:`widgets.viewport.tools`), plus the lookup gestures share (a picked
+point back in model space).
 """
 
 from __future__ import annotations
@@ -16,16 +17,19 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from widgets.viewport.gestures import Gesture, GestureDispatcher, vertex_ids
-from widgets.viewport.tools import HandleDrag, HookedDrag, HookedStroke, PaintStroke
+from widgets.viewport.tools import DragGesture, HookedDrag, HookedStroke, StrokeGesture, Tool
 
 
 class GestureAPI:
-    """Handle drags and paint strokes driven from Python (mixed into ``Viewport``)."""
+    """Marker drags and brush strokes driven from Python (mixed into ``Viewport``)."""
 
     gestures: GestureDispatcher
     drag_handler: Any
     stroke_handler: Any
     stroke_target: str
+    _hook_target: str
+    tools: dict[str, Tool]
+    tool: str
     sync: Any
     errors: Any
     _model: Any
@@ -35,104 +39,127 @@ class GestureAPI:
         @property
         def _connected(self) -> bool: ...
 
-    def begin_drag(self, index: int, vertex: int | None = None) -> None:
-        """Start dragging model handle ``index`` (the front end's "start" message).
+        def refresh_tool(self) -> None: ...
 
-        Opens the interaction "Drag handle <name>"; an open gesture, and every
-        interaction other widgets hold open (a slider burst), is ended first.
+    def begin_drag(self, index: int, vertex: int | None = None) -> None:
+        """Start dragging marker ``index`` (at ``vertex``): what the front end's "start" message does.
+
+        The drag goes to ``drag_handler`` if a panel set one, else to the drag tool
+        (the current tool if it drags markers, else the first registered one), which
+        opens its model interaction. An open gesture, and every interaction other
+        widgets hold open (a slider burst), is ended first.
         """
-        self.gestures.start(HandleDrag(self, index, vertex))
+        self.gestures.start(self._drag_gesture({"index": int(index), "vertex": vertex}))
 
     def drag_to(self, position: Any) -> float:
-        """Move the dragged handle's vertex to ``position`` (3,) in model space.
+        """Move the dragged marker's vertex to ``position`` (3,) in model space.
 
-        The handle offset is ``position - model.blended()[vertex]`` (the edit sits
-        on top of the blend); with :attr:`symmetric` the mirror handle follows.
-        Returns the kernel time in ms (rank-1 update + evaluate + send); 0 without a drag.
+        Returns the kernel time in ms (the edit + evaluate + send); 0 without a drag.
         """
         p = np.asarray(position, dtype=np.float64).reshape(-1)
         if p.shape != (3,) or not np.isfinite(p).all():
             raise ValueError(
                 f"Viewport.drag_to: position must be 3 finite numbers, got {position!r}"
             )
-        g = self.gestures.current(HandleDrag)
+        g = self.gestures.current(DragGesture)
         return 0.0 if g is None else self.gestures.update(g, {"model_position": p})
 
     def end_drag(self) -> None:
-        """End the open handle drag (one undo step); no-op without one."""
-        self.gestures.finish(HandleDrag)
+        """End the open marker drag (one undo step); no-op without one."""
+        self.gestures.finish(DragGesture)
 
-    def begin_stroke(self, expression: str | None = None) -> None:
-        """Start a paint stroke of ``expression`` (default :attr:`paint_expression`).
+    def begin_stroke(self, target: str | None = None) -> None:
+        """Start a brush stroke: what a press on the face does.
 
-        Opens the interaction "Paint <expression>"; an open gesture, and every
-        interaction other widgets hold open, is ended first.
+        The stroke goes to the stroke handler if a panel set one, else to the stroke
+        tool (the current tool if it strokes, else the first registered one) with
+        ``target`` (default: the tool's own :meth:`~widgets.viewport.tools.Tool.target`). An open
+        gesture, and every interaction other widgets hold open, is ended first.
         """
-        self.gestures.start(PaintStroke(self, expression))
+        self.gestures.start(self._stroke_gesture({} if target is None else {"target": target}))
 
-    def paint_at(self, vertices: Any) -> float:
+    def stroke_at(self, vertices: Any) -> float:
         """Brush dabs at vertex ids ``vertices`` (int or sequence) within the open stroke.
 
-        One overlay + geometry update is sent after the last dab. Returns the
-        kernel time in ms (dabs + updates); 0 without an open stroke.
+        One tint + geometry update is sent after the last dab. Returns the kernel
+        time in ms (dabs + updates); 0 without an open stroke.
         """
-        ids = vertex_ids(vertices, self._model.n_vertices, "Viewport.paint_at")
-        g = self.gestures.current(PaintStroke)
+        ids = vertex_ids(vertices, self._model.n_vertices, "Viewport.stroke_at")
+        g = self.gestures.current(StrokeGesture)
         return 0.0 if g is None else self.gestures.update(g, {"vertices": ids})
 
     def end_stroke(self) -> None:
-        """End the open paint stroke (one undo step); no-op without one."""
-        self.gestures.finish(PaintStroke)
+        """End the open brush stroke (one undo step); no-op without one."""
+        self.gestures.finish(StrokeGesture)
 
     def cancel_gesture(self) -> None:
         """Cancel the open gesture: its edits are put back, no undo step."""
         self.gestures.cancel()
 
     def set_stroke_handler(self, handler: Any, target: str = "") -> None:
-        """Send paint strokes to ``handler`` instead of the model's paint layers (None: back).
+        """Send brush strokes to ``handler`` instead of the stroke tool (None: back).
 
         ``handler`` has ``begin()``, ``dab(vertices)``, ``end()``, ``cancel()``
-        and optionally ``overlay() -> (n,) float or None`` (drawn as the paint
-        overlay while it is set). ``target`` describes what a stroke does (the
-        front end paints on a press only when it, or :attr:`paint_expression`,
-        is set). An open stroke of the previous handler is cancelled; an open
-        paint stroke is ended.
+        and optionally ``overlay() -> (n,) float or None`` (drawn as the surface
+        tint while it is set). ``target`` describes what a stroke does (the front
+        end strokes on a press only when it, or the stroke tool's target, is set).
+        An open stroke of the previous handler is cancelled; an open stroke of the
+        tool is ended.
         """
         if handler is not None and not str(target):
             raise ValueError("Viewport.set_stroke_handler: describe the stroke's target")
         g = self.gestures.active
         if isinstance(g, HookedStroke) and g.handler is not handler:
             self.gestures.cancel(HookedStroke)
-        if handler is not None:
-            self.gestures.finish(PaintStroke)
+        if handler is not None and not isinstance(self.gestures.active, HookedStroke):
+            self.gestures.finish(StrokeGesture)
         self.stroke_handler = handler
-        self.stroke_target = str(target) if handler is not None else ""
+        self._hook_target = str(target) if handler is not None else ""
         overlay = getattr(handler, "overlay", None) if handler is not None else None
-        self.sync.overlay_source = overlay if overlay is not None else (
+        self.sync.tint_source = overlay if overlay is not None else (
             (lambda: None) if handler is not None else None
         )
-        # the overlay's source changed: send the difference to what the front end has
+        # the tint's source changed: send the difference to what the front end has
+        self.stroke_target = self._hook_target
         if self._connected:
-            self.errors.guard("Viewport paint overlay")(self.sync.sync_paint)()
+            self.refresh_tool()
 
-    def _handle_gesture(self, content: Mapping[str, Any]) -> Gesture:
+    def tool_of_kind(self, kind: str) -> Tool | None:
+        """The tool a ``kind`` gesture goes to: the current tool if it is one, else the first registered."""
+        current = self.tools.get(self.tool)
+        if current is not None and current.kind == kind:
+            return current
+        return next((tl for tl in self.tools.values() if tl.kind == kind), None)
+
+    def tools_current_first(self) -> list[Tool]:
+        """The tools, the current one first (whose markers and tint are drawn first)."""
+        current = self.tools.get(self.tool)
+        return [current, *(tl for tl in self.tools.values() if tl is not current)] if current else list(self.tools.values())
+
+    def _drag_gesture(self, content: Mapping[str, Any]) -> Gesture:
         v = content.get("vertex")
         index, vertex = int(content["index"]), None if v is None else int(v)
         if self.drag_handler is not None:
             return HookedDrag(self, self.drag_handler, index, vertex)
-        return HandleDrag(self, index, vertex)
+        tool = self.tool_of_kind("drag")
+        if tool is None:
+            raise ValueError("Viewport: no registered tool drags markers")
+        return tool.gesture({**content, "index": index, "vertex": vertex})
 
-    def _paint_gesture(self, content: Mapping[str, Any]) -> Gesture:
+    def _stroke_gesture(self, content: Mapping[str, Any]) -> Gesture:
         if self.stroke_handler is not None:
-            return HookedStroke(self, self.stroke_handler, self.stroke_target)
-        return PaintStroke(self)
+            return HookedStroke(self, self.stroke_handler, self._hook_target)
+        tool = self.tool_of_kind("stroke")
+        if tool is None:
+            raise ValueError("Viewport: no registered tool makes brush strokes")
+        return tool.gesture(content)
 
-    def _unposed(self, position: Any) -> Any:
+    def unposed(self, position: Any) -> Any:
         """A point picked on the shown mesh, in model space.
 
         The view draws :meth:`FaceModel.evaluate`, which applies the keyed head pose
-        last (or the unposed face under the pose :meth:`show_head_pose` set); handle
-        offsets and region pins live before it, so a pointer position is mapped back
+        last (or the unposed face under the pose :meth:`show_head_pose` set); the
+        edits a pointer makes live before it, so a pointer position is mapped back
         with the inverse rigid transform (a no-op without a pose).
         """
         M = self.sync.shown_matrix()
@@ -174,14 +201,3 @@ class GestureAPI:
         self.sync.view_pose = M
         if self._connected:
             self.sync.push_geometry_event(False)
-
-    def _resolve_handle(self, index: int, vertex: int | None) -> int | None:
-        """The model handle ``index`` if it sits on ``vertex``, else the handle on ``vertex``."""
-        verts = self._model.handles.vertices
-        if 0 <= index < verts.size and (vertex is None or int(verts[index]) == vertex):
-            return int(index)
-        if vertex is not None:
-            hits = np.flatnonzero(verts == vertex)
-            if hits.size:
-                return int(hits[0])
-        return None

@@ -1,21 +1,20 @@
 """One gesture protocol for every pointer interaction of the viewport.
 
 A gesture is a press, moves and a release in the browser that changes the
-model across several comm messages: a handle drag, a paint stroke, and the
-hooked ones other panels install (a region pin drag or region brush through
-``Viewport.drag_handler``, the wrinkle eraser through
-``Viewport.set_stroke_handler``). All of them speak the same protocol:
+model across several comm messages: a tool's marker drag or brush stroke
+(:mod:`widgets.viewport.tools`), and the hooked ones panels install through
+``Viewport.drag_handler`` and ``Viewport.set_stroke_handler``. All of them speak the same protocol:
 
 * the front end sends ``{"type": kind, "phase": "start" | "move" | "end" |
-  "cancel", "seq", ...}`` (``kind`` is ``"handle"`` or ``"paint"``; an optional
+  "cancel", "seq", ...}`` (``kind`` is ``"drag"`` or ``"stroke"``; an optional
   ``"gesture"`` id names the press the message belongs to);
 * it keeps ONE message in flight: the next one (the newest pointer position,
   or the dabs queued since) goes when the kernel answers
   ``{"type": kind + "_ack", "seq", "phase", "version", "kernel_ms"[,
-  "paint_version"]}`` - or when the geometry patch carrying that ``seq``
+  "tint_version"]}`` - or when the geometry patch carrying that ``seq``
   arrives;
 * ``{"type": kind + "_cancel"}`` tells the front end the gesture is over on the
-  kernel side (an error, the dragged handle removed, another widget's edit
+  kernel side (an error, the dragged marker gone, another widget's edit
   closed it): it stops sending;
 * ``"end"`` keeps the edits: one undo step. ``"cancel"`` puts everything back
   (no undo step). An error ends the gesture keeping what was done before it.
@@ -50,7 +49,7 @@ DRAG_WATCHDOG_S = 30.0
 
 
 class GestureStopped(Exception):
-    """Raised by a gesture that cannot go on (not an error: e.g. its handle was removed)."""
+    """Raised by a gesture that cannot go on (not an error: e.g. its marker was removed)."""
 
 
 class Gesture:
@@ -386,7 +385,7 @@ class GestureDispatcher:
             self.viewport.errors.report("ending an abandoned drag or stroke", exc)
 
 
-_WHAT = {"handle": "handle drag", "paint": "paint stroke"}
+_WHAT = {"drag": "marker drag", "stroke": "brush stroke"}
 
 
 def vertex_ids(vertices: Any, n: int, what: str) -> np.ndarray:

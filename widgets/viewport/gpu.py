@@ -1,7 +1,7 @@
 """The GPU path of the viewport: the rig is uploaded once, updates send only weights.
 
 The browser evaluates the linear part of the rig itself (``widgets/js/src/viewport/
-gpu_morph.js``); the kernel sends, per slider tick, handle drag update or
+gpu_morph.js``); the kernel sends, per slider tick, marker drag update or
 playback frame, only the parameters::
 
     p = M · ( base + a(v) · Σ_k w_k δ_k(v) + c(v) · B(v) u_H )
@@ -9,21 +9,21 @@ playback frame, only the parameters::
 
 * ``w`` (k,) the shapes' effective weights (derived corrective weights, muted
   shapes 0: :meth:`StateView.weight_vector`), ``u_H`` (H_u, 3) the controls of
-  the first linear layer that has a basis (the handle offsets per shell-basis
+  the first linear layer that has a basis (its control offsets per basis
   column, ``layer.control_basis(view)``), ``M`` the rigid head pose;
 * ``δ`` the shapes' deltas, vertex-major and sparse (only the vertices a shape
   moves: per vertex ``(offset, count)`` into ``(dx, dy, dz, shape)`` entries),
   half floats when that rounds no vertex by more than :data:`HALF_TOLERANCE` of
-  the face size at the largest slider value, else floats; ``B`` the shell basis
-  of the current handle set;
+  the face size at the largest slider value, else floats; ``B`` that layer's
+  basis for its current controls (a linear shell's, Bickel 2008 §4);
 * ``a(v)``, ``c(v)`` per-vertex gains: each linear layer says how much of the
-  motion below it a vertex keeps (:mod:`workbench.core.linear`; e.g. the region
-  blend keeps its background, Joshi 2003, and painted expressions ``1 - Σ_e W_e``,
+  motion below it a vertex keeps (:mod:`workbench.core.linear`; e.g. a local blend
+  keeps its background, Joshi 2003, or ``1 - Σ_e W_e`` under weight maps,
   Pighin 1998 §4.2); ``a`` is the product over all of them, ``c`` over those
   above the controls layer;
 * ``r(v)`` the *residual*: whatever the kernel's ``evaluate()`` holds beyond
   that linear part — the linear layers' constant terms and the nonlinear
-  layers (pose-space wrinkles). The kernel computes it from
+  layers (e.g. pose-space detail). The kernel computes it from
   its own evaluation, so Python stays the truth: any layer this model does not
   describe lands in ``r`` and is streamed as sparse rows, exactly like today's
   patches. During an interaction rows are re-sent only when they moved more
@@ -54,10 +54,10 @@ and residual rows per frame.
 
 The page moves the face before the kernel answers (``gpu_local.js``): the shape
 sliders a view follows (``Viewport.follow_sliders``, trait ``_weight_slider_ids``)
-and handle drags change the parameters in the page at once; ``_gpu_meta`` gives
+and marker drags change the parameters in the page at once; ``_gpu_meta`` gives
 it the shapes' order (``names``), the rules of the played weights (``local``:
 muted shapes, correctives as products of their drivers, :func:`local_weight_rules`)
-and the basis column of each handle (``columns``). The kernel's parameters
+and the basis column of each control (``columns``). The kernel's parameters
 follow and win. While parameters change, a view whose full frame is slow draws
 a simplified face evaluated at its own vertices (``gpu_draft.js``,
 ``Viewport.fast_interaction``) and the full mesh once the changes pause.
@@ -172,8 +172,8 @@ def linear_layers(model: Any, view: Any) -> tuple[np.ndarray, Any]:
     ``gains`` (n, 2) float32 ``(a, c)``: how much of the global blend and of the
     controls layer's displacement each vertex keeps (the product of the gains
     of the linear layers above each, :func:`workbench.core.linear.decompose`);
-    ``controls`` the first linear layer with keyed controls and a basis (the
-    handle shell), or None. Whatever else the layers add is in the residual.
+    ``controls`` the first linear layer with keyed controls and a basis (a
+    linear shell), or None. Whatever else the layers add is in the residual.
     """
     n = model.n_vertices
     dec = decompose(model.pipeline.layers, view, None, n=n, constants=False)
@@ -214,9 +214,9 @@ class GpuSync:
         self.basis_key: Any = None
         self.gain_key: Any = None
         self.gain: np.ndarray | None = None
-        #: the linear layer whose controls the page evaluates with the basis (the handle shell), or None
+        #: the linear layer whose controls the page evaluates with the basis (a linear shell), or None
         self.controls_layer: Any = None
-        self.columns: np.ndarray | None = None  # basis column of each handle
+        self.columns: np.ndarray | None = None  # basis column of each control
         self.hu = 0
         self.k = 0
         self.residual: np.ndarray | None = None  # what the front end has (n, 3)
@@ -239,7 +239,7 @@ class GpuSync:
     def ensure_rig(self, view: Any, final: bool = True) -> None:
         """Send the neutral + deltas, the shell basis and the gains when they changed.
 
-        Not ``final`` (mid-interaction, e.g. a paint stroke): the gains stay as they are
+        Not ``final`` (mid-interaction, e.g. a brush stroke): the gains stay as they are
         and the residual carries the difference, as sparse rows; the exact update after
         the interaction sends them.
         """
@@ -352,7 +352,7 @@ class GpuSync:
         ids = changed_rows(residual, self.residual, max(tolerance, floor))
         rows = residual[ids]
         if ids.size >= SPARSE_FRACTION * residual.shape[0]:
-            # e.g. regions switched on: the whole residual, once, as a trait
+            # e.g. a layer switched on: the whole residual, once, as a trait
             self.residual = residual.copy()
             with w.hold_sync():
                 assign_synced(w, _gpu_residual=f32_bytes(residual), _gpu_params=params.tobytes())

@@ -2,8 +2,8 @@
 
 :class:`OverlayAPI` is mixed into :class:`widgets.viewport.widget.Viewport`
 (kept apart so the widget's module stays readable): the Capture tab's markers,
-landmarks or point cloud (:meth:`set_overlay_points`) and the pose-space
-wrinkles' feature graph coloured by strain (:meth:`set_feature_graph`,
+landmarks or point cloud (:meth:`set_overlay_points`) and a feature graph
+(Bickel et al. 2008 §5.1) coloured by strain (:meth:`set_feature_graph`,
 :meth:`set_feature_strain`). The values are checked here and sent as the
 widget's byte traits (``_overlay_points``, ``_feature_edges``, ...).
 """
@@ -66,9 +66,8 @@ class OverlayAPI:
         return int(keep.sum())
 
     # ------------------------------------------------------- feature graph overlay
-    # Pose-space wrinkles (Bickel et al. 2008 §5.1): the edges between handles on
-    # which strain is measured, coloured by strain. The viewport does not know about
-    # wrinkle layers; widgets.WrinklePanel feeds it.
+    # A feature graph (Bickel et al. 2008 §5.1): the edges on which a layer measures
+    # strain, coloured by strain. The viewport does not know the layer; its panel feeds it.
 
     @property
     def feature_updates_sent(self) -> int:

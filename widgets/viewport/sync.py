@@ -1,4 +1,4 @@
-"""What the viewport ships to the browser: geometry, paint overlay, handle markers, feature graph.
+"""What the viewport ships to the browser: geometry, surface tint, markers, feature graph.
 
 :class:`SceneSync` owns what the front end was last sent and decides, on every
 model event, between a full buffer and a patch. It writes the widget's synced
@@ -14,14 +14,20 @@ Transfer protocol (binary only, never JSON lists):
   ``_positions`` is then updated *without* a sync message so that a reloaded
   page still gets the current full state. ``seq`` is the gesture message whose
   edit the patch shows (the front end may send its next update on it).
-* The weight-map overlay: ``_paint_weights`` (float32 n, or empty) plus
-  ``{"type": "paint_patch", "version"}`` messages with buffers
-  ``[ids uint32, weights float32]``, the same scheme with ``_paint_version``.
+* The surface tint (a per-vertex weight in [0, 1] a tool shows):
+  ``_tint`` (float32 n, or empty) plus ``{"type": "tint_patch", "version"}``
+  messages with buffers ``[ids uint32, weights float32]``, the same scheme
+  with ``_tint_version``. It comes from a stroke handler's ``overlay()`` while
+  one is set, else from the current tool, else from the first tool that has one
+  (``Tool.tint``).
+* Markers: ``_markers`` (uint32 h) and ``_marker_mirror`` (int32 h, or empty),
+  from the current tool, else the first tool that has some (``Tool.markers``), re-sent when they
+  change; ``Viewport.markers = ids`` shows others until then.
 
 During an interaction (``deformed(False)``) a vertex is re-sent only when it
 moved more than :data:`~widgets.viewport.common.DRAG_TOLERANCE` of the mesh's
-size since the front end last got it (the shell basis of a handle moves almost
-every vertex by a tiny amount); the final event of the interaction sends the
+size since the front end last got it (a shell basis moves almost every vertex
+by a tiny amount); the final event of the interaction sends the
 exact positions.
 
 GPU mode (``Viewport.gpu``, the default, when the front end can): after the full
@@ -30,8 +36,8 @@ buffer, updates are the parameters of the rig the browser evaluates itself
 residual rows) instead of vertex rows; ``_positions`` is then kept current
 silently after each exact update, for a reloaded page.
 
-While a gesture message runs several edits (the dabs of one paint message),
-:meth:`SceneSync.held` turns model events into one overlay + geometry update
+While a gesture message runs several edits (the dabs of one stroke message),
+:meth:`SceneSync.held` turns model events into one tint + geometry update
 sent after the last edit.
 """
 
@@ -92,13 +98,14 @@ class SceneSync:
         self._pending = False
         #: (4, 4) head pose drawn instead of the model's (:meth:`Viewport.show_head_pose`), or None
         self.view_pose: np.ndarray | None = None
-        # paint overlay
-        self.paint_last: np.ndarray | None = None  # weights the front end has (None = empty)
-        self.paint_last_ref: Any = None  # the array they came from
-        self.paint_updates_sent = {"full": 0, "patch": 0}
-        #: returns the overlay of a stroke handler, or None to show the model's paint layers
-        self.overlay_source: Any = None
-        self.handles_sent: tuple[bytes, bytes] | None = None
+        # surface tint
+        self.tint_last: np.ndarray | None = None  # weights the front end has (None = empty)
+        self.tint_last_ref: Any = None  # the array they came from
+        self.tint_updates_sent = {"full": 0, "patch": 0}
+        #: returns the tint of a stroke handler, or None to ask the tools
+        self.tint_source: Any = None
+        #: the tools' markers as last sent (bytes of the ids, of the mirror links)
+        self.markers_sent: tuple[bytes, bytes] | None = None
         # feature graph
         self.strain_sent: np.ndarray | None = None
         self.strain_pending: np.ndarray | None = None
@@ -109,7 +116,7 @@ class SceneSync:
     # ------------------------------------------------------------------ batching
     @contextmanager
     def held(self) -> Iterator[None]:
-        """Run several edits; send one overlay + geometry update after the last."""
+        """Run several edits; send one tint + geometry update after the last."""
         self._hold += 1
         try:
             yield
@@ -117,7 +124,7 @@ class SceneSync:
             self._hold -= 1
         if self._pending and not self._hold:
             self._pending = False
-            self.sync_paint()
+            self.sync_tint()
             self.push_geometry_event(False)
 
     @contextmanager
@@ -253,9 +260,20 @@ class SceneSync:
         self.log_sent("full", w._version)
         self.updates_sent["full"] += 1
 
-    # ------------------------------------------------------------- paint overlay
-    def sync_paint(self, *_args: Any) -> None:
-        """Send the overlay weights (stroke handler's, else the selected expression's)."""
+    # -------------------------------------------------------------- surface tint
+    def tint_weights(self) -> np.ndarray | None:
+        """The tint to show: the stroke handler's, else the current tool's, else the first tool's that has one."""
+        if self.tint_source is not None:
+            ov = self.tint_source()
+            return None if ov is None else np.asarray(ov, dtype=np.float32)
+        for tool in self.widget.tools_current_first():
+            weights = tool.tint()
+            if weights is not None:
+                return weights
+        return None
+
+    def sync_tint(self, *_args: Any) -> None:
+        """Send the tint (full, or the vertices that changed) when it differs from the front end's."""
         if self._hold:
             self._pending = True
             return
@@ -263,70 +281,65 @@ class SceneSync:
         with model.lock:
             if not self.connected:
                 return
-            weights: np.ndarray | None
-            if self.overlay_source is not None:
-                ov = self.overlay_source()
-                weights = None if ov is None else np.asarray(ov, dtype=np.float32)
-            else:
-                expr = w.paint_expression if w.paint_overlay else ""
-                weights = model.paint.get(expr) if expr else None
-            last = self.paint_last
+            weights = self.tint_weights()
+            last = self.tint_last
             if weights is None:
                 if last is not None:
-                    self.send_paint_full(None)
+                    self.send_tint_full(None)
                 return
             if last is None or last.shape != weights.shape:
-                self.send_paint_full(weights)
+                self.send_tint_full(weights)
                 return
-            if weights is self.paint_last_ref:
+            if weights is self.tint_last_ref:
                 return
             changed = np.flatnonzero(weights != last)
-            self.paint_last_ref = weights
+            self.tint_last_ref = weights
             if changed.size == 0:
                 return
             if changed.size >= SPARSE_FRACTION * weights.shape[0]:
-                self.send_paint_full(weights)
+                self.send_tint_full(weights)
                 return
             last[changed] = weights[changed]
-            version = w._paint_version + 1
+            version = w._tint_version + 1
             # Silent: a reloaded page gets the current weights without a full sync here.
-            store_silently(w, _paint_version=version, _paint_weights=f32_bytes(last))
+            store_silently(w, _tint_version=version, _tint=f32_bytes(last))
             w.send(
-                {"type": "paint_patch", "version": version, "count": int(changed.size)},
+                {"type": "tint_patch", "version": version, "count": int(changed.size)},
                 buffers=[u32_bytes(changed), f32_bytes(weights[changed])],
             )
-            self.paint_updates_sent["patch"] += 1
+            self.tint_updates_sent["patch"] += 1
 
-    def send_paint_full(self, weights: np.ndarray | None) -> None:
+    def send_tint_full(self, weights: np.ndarray | None) -> None:
         w = self.widget
-        self.paint_last = None if weights is None else np.array(weights, dtype=np.float32)
-        self.paint_last_ref = weights
+        self.tint_last = None if weights is None else np.array(weights, dtype=np.float32)
+        self.tint_last_ref = weights
         with w.hold_sync():
-            assign_synced(w, _paint_weights=b"" if weights is None else f32_bytes(weights),
-                          _paint_version=w._paint_version + 1)
-        self.paint_updates_sent["full"] += 1
+            assign_synced(w, _tint=b"" if weights is None else f32_bytes(weights),
+                          _tint_version=w._tint_version + 1)
+        self.tint_updates_sent["full"] += 1
 
-    def resend_paint(self) -> None:
-        """The front end lost track of the overlay: send it whole."""
+    def resend_tint(self) -> None:
+        """The front end lost track of the tint: send it whole."""
         with self.model.lock:
-            self.paint_last = None
-        self.sync_paint()
+            self.tint_last = None
+        self.sync_tint()
 
-    # ------------------------------------------------------------------ handles
-    def sync_handles(self, *_args: Any) -> None:
-        """Send the model's handle vertices / mirror links when the handle *set* changed."""
+    # ------------------------------------------------------------------ markers
+    def sync_markers(self, force: bool = False) -> None:
+        """Send the tools' markers when they changed (``force``: also over display-only ones)."""
         w = self.widget
         with self.model.lock:
-            h = self.model.handles
-            verts = u32_bytes(h.vertices)
-            mirror = np.ascontiguousarray(h.mirror, dtype="<i4").tobytes()
-        if (verts, mirror) != self.handles_sent:
-            self.handles_sent = (verts, mirror)
+            found = next((m for m in (tool.markers() for tool in w.tools_current_first()) if m is not None), None)
+            ids, mirror = found if found is not None else (np.zeros(0, np.uint32), np.zeros(0, np.int32))
+            verts = u32_bytes(np.asarray(ids))
+            links = np.ascontiguousarray(mirror, dtype="<i4").tobytes()
+        if force or (verts, links) != self.markers_sent:
+            self.markers_sent = (verts, links)
             with w.hold_sync():
-                w._handles = verts
-                w._handle_mirror = mirror
-                if w.selected_handle >= len(h):
-                    w.selected_handle = -1
+                w._markers = verts
+                w._marker_mirror = links
+                if w.selected_marker >= len(verts) // 4:
+                    w.selected_marker = -1
 
     # ------------------------------------------------------------- feature graph
     def set_feature_graph(self, pairs: np.ndarray) -> None:

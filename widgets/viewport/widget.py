@@ -3,39 +3,43 @@
 The viewport only *observes* the model: it subscribes to ``model.events.deformed``
 and ``model.events.shapes`` and ships ``model.evaluate()`` to the browser. Two
 viewports of one model therefore always agree, and an edit made from any cell
-updates every view. What is sent and how (full buffers, patches, the paint
-overlay, handle markers, the feature graph) is :mod:`widgets.viewport.sync`;
-every pointer interaction that edits the model (handle drag, paint stroke, and
-the hooked region pin drag, region brush and wrinkle eraser) is one
-:class:`~widgets.viewport.gestures.Gesture` (:mod:`widgets.viewport.gestures`,
-:mod:`widgets.viewport.tools`) driven by one dispatcher, ``Viewport.gestures``.
+updates every view. What is sent and how (full buffers, patches, the surface
+tint, markers, the feature graph) is :mod:`widgets.viewport.sync`; every
+pointer interaction that edits the model is one
+:class:`~widgets.viewport.gestures.Gesture` (:mod:`widgets.viewport.gestures`)
+driven by one dispatcher, ``Viewport.gestures``.
 
 Camera orbit/zoom/pan happen entirely in the browser (OrbitControls): they
 never send a kernel message. Each view frames the camera on the *neutral*
 mesh's bounds (``_neutral_bounds``, sent with every topology) at the canvas's
 current size, until the person orbits, zooms or pans.
 
-Handle editing (``tool="sculpt"``, Bickel et al. 2008 §4): a drag on a marker
-is a ``"handle"`` gesture (``{"type": "handle", "phase", "index", "vertex",
-"position": [x, y, z], "seq"}``); ``{"type": "add_handle", "vertex"}``
-(Shift-click on the surface) and ``{"type": "remove_handle", "index",
-"vertex"}`` (Alt-click on a marker) are single clicks. The markers are the
-model's handles, re-sent whenever the handle *set* changes;
-``Viewport.handles = ids`` draws other markers until it next changes.
+Tools (:mod:`widgets.viewport.tools`): ``tool`` is ``"orbit"`` or a tool a
+method family registered; ``tools`` holds each one's state in this view
+(``viewport.tools[name]``, settings a panel links to). The viewport knows only the two
+kinds of pointer work a tool does:
 
-Painterly blending (``tool="paint"``, Pighin et al. 1998 §4.2): a left press on
-the face is a ``"paint"`` gesture (``{"type": "paint", "phase", "vertices":
-[v, ...], "seq"}``): the front end queues hit vertices a quarter of the brush
-radius apart while a message is in flight (at most 8 per message); Python calls
-``model.paint.dab(paint_expression, v, brush)`` for each. The brush
-(``brush_radius`` in model units along the surface, ``brush_opacity``,
-``brush_falloff``, ``brush_mode``, ``brush_mirror``) lives on the viewport so
-the front end can draw the brush cursor; :class:`widgets.PaintPanel` links its
-controls to these traits.
+* ``"drag"`` tools: a drag on a marker is a ``"drag"`` gesture (``{"type":
+  "drag", "phase", "index", "vertex", "position": [x, y, z], "seq"}``);
+  ``{"type": "pick", "vertex"}`` (Shift-click on the surface) and ``{"type":
+  "unpick", "index", "vertex"}`` (Alt-click on a marker) are single clicks.
+  The markers are the current tool's, else the first tool's that has some,
+  re-sent when they change;
+  ``Viewport.markers = ids`` draws other markers until then.
+* ``"stroke"`` tools: a left press on the face is a ``"stroke"`` gesture
+  (``{"type": "stroke", "phase", "vertices": [v, ...], "seq"}``): the front
+  end queues hit vertices a quarter of the brush radius apart while a message
+  is in flight (at most 8 per message). The brush (``brush_radius`` in model
+  units along the surface, ``brush_opacity``, ``brush_falloff``,
+  ``brush_mode``, ``brush_mirror``) lives on the viewport so the front end can
+  draw the brush cursor; a press strokes only while ``stroke_target`` says
+  what it changes.
 
-Feature-graph overlay (pose-space wrinkles, Bickel et al. 2008 §5.1): the edges
-between handles on which a :class:`workbench.methods.wrinkles.layer.WrinkleLayer`
-measures skin strain, drawn as line segments coloured by their relative stretch
+Panels borrow the pointer with hooks (``drag_handler``,
+``set_stroke_handler``, ``pick_handler``), which win over the tools.
+
+Feature-graph overlay (Bickel et al. 2008 §5.1): edges between vertices on
+which a layer measures skin strain, drawn as line segments coloured by their relative stretch
 (blue = compressed, grey = rest, red = stretched, full colour at
 ±:attr:`Viewport.strain_range`): ``_feature_edges`` (uint32, F*2:
 :meth:`Viewport.set_feature_graph`) and ``_feature_strain`` (float32, F:
@@ -62,7 +66,6 @@ from widgets.viewport.common import (
     BRUSH_MODES,
     FALLOFFS,
     STRAIN_RANGE,
-    TOOLS,
     as_ids,
     default_brush_radius,
     f32_bytes,
@@ -74,12 +77,7 @@ from widgets.viewport.gesture_api import GestureAPI
 from widgets.viewport.gestures import GestureDispatcher
 from widgets.viewport.overlays import OverlayAPI
 from widgets.viewport.sync import SceneSync
-from widgets.viewport.tools import (
-    HandleDrag,
-    PaintStroke,
-    add_handle,
-    remove_handle,
-)
+from widgets.viewport.tools import DragGesture, StrokeGesture, make_tools, tool_names
 
 
 class Viewport(GestureAPI, OverlayAPI, anywidget.AnyWidget):
@@ -100,40 +98,37 @@ class Viewport(GestureAPI, OverlayAPI, anywidget.AnyWidget):
         Draw the triangle edges over the shaded surface.
     vertex_colors : (n, 3) float or None
         Per-vertex sRGB colour overlay in [0, 1]; None shows component colours.
-    handles : (h,) int
-        Vertex ids drawn as handle markers.
+    markers : (h,) int
+        Vertex ids drawn as markers (display only, until the tools' markers change).
     component_visible : dict[str, bool]
         Component name -> visible (missing names are visible).
     probe_ids : (p,) int
         Test hook: the front end writes the screen positions of these vertices
         to the ``data-probe`` attribute of its root element after each render.
-    tool : {"orbit", "sculpt", "paint"}
-        ``"sculpt"``: left-drag a handle marker to move it in the view plane,
-        Shift-click the surface to add a handle, Alt-click a marker to remove it;
-        orbit/zoom/pan still work off the markers. ``"paint"``: left-drag on the
-        face paints :attr:`paint_expression` with the brush (one undo step per
-        stroke); off the face, or with Alt held, the left button orbits.
-        ``"orbit"``: camera only.
+    tool : str
+        ``"orbit"`` (camera only) or a registered tool (:func:`widgets.viewport.tools.tool_names`).
+        With a ``"drag"`` tool, left-drag a marker to move it in the view plane,
+        Shift-click the surface to pick a vertex, Alt-click a marker to unpick it;
+        orbit/zoom/pan still work off the markers. With a ``"stroke"`` tool a
+        left-drag on the face is a brush stroke (one undo step); off the face,
+        with Alt held, or while ``stroke_target`` is empty, the left button orbits.
+    tools : dict[str, widgets.viewport.tools.Tool]
+        Each registered tool's state in this view.
     symmetric : bool
-        Handle drags also move the mirror handle (x reflected); Shift-click adds
-        a mirrored pair; the mirror marker is highlighted.
+        Marker drags also move the mirror marker's edit (x reflected); Shift-click
+        picks a mirrored pair; the mirror marker is highlighted.
     add_on_click : bool
-        In sculpt mode, a plain click (no modifier) on the surface adds a handle.
-    selected_handle : int
-        Index of the last dragged handle (highlighted), or -1. Cleared when the
+        With a drag tool, a plain click (no modifier) on the surface picks too.
+    selected_marker : int
+        Index of the last dragged marker (highlighted), or -1. Cleared when the
         tool changes and when the pointer leaves the view.
-    paint_expression : str
-        The expression the brush paints (a blendshape or saved expression name;
-        "" = none: the left button then orbits in paint mode).
     brush_radius, brush_opacity, brush_falloff, brush_mode, brush_mirror
-        The brush (:class:`workbench.methods.paint.painting.Brush`); the radius is a surface
-        distance in model units (default :func:`default_brush_radius`).
-    paint_overlay : bool
-        Tint the surface by the painted weight of :attr:`paint_expression`
-        (white skin -> magenta at weight 1).
+        The brush of stroke tools; the radius is a surface distance in model
+        units (default :func:`default_brush_radius`).
     stroke_target : str
-        Set by :meth:`set_stroke_handler`: what paint strokes do while a stroke
-        handler receives them ("" = the model's paint layers).
+        What a stroke changes: the stroke handler's target while one is set, else
+        the stroke tool's (:meth:`~widgets.viewport.tools.Tool.target`); "" = the
+        left button orbits.
     feature_graph : bool
         Draw the feature-graph edges given to :meth:`set_feature_graph`, coloured
         by the strain given to :meth:`set_feature_strain` (blue compressed, grey
@@ -148,12 +143,12 @@ class Viewport(GestureAPI, OverlayAPI, anywidget.AnyWidget):
     gpu : bool
         Evaluate the rig in the browser (default), once a view says it can: the
         kernel uploads the neutral, the shapes' deltas and the shell basis once
-        and then sends only weights, handle offsets, the head pose and the rows
+        and then sends only weights, the linear layer's controls, the head pose and the rows
         of layers the GPU does not evaluate (:mod:`widgets.viewport.gpu`).
         ``False`` (or a browser without WebGL2 float textures) streams evaluated
         vertex rows, with a note in the view.
     fast_interaction : {"auto", "on", "off"}
-        While the rig's parameters change (a slider moves, a handle is dragged,
+        While the rig's parameters change (a slider moves, a marker is dragged,
         a clip plays), draw a simplified copy of the face evaluated on the GPU at
         its own vertices, and the full mesh once the changes pause (~0.14 s), as
         Maya's Fast Interaction does. ``"auto"`` (default): only in a view whose
@@ -165,7 +160,7 @@ class Viewport(GestureAPI, OverlayAPI, anywidget.AnyWidget):
         their units or up axes; no kernel messages), e.g. the Rig tab's template
         and target views.
 
-    The front end writes the markers' screen positions to ``data-handles``
+    The front end writes the markers' screen positions to ``data-markers``
     (JSON ``[[x, y, in_front], ...]`` in page pixels) after every render.
     """
 
@@ -183,24 +178,24 @@ class Viewport(GestureAPI, OverlayAPI, anywidget.AnyWidget):
     _up_axis = t.Unicode("+y").tag(sync=True)
     _neutral_bounds = t.Dict().tag(sync=True)
     _vertex_colors = t.Bytes(None, allow_none=True).tag(sync=True)
-    _handles = t.Bytes(b"").tag(sync=True)
+    _markers = t.Bytes(b"").tag(sync=True)
     _probe_ids = t.Bytes(b"").tag(sync=True)
     _error = t.Unicode("").tag(sync=True)
-    _handle_mirror = t.Bytes(b"").tag(sync=True)
-    _paint_weights = t.Bytes(b"").tag(sync=True)
-    _paint_version = t.Int(0).tag(sync=True)
+    _marker_mirror = t.Bytes(b"").tag(sync=True)
+    _tint = t.Bytes(b"").tag(sync=True)
+    _tint_version = t.Int(0).tag(sync=True)
+    #: tool name -> its kind ("drag" | "stroke"): how the page's pointer works with it
+    _tool_kinds = t.Dict(value_trait=t.Unicode()).tag(sync=True)
 
     tool = t.Unicode("orbit").tag(sync=True)
     symmetric = t.Bool(False).tag(sync=True)
     add_on_click = t.Bool(False).tag(sync=True)
-    selected_handle = t.Int(-1).tag(sync=True)
-    paint_expression = t.Unicode("").tag(sync=True)
+    selected_marker = t.Int(-1).tag(sync=True)
     brush_radius = t.Float(0.1).tag(sync=True)
     brush_opacity = t.Float(0.5).tag(sync=True)
     brush_falloff = t.Unicode("smooth").tag(sync=True)
     brush_mode = t.Unicode("add").tag(sync=True)
     brush_mirror = t.Bool(False).tag(sync=True)
-    paint_overlay = t.Bool(True).tag(sync=True)
     stroke_target = t.Unicode("").tag(sync=True)
     wireframe = t.Bool(False).tag(sync=True)
     component_visible = t.Dict(value_trait=t.Bool()).tag(sync=True)
@@ -254,53 +249,50 @@ class Viewport(GestureAPI, OverlayAPI, anywidget.AnyWidget):
         #: full updates the page asked for, with its reason ("gap": a version it never got,
         #: "rig": GPU parameters without the rig); the browser tests require none
         self.resyncs: list[str] = []
-        #: kernel-side ms per handle move (move_handle: rank-1 update + evaluate + send)
+        #: kernel-side ms per marker move (the tool's edit + evaluate + send)
         self.drag_ms: deque[float] = deque(maxlen=512)
         #: the geometry-send part of the last drag_ms entries
         self.drag_push_ms: deque[float] = deque(maxlen=512)
-        #: called after each handle drag ends with a dict of stats (SculptPanel status line)
+        #: called after each tool drag ends with a dict of stats (a panel's status line)
         self.drag_listeners: list[Any] = []
         self.last_drag: dict[str, Any] = {}
-        #: core ms per brush dab (model.paint.dab), for the status line and benchmarks
+        #: core ms per brush dab of a stroke tool, for the status line and benchmarks
         self.dab_ms: deque[float] = deque(maxlen=2048)
-        #: kernel ms per paint message (its dabs + overlay + geometry send)
-        self.paint_ms: deque[float] = deque(maxlen=512)
-        #: called after each stroke ends with a dict of stats (PaintPanel status line)
+        #: kernel ms per stroke message (its dabs + tint + geometry send)
+        self.stroke_ms: deque[float] = deque(maxlen=512)
+        #: called after each tool stroke ends with a dict of stats (a panel's status line)
         self.stroke_listeners: list[Any] = []
         self.last_stroke: dict[str, Any] = {}
-        #: receives paint strokes instead of the model's paint layers (set_stroke_handler)
+        #: receives brush strokes instead of the stroke tool (set_stroke_handler)
         self.stroke_handler: Any = None
-        #: receives marker drags instead of the model's handles (a plain attribute:
-        #: RegionsPanel sets its pin drag, region brush or seed picker here)
+        self._hook_target = ""
+        #: receives marker drags instead of the drag tool (a plain attribute: a panel
+        #: sets its own drag here)
         self.drag_handler: Any = None
         #: the shape sliders the page plays itself (follow_sliders)
         self.weight_sliders: dict[str, Any] = {}
-        #: receives surface clicks and marker Alt-clicks instead of the model's handles: an
+        #: receives surface clicks and marker Alt-clicks instead of the drag tool: an
         #: object with ``pick(vertex)`` and optionally ``remove(index, vertex)`` (the Rig
-        #: tab's landmark picker); ``None`` = add / remove model handles
+        #: tab's landmark picker); ``None`` = the drag tool's pick / unpick
         self.pick_handler: Any = None
         #: every pointer gesture (widgets.viewport.gestures): one open at a time
         self.gestures = GestureDispatcher(
             self,
-            {"handle": self._handle_gesture, "paint": self._paint_gesture},
-            ack_extra={"paint": lambda: {"paint_version": self._paint_version}},
+            {"drag": self._drag_gesture, "stroke": self._stroke_gesture},
+            ack_extra={"stroke": lambda: {"tint_version": self._tint_version}},
         )
+        #: each registered tool's state in this view (widgets.viewport.tools)
+        self.tools = make_tools(self)
+        self._tool_kinds = {name: tool.kind for name, tool in self.tools.items()}
         self._on_deformed = self.errors.guard("Viewport update")(self.sync.push_geometry_event)
         self._on_shapes = self.errors.guard("Viewport shapes update")(self.sync.push_geometry_event)
-        self._on_handles = self.errors.guard("Viewport handles update")(self.sync.sync_handles)
-        self._on_paint = self.errors.guard("Viewport paint overlay")(self.sync.sync_paint)
         self.on_msg(self._on_frontend_msg)
         ev = model.events
         ev.deformed.connect(self._on_deformed)
         ev.shapes.connect(self._on_shapes)
-        ev.handles.connect(self._on_handles)
-        ev.handles_changing.connect(self._on_handles)
-        ev.paint_layers.connect(self._on_paint)
-        ev.paint_layers_changing.connect(self._on_paint)
         self.sync.connected = True
         self.sync.push_geometry(force_full=True)
-        self.sync.sync_handles()
-        self.sync.sync_paint()
+        self.refresh_tool()
 
     # ------------------------------------------------------------------ public
     @property
@@ -335,17 +327,34 @@ class Viewport(GestureAPI, OverlayAPI, anywidget.AnyWidget):
         self._vertex_colors = f32_bytes(c)
 
     @property
-    def handles(self) -> np.ndarray:
-        """(h,) uint32 vertex ids drawn as handle markers."""
-        return np.frombuffer(self._handles, dtype="<u4").copy()
+    def markers(self) -> np.ndarray:
+        """(h,) uint32 vertex ids drawn as markers."""
+        return np.frombuffer(self._markers, dtype="<u4").copy()
 
-    @handles.setter
-    def handles(self, value: Any) -> None:
-        # Display-only markers: no mirror links; the model's handles come back when
-        # its handle set next changes.
+    @markers.setter
+    def markers(self, value: Any) -> None:
+        # Display-only markers: no mirror links; the tools' markers come back when
+        # they next change (or on show_tool_markers).
         with self.hold_sync():
-            self._handles = u32_bytes(as_ids(value, self._model.n_vertices, "handles"))
-            self._handle_mirror = b""
+            self._markers = u32_bytes(as_ids(value, self._model.n_vertices, "markers"))
+            self._marker_mirror = b""
+
+    def show_tool_markers(self) -> None:
+        """Draw the tools' markers again (after display-only ones set through :attr:`markers`)."""
+        self.sync.sync_markers(force=True)
+
+    def refresh_tool(self) -> None:
+        """A tool's markers, tint or stroke target may have changed: send what differs.
+
+        Tools call this from their model-event callbacks and when their settings change.
+        """
+        if not self._connected:
+            return
+        self.sync.sync_markers()
+        self.sync.sync_tint()
+        if self.stroke_handler is None:
+            tool = self.tool_of_kind("stroke")
+            self.stroke_target = tool.target() if tool is not None else ""
 
     @property
     def probe_ids(self) -> np.ndarray:
@@ -368,14 +377,17 @@ class Viewport(GestureAPI, OverlayAPI, anywidget.AnyWidget):
     @t.validate("tool")
     def _valid_tool(self, proposal: Any) -> str:
         value = str(proposal["value"])
-        if value not in TOOLS:
-            raise t.TraitError(f"Viewport.tool must be one of {TOOLS}, got {value!r}")
+        names = tool_names()
+        if value not in names:
+            raise t.TraitError(f"Viewport.tool must be one of {names}, got {value!r}")
         return value
 
     @t.observe("tool")
     def _on_tool_changed(self, _change: Any) -> None:
         # the last dragged marker is no longer highlighted once another tool is picked
-        self.selected_handle = -1
+        self.selected_marker = -1
+        if self._connected:
+            self.refresh_tool()
 
     @t.validate("brush_falloff")
     def _valid_falloff(self, proposal: Any) -> str:
@@ -406,27 +418,14 @@ class Viewport(GestureAPI, OverlayAPI, anywidget.AnyWidget):
         return value
 
     @property
-    def brush(self) -> Any:
-        """The current :class:`workbench.methods.paint.painting.Brush` (built from the brush traits)."""
-        from workbench.methods.paint.painting import Brush
-
-        return Brush(
-            radius=self.brush_radius,
-            opacity=self.brush_opacity,
-            falloff=self.brush_falloff,  # type: ignore[arg-type]
-            mode=self.brush_mode,  # type: ignore[arg-type]
-            mirror=self.brush_mirror,
-        )
-
-    @property
     def dragging(self) -> bool:
-        """True while a handle drag is open."""
-        return self.gestures.current(HandleDrag) is not None
+        """True while a marker drag (a tool's or a drag handler's) is open."""
+        return self.gestures.current(DragGesture) is not None
 
     @property
-    def painting(self) -> bool:
-        """True while a paint stroke (on the model's paint layers) is open."""
-        return self.gestures.current(PaintStroke) is not None
+    def stroking(self) -> bool:
+        """True while a brush stroke (a tool's or a stroke handler's) is open."""
+        return self.gestures.current(StrokeGesture) is not None
 
     def close(self) -> None:
         """End an open gesture, disconnect from the model, then close the widget."""
@@ -438,10 +437,8 @@ class Viewport(GestureAPI, OverlayAPI, anywidget.AnyWidget):
                 ev = self._model.events
                 ev.deformed.disconnect(self._on_deformed)
                 ev.shapes.disconnect(self._on_shapes)
-                ev.handles.disconnect(self._on_handles)
-                ev.handles_changing.disconnect(self._on_handles)
-                ev.paint_layers.disconnect(self._on_paint)
-                ev.paint_layers_changing.disconnect(self._on_paint)
+                for tool in self.tools.values():
+                    tool.close()
                 self.sync.connected = False
         super().close()
 
@@ -466,7 +463,7 @@ class Viewport(GestureAPI, OverlayAPI, anywidget.AnyWidget):
         ``sliders`` maps shape names to slider widgets whose ``value`` is the shape's
         weight (the Shapes tab's). A slider moved in the page then changes the weight
         the browser evaluates at once; the kernel's answer (the exact parameters and
-        any wrinkle rows) follows and wins. Call again when the sliders are rebuilt.
+        the rows of non-linear layers) follows and wins. Call again when the sliders are rebuilt.
         """
         self.weight_sliders = dict(sliders)
         self._weight_slider_ids = {str(k): str(w.model_id) for k, w in self.weight_sliders.items()}
@@ -478,22 +475,29 @@ class Viewport(GestureAPI, OverlayAPI, anywidget.AnyWidget):
                 self.sync.gpu.unavailable = ""  # try again
             self.errors.guard("Viewport resync")(self.sync.push_geometry)(force_full=True)
 
-    @t.observe("paint_expression", "paint_overlay")
-    def _on_paint_settings(self, _change: Any) -> None:
-        if self._connected:
-            self.errors.guard("Viewport paint overlay")(self.sync.sync_paint)()
+    # ------------------------------------------------------------------ clicks
+    def pick_at(self, vertex: int) -> None:
+        """What a Shift-click on the surface at ``vertex`` does: ``pick_handler``'s pick, else the drag tool's."""
+        vertex = int(vertex)
+        if not 0 <= vertex < self._model.n_vertices:
+            raise ValueError(f"Viewport.pick_at: vertex must be in 0..{self._model.n_vertices - 1}, got {vertex}")
+        if self.pick_handler is not None:
+            self.pick_handler.pick(vertex)
+            return
+        tool = self.tool_of_kind("drag")
+        if tool is not None:
+            tool.pick(vertex)
 
-    # ------------------------------------------------------------ handle clicks
-    def add_handle_at(self, vertex: int) -> int:
-        """Add a model handle at ``vertex`` (Shift-click); with :attr:`symmetric` a mirrored pair.
-
-        A pair is one undo step. Returns the new handle's index.
-        """
-        return add_handle(self, vertex)
-
-    def remove_handle_at(self, index: int, vertex: int | None = None) -> None:
-        """Remove a model handle (Alt-click); with :attr:`symmetric` its mirror too (one undo step)."""
-        remove_handle(self, index, vertex)
+    def unpick_at(self, index: int, vertex: int | None = None) -> None:
+        """What an Alt-click on marker ``index`` (at ``vertex``) does: ``pick_handler``'s remove, else the drag tool's unpick."""
+        if self.pick_handler is not None:
+            remove = getattr(self.pick_handler, "remove", None)
+            if remove is not None:
+                remove(int(index), vertex)
+            return
+        tool = self.tool_of_kind("drag")
+        if tool is not None:
+            tool.unpick(int(index), vertex)
 
     # --------------------------------------------------------------- messages
     def _show_error(self, text: str) -> None:
@@ -508,7 +512,7 @@ class Viewport(GestureAPI, OverlayAPI, anywidget.AnyWidget):
         if not isinstance(content, dict):
             return
         kind = content.get("type")
-        if kind in ("handle", "paint"):
+        if kind in ("drag", "stroke"):
             self.gestures.on_message(kind, content)
         elif kind == "gpu_ready":
             # a view can evaluate the rig: upload it, then send parameters only
@@ -532,22 +536,13 @@ class Viewport(GestureAPI, OverlayAPI, anywidget.AnyWidget):
             # parameters without their rig (content['why']); counted, the browser tests require none
             self.resyncs.append(str(content.get("why") or "gap"))
             self.errors.guard("Viewport resync")(self.sync.resync)(rig=bool(content.get("rig")))
-        elif kind == "request_paint":
-            self.errors.guard("Viewport paint resync")(self.sync.resend_paint)()
-        elif kind == "add_handle":
-            if self.pick_handler is not None:
-                self.errors.guard("pick")(self.pick_handler.pick)(int(content["vertex"]))
-            else:
-                self.errors.guard("add handle")(self.add_handle_at)(int(content["vertex"]))
-        elif kind == "remove_handle":
+        elif kind == "request_tint":
+            self.errors.guard("Viewport tint resync")(self.sync.resend_tint)()
+        elif kind == "pick":
+            self.errors.guard("pick")(self.pick_at)(int(content["vertex"]))
+        elif kind == "unpick":
             v = content.get("vertex")
-            vertex = None if v is None else int(v)
-            if self.pick_handler is not None:
-                remove = getattr(self.pick_handler, "remove", None)
-                if remove is not None:
-                    self.errors.guard("pick remove")(remove)(int(content["index"]), vertex)
-            else:
-                self.errors.guard("remove handle")(self.remove_handle_at)(int(content["index"]), vertex)
+            self.errors.guard("unpick")(self.unpick_at)(int(content["index"]), None if v is None else int(v))
 
     # ----------------------------------------------- what the front end was sent
     # (read by tests and benchmarks; widgets.viewport.sync owns it)
@@ -556,8 +551,8 @@ class Viewport(GestureAPI, OverlayAPI, anywidget.AnyWidget):
         return self.sync.updates_sent
 
     @property
-    def paint_updates_sent(self) -> dict[str, int]:
-        return self.sync.paint_updates_sent
+    def tint_updates_sent(self) -> dict[str, int]:
+        return self.sync.tint_updates_sent
 
     @property
     def push_ms(self) -> deque[float]:
@@ -571,22 +566,8 @@ class Viewport(GestureAPI, OverlayAPI, anywidget.AnyWidget):
     def _tolerance(self) -> float:
         return self.sync.tolerance
 
-    @property
-    def _model_handles_sent(self) -> tuple[bytes, bytes] | None:
-        return self.sync.handles_sent
-
-    @_model_handles_sent.setter
-    def _model_handles_sent(self, value: tuple[bytes, bytes] | None) -> None:
-        self.sync.handles_sent = value
-
     def _push_geometry(self, force_full: bool, tolerance: float = 0.0) -> None:
         self.sync.push_geometry(force_full, tolerance)
-
-    def _sync_handles(self, *_args: Any) -> None:
-        self.sync.sync_handles()
-
-    def _sync_paint(self, *_args: Any) -> None:
-        self.sync.sync_paint()
 
     @t.observe("feature_graph")
     def _on_feature_graph_shown(self, change: Any) -> None:

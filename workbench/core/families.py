@@ -16,6 +16,9 @@ rigging, capture, enhancement) lives in its own folder and registers one
   :meth:`FaceState.evaluate_at`);
 * ``tab`` — optionally, the module (in a UI package) that registers its tab of
   the Workbench (:mod:`widgets.tabs`);
+* ``viewport`` — optionally, the module (in a UI package) that registers its
+  viewport tools (:mod:`widgets.viewport.tools`: what the pointer does, the
+  markers and surface tint it draws);
 * ``tracks`` — the timeline tracks it keys (:class:`TrackSpec`: value shape,
   title, what keying it now records); its ``animate`` reads them from the
   sample (``sample.others``); ``check_tracks`` checks its tracks together (the
@@ -169,6 +172,8 @@ class Family:
     check_tracks: Callable[[FaceState, Mapping[str, Any]], None] | None = None
     #: optional: the module that registers its Workbench tab (imported by the widgets, never by the core)
     tab: str = ""
+    #: optional: the module that registers its viewport tools (imported by the widgets, never by the core)
+    viewport: str = ""
     #: optional: ``recipe_slots(slots) -> {slot: value}``: its slots as a saved expression's recipe
     #: (weights and handle offsets) plays back, without the edits a recipe does not record
     recipe_slots: Callable[[Mapping[str, Any]], Mapping[str, Any]] | None = None

@@ -54,6 +54,7 @@ FAMILY = register_family(Family(
     order=35,  # after paint, before wrinkles
     file_part=GainFilePart(),
     animate=animate,
+    viewport="mouth_gain.tool",  # its viewport tool: brush the mask (tool.py)
     # one number per key; "Key" on its timeline row records the gain the model has now
     tracks={TRACK: TrackSpec(lambda model, track: (1,), title=lambda track: "mouth gain",
                              current=lambda model, track: [model.slot("mouth_gain").gain])},

@@ -7,10 +7,10 @@
 // give all three; the code has no dependency but three.js.
 ////
 // Modules (Python side: widgets/viewport/):
-//   viewport/sync.js           Store: the geometry and paint overlay Python sent (one per model)
+//   viewport/sync.js           Store: the geometry and surface tint Python sent (one per model)
 //   viewport/scene.js          View: renderer, camera, render loop, test hooks (one per display)
-//   viewport/markers.js        handle markers;  viewport/picking.js  rays, marker picks
-//   viewport/tools.js          sculpt and paint tools: pointer events -> gestures
+//   viewport/markers.js        markers;  viewport/picking.js  rays, marker picks
+//   viewport/tools.js          marker and brush tools: pointer events -> gestures
 //   viewport/gestures.js       GestureClient: the ONE gesture protocol (start/move/end/cancel,
 //                              one message in flight, acks) used by every tool
 //   viewport/feature_graph.js  feature-graph strain overlay
@@ -47,11 +47,11 @@ export default {
     const store = storeFor(model);
     store.model = model;
     store.loadFull();
-    store.loadPaintFull();
+    store.loadTintFull();
     store.initLocal(); // shape sliders move the face in the page first (./viewport/gpu_local.js)
     const unwatchSliders = watchSliderPointer(model); // the page says when a slider drag ends
     const onFull = () => store.loadFull();
-    const onPaintFull = () => store.loadPaintFull();
+    const onTintFull = () => store.loadTintFull();
     const onRig = () => { store.loadGpuRig(); store.notify(); };
     const onParamsTrait = () => store.gpuParamsTraitChanged();
     const onMsg = (content, buffers) => {
@@ -67,22 +67,22 @@ export default {
         // The patch of a gesture message doubles as its acknowledgement (gestures.js).
         if (content.seq != null) for (const v of store.views) v.onAck(content);
       }
-      else if (content.type === "handle_ack") for (const v of store.views) v.onAck(content);
-      else if (content.type === "handle_cancel") for (const v of store.views) v.onCancel("handle", content);
-      else if (content.type === "paint_patch") store.applyPaintPatch(content, buffers || []);
-      else if (content.type === "paint_ack") for (const v of store.views) v.onAck(content);
-      else if (content.type === "paint_cancel") for (const v of store.views) v.onCancel("paint", content);
+      else if (content.type === "drag_ack") for (const v of store.views) v.onAck(content);
+      else if (content.type === "drag_cancel") for (const v of store.views) v.onCancel("drag", content);
+      else if (content.type === "tint_patch") store.applyTintPatch(content, buffers || []);
+      else if (content.type === "stroke_ack") for (const v of store.views) v.onAck(content);
+      else if (content.type === "stroke_cancel") for (const v of store.views) v.onCancel("stroke", content);
     };
     model.on("change:_version", onFull);
     model.on("change:_topology", onFull);
-    model.on("change:_paint_version", onPaintFull);
+    model.on("change:_tint_version", onTintFull);
     model.on("change:_gpu_meta", onRig);
     model.on("change:_gpu_params", onParamsTrait);
     model.on("msg:custom", onMsg);
     return () => {
       model.off("change:_version", onFull);
       model.off("change:_topology", onFull);
-      model.off("change:_paint_version", onPaintFull);
+      model.off("change:_tint_version", onTintFull);
       model.off("change:_gpu_meta", onRig);
       model.off("change:_gpu_params", onParamsTrait);
       model.off("msg:custom", onMsg);
@@ -95,7 +95,7 @@ export default {
   render({ model, el }) {
     const store = storeFor(model);
     if (!store.positions) store.loadFull();
-    store.loadPaintFull();
+    store.loadTintFull();
     const view = new View(store, model, el);
     store.views.add(view);
     const featureGraph = new FeatureGraphOverlay(view, model); // feature-graph overlay
@@ -105,13 +105,14 @@ export default {
       "change:wireframe": () => { view.updateWireframe(); view.requestRender(); },
       "change:_vertex_colors": () => { view.updateColors(); view.requestRender(); },
       "change:component_visible": () => { view.updateIndex(); view.requestRender(); },
-      "change:_handles": () => { view.refreshHandleCache(); view.requestRender(); },
-      "change:_handle_mirror": () => { view.refreshHandleCache(); view.requestRender(); },
-      "change:selected_handle": () => { view.handlesDirty = true; view.requestRender(); },
-      "change:symmetric": () => { view.handlesDirty = true; view.requestRender(); },
+      "change:_markers": () => { view.refreshMarkerCache(); view.requestRender(); },
+      "change:_marker_mirror": () => { view.refreshMarkerCache(); view.requestRender(); },
+      "change:selected_marker": () => { view.markersDirty = true; view.requestRender(); },
+      "change:symmetric": () => { view.markersDirty = true; view.requestRender(); },
       "change:tool": () => view.updateTool(),
-      "change:brush_radius": () => view.tools?.paint.brushSettingsChanged(),
-      "change:brush_mirror": () => view.tools?.paint.brushSettingsChanged(),
+      "change:_tool_kinds": () => view.updateTool(),
+      "change:brush_radius": () => view.tools?.stroke.brushSettingsChanged(),
+      "change:brush_mirror": () => view.tools?.stroke.brushSettingsChanged(),
       "change:_probe_ids": () => view.writeProbe(),
       "change:_error": () => view.updateError(),
       "change:height": () => view.resize(),

@@ -117,6 +117,7 @@ FAMILY = register_family(
         layer=HandleLayer,
         order=20,
         tab="widgets.tabs.sculpt",
+        viewport="widgets.panels.sculpt_tool",
         file_part=HandlesFilePart(),
         animate=animate,
         tracks={HANDLES_TRACK: TrackSpec(handles_track_shape, title=lambda t: "handles (pose)",

@@ -159,6 +159,7 @@ PAINT = register_family(
         layer=PaintLayer,
         order=30,
         tab="widgets.tabs.paint",
+        viewport="widgets.panels.paint_tool",
         recipe_slots=lambda slots: {"paint_layers": PaintMix()},  # a recipe paints nothing
         file_part=PaintFilePart(),
     )

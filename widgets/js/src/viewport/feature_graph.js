@@ -1,5 +1,5 @@
-// Feature-graph overlay (pose-space wrinkles, Bickel et al. 2008 §5.1), Python -> front end:
-//   _feature_edges   bytes, uint32 (F*2): vertex ids of the edges between handles
+// Feature-graph overlay (Bickel et al. 2008 §5.1), Python -> front end:
+//   _feature_edges   bytes, uint32 (F*2): vertex ids of the edges (between handles)
 //   _feature_strain  bytes, float32 (F): relative stretch of each edge
 //   feature_graph (bool, draw it), strain_range (|strain| drawn in full colour)
 // Fat line segments over the surface, blue (compressed) - grey (rest) - red (stretched),

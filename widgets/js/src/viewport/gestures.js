@@ -1,9 +1,8 @@
-// The one gesture client: every pointer interaction that edits the model (handle drag,
-// paint stroke, and the hooked region pin drag, region brush and wrinkle eraser, which
-// Python routes to other panels) speaks this protocol with widgets/viewport/gestures.py:
+// The one gesture client: every pointer interaction that edits the model (a marker drag
+// or a brush stroke, which Python routes to the current tool or to a panel's hook) speaks this protocol with widgets/viewport/gestures.py:
 //
 //   front end -> Python  {type: kind, phase: "start"|"move"|"end"|"cancel", gesture, seq, ...body}
-//   Python -> front end  {type: kind + "_ack", seq, phase, version, kernel_ms[, paint_version]}
+//   Python -> front end  {type: kind + "_ack", seq, phase, version, kernel_ms[, tint_version]}
 //                        {type: "patch", seq, ...}  (the geometry of that message: an early ack)
 //                        {type: kind + "_cancel"[, gesture]}  (the kernel ended the gesture)
 //
@@ -17,7 +16,7 @@ const LOST_MS = 2000;
 let clientIds = 0;
 
 export class GestureClient {
-  // kind: "handle" | "paint" (the message type). options:
+  // kind: "drag" | "stroke" (the message type). options:
   //   body(phase) -> object   what the next message carries (called when it is sent)
   //   measure(phase, body)    -> stat fields or null: record timing for this message
   //   onStat(stat)            an acked message's timing {kind, seq, input, send, ack, kernel, version}
@@ -105,7 +104,7 @@ export class GestureClient {
     }
   }
 
-  // Python ended the gesture (an error, the dragged handle removed, another widget's edit).
+  // Python ended the gesture (an error, the dragged marker removed, another widget's edit).
   onCancel(content) {
     const a = this.active;
     if (!a || (content && content.gesture != null && content.gesture !== a.gesture)) return;

@@ -86,11 +86,11 @@ export const localWeightMethods = {
 
   expireLocal() {
     this.localTimer = null;
-    if (!this.kernelParams || this.clipPlay || !(this.local.size || this.localHandle)) return;
+    if (!this.kernelParams || this.clipPlay || !(this.local.size || this.localMarker)) return;
     this.gpuParams = new Float32Array(this.kernelParams);
     this.reconcileLocal(); // drops what expired, puts the rest back on top
     this.pageParamsChanged();
-    if (this.local.size || this.localHandle) this.scheduleLocalExpiry();
+    if (this.local.size || this.localMarker) this.scheduleLocalExpiry();
   },
 
   // The page changed the parameters itself (a slider, a drag, a clip frame): every view
@@ -125,19 +125,19 @@ export const localWeightMethods = {
     }
     const L = d.local;
     const u = d.target.clone().sub(L.p0).applyMatrix3(L.toModel).add(L.u0);
-    this.localHandle = { col, u: u.toArray(), colM, t: performance.now(), ending: false };
-    this.applyLocalHandle(P);
+    this.localMarker = { col, u: u.toArray(), colM, t: performance.now(), ending: false };
+    this.applyLocalMarker(P);
     this.pageParamsChanged();
     this.scheduleLocalExpiry();
   },
 
   // The drag ended: the kernel's next parameters are final.
   endLocalDrag() {
-    if (this.localHandle) this.localHandle.ending = true;
+    if (this.localMarker) this.localMarker.ending = true;
   },
 
-  applyLocalHandle(P) {
-    const h = this.localHandle;
+  applyLocalMarker(P) {
+    const h = this.localMarker;
     if (!h) return;
     const at = (c) => this.gpu.k + 3 * c;
     for (let q = 0; q < 3; q++) P[at(h.col) + q] = h.u[q];
@@ -150,10 +150,10 @@ export const localWeightMethods = {
   // the rest on top.
   reconcileLocal() {
     const P = this.gpuParams;
-    const h = this.localHandle;
+    const h = this.localMarker;
     if (h && P) {
-      if (h.ending || performance.now() - h.t > LOCAL_MS || !this.gpu) this.localHandle = null;
-      else this.applyLocalHandle(P);
+      if (h.ending || performance.now() - h.t > LOCAL_MS || !this.gpu) this.localMarker = null;
+      else this.applyLocalMarker(P);
     }
     if (!this.local || !this.local.size || !P) return;
     const now = performance.now();

@@ -173,7 +173,7 @@ export const gpuViewMethods = {
   // Vertices whose positions the CPU needs every frame: markers, feature graph, probes.
   cpuRowIds() {
     const ids = [];
-    if (this.handleIds) for (const i of this.handleIds) ids.push(i);
+    if (this.markerIds) for (const i of this.markerIds) ids.push(i);
     const fg = this.featureGraph;
     if (fg && fg.edges && fg.edges.length && this.model.get("feature_graph")) {
       for (const i of fg.edges) ids.push(i);
@@ -222,7 +222,7 @@ export const gpuViewMethods = {
   // (./gpu_local.js predictDrag; the kernel's parameters follow and win).
   predictDrag(d) {
     if (!this.gpuOn() || !this.gpuDrawn) return;
-    const mirror = this.model.get("symmetric") && this.handleMirror ? this.handleMirror[d.index] : -1;
+    const mirror = this.model.get("symmetric") && this.markerMirror ? this.markerMirror[d.index] : -1;
     this.store.predictDrag(d, mirror);
   },
 

@@ -1,25 +1,25 @@
-// Handle markers of a view: one instanced sphere per handle, coloured by state (dragged,
-// hovered, selected, mirror), and their page coordinates for tests (data-handles).
-//   _handles        bytes, uint32 (h)   handle marker vertex ids (the model's handles)
-//   _handle_mirror  bytes, int32 (h)    mirror handle index or -1 (may be empty)
+// Markers of a view: one instanced sphere per marker, coloured by state (dragged,
+// hovered, selected, mirror), and their page coordinates for tests (data-markers).
+//   _markers        bytes, uint32 (h)   marker vertex ids (a tool's, e.g. the model's handles)
+//   _marker_mirror  bytes, int32 (h)    mirror marker index or -1 (may be empty)
 // Markers are sized by the NEUTRAL mesh's radius (_neutral_bounds), whatever the expression.
 // Methods mixed into View.
 import * as THREE from "three";
-import { HANDLE_COLOR, HANDLE_HOVER, HANDLE_MIRROR, HANDLE_SELECTED, typed } from "./util.js";
+import { MARKER_COLOR, MARKER_HOVER, MARKER_MIRROR, MARKER_SELECTED, typed } from "./util.js";
 
 export const markerMethods = {
-  refreshHandleCache() {
-    const ids = typed(this.model.get("_handles"), Uint32Array) || new Uint32Array(0);
-    const mirror = typed(this.model.get("_handle_mirror"), Int32Array);
-    this.handleIds = ids;
-    this.handleMirror = mirror && mirror.length === ids.length ? mirror : null;
+  refreshMarkerCache() {
+    const ids = typed(this.model.get("_markers"), Uint32Array) || new Uint32Array(0);
+    const mirror = typed(this.model.get("_marker_mirror"), Int32Array);
+    this.markerIds = ids;
+    this.markerMirror = mirror && mirror.length === ids.length ? mirror : null;
     if (this.drag && (this.drag.index >= ids.length || ids[this.drag.index] !== this.drag.vertex)) {
-      // The handle set changed under the drag: find the dragged vertex again.
+      // The marker set changed under the drag: find the dragged vertex again.
       const k = ids.indexOf(this.drag.vertex);
       if (k >= 0) this.drag.index = k;
     }
     if (this.hover >= ids.length) this.hover = -1;
-    this.handlesDirty = true;
+    this.markersDirty = true;
     if (this.cpuRows) this.cpuRows(ids); // GPU path: the new markers' rows (./gpu_view.js)
   },
 
@@ -44,36 +44,36 @@ export const markerMethods = {
     if (d && d.index === k) return out.copy(d.target);
     const P = this.store.positions;
     const n = P ? P.length / 3 : 0;
-    const i = Math.min(this.handleIds[k], Math.max(n - 1, 0));
+    const i = Math.min(this.markerIds[k], Math.max(n - 1, 0));
     return P ? out.set(P[3 * i], P[3 * i + 1], P[3 * i + 2]) : out.set(0, 0, 0);
   },
 
-  // The last dragged marker, highlighted while the sculpt tool is on (-1: none).
-  selectedHandle() {
-    if (this.model.get("tool") !== "sculpt") return -1;
-    const sel = this.model.get("selected_handle");
-    return sel >= 0 && sel < this.handleIds.length ? sel : -1;
+  // The last dragged marker, highlighted while a drag tool is on (-1: none).
+  selectedMarker() {
+    if (this.toolKind() !== "drag") return -1;
+    const sel = this.model.get("selected_marker");
+    return sel >= 0 && sel < this.markerIds.length ? sel : -1;
   },
 
   // Which marker gets the highlight: the dragged one, else the hovered, else the selected.
-  activeHandle() {
+  activeMarker() {
     if (this.drag) return this.drag.index;
     if (this.hover >= 0) return this.hover;
-    return this.selectedHandle();
+    return this.selectedMarker();
   },
 
-  updateHandles() {
-    this.handlesDirty = false;
-    const ids = this.handleIds;
+  updateMarkers() {
+    this.markersDirty = false;
+    const ids = this.markerIds;
     const P = this.store.positions;
-    if (this.handleMesh && this.handleMesh.count !== ids.length) {
-      this.scene.remove(this.handleMesh);
-      this.handleMesh.geometry.dispose();
-      this.handleMesh.material.dispose();
-      this.handleMesh = null;
+    if (this.markerMesh && this.markerMesh.count !== ids.length) {
+      this.scene.remove(this.markerMesh);
+      this.markerMesh.geometry.dispose();
+      this.markerMesh.material.dispose();
+      this.markerMesh = null;
     }
     if (!ids.length || !P) return;
-    if (!this.handleMesh) {
+    if (!this.markerMesh) {
       const mesh = new THREE.InstancedMesh(
         // unlit, a few pixels wide: an 80-triangle icosphere reads as the same dot as a
         // 168-triangle UV sphere, and on software WebGL every marker triangle costs
@@ -84,13 +84,13 @@ export const markerMethods = {
       );
       mesh.frustumCulled = false;
       mesh.renderOrder = 1;
-      this.handleMesh = mesh;
+      this.markerMesh = mesh;
       this.scene.add(mesh);
     }
-    const active = this.activeHandle();
+    const active = this.activeMarker();
     const dragged = this.drag ? this.drag.index : -1;
-    const selected = this.selectedHandle();
-    const mirror = this.handleMirror;
+    const selected = this.selectedMarker();
+    const mirror = this.markerMirror;
     const mirrorOf = this.model.get("symmetric") && mirror && active >= 0 ? mirror[active] : -1;
     const m = new THREE.Matrix4();
     const v = new THREE.Vector3();
@@ -102,20 +102,20 @@ export const markerMethods = {
       this.markerWorld(k, v);
       const hot = k === dragged || k === this.hover || k === mirrorOf;
       m.compose(v, q, hot ? big : one);
-      this.handleMesh.setMatrixAt(k, m);
-      let hex = HANDLE_COLOR;
-      if (k === dragged || (k === selected && k !== this.hover)) hex = HANDLE_SELECTED;
-      if (k === this.hover && k !== dragged) hex = HANDLE_HOVER;
-      if (k === mirrorOf) hex = HANDLE_MIRROR;
-      this.handleMesh.setColorAt(k, color.setHex(hex));
+      this.markerMesh.setMatrixAt(k, m);
+      let hex = MARKER_COLOR;
+      if (k === dragged || (k === selected && k !== this.hover)) hex = MARKER_SELECTED;
+      if (k === this.hover && k !== dragged) hex = MARKER_HOVER;
+      if (k === mirrorOf) hex = MARKER_MIRROR;
+      this.markerMesh.setColorAt(k, color.setHex(hex));
     }
-    this.handleMesh.instanceMatrix.needsUpdate = true;
-    if (this.handleMesh.instanceColor) this.handleMesh.instanceColor.needsUpdate = true;
+    this.markerMesh.instanceMatrix.needsUpdate = true;
+    if (this.markerMesh.instanceColor) this.markerMesh.instanceColor.needsUpdate = true;
   },
 
   // Page (client) coordinates of the markers, [[x, y, inFront], ...], computed now.
-  handleScreenPositions() {
-    const ids = this.handleIds;
+  markerScreenPositions() {
+    const ids = this.markerIds;
     if (!ids.length || !this.renderer) return [];
     const v = new THREE.Vector3();
     const rect = this.renderer.domElement.getBoundingClientRect();
@@ -131,13 +131,13 @@ export const markerMethods = {
     return out;
   },
 
-  // Test hook: data-handles = the markers' page coordinates at the last render (the page
-  // may have scrolled since: el.fwbHandles() computes them now).
-  writeHandleHook() {
-    const text = JSON.stringify(this.handleScreenPositions());
-    if (this.el.getAttribute("data-handles") !== text) this.el.setAttribute("data-handles", text);
+  // Test hook: data-markers = the markers' page coordinates at the last render (the page
+  // may have scrolled since: el.fwbMarkers() computes them now).
+  writeMarkerHook() {
+    const text = JSON.stringify(this.markerScreenPositions());
+    if (this.el.getAttribute("data-markers") !== text) this.el.setAttribute("data-markers", text);
   },
 
-  // ---- sculpt tool: picking -----------------------------------------------------------
+  // ---- drag tools: picking ------------------------------------------------------------
 
 };

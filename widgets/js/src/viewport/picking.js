@@ -13,8 +13,8 @@ export const pickingMethods = {
 
   // Marker under the pointer (screen distance, nearest first), or -1. With `visible`,
   // markers hidden behind the surface (seen from the back of the head) are skipped.
-  pickHandle(clientX, clientY, visible) {
-    const ids = this.handleIds;
+  pickMarker(clientX, clientY, visible) {
+    const ids = this.markerIds;
     if (!ids.length || !this.store.positions) return -1;
     this.ensureCpuPositions();
     const rect = this.renderer.domElement.getBoundingClientRect();

@@ -1,12 +1,12 @@
 // One view of a viewport widget: renderer, scene, camera, controls, render loop, test hooks.
-// Its handle markers (./markers.js), picking (./picking.js) and pointer tools (./tools.js)
+// Its markers (./markers.js), picking (./picking.js) and pointer tools (./tools.js)
 // live in their own modules; the geometry comes from the widget model's Store (./sync.js).
 //
 // Test hooks (attributes of the root element): data-frame / data-version / data-frame-time
-// after each render with new geometry, data-render-count, data-ready, data-handles (marker
+// after each render with new geometry, data-render-count, data-ready, data-markers (marker
 // page coordinates), data-probe (_probe_ids' page coordinates), data-tool, data-dragging,
-// data-painting, data-hover; el.fwbProject(ids), el.fwbHandles(), el.fwbBrush(),
-// el.fwbDragStats, el.fwbPaintStats.
+// data-stroking, data-hover; el.fwbProject(ids), el.fwbMarkers(), el.fwbBrush(),
+// el.fwbDragStats, el.fwbStrokeStats.
 import * as THREE from "three";
 import { OrbitControls } from "three/examples/jsm/controls/OrbitControls.js";
 import { isPlaying, onPlayback } from "../shared/playback.js";
@@ -14,9 +14,9 @@ import { cameraLinkMethods } from "./camera_link.js";
 import { gpuViewMethods } from "./gpu_view.js";
 import { markerMethods } from "./markers.js";
 import { pickingMethods } from "./picking.js";
-import { PaintTool, SculptTool } from "./tools.js";
+import { BrushTool, MarkerTool } from "./tools.js";
 import {
-  BRUSH_COLOR, DRAFT_PIXEL_RATIO, PAINT_STRENGTH, PAINT_TINT, SKIN,
+  BRUSH_COLOR, DRAFT_PIXEL_RATIO, TINT_STRENGTH, TINT_COLOR, SKIN,
   colorForComponent, computeNormals, softwareWebGL, srgbToLinear, typed,
 } from "./util.js";
 
@@ -32,8 +32,8 @@ export class View {
     this.seenTopology = -1;
     this.seenPositions = -1;
     this.framed = false;
-    this.paintDirty = null; // null | "full" | array of Uint32Array ids with new weights
-    this.renderedPaintVersion = -1;
+    this.tintDirty = null; // null | "full" | array of Uint32Array ids with new weights
+    this.renderedTintVersion = -1;
     this.build();
   }
 
@@ -118,9 +118,9 @@ export class View {
     this.wire.visible = false;
     scene.add(this.wire);
     this.initGpu(); // GPU evaluation of the rig (./gpu_view.js), or the note why not
-    this.handleMesh = null;
-    this.handlesDirty = true;
-    this.refreshHandleCache();
+    this.markerMesh = null;
+    this.markersDirty = true;
+    this.refreshMarkerCache();
     // Brush cursor: a unit ring in the xy plane, placed on the surface along the normal.
     const ringGeo = new THREE.RingGeometry(0.9, 1.0, 64);
     const ringMat = new THREE.MeshBasicMaterial({
@@ -159,10 +159,10 @@ export class View {
     // Pointer tools. Listeners sit on the container in the CAPTURE phase so a press on a
     // handle marker (or on the face with the brush) is taken before OrbitControls sees it.
     this.raycaster = new THREE.Raycaster();
-    this.drag = null; // the handle drag in progress (SculptTool)
-    this.stroke = null; // the paint stroke in progress (PaintTool)
+    this.drag = null; // the marker drag in progress (MarkerTool)
+    this.stroke = null; // the brush stroke in progress (BrushTool)
     this.hover = -1;
-    this.tools = { sculpt: new SculptTool(this), paint: new PaintTool(this) };
+    this.tools = { drag: new MarkerTool(this), stroke: new BrushTool(this) };
     this.awaitFrame = []; // acked messages waiting for the frame that shows them
     this.renderedVersion = -1;
     this.renderedTime = 0;
@@ -170,16 +170,16 @@ export class View {
     // (performance.now() ms): input = pointer event, frame = first render showing it.
     this.dragStats = [];
     el.fwbDragStats = this.dragStats;
-    // Same for paint messages: {seq, input, send, ack, frame, kernel, dabs}.
-    this.paintStats = [];
-    el.fwbPaintStats = this.paintStats;
-    const tool = () => (this.stroke || this.model.get("tool") === "paint" ? this.tools.paint : this.tools.sculpt);
+    // Same for stroke messages: {seq, input, send, ack, frame, kernel, dabs}.
+    this.strokeStats = [];
+    el.fwbStrokeStats = this.strokeStats;
+    const tool = () => (this.stroke || this.toolKind() === "stroke" ? this.tools.stroke : this.tools.drag);
     this.listeners = {
       pointerdown: (e) => {
         if (!this.renderer) return;
-        const t = this.model.get("tool");
-        if (t === "paint") this.tools.paint.down(e);
-        else if (t === "sculpt") this.tools.sculpt.down(e);
+        const kind = this.toolKind();
+        if (kind === "stroke") this.tools.stroke.down(e);
+        else if (kind === "drag") this.tools.drag.down(e);
       },
       pointermove: (e) => tool().move(e),
       pointerup: (e) => tool().up(e),
@@ -189,13 +189,13 @@ export class View {
     // Escape during a drag or stroke cancels it (Python puts its edits back).
     this.onKey = (e) => {
       if (e.key !== "Escape") return;
-      if (this.drag) this.tools.sculpt.end(null, true);
-      if (this.stroke) this.tools.paint.end(null, true);
+      if (this.drag) this.tools.drag.end(null, true);
+      if (this.stroke) this.tools.stroke.end(null, true);
     };
     window.addEventListener("keydown", this.onKey);
     this.onLostCapture = (e) => {
-      if (this.drag && e.pointerId === this.drag.pointerId) this.tools.sculpt.end(null);
-      if (this.stroke && e.pointerId === this.stroke.pointerId) this.tools.paint.end(null);
+      if (this.drag && e.pointerId === this.drag.pointerId) this.tools.drag.end(null);
+      if (this.stroke && e.pointerId === this.stroke.pointerId) this.tools.stroke.end(null);
     };
     this.onLeave = () => {
       this.pointerInside = false;
@@ -206,12 +206,12 @@ export class View {
       }
       if (!this.drag) {
         // No marker stays lit once the pointer is elsewhere: neither the hovered one nor
-        // the last dragged one (selected_handle, cleared for every view).
+        // the last dragged one (selected_marker, cleared for every view).
         this.clearHover();
-        if (this.model.get("selected_handle") >= 0) {
-          this.model.set("selected_handle", -1);
+        if (this.model.get("selected_marker") >= 0) {
+          this.model.set("selected_marker", -1);
           this.model.save_changes();
-          this.handlesDirty = true;
+          this.markersDirty = true;
           this.requestRender();
         }
       }
@@ -225,11 +225,11 @@ export class View {
 
     // Test hook: screen (client) coordinates of vertex ids, [[x, y, inFront], ...].
     el.fwbProject = (ids) => this.project(ids);
-    el.fwbHandles = () => this.handleScreenPositions();
+    el.fwbMarkers = () => this.markerScreenPositions();
     // Test hook: the marker a press at page (x, y) would grab, or -1 (occluded, or none there).
-    el.fwbPickHandle = (x, y) => this.pickHandle(x, y, true);
+    el.fwbPickMarker = (x, y) => this.pickMarker(x, y, true);
     // Test hook: the brush cursor's centre in page coordinates, or null when hidden.
-    el.fwbBrush = () => this.tools.paint.brushScreenPosition();
+    el.fwbBrush = () => this.tools.stroke.brushScreenPosition();
     // Test hook: the positions the GPU evaluated (read back), or null when not on the GPU.
     el.fwbGpuPositions = () => this.gpuPositions();
 
@@ -282,7 +282,7 @@ export class View {
     if (this.gpuFrame()) { // positions and normals evaluated on the GPU
       this.seenPositions = s.positionsVersion;
       if (!this.framed) { g.computeBoundingSphere(); this.frameCamera(); }
-      this.updateHandles();
+      this.updateMarkers();
       return true;
     }
     if (!topo) {
@@ -307,7 +307,7 @@ export class View {
     normals.needsUpdate = true;
     if (!this.framed) g.computeBoundingSphere();
     if (!this.framed) this.frameCamera();
-    this.updateHandles();
+    this.updateMarkers();
     return true;
   }
 
@@ -354,19 +354,19 @@ export class View {
         C[3 * i] = rgb[0]; C[3 * i + 1] = rgb[1]; C[3 * i + 2] = rgb[2];
       }
     }
-    this.applyPaint(null);
+    this.applyTint(null);
   }
 
-  // Colour attribute = base colours tinted by the painted weights (all, or only `ids`).
-  applyPaint(idLists) {
+  // Colour attribute = base colours tinted by the tint weights (all, or only `ids`).
+  applyTint(idLists) {
     const attr = this.geometry.getAttribute("color");
     const B = this.baseColors;
     if (!attr || !B || attr.array.length !== B.length) return;
     const C = attr.array;
-    const W = this.store.paintW && this.store.paintW.length * 3 === B.length ? this.store.paintW : null;
-    const T = this.paintTint || (this.paintTint = PAINT_TINT.map(srgbToLinear));
+    const W = this.store.tintW && this.store.tintW.length * 3 === B.length ? this.store.tintW : null;
+    const T = this.tintColor || (this.tintColor = TINT_COLOR.map(srgbToLinear));
     const tint = (i) => {
-      const a = W ? PAINT_STRENGTH * Math.min(1, Math.max(0, W[i])) : 0;
+      const a = W ? TINT_STRENGTH * Math.min(1, Math.max(0, W[i])) : 0;
       const j = 3 * i;
       C[j] = B[j] + a * (T[0] - B[j]);
       C[j + 1] = B[j + 1] + a * (T[1] - B[j + 1]);
@@ -379,12 +379,12 @@ export class View {
       for (let i = 0; i < n; i++) tint(i);
     }
     attr.needsUpdate = true;
-    this.renderedPaintVersion = this.store.paintVersion;
+    this.renderedTintVersion = this.store.tintVersion;
   }
 
-  paintChanged(ids) {
-    if (ids === null || this.paintDirty === "full") this.paintDirty = "full";
-    else (this.paintDirty || (this.paintDirty = [])).push(ids);
+  tintChanged(ids) {
+    if (ids === null || this.tintDirty === "full") this.tintDirty = "full";
+    else (this.tintDirty || (this.tintDirty = [])).push(ids);
     this.requestRender();
   }
 
@@ -408,26 +408,32 @@ export class View {
     this.hover = -1;
     this.el.setAttribute("data-hover", "-1");
     if (this.renderer && !this.drag) {
-      this.renderer.domElement.style.cursor = this.model.get("tool") === "sculpt" ? "crosshair" : "";
+      this.renderer.domElement.style.cursor = this.toolKind() === "drag" ? "crosshair" : "";
     }
-    this.handlesDirty = true;
+    this.markersDirty = true;
     this.requestRender();
   }
 
+  // How the pointer works with the current tool: "drag" (markers), "stroke" (a brush)
+  // or "" (orbit); the kernel sends each registered tool's kind (_tool_kinds).
+  toolKind() {
+    return (this.model.get("_tool_kinds") || {})[this.model.get("tool")] || "";
+  }
+
   updateTool() {
-    const tool = this.model.get("tool");
-    const sculpt = tool === "sculpt";
-    this.el.setAttribute("data-tool", tool === "sculpt" || tool === "paint" ? tool : "orbit");
+    const kind = this.toolKind();
+    const dragging = kind === "drag";
+    this.el.setAttribute("data-tool", kind ? this.model.get("tool") : "orbit");
     if (!this.tools) return;
-    if (!sculpt) this.tools.sculpt.end(null);
-    this.tools.sculpt.click = null;
+    if (!dragging) this.tools.drag.end(null);
+    this.tools.drag.click = null;
     this.clearHover();
-    if (tool !== "paint") {
-      this.tools.paint.end(null);
+    if (kind !== "stroke") {
+      this.tools.stroke.end(null);
       if (this.brushRing) { this.brushRing.visible = false; this.brushMirrorRing.visible = false; }
     }
-    if (this.renderer) this.renderer.domElement.style.cursor = sculpt || tool === "paint" ? "crosshair" : "";
-    this.handlesDirty = true;
+    if (this.renderer) this.renderer.domElement.style.cursor = kind ? "crosshair" : "";
+    this.markersDirty = true;
     this.requestRender();
   }
 
@@ -435,44 +441,44 @@ export class View {
   onAck(content) {
     for (const t of Object.values(this.tools || {})) t.client.onAck(content);
     // A dab that changed nothing still moved the brush cursor.
-    if (this.stroke && !this.geometryDirty && !this.paintDirty) this.requestRender();
+    if (this.stroke && !this.geometryDirty && !this.tintDirty) this.requestRender();
     // A move that changed no geometry still moved the marker.
-    if (this.handlesDirty && !this.geometryDirty) this.requestRender();
+    if (this.markersDirty && !this.geometryDirty) this.requestRender();
   }
 
-  // Python ended the gesture of `kind` ("handle" | "paint").
+  // Python ended the gesture of `kind` ("drag" | "stroke").
   onCancel(kind, content) {
     if (!this.tools) return;
-    (kind === "handle" ? this.tools.sculpt : this.tools.paint).client.onCancel(content);
+    (kind === "drag" ? this.tools.drag : this.tools.stroke).client.onCancel(content);
   }
 
   // The timing of an acked message: reported once a render shows its update.
   onStat(st) {
-    // The overlay patch of a paint message came before its ack (same channel, in order).
-    st.paintVersion = this.store.paintVersion;
+    // The tint patch of a stroke message came before its ack (same channel, in order).
+    st.tintVersion = this.store.tintVersion;
     if (this.statShown(st)) this.finishStat(st, this.renderedTime);
     else this.awaitFrame.push(st);
   }
 
-  // Has a render shown this update (its geometry version and its paint overlay version)?
+  // Has a render shown this update (its geometry version and its tint version)?
   statShown(st) {
     return (
       this.renderedVersion >= st.version && !this.geometryDirty &&
-      (st.paintVersion == null || this.renderedPaintVersion >= st.paintVersion) && !this.paintDirty
+      (st.tintVersion == null || this.renderedTintVersion >= st.tintVersion) && !this.tintDirty
     );
   }
 
   finishStat(st, frameTime) {
     // A move that changed nothing shows no new frame: no latency to report.
     st.frame = frameTime >= st.input ? frameTime : null;
-    const list = st.kind === "paint" ? this.paintStats : this.dragStats;
+    const list = st.kind === "stroke" ? this.strokeStats : this.dragStats;
     list.push(st);
     if (list.length > 4000) list.splice(0, 2000);
     this.el.setAttribute(
-      st.kind === "paint" ? "data-paint-updates" : "data-drag-updates", String(list.length));
+      st.kind === "stroke" ? "data-stroke-updates" : "data-drag-updates", String(list.length));
   }
 
-  // ---- paint tool -----------------------------------------------------------------------
+  // ---- brush tool -----------------------------------------------------------------------
 
 
   frameBox() {
@@ -551,15 +557,15 @@ export class View {
     if (this.geometryDirty) {
       this.geometryDirty = false;
       newGeometry = this.uploadGeometry();
-    } else if (this.handlesDirty) {
-      this.updateHandles();
+    } else if (this.markersDirty) {
+      this.updateMarkers();
     }
-    if (this.paintDirty && this.positionAttr) {
-      const d = this.paintDirty;
-      this.paintDirty = null;
-      this.applyPaint(d === "full" ? null : d);
+    if (this.tintDirty && this.positionAttr) {
+      const d = this.tintDirty;
+      this.tintDirty = null;
+      this.applyTint(d === "full" ? null : d);
       newGeometry = true; // new pixels: counts as a frame for the test hooks and latency
-      this.el.setAttribute("data-paint-version", String(this.store.paintVersion));
+      this.el.setAttribute("data-tint-version", String(this.store.tintVersion));
     }
     if (this.featureGraph) this.featureGraph.beforeRender(); // feature-graph overlay
     this.renderer.render(this.scene, this.camera);
@@ -597,7 +603,7 @@ export class View {
       }
     }
     this.writeProbe();
-    this.writeHandleHook();
+    this.writeMarkerHook();
   }
 
   // ---- test hooks ---------------------------------------------------------------------
@@ -635,8 +641,8 @@ export class View {
     if (this.onCameraGroup) this.model.off("change:camera_group", this.onCameraGroup);
     // Never leave Python inside a drag interaction when the view goes away.
     if (this.tools) {
-      try { this.tools.sculpt.end(null); } catch (err) { /* closing */ }
-      try { this.tools.paint.end(null); } catch (err) { /* closing */ }
+      try { this.tools.drag.end(null); } catch (err) { /* closing */ }
+      try { this.tools.stroke.end(null); } catch (err) { /* closing */ }
     }
     if (this.onKey) window.removeEventListener("keydown", this.onKey);
     if (this.listeners) {
@@ -655,7 +661,7 @@ export class View {
     if (this.offPlayback) this.offPlayback();
     this.disposeGpu();
     if (this.controls) this.controls.dispose();
-    if (this.handleMesh) this.handleMesh.geometry.dispose();
+    if (this.markerMesh) this.markerMesh.geometry.dispose();
     if (this.geometry) this.geometry.dispose();
     if (this.material) this.material.dispose();
     if (this.wireMaterial) this.wireMaterial.dispose();
@@ -665,11 +671,11 @@ export class View {
     }
     delete this.el.fwbProject;
     delete this.el.fwbDragStats;
-    delete this.el.fwbHandles;
-    delete this.el.fwbPaintStats;
+    delete this.el.fwbMarkers;
+    delete this.el.fwbStrokeStats;
     delete this.el.fwbBrush;
     delete this.el.fwbGpuPositions;
-    delete this.el.fwbPickHandle;
+    delete this.el.fwbPickMarker;
   }
 }
 

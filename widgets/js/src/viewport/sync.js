@@ -6,8 +6,8 @@
 //   _labels     bytes, uint16 (n)     component index per vertex
 //   msg:custom  {type: "patch", version[, seq]}, buffers [ids uint32 (k), values float32 (k*3)]
 //               when fewer than ~1/3 of the vertices changed (seq: the gesture message it shows)
-//   _paint_weights  bytes, float32 (n) or empty: the paint overlay (selected expression's
-//   msg:custom      {type: "paint_patch", version}, buffers [ids uint32, weights float32]
+//   _tint  bytes, float32 (n) or empty: the surface tint (a tool's weights
+//   msg:custom      {type: "tint_patch", version}, buffers [ids uint32, weights float32]
 //                   weights, or a stroke handler's mask)
 // GPU mode (_gpu_mode == "gpu", widgets/viewport/gpu.py): the rig once (_gpu_meta, _gpu_neutral,
 // _gpu_morph_index, _gpu_morph_entries, _gpu_basis, _gpu_gain, _gpu_residual), then per update
@@ -19,7 +19,7 @@
 // fires custom messages at once, so a message can arrive before the full update Python sent
 // just before it. A message ahead of the version we have waits (held) until the full
 // update brings us to the version before it; only a gap that lasts GAP_MS (a really
-// missed update) asks Python for a full buffer: request_full / request_paint.
+// missed update) asks Python for a full buffer: request_full / request_tint.
 import { clipMethods } from "./gpu_clip.js";
 import { cpuRowMethods } from "./gpu_cpu.js";
 import { localWeightMethods } from "./gpu_local.js";
@@ -40,8 +40,8 @@ export class Store {
     this.topologyVersion = 0; // bumps when faces / vertex count change
     this.positionsVersion = 0; // bumps on every applied update
     this.lastPatchIds = null; // ids of the last sparse update (null = full)
-    this.paintW = null; // Float32Array n: painted weights of the selected expression, or null
-    this.paintVersion = -1;
+    this.tintW = null; // Float32Array n: the tint weights (a tool's or a stroke handler's), or null
+    this.tintVersion = -1;
     this.seq = 0; // gesture message numbers, unique over the views of this model
     this.gpu = null; // the rig for GPU evaluation (loadGpuRig), or null
     this.gpuParams = null; // Float32Array: weights, shell offsets, head matrix (+ page predictions)
@@ -192,29 +192,29 @@ export class Store {
     return this.seq;
   }
 
-  loadPaintFull() {
-    const version = this.model.get("_paint_version");
-    if (version === this.paintVersion) return;
-    const w = typed(this.model.get("_paint_weights"), Float32Array);
-    this.paintW = w && w.length ? new Float32Array(w) : null;
-    this.paintVersion = version;
-    for (const v of this.views) v.paintChanged(null);
+  loadTintFull() {
+    const version = this.model.get("_tint_version");
+    if (version === this.tintVersion) return;
+    const w = typed(this.model.get("_tint"), Float32Array);
+    this.tintW = w && w.length ? new Float32Array(w) : null;
+    this.tintVersion = version;
+    for (const v of this.views) v.tintChanged(null);
   }
 
-  applyPaintPatch(content, buffers) {
-    if (content.version <= this.paintVersion) return;
+  applyTintPatch(content, buffers) {
+    if (content.version <= this.tintVersion) return;
     const n = this.positions ? this.positions.length / 3 : 0;
-    if (content.version !== this.paintVersion + 1 || (!this.paintW && n === 0)) {
-      this.model.send({ type: "request_paint", have: this.paintVersion });
+    if (content.version !== this.tintVersion + 1 || (!this.tintW && n === 0)) {
+      this.model.send({ type: "request_tint", have: this.tintVersion });
       return;
     }
-    if (!this.paintW) this.paintW = new Float32Array(n);
+    if (!this.tintW) this.tintW = new Float32Array(n);
     const ids = typed(buffers[0], Uint32Array);
     const values = typed(buffers[1], Float32Array);
-    const W = this.paintW;
+    const W = this.tintW;
     for (let k = 0; k < ids.length; k++) if (ids[k] < W.length) W[ids[k]] = values[k];
-    this.paintVersion = content.version;
-    for (const v of this.views) v.paintChanged(ids);
+    this.tintVersion = content.version;
+    for (const v of this.views) v.tintChanged(ids);
   }
 
   loadFull() {

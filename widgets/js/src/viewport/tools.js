@@ -1,21 +1,22 @@
-// The pointer tools of a view. Each edit is one gesture (./gestures.js):
+// The pointer tools of a view. Each edit is one gesture (./gestures.js). Which one the
+// left button uses follows the kind of the current tool (View.toolKind: the kernel's
+// _tool_kinds; method families register the tools, widgets/viewport/tools.py):
 //
-// Sculpt tool (tool == "sculpt", Bickel et al. 2008 §4 handle editing):
-//   left-drag on a marker: a "handle" gesture {index, vertex, position: [x, y, z]}; the
+// MarkerTool (kind "drag"):
+//   left-drag on a marker: a "drag" gesture {index, vertex, position: [x, y, z]}; the
 //       marker moves in the plane through it perpendicular to the view direction. Python
-//       moves the model handle, or hands the drag to a panel's drag_handler (region pin
-//       drag, region brush, split-seed pick).
-//   {type: "add_handle", vertex}            Shift-click (or click with add_on_click) on the
-//                                           surface: nearest vertex of the hit triangle
-//   {type: "remove_handle", index, vertex}  Alt-click on a marker
+//       hands it to the tool (or to a panel's drag_handler).
+//   {type: "pick", vertex}           Shift-click (or click with add_on_click) on the
+//                                    surface: nearest vertex of the hit triangle
+//   {type: "unpick", index, vertex}  Alt-click on a marker
 //   Orbit/zoom/pan keep working off the markers (and with the right/middle button).
-// Paint tool (tool == "paint", Pighin et al. 1998 §4.2 painterly blending):
-//   a left press ON the face: a "paint" gesture {vertices: [v, ...]} (off the face, or
+// BrushTool (kind "stroke"):
+//   a left press ON the face: a "stroke" gesture {vertices: [v, ...]} (off the face, or
 //       with Alt, the left button orbits). Every pointer move raycasts the face; the nearest
 //       corner of the hit triangle is queued when it lies a quarter brush radius from the
 //       last queued point; the queue (the MAX_QUEUE newest) is the next message's body.
-//   stroke_target  non-empty while Python sends strokes to a stroke handler (the wrinkle
-//       eraser): a press paints even with no paint_expression.
+//   stroke_target  what a stroke changes (the tool's target or a stroke handler's); while
+//       it is empty a press orbits.
 //   brush_radius (model units along the surface) sets the size of the brush cursor: a ring
 //   lying on the surface under the pointer (and at the x-mirror with brush_mirror).
 // Escape during a drag or stroke cancels it: Python puts its edits back.
@@ -28,7 +29,7 @@ function clientFor(view, kind, body, measure) {
     body,
     measure,
     onStat: (st) => view.onStat(st),
-    onCancel: () => view.tools[kind === "handle" ? "sculpt" : "paint"].stopped(),
+    onCancel: () => view.tools[kind].stopped(),
   });
 }
 
@@ -39,11 +40,11 @@ function capture(view, pointerId, on) {
   } catch (err) { /* synthetic events, or the pointer is gone */ }
 }
 
-export class SculptTool {
+export class MarkerTool {
   constructor(view) {
     this.view = view;
     this.click = null; // a press that becomes an add/remove click if the pointer stays put
-    this.client = clientFor(view, "handle", () => {
+    this.client = clientFor(view, "drag", () => {
       const d = view.drag;
       const t = d.target;
       return { index: d.index, vertex: d.vertex, position: [t.x, t.y, t.z] };
@@ -53,7 +54,7 @@ export class SculptTool {
   down(e) {
     const view = this.view;
     if (view.drag || e.button !== 0) return; // right / middle button: camera (OrbitControls)
-    const k = view.pickHandle(e.clientX, e.clientY, true);
+    const k = view.pickMarker(e.clientX, e.clientY, true);
     if (k >= 0 && e.altKey) {
       e.stopPropagation(); e.preventDefault();
       this.click = { kind: "remove", index: k, x: e.clientX, y: e.clientY };
@@ -65,7 +66,7 @@ export class SculptTool {
       return;
     }
     // Off the markers the press goes on to OrbitControls (shift+drag pans); it becomes
-    // an "add handle" click if the pointer is released where it was pressed.
+    // a "pick" click if the pointer is released where it was pressed.
     if (e.shiftKey || view.model.get("add_on_click")) {
       this.click = { kind: "add", x: e.clientX, y: e.clientY };
     }
@@ -86,11 +87,11 @@ export class SculptTool {
       // target (a render per pointer event doubled the GPU work of software WebGL
       // and slowed the kernel's round trip on 2 cores); see View.onAck for moves that
       // change no geometry.
-      view.handlesDirty = true;
+      view.markersDirty = true;
       this.client.update(e.timeStamp);
       return;
     }
-    if (view.model.get("tool") !== "sculpt" || e.buttons !== 0) return;
+    if (view.toolKind() !== "drag" || e.buttons !== 0) return;
     view.hoverAt = [e.clientX, e.clientY];
     view.pointerInside = true;
     if (view.hoverPending) return;
@@ -99,13 +100,13 @@ export class SculptTool {
       view.hoverPending = false;
       // (a pick queued just before the pointer left must not light a marker again)
       if (!view.renderer || view.drag || !view.pointerInside) return;
-      if (view.model.get("tool") !== "sculpt") return;
-      const k = view.pickHandle(view.hoverAt[0], view.hoverAt[1], false);
+      if (view.toolKind() !== "drag") return;
+      const k = view.pickMarker(view.hoverAt[0], view.hoverAt[1], false);
       if (k !== view.hover) {
         view.hover = k;
         view.el.setAttribute("data-hover", String(k));
         view.renderer.domElement.style.cursor = k >= 0 ? "grab" : "crosshair";
-        view.handlesDirty = true;
+        view.markersDirty = true;
         view.requestRender();
       }
     });
@@ -124,10 +125,10 @@ export class SculptTool {
     if (!c || e.type !== "pointerup" || Math.hypot(e.clientX - c.x, e.clientY - c.y) > 4) return;
     if (c.kind === "remove") {
       e.stopPropagation();
-      view.model.send({ type: "remove_handle", index: c.index, vertex: view.handleIds[c.index] });
+      view.model.send({ type: "unpick", index: c.index, vertex: view.markerIds[c.index] });
     } else {
       const v = view.pickVertex(e.clientX, e.clientY);
-      if (v >= 0) view.model.send({ type: "add_handle", vertex: v });
+      if (v >= 0) view.model.send({ type: "pick", vertex: v });
     }
   }
 
@@ -139,7 +140,7 @@ export class SculptTool {
     const hit = view.rayPlane(e.clientX, e.clientY, plane) || p0.clone();
     view.drag = {
       index: k,
-      vertex: view.handleIds[k],
+      vertex: view.markerIds[k],
       plane,
       grab: p0.clone().sub(hit), // keeps the marker from jumping to the pointer
       target: p0.clone(),
@@ -152,7 +153,7 @@ export class SculptTool {
     view.renderer.domElement.style.cursor = "grabbing";
     view.el.setAttribute("data-dragging", "1");
     this.client.begin(e.timeStamp);
-    view.handlesDirty = true;
+    view.markersDirty = true;
     view.requestRender();
   }
 
@@ -171,25 +172,25 @@ export class SculptTool {
     this.stopped();
   }
 
-  // The drag is over (ended here, or by Python: handle_cancel).
+  // The drag is over (ended here, or by Python: drag_cancel).
   stopped() {
     const view = this.view;
     if (!view.drag) return;
     view.drag = null;
     view.controls.enabled = true;
     if (view.renderer) {
-      view.renderer.domElement.style.cursor = view.model.get("tool") === "sculpt" ? "crosshair" : "";
+      view.renderer.domElement.style.cursor = view.toolKind() === "drag" ? "crosshair" : "";
     }
     view.el.setAttribute("data-dragging", "0");
-    view.handlesDirty = true;
+    view.markersDirty = true;
     view.requestRender();
   }
 }
 
-export class PaintTool {
+export class BrushTool {
   constructor(view) {
     this.view = view;
-    this.client = clientFor(view, "paint", () => {
+    this.client = clientFor(view, "stroke", () => {
       const s = view.stroke;
       const vertices = s.queue;
       s.queue = [];
@@ -258,15 +259,15 @@ export class PaintTool {
   down(e) {
     const view = this.view;
     if (view.stroke || e.button !== 0 || e.altKey || e.ctrlKey || e.metaKey) return;
-    // Nothing to paint (no expression picked, no stroke handler in Python): the press orbits.
-    if (!view.model.get("paint_expression") && !view.model.get("stroke_target")) return;
+    // Nothing to stroke (the tool has no target, e.g. no expression picked): the press orbits.
+    if (!view.model.get("stroke_target")) return;
     const hit = this.hit(e.clientX, e.clientY);
     if (!hit) return; // off the face: OrbitControls gets it
     e.stopPropagation(); e.preventDefault();
     view.stroke = { pointerId: e.pointerId, queue: [hit.vertex], last: hit.point.clone() };
     view.controls.enabled = false;
     capture(view, e.pointerId, true);
-    view.el.setAttribute("data-painting", "1");
+    view.el.setAttribute("data-stroking", "1");
     this.placeBrush(hit);
     this.client.begin(e.timeStamp);
     view.requestRender();
@@ -297,7 +298,7 @@ export class PaintTool {
     view.hoverPending = true;
     requestAnimationFrame(() => {
       view.hoverPending = false;
-      if (!view.renderer || view.stroke || view.model.get("tool") !== "paint") return;
+      if (!view.renderer || view.stroke || view.toolKind() !== "stroke") return;
       this.placeBrush(this.hit(view.hoverAt[0], view.hoverAt[1]));
       view.requestRender();
     });
@@ -329,7 +330,7 @@ export class PaintTool {
     if (!view.stroke) return;
     view.stroke = null;
     view.controls.enabled = true;
-    view.el.setAttribute("data-painting", "0");
+    view.el.setAttribute("data-stroking", "0");
     view.requestRender();
   }
 }

@@ -57,17 +57,17 @@ export const COMPONENT_COLORS = [
 ];
 export const SKIN = [0.86, 0.68, 0.58];
 
-// Handle marker colours (sRGB): idle, hovered, dragged/selected, mirror of the active one.
-export const HANDLE_COLOR = 0xff8c1a;
-export const HANDLE_HOVER = 0xffe14d;
-export const HANDLE_SELECTED = 0x2ee6ff;
-export const HANDLE_MIRROR = 0xd17aff;
+// Marker colours (sRGB): idle, hovered, dragged/selected, mirror of the active one.
+export const MARKER_COLOR = 0xff8c1a;
+export const MARKER_HOVER = 0xffe14d;
+export const MARKER_SELECTED = 0x2ee6ff;
+export const MARKER_MIRROR = 0xd17aff;
 
-// Weight-map overlay: colour = mix(component colour, PAINT_TINT, PAINT_STRENGTH * weight).
-export const PAINT_TINT = [0.95, 0.1, 0.85]; // sRGB magenta
-export const PAINT_STRENGTH = 0.85;
+// Weight-map overlay: colour = mix(component colour, TINT_COLOR, TINT_STRENGTH * weight).
+export const TINT_COLOR = [0.95, 0.1, 0.85]; // sRGB magenta
+export const TINT_STRENGTH = 0.85;
 export const BRUSH_COLOR = 0xfff27a;
-export const MAX_QUEUE = 8; // most dab vertices per paint message
+export const MAX_QUEUE = 8; // most dab vertices per stroke message
 
 export function colorForComponent(name) {
   for (const [re, rgb] of COMPONENT_COLORS) if (re.test(name || "")) return rgb;
