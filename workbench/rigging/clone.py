@@ -7,7 +7,9 @@ Neumann's expression cloning:
 
 1. **Dense correspondence.** The rigging step's set-up
    (:class:`~workbench.rigging.RigTransfer`: rigid alignment, non-rigid fit of
-   the source skin onto the target, closest points) gives every target skin
+   the source skin onto the target with the point-to-plane tail
+   ``fine_fit=True``, :func:`~workbench.rigging.registration.planar_refine`,
+   so a grown jaw is followed, closest points) gives every target skin
    vertex a point (triangle, barycentric coordinates) on the *deformed source
    model* — the source fitted onto the target. The paper's RBF volume morph and
    cylindrical projection play this part there; the rigging fit is ours already
@@ -107,7 +109,7 @@ class ExpressionCloner:
                  smoothing: float = AFFINE_SMOOTHING, progress: Progress = None) -> None:
         t0 = time.perf_counter()
         say = progress or (lambda f, m: None)
-        self.transfer_ = rt = RigTransfer(source, target, landmarks=landmarks,
+        self.transfer_ = rt = RigTransfer(source, target, landmarks=landmarks, fine_fit=True,
                                           progress=lambda f, m: say(0.9 * f, m))
         self.source, self.target = rt.source, rt.target
         say(0.9, "motion-vector frames")

@@ -23,7 +23,13 @@ from scipy.spatial import cKDTree
 from workbench.geometry.normals import triangle_areas
 from workbench.geometry.similarity import Similarity, fit_similarity
 from workbench.geometry.surface import SurfaceQuery, boundary_vertices
-from workbench.rigging.registration import NonRigidResult, affine_icp, nonrigid_icp, rigid_icp
+from workbench.rigging.registration import (
+    NonRigidResult,
+    affine_icp,
+    nonrigid_icp,
+    planar_refine,
+    rigid_icp,
+)
 from workbench.rigging.report import RigTransferError, StretchMeter
 from workbench.rigging.sides import Side, eye_centres
 
@@ -150,12 +156,22 @@ def _head_top(S: NDArray[np.float64], T: NDArray[np.float64], units: str, warnin
 
 def fit_template(
     src: Side, tgt: Side, query: SurfaceQuery, landmarks: Landmarks,
-    progress: Callable[[float, str], None] | None = None,
+    progress: Callable[[float, str], None] | None = None, fine: bool = False,
 ) -> NonRigidResult:
-    """The template skin fitted onto the target skin (``query``): affine ICP, then non-rigid ICP with the landmarks."""
+    """The template skin fitted onto the target skin (``query``): affine ICP, then non-rigid ICP with the landmarks.
+
+    ``fine``: then a soft point-to-plane tail (:func:`.registration.planar_refine`), for a dense
+    correspondence that follows local changes of proportion (expression cloning).
+    """
     A, b = affine_icp(src.skin_X, src.skin_faces, query)
-    return nonrigid_icp(src.skin_X @ A.T + b, src.skin_faces, query, landmarks=landmark_pull(landmarks, src, tgt),
-                        progress=progress)
+    X0 = src.skin_X @ A.T + b
+    lms = landmark_pull(landmarks, src, tgt)
+    fit = nonrigid_icp(X0, src.skin_faces, query, landmarks=lms, progress=progress)
+    if not fine:
+        return fit
+    tail = planar_refine(fit.positions, X0, src.skin_faces, query, landmarks=lms)
+    return NonRigidResult(tail.positions, tail.accepted, tail.distance, fit.iterations + tail.iterations,
+                          fit.factorizations + tail.factorizations)
 
 
 def _near_target_border(P: NDArray[np.float64], tgt: Side, query: SurfaceQuery) -> NDArray[np.bool_]:

