@@ -74,3 +74,30 @@ def tiny_model() -> FaceModel:
         [BlendShape("up", up), BlendShape("left", left, slider_min=-1.0, slider_max=2.0)],
         polygons=polys,
     )
+
+
+# --- pytest-xdist (the test command runs ``-n 2``): the browser harness's health counts
+# (tests/browser/harness.py HEALTH) live in the worker that ran the browser tests; each worker
+# hands its counts to the controller, which prints their sum once (the line CI logs show).
+_WORKER_HEALTH: dict[str, int] = {}
+
+
+def pytest_sessionfinish(session: pytest.Session) -> None:
+    out = getattr(session.config, "workeroutput", None)  # set on an xdist worker only
+    harness = sys.modules.get("harness")
+    if out is not None and harness is not None:
+        out["browser_health"] = dict(harness.HEALTH)
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_testnodedown(node, error) -> None:  # type: ignore[no-untyped-def]
+    for k, v in (getattr(node, "workeroutput", None) or {}).get("browser_health", {}).items():
+        _WORKER_HEALTH[k] = _WORKER_HEALTH.get(k, 0) + int(v)
+
+
+def pytest_terminal_summary(terminalreporter) -> None:  # type: ignore[no-untyped-def]
+    if _WORKER_HEALTH:
+        terminalreporter.write_line(
+            "browser health: " + ", ".join(f"{k} {v}" for k, v in _WORKER_HEALTH.items())
+            + " (all but 'checked' must be 0)"
+        )
