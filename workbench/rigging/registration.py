@@ -70,15 +70,35 @@ def _accept(
     *,
     floor: float,
     max_angle_cos: float = 0.5,
-) -> tuple[NDArray[np.float64], NDArray[np.bool_], NDArray[np.float64]]:
-    """Closest target points of ``X`` and which correspondences to keep."""
+) -> tuple[NDArray[np.float64], NDArray[np.bool_], NDArray[np.float64], NDArray[np.float64]]:
+    """Closest target points of ``X``, which correspondences to keep, their distances and the target normals there."""
     dist, face, C, bary = query.closest(X)
     tn = query.normals_at(face, bary)
     med = float(np.median(dist))
     ok = dist <= max(3.0 * med, floor)
     ok &= (normals * tn).sum(1) >= max_angle_cos
     ok &= ~query.on_boundary(face, bary)
-    return C, ok, dist
+    return C, ok, dist, tn
+
+
+def _vertex_masses(X0: NDArray[np.float64], F: NDArray[np.int64]) -> NDArray[np.float64]:
+    """(n,) Voronoi masses of the template, a vertex without area given the smallest one."""
+    m = np.asarray(mass_matrix(X0, F).diagonal(), np.float64)
+    return np.where(m > 0, m, m[m > 0].min() if (m > 0).any() else 1.0)
+
+
+def _landmark_terms(
+    landmarks: tuple[NDArray[np.int64], NDArray[np.float64]] | None, weight: float, m: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Per-vertex landmark weight (n,) and its right-hand side (n, 3): ``weight`` median masses per landmark."""
+    n = m.shape[0]
+    lm_w = np.zeros(n)
+    lm_rhs = np.zeros((n, 3))
+    if landmarks is not None and landmarks[0].size:
+        wl = weight * float(np.median(m))
+        np.add.at(lm_w, landmarks[0], wl)
+        np.add.at(lm_rhs, landmarks[0], wl * landmarks[1])
+    return lm_w, lm_rhs
 
 
 def rigid_icp(
@@ -120,7 +140,7 @@ def rigid_icp(
     for _ in range(iterations):
         P = T(P0)
         N = N0 @ T.R.T
-        C, ok, dist = _accept(query, P, N, floor=0.02, max_angle_cos=0.3)
+        C, ok, dist, _ = _accept(query, P, N, floor=0.02, max_angle_cos=0.3)
         share = float(ok.mean())
         med = float(np.median(dist[ok])) if ok.any() else np.inf
         if ok.sum() < 10:
@@ -160,7 +180,7 @@ def affine_icp(
         P = P0 @ A.T + b
         N = N0 @ np.linalg.inv(A)  # normals transform by the inverse transpose
         N /= np.maximum(np.linalg.norm(N, axis=1, keepdims=True), 1e-300)
-        C, ok, _ = _accept(query, P, N, floor=0.01, max_angle_cos=0.3)
+        C, ok, _, _ = _accept(query, P, N, floor=0.01, max_angle_cos=0.3)
         if ok.sum() < 0.5 * len(P0):
             break
         sol, *_ = np.linalg.lstsq(H[ok], C[ok], rcond=None)
@@ -239,22 +259,11 @@ def nonrigid_icp(
         schedule = DEFAULT_SCHEDULE
     n = X0.shape[0]
     L = cotangent_laplacian(X0, F)
-    M = mass_matrix(X0, F)
-    m = np.asarray(M.diagonal(), np.float64)
-    m = np.where(m > 0, m, m[m > 0].min() if (m > 0).any() else 1.0)
+    m = _vertex_masses(X0, F)
     K = sp.csr_matrix(L.T @ sp.diags(1.0 / m) @ L)
     KX0 = K @ X0
     eps = 1e-3
-    lm_ids = np.zeros(0, np.int64)
-    lm_pos = np.zeros((0, 3))
-    if landmarks is not None and landmarks[0].size:
-        lm_ids, lm_pos = landmarks
-    lm_w = np.zeros(n)
-    lm_rhs = np.zeros((n, 3))
-    if lm_ids.size:
-        wl = landmark_weight * float(np.median(m))
-        np.add.at(lm_w, lm_ids, wl)
-        np.add.at(lm_rhs, lm_ids, wl * lm_pos)
+    lm_w, lm_rhs = _landmark_terms(landmarks, landmark_weight, m)
     X = X0.copy()
     total = sum(it for _, it in schedule)
     done = 0
@@ -265,7 +274,7 @@ def nonrigid_icp(
         solver: SparseSPDSolver | None = None
         held = np.zeros(n, bool)  # the correspondences the current factor holds
         for _ in range(iters):
-            C, accepted, dist = _accept(query, X, vertex_normals(X, F), floor=0.005)
+            C, accepted, dist, _ = _accept(query, X, vertex_normals(X, F), floor=0.005)
             # refactor at each stiffness and when the accepted set changed by more than 1 %; otherwise the
             # factor's correspondences stay (a dropped one holds its vertex where it is, a new one waits)
             if solver is None or int((accepted != held).sum()) > refactor_share * n:
@@ -337,20 +346,14 @@ def planar_refine(
     """
     n = X0.shape[0]
     L = cotangent_laplacian(X0, F)
-    m = np.asarray(mass_matrix(X0, F).diagonal(), np.float64)
-    m = np.where(m > 0, m, m[m > 0].min() if (m > 0).any() else 1.0)
+    m = _vertex_masses(X0, F)
     Lm = sp.csr_matrix(L.T @ sp.diags(1.0 / m))
     K3 = sp.kron(Lm @ L, sp.identity(3), format="csr")
     LX0 = np.asarray(L @ X0)
     A = sp.csr_matrix(sp.csr_matrix(L, copy=True) != 0, dtype=np.float64)
     A.setdiag(0.0)
     A.eliminate_zeros()
-    lm_w = np.zeros(n)
-    lm_rhs = np.zeros((n, 3))
-    if landmarks is not None and landmarks[0].size:
-        wl = landmark_weight * float(np.median(m))
-        np.add.at(lm_w, landmarks[0], wl)
-        np.add.at(lm_rhs, landmarks[0], wl * landmarks[1])
+    lm_w, lm_rhs = _landmark_terms(landmarks, landmark_weight, m)
     idx = 3 * np.arange(n)[:, None, None] + np.arange(3)
     rows, cols = np.broadcast_to(idx.transpose(0, 2, 1), (n, 3, 3)), np.broadcast_to(idx, (n, 3, 3))
     X = X.copy()
@@ -358,11 +361,7 @@ def planar_refine(
     done = 0
     for alpha, iters in schedule:
         for _ in range(iters):
-            dist, face, C, bary = query.closest(X)
-            tn = query.normals_at(face, bary)
-            accepted = dist <= max(3.0 * float(np.median(dist)), 0.005)
-            accepted &= (vertex_normals(X, F) * tn).sum(1) >= 0.5
-            accepted &= ~query.on_boundary(face, bary)
+            C, accepted, _, tn = _accept(query, X, vertex_normals(X, F), floor=0.005)
             w = m * accepted
             B = w[:, None, None] * tn[:, :, None] * tn[:, None, :] + ((eps * m + lm_w)[:, None, None] * np.eye(3))
             D = sp.csr_matrix((B.ravel(), (rows.ravel(), cols.ravel())), shape=(3 * n, 3 * n))
