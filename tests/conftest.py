@@ -76,9 +76,10 @@ def tiny_model() -> FaceModel:
     )
 
 
-# --- pytest-xdist (the test command runs ``-n 2``): the browser harness's health counts
-# (tests/browser/harness.py HEALTH) live in the worker that ran the browser tests; each worker
-# hands its counts to the controller, which prints their sum once (the line CI logs show).
+# --- The browser harness's health counts (tests/browser/harness.py HEALTH), printed once at the
+# end (the line CI logs show). Under pytest-xdist (the test command runs ``-n 2``) they live in
+# the worker that ran the browser tests: each worker hands its counts to the controller, which
+# prints their sum.
 _WORKER_HEALTH: dict[str, int] = {}
 
 
@@ -96,8 +97,10 @@ def pytest_testnodedown(node, error) -> None:  # type: ignore[no-untyped-def]
 
 
 def pytest_terminal_summary(terminalreporter) -> None:  # type: ignore[no-untyped-def]
-    if _WORKER_HEALTH:
+    harness = sys.modules.get("harness")  # loaded here when the browser tests ran in this process
+    health = _WORKER_HEALTH or (dict(harness.HEALTH) if harness is not None else {})
+    if any(health.values()):
         terminalreporter.write_line(
-            "browser health: " + ", ".join(f"{k} {v}" for k, v in _WORKER_HEALTH.items())
+            "browser health: " + ", ".join(f"{k} {v}" for k, v in health.items())
             + " (all but 'checked' must be 0)"
         )

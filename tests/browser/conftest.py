@@ -205,12 +205,3 @@ def open_notebook(
     lab.shutdown_kernels(lab.kernel_ids() - before)
     if problems:
         pytest.fail("the page and the kernel fell out of step: " + "; ".join(problems))
-
-
-def pytest_terminal_summary(terminalreporter: Any) -> None:
-    if any(HEALTH.values()) or HEALTH["checked"]:
-        terminalreporter.write_line(
-            "browser health: "
-            + ", ".join(f"{k} {v}" for k, v in HEALTH.items())
-            + " (all but 'checked' must be 0)"
-        )

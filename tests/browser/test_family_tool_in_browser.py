@@ -22,12 +22,11 @@ from __future__ import annotations
 import itertools
 import json
 import os
-import time
 from typing import Any
 
 import numpy as np
 from example_family.install import install
-from harness import NotebookPage, clip_around, pixel_change
+from harness import NotebookPage, clip_around, pixel_change, wait_until
 
 _SETUP = """
 import sys
@@ -77,10 +76,8 @@ def _state(nb: NotebookPage) -> dict[str, Any]:
 
 
 def _wait(nb: NotebookPage, pred: str, timeout: float = 30.0) -> None:
-    deadline = time.monotonic() + timeout
-    while not nb.kernel_eval(f"print(json.dumps(bool({pred})))"):
-        assert time.monotonic() < deadline, f"kernel never reached {pred}"
-        time.sleep(0.1)
+    """Wait until the kernel expression ``pred`` is true."""
+    wait_until(pred, lambda: nb.kernel_eval(f"print(json.dumps(bool({pred})))"), bool, timeout)
 
 
 def test_a_family_tool_paints_with_the_mouse_and_undoes(open_notebook, tmp_path) -> None:

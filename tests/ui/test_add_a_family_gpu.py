@@ -34,11 +34,16 @@ print(json.dumps(out))
 """
 
 
-def test_an_unknown_linear_layer_is_drawn_by_the_page_not_the_residual(tmp_path):
-    env = install(tmp_path)
-    run = subprocess.run([sys.executable, "-c", SCRIPT], env=env, capture_output=True, text=True, timeout=600)
+def _run_with_the_family(script: str, tmp_path) -> dict:
+    """Run ``script`` in a Python that has the example family installed; its last line's JSON."""
+    run = subprocess.run([sys.executable, "-c", script], env=install(tmp_path), capture_output=True, text=True,
+                         timeout=600)
     assert run.returncode == 0, run.stderr[-3000:]
-    out = json.loads(run.stdout.strip().splitlines()[-1])
+    return json.loads(run.stdout.strip().splitlines()[-1])
+
+
+def test_an_unknown_linear_layer_is_drawn_by_the_page_not_the_residual(tmp_path):
+    out = _run_with_the_family(SCRIPT, tmp_path)
     assert abs(out["gain_max"] - 1.5) < 1e-6  # the mask reaches 1 where the jaw moves most
     # the page's own evaluation is the kernel's to float rounding: the residual stays empty
     assert out["0.2"] < 1e-5 and out["0.9"] < 1e-5, out
@@ -75,10 +80,7 @@ print(json.dumps(out))
 
 
 def test_a_family_adds_a_viewport_tool_without_editing_the_viewport(tmp_path):
-    env = install(tmp_path)
-    run = subprocess.run([sys.executable, "-c", TOOL_SCRIPT], env=env, capture_output=True, text=True, timeout=600)
-    assert run.returncode == 0, run.stderr[-3000:]
-    out = json.loads(run.stdout.strip().splitlines()[-1])
+    out = _run_with_the_family(TOOL_SCRIPT, tmp_path)
     assert out["names"][0] == "orbit" and {"sculpt", "paint", "gain_brush"} <= set(out["names"])
     assert out["kinds"]["gain_brush"] == "stroke" and out["kinds"]["sculpt"] == "drag"
     assert out["target"] == "mouth gain mask"  # the page strokes only while there is a target

@@ -72,10 +72,6 @@ class PaintStroke(StrokeGesture):
         self.brush = viewport_brush(self.viewport)
         return self.update(content) if self.has_update(content) else 0.0
 
-    def has_update(self, content: Mapping[str, Any]) -> bool:
-        v = content.get("vertices")
-        return v is not None and bool(np.size(v))
-
     def update(self, content: Mapping[str, Any]) -> float:
         ids = vertex_ids(content.get("vertices"), self.model.n_vertices, "Viewport.stroke_at")
         if not ids.size or not self.live:

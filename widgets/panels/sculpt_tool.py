@@ -61,9 +61,6 @@ class HandleDrag(DragGesture):
         vp.selected_marker = self.index
         return 0.0
 
-    def has_update(self, content: Mapping[str, Any]) -> bool:
-        return content.get("position") is not None or "model_position" in content
-
     def update(self, content: Mapping[str, Any]) -> float:
         vp = self.viewport
         vp.sync.last_push_ms = 0.0
@@ -75,10 +72,7 @@ class HandleDrag(DragGesture):
 
     def apply(self, content: Mapping[str, Any]) -> None:
         vp, model = self.viewport, self.model
-        if "model_position" in content:
-            p = np.asarray(content["model_position"], dtype=np.float64).reshape(-1)
-        else:
-            p = np.asarray(vp.unposed(content["position"]), dtype=np.float64).reshape(-1)
+        p = np.asarray(self.model_point(content), dtype=np.float64).reshape(-1)
         if p.shape != (3,) or not np.isfinite(p).all():
             raise ValueError(f"Viewport.drag_to: position must be 3 finite numbers, got {p!r}")
         with model.lock:

@@ -27,7 +27,6 @@ class GestureAPI:
     drag_handler: Any
     stroke_handler: Any
     stroke_target: str
-    _hook_target: str
     tools: dict[str, Tool]
     tool: str
     sync: Any
@@ -114,13 +113,13 @@ class GestureAPI:
         if handler is not None and not isinstance(self.gestures.active, HookedStroke):
             self.gestures.finish(StrokeGesture)
         self.stroke_handler = handler
-        self._hook_target = str(target) if handler is not None else ""
+        # while a handler is set, stroke_target is its target (refresh_tool leaves it)
+        self.stroke_target = str(target) if handler is not None else ""
         overlay = getattr(handler, "overlay", None) if handler is not None else None
         self.sync.tint_source = overlay if overlay is not None else (
             (lambda: None) if handler is not None else None
         )
         # the tint's source changed: send the difference to what the front end has
-        self.stroke_target = self._hook_target
         if self._connected:
             self.refresh_tool()
 
@@ -148,7 +147,7 @@ class GestureAPI:
 
     def _stroke_gesture(self, content: Mapping[str, Any]) -> Gesture:
         if self.stroke_handler is not None:
-            return HookedStroke(self, self.stroke_handler, self._hook_target)
+            return HookedStroke(self, self.stroke_handler, self.stroke_target)
         tool = self.tool_of_kind("stroke")
         if tool is None:
             raise ValueError("Viewport: no registered tool makes brush strokes")

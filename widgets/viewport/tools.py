@@ -48,15 +48,29 @@ ORBIT = "orbit"
 
 
 class DragGesture(Gesture):
-    """A marker drag (message kind ``"drag"``)."""
+    """A marker drag (message kind ``"drag"``): a message moves it with ``"position"`` (picked on the
+    shown mesh) or, from Python (``Viewport.drag_to``), ``"model_position"``."""
 
     kind = "drag"
 
+    def has_update(self, content: Mapping[str, Any]) -> bool:
+        return content.get("position") is not None or "model_position" in content
+
+    def model_point(self, content: Mapping[str, Any]) -> Any:
+        """The message's point in model space (a picked one mapped back through the shown head pose)."""
+        if "model_position" in content:
+            return content["model_position"]
+        return self.viewport.unposed(content["position"])
+
 
 class StrokeGesture(Gesture):
-    """A brush stroke (message kind ``"stroke"``)."""
+    """A brush stroke (message kind ``"stroke"``): a message carries the dabbed ``"vertices"``."""
 
     kind = "stroke"
+
+    def has_update(self, content: Mapping[str, Any]) -> bool:
+        v = content.get("vertices")
+        return v is not None and bool(np.size(v))
 
 
 class Tool(t.HasTraits):
@@ -169,10 +183,6 @@ class HookedStroke(StrokeGesture):
         self._handler_open = True
         return self.update(content) if self.has_update(content) else 0.0
 
-    def has_update(self, content: Mapping[str, Any]) -> bool:
-        v = content.get("vertices")
-        return v is not None and bool(np.size(v))
-
     def apply(self, content: Mapping[str, Any]) -> None:
         ids = vertex_ids(content.get("vertices"), self.model.n_vertices, "stroke")
         if ids.size:
@@ -213,17 +223,10 @@ class HookedDrag(DragGesture):
         self.handler.begin(self.index, self.vertex)
         return 0.0
 
-    def has_update(self, content: Mapping[str, Any]) -> bool:
-        return content.get("position") is not None or "model_position" in content
-
     def update(self, content: Mapping[str, Any]) -> float:
         if not self.live or not self.has_update(content):
             return 0.0
-        if "model_position" in content:
-            pos = content["model_position"]
-        else:
-            pos = self.viewport.unposed(content["position"])
-        ms = float(self.handler.move(self.index, pos) or 0.0)
+        ms = float(self.handler.move(self.index, self.model_point(content)) or 0.0)
         self.updates += 1
         self.ms.append(ms)
         return ms

@@ -265,7 +265,6 @@ class Viewport(GestureAPI, OverlayAPI, anywidget.AnyWidget):
         self.last_stroke: dict[str, Any] = {}
         #: receives brush strokes instead of the stroke tool (set_stroke_handler)
         self.stroke_handler: Any = None
-        self._hook_target = ""
         #: receives marker drags instead of the drag tool (a plain attribute: a panel
         #: sets its own drag here)
         self.drag_handler: Any = None

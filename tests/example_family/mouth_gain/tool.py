@@ -23,9 +23,6 @@ class GainStroke(StrokeGesture):
         self.open_interaction("Brush mouth gain mask")
         return self.update(content) if self.has_update(content) else 0.0
 
-    def has_update(self, content: Mapping[str, Any]) -> bool:
-        return bool(np.size(content.get("vertices") or []))
-
     def apply(self, content: Mapping[str, Any]) -> None:
         st: GainState = self.model.slot("mouth_gain")
         mask = np.zeros(self.model.n_vertices, np.float32) if st.mask is None else st.mask.copy()
