@@ -8,7 +8,8 @@
 * :meth:`PerformanceDatabase.enhance` / :func:`enhance_frames` — spatial
   enhancement (§5) of input frames through a :class:`Correspondence` (:mod:`.spatial`);
 * :func:`retime` / :class:`RetimeResult` — sequence projection (eq. 5–6) and
-  temporally driven interpolation (§6.2) (:mod:`.retime`);
+  temporally driven interpolation (§6.2) (:mod:`.retime`); point caches matched in
+  a rig's weights, :class:`RigBasis` (:mod:`.rig_space`);
 * ``model.enhance.retime(t0, t1, takes)`` — *Retime from performance* on the
   timeline, one undo step (:mod:`.facet`, registered by :mod:`.family`).
 """
@@ -21,9 +22,10 @@ from workbench.enhance.motion_regions import (
            voluntary_cores_from_motion,
 )
 from workbench.enhance.retime import RetimeResult, retime
+from workbench.enhance.rig_space import RigBasis
 from workbench.enhance.spatial import Correspondence, EnhanceResult, enhance_frames
 from workbench.enhance.voluntary import voluntary_region_weights
 
 __all__ = ["Correspondence", "DatabaseError", "EnhanceResult", "MotionRegions", "PerformanceDatabase", "RetimeResult",
-           "enhance_frames", "motion_regions", "retime", "simplex_lsq", "voluntary_cores_from_motion",
+           "RigBasis", "enhance_frames", "motion_regions", "retime", "simplex_lsq", "voluntary_cores_from_motion",
            "voluntary_region_weights"]

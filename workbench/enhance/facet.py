@@ -18,7 +18,11 @@ of eq. 5–6 over every take) and keys the in-betweens with the matched take's
 timing — linear keys on every frame between the two times, for the shapes that
 change between them — as one undo step. The database is any sequence of takes:
 (T, k) weight arrays in ``model.shape_names`` order, tracked takes
-(:class:`workbench.capture.TrackResult`) or timelines (sampled at their frames).
+(:class:`workbench.capture.TrackResult`) or timelines (sampled at their frames),
+or point caches (T, n, 3) on the model's mesh — projected onto the model's own
+shapes (:class:`~workbench.enhance.rig_space.RigBasis`, bounded by the sliders)
+and matched in those weights, the paper's compressed space (``space="mesh"``:
+in raw vertices).
 """
 
 from __future__ import annotations
@@ -35,6 +39,7 @@ from workbench.core.shapes import ModelError
 from workbench.enhance.bake import EnhancedTake
 from workbench.enhance.layer import EnhancementState
 from workbench.enhance.retime import RetimeResult, retime
+from workbench.enhance.rig_space import RigBasis
 from workbench.enhance.spatial import Correspondence, Progress
 
 if TYPE_CHECKING:
@@ -213,7 +218,7 @@ class EnhanceFacet:
     # ------------------------------------------------------------------ temporal (§6.2)
 
     def retime(self, t0: float, t1: float, database: Any, *, n_frames: int | None = None, extend: bool = False,
-               method: str = "auto", label: str | None = None) -> RetimeResult:
+               method: str = "auto", space: str = "auto", label: str | None = None) -> RetimeResult:
         """Key the in-betweens of ``t0`` → ``t1`` with the timing of the best-matching take (one undo step).
 
         Parameters
@@ -222,7 +227,7 @@ class EnhanceFacet:
             Seconds, ``t0 < t1`` (usually two keys).
         database : sequence of takes
             Weight takes (see :func:`weight_takes`), or point caches (T_i, n, 3) on the
-            model's mesh (mesh space: the faces shown at ``t0`` and ``t1`` are matched).
+            model's mesh (the faces shown at ``t0`` and ``t1`` are the keys; see ``space``).
         n_frames : int, optional
             In-betweens including both ends; default one per frame of the timeline's fps.
         extend : bool
@@ -230,6 +235,13 @@ class EnhanceFacet:
         method : {"auto", "closest", "take"}
             Where the timing comes from (see :func:`workbench.enhance.retime`);
             ``RetimeResult.choice`` says which was used.
+        space : {"auto", "mesh", "weights"}
+            For point caches: ``"weights"`` projects the takes and the two faces
+            onto the model's shapes (those the timeline keys, correctives left
+            out; bounded by the sliders) and matches in those weights; ``"mesh"``
+            matches the raw vertices; ``"auto"`` (default) is ``"weights"`` when the
+            model has shapes. ``RetimeResult.space`` says which (``"rig"`` for the
+            weights). Ignored for weight takes.
 
         Returns
         -------
@@ -249,12 +261,16 @@ class EnhanceFacet:
         changed = np.flatnonzero(np.abs(W[1] - W[0]) > 1e-9)
         if changed.size == 0:
             raise ModelError(f"retime: the weights at {a:g} s and {b:g} s are the same: nothing to retime")
+        if space not in ("auto", "mesh", "weights"):
+            raise ModelError(f"retime: space must be 'auto', 'mesh' or 'weights', got {space!r}")
         meshes = mesh_takes(database, m.n_vertices)
         if meshes is not None:
-            # mesh space: the keys are the faces shown at t0 and t1 (model space), the takes point caches
+            # point caches: the keys are the faces shown at t0 and t1 (model space), matched in the model's
+            # weights (space="mesh": the raw vertices)
             ends = [np.asarray(m.evaluation_at(t).mesh, np.float64) for t in (a, b)]
-            found = retime(meshes, ends[0], ends[1], n, extend=extend, method=method)
-            # the mesh-space timing, keyed on the weights
+            basis = RigBasis.from_model(m, names) if names and space != "mesh" else None
+            found = retime(meshes, ends[0], ends[1], n, extend=extend, method=method, basis=basis, space=space)
+            # the timing found for the caches, keyed on the weights
             res = dataclasses.replace(found, frames=W[0][None, :] + found.s[:, None] * (W[1] - W[0])[None, :])
         else:
             res = retime(weight_takes(database, names, tl.fps), W[0], W[1], n, extend=extend, method=method)

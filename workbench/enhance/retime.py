@@ -52,10 +52,24 @@ them). A consequence, as in the paper: overshoot (the actor passing the end
 pose and settling back) is not reproduced — the in-betweens never leave the
 start→end segment.
 
-Differences from the paper. Matching uses the raw vectors (weights, or the
-flattened ``(n, 3)`` vertices), not the compressed per-region shape space of
-§4 (that is :class:`PerformanceDatabase`'s job), and the whole face is one
-region. The paper's *extend to the full matched sequence* (``extend=True``)
+**Point caches on a rig** (§6's matching in a compressed space). Given the
+rig's shapes (``basis``: a :class:`~workbench.enhance.rig_space.RigBasis`, or
+``(deltas, neutral)``), mesh takes and keys are first projected onto the rig's
+weights (bounded least squares, one factorisation for all frames,
+:mod:`workbench.enhance.rig_space`) and everything above — eq. 5–6, §6.2 and
+the take's transitions — runs on those weights (``space="weights"``, the
+default when a basis is given). The timing found there drives the mesh keys'
+in-betweens exactly as mesh-space matching does: ``start + s (end − start)`` in
+vertices. In raw vertices a take's rest (a low percentile of every coordinate)
+means nothing, since vertices move both ways, and distances are dominated by the
+jaw, so the take is cut into the wrong transitions: on held-out transitions of
+realistic point caches (``benchmarks/bench_retime_realistic.py``) mesh-space
+timing is about 0.94× straight in-betweens, rig weights about 0.84×.
+
+Differences from the paper. Matching uses the raw vectors (weights, the
+rig's weights of point caches, or the flattened ``(n, 3)`` vertices), not the
+compressed per-region shape space of §4 (that is :class:`PerformanceDatabase`'s
+job), and the whole face is one region. The paper's *extend to the full matched sequence* (``extend=True``)
 is not specified further in the paper; here the span grows while the take
 keeps moving along the matched chord (strictly), i.e. to the rest before and
 the extreme after, stopping at holds and reversals.
@@ -73,7 +87,8 @@ measures it against a brute-force window search in the same run.
 
 Shapes: ``database`` — a sequence of ``(T_i, k)`` weight sequences or
 ``(T_i, n, 3)`` mesh sequences; ``start``, ``end`` — ``(k,)`` or ``(n, 3)``;
-results ``(n_frames,)`` and ``(n_frames, k)`` / ``(n_frames, n, 3)``.
+``basis`` — ``(k', n, 3)`` deltas and an ``(n, 3)`` neutral; results
+``(n_frames,)`` and ``(n_frames, k)`` / ``(n_frames, n, 3)``.
 """
 
 from __future__ import annotations
@@ -84,6 +99,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from workbench.enhance.rig_space import RigBasis
 from workbench.enhance.transitions import transition_timing
 
 __all__ = ["RetimeResult", "project_segments", "retime", "sequence_projection"]
@@ -99,6 +115,7 @@ _CHORD_BUDGET = 4_000_000  # entries of the (chord samples, segments) tables of 
 #: (the same transition, up to noise); realistic takes' closest matches sit at 0.25–1.0 of it
 CLOSE_MATCH = 0.15
 METHODS = ("auto", "closest", "take")
+SPACES = ("auto", "mesh", "weights")
 
 
 @dataclass(frozen=True)
@@ -130,6 +147,14 @@ class RetimeResult:
         match (``(-1, -1, -1)``, ``inf``, NaN when none moves forward in time).
     sources : tuple of (int, int, int, float)
         For ``"take"``: ``(sequence, first, last, weight)`` of every transition blended.
+    space : {"weights", "mesh", "rig"}
+        What was matched: weight takes as given, point caches as vertices, or
+        point caches projected onto the rig's weights (``basis``); ``error`` is
+        in those units.
+    fit_rms : float
+        For ``"rig"``: RMS distance of the rig's fit from the point caches' and
+        keys' vertices (:meth:`~workbench.enhance.rig_space.RigBasis.fit`; near 0
+        when the rig made them); NaN otherwise.
     """
 
     s: NDArray[np.float64]
@@ -140,15 +165,19 @@ class RetimeResult:
     times: NDArray[np.float64]
     choice: str = "match"
     sources: tuple[tuple[int, int, int, float], ...] = ()
+    space: str = "weights"
+    fit_rms: float = float("nan")
 
     def describe(self) -> str:
         """Where the timing came from, in words (for a status line)."""
+        where = {"rig": f", matched in the rig's weights (fit RMS {self.fit_rms:.3g})",
+                 "mesh": ", matched in mesh space"}.get(self.space, "")
         if self.choice == "match":
             i, first, last = self.matched
-            return f"the timing of take {i}, frames {first}–{last} (match error {self.error:.3g})"
+            return f"the timing of take {i}, frames {first}–{last} (match error {self.error:.3g}){where}"
         if self.choice == "take":
             takes = sorted({src[0] for src in self.sources})
-            return f"the timing of {len(self.sources)} transitions of {len(takes)} take(s) blended"
+            return f"the timing of {len(self.sources)} transitions of {len(takes)} take(s) blended{where}"
         return "an ease curve (the takes hold no transition to learn from)"
 
 
@@ -413,9 +442,37 @@ def _extend(beta: NDArray[np.float64], tau0: float, tau1: float) -> tuple[float,
     return tau0, tau1
 
 
+def _rig_basis(basis: RigBasis | tuple[ArrayLike, ArrayLike] | None, space: str,
+               shape: tuple[int, ...]) -> RigBasis | None:
+    """The basis to match point caches in, or None to match the raw vectors; checks ``basis`` against the keys."""
+    if basis is not None and not isinstance(basis, RigBasis):
+        try:
+            deltas, neutral = basis
+        except (TypeError, ValueError):
+            raise ValueError(f"basis must be a RigBasis or a (deltas, neutral) pair, got {type(basis).__name__}") from None
+        try:
+            basis = RigBasis(deltas, neutral)
+        except ValueError as exc:
+            raise ValueError(f"basis: {exc}") from None
+    if len(shape) == 1:  # weight takes: already the rig's space
+        if basis is not None or space == "mesh":
+            raise ValueError("basis/space apply to point caches ((n, 3) keys); start and end are (k,) weights")
+        return None
+    if space == "mesh":
+        return None
+    if basis is None:
+        if space == "weights":
+            raise ValueError('basis: space="weights" needs the rig\'s shapes (a RigBasis or (deltas, neutral))')
+        return None
+    if basis.neutral.shape != shape:
+        raise ValueError(f"basis is on a mesh of {basis.n_vertices} vertices; start, end and the database are "
+                         f"{shape[0]} vertices a frame")
+    return basis
+
+
 def retime(
     database: Sequence[ArrayLike], start: ArrayLike, end: ArrayLike, n_frames: int, *, extend: bool = False,
-    method: str = "auto",
+    method: str = "auto", basis: RigBasis | tuple[ArrayLike, ArrayLike] | None = None, space: str = "auto",
 ) -> RetimeResult:
     """Retime the in-betweens of a key pair after the closest database transition (§6).
 
@@ -442,6 +499,19 @@ def retime(
         of the take passes near both keys. ``"auto"`` (default): the closest
         match when its error is within ``CLOSE_MATCH`` (15 %) of ``|end − start|``,
         else the take's transitions; ``RetimeResult.choice`` says which.
+    basis : RigBasis or (deltas, neutral), optional
+        For point caches: the rig's shapes, ``(k', n, 3)`` deltas on the keys'
+        mesh and its ``(n, 3)`` neutral (a pair is bounded to ``[0, 1]``; a
+        :class:`~workbench.enhance.rig_space.RigBasis`, e.g.
+        ``RigBasis.from_model(model)``, carries the sliders' ranges). Takes and
+        keys are projected onto its weights and matched there (module docstring).
+    space : {"auto", "mesh", "weights"}
+        Where point caches are matched: ``"weights"`` — the rig's weights
+        (needs ``basis``); ``"mesh"`` — the raw vertices (the behaviour without
+        a basis); ``"auto"`` (default) — the rig's weights when ``basis`` is
+        given (falling back to vertices when the keys' projections coincide),
+        else vertices. ``RetimeResult.space`` says which. Weight takes are
+        matched as they are.
 
     Returns
     -------
@@ -454,17 +524,40 @@ def retime(
     ValueError
         Naming the argument: empty ``database``, a sequence of the wrong shape
         or with < 2 frames, NaN/inf anywhere, ``start``/``end`` shapes that
-        differ, ``end == start``, ``n_frames < 2``, an unknown ``method``; or,
-        for ``method="closest"``, no database sequence moves forward in time from
-        the start's projection to the end's.
+        differ, ``end == start``, ``n_frames < 2``, an unknown ``method`` or
+        ``space``, a ``basis`` on another mesh than the keys (or given with
+        weight keys), ``space="weights"`` without a ``basis`` or with keys whose
+        projections coincide; or, for ``method="closest"``, no database sequence
+        moves forward in time from the start's projection to the end's.
     """
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+    if space not in SPACES:
+        raise ValueError(f"space must be one of {SPACES}, got {space!r}")
     seqs, s_vec, e_vec, shape = _validate(database, start, end, n_frames)
-    keys = np.vstack([s_vec, e_vec])
-    scale = float(np.linalg.norm(e_vec - s_vec))
+    rig = _rig_basis(basis, space, shape)
+    where, fit_rms = ("weights" if len(shape) == 1 else "mesh"), float("nan")
+    # the vectors matched: the inputs, or their rig weights (the in-betweens are always the inputs' keys)
+    m_seqs, m_s, m_e = seqs, s_vec, e_vec
+    if rig is not None:
+        m_keys, rms = rig.fit(np.vstack([s_vec, e_vec]).reshape(2, *shape), name="start and end")
+        sq = 2 * rms * rms  # squared misfit summed over frames (per vertex), for fit_rms
+        if np.linalg.norm(m_keys[1] - m_keys[0]) > _EPS:
+            m_seqs = []
+            for i, x in enumerate(seqs):
+                w, r = rig.fit(x.reshape(x.shape[0], *shape), name=f"database[{i}]")
+                m_seqs.append(w)
+                sq += r * r * x.shape[0]
+            m_s, m_e = m_keys[0], m_keys[1]
+            where = "rig"
+            fit_rms = float(np.sqrt(sq / (2 + sum(x.shape[0] for x in seqs))))
+        elif space == "weights":
+            raise ValueError("end: its projection onto the rig's weights equals start's (the keys differ only where "
+                             'the shapes do not reach); match in mesh space (space="mesh")')
+    keys = np.vstack([m_s, m_e])
+    scale = float(np.linalg.norm(m_e - m_s))
     best: tuple[float, int, float, float] | None = None
-    for i, (T, E) in enumerate(_segment_tables(keys, seqs)):
+    for i, (T, E) in enumerate(_segment_tables(keys, m_seqs)):
         m = _match_pair(T, E, scale)
         if m is not None and (best is None or m[0] < best[0]):
             best = (m[0], i, m[1], m[2])
@@ -477,18 +570,19 @@ def retime(
     sources: tuple[tuple[int, int, int, float], ...] = ()
     if best is not None:
         _, i, tau0, tau1 = best
+        beta = m_seqs[i]
         # the reported error exactly (eq. 5's inner-product expansion is only used to choose)
-        err = float(np.linalg.norm(s_vec - _at(seqs[i], tau0)) + np.linalg.norm(e_vec - _at(seqs[i], tau1)))
+        err = float(np.linalg.norm(m_s - _at(beta, tau0)) + np.linalg.norm(m_e - _at(beta, tau1)))
         if extend:
-            tau0, tau1 = _extend(seqs[i], tau0, tau1)
-        matched = (i, int(np.floor(tau0)), min(int(np.ceil(tau1)), seqs[i].shape[0] - 1))
+            tau0, tau1 = _extend(beta, tau0, tau1)
+        matched = (i, int(np.floor(tau0)), min(int(np.ceil(tau1)), beta.shape[0] - 1))
         span = (float(tau0), float(tau1))
         if method == "closest" or (method == "auto" and err <= CLOSE_MATCH * scale):
-            s, times = _progress_curve(seqs[i], tau0, tau1, n)
+            s, times = _progress_curve(beta, tau0, tau1, n)
         else:
             times = np.linspace(tau0, tau1, n)  # what §6.2 would have sampled; its curve is not needed
     if s is None:
-        blended = transition_timing(seqs, s_vec, e_vec, n)
+        blended = transition_timing(m_seqs, m_s, m_e, n)
         if blended is not None:
             s, choice, sources = blended.s, "take", blended.sources
         else:
@@ -505,4 +599,6 @@ def retime(
         times=times,
         choice=choice,
         sources=sources,
+        space=where,
+        fit_rms=fit_rms,
     )
