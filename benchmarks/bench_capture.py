@@ -322,8 +322,10 @@ def _adaptation_table(model: Any, args: argparse.Namespace) -> None:
     print("| tracker | frames/s (frames) | set-up (s) | fit error, 2nd half (mm) | posed-vertex error, last 10 "
           "frames (mm) | weight RMSE |")
     print("|---|---|---|---|---|---|")
-    for name, adapt in (("template rig, adaptation off", False), ("adaptation on (defaults)", True)):
-        res = track_clouds(model, clouds, adapt=adapt)
+    for name, kw in (("template rig, adaptation off", {"adapt": False}),
+                     ("adaptation on (defaults: the identity from the neutral start)", {}),
+                     ("adaptation with the online refinement (`refine=True`)", {"refine": True})):
+        res = track_clouds(model, clouds, **kw)
         am = res.info["adapted"]
         b0, DS = (am.neutral_, am.shapes_) if am is not None else (V, D)
         ids = res.info["vertex_ids"]

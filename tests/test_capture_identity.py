@@ -48,6 +48,17 @@ def test_sampled_people_are_centred_and_rigidly_aligned(head: workbench.FaceMode
     np.testing.assert_array_equal(X, sample_identities(identity_targets(), 60, seed=3, neutral=V))
 
 
+def test_one_person_drawn_to_test_on_is_a_face_not_zeros(head: workbench.FaceModel) -> None:
+    V = np.asarray(head.vertices, np.float64)
+    one = sample_identities(identity_targets(), 1, seed=99, neutral=V, centre=False)[0]
+    assert np.linalg.norm(one, axis=1).mean() > 0.01  # millimetres to centimetres, in dm
+    # the same person as in an uncentred population drawn with that seed (the first one drawn)
+    many = sample_identities(identity_targets(), 3, seed=99, neutral=V, centre=False)
+    np.testing.assert_allclose(many[0], one, atol=1e-12)
+    # centring a single sample leaves nothing: why the benchmarks draw test people uncentred
+    np.testing.assert_array_equal(sample_identities(identity_targets(), 1, seed=99, neutral=V), 0.0)
+
+
 def test_the_basis_is_orthonormal_and_ordered(pca: IdentityModel, head: workbench.FaceModel) -> None:
     P = pca.basis.reshape(pca.n_components, -1)
     np.testing.assert_allclose(P @ P.T, np.eye(pca.n_components), atol=1e-9)
@@ -128,3 +139,15 @@ def test_bad_input_gives_clear_errors(pca: IdentityModel, head: workbench.FaceMo
         AdaptiveModel(grid, n_basis=1, identity=pca)
     with pytest.raises(TypeError, match="identity must be an IdentityModel"):
         AdaptiveModel(head, n_basis=5, identity="pca")  # type: ignore[arg-type]
+
+
+def test_the_pca_spans_the_way_from_the_template_to_the_average_person(pca: IdentityModel,
+                                                                       head: workbench.FaceModel) -> None:
+    """The PCA's m is the template, so its components are of the offsets from it, not from the people's mean."""
+    V = np.asarray(head.vertices, np.float64)
+    people = sample_identities(identity_targets(), 200, seed=7, neutral=V, centre=False)
+    mean = people.mean(axis=0)
+    assert np.sqrt((mean**2).sum(1).mean()) > 0.03  # the average person is not the template (> 3 mm, in dm)
+    back = np.tensordot(pca.project(V + mean), pca.basis, axes=(0, 0))
+    # a PCA of centred offsets leaves most of it out; of offsets from m, nearly nothing
+    assert np.linalg.norm(back - mean) < 0.1 * np.linalg.norm(mean)

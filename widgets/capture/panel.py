@@ -233,7 +233,8 @@ class CapturePanel(ModelPanel):
         return out
 
     # ------------------------------------------------------------------ tracking
-    def _track(self, frames: Any, progress: Any = None, adapt: Any = None, auto: bool = False) -> Any:
+    def _track(self, frames: Any, progress: Any = None, adapt: Any = None, auto: bool = False,
+               **options: Any) -> Any:
         from workbench.capture import track
 
         t = self.take
@@ -241,7 +242,7 @@ class CapturePanel(ModelPanel):
         return track(self.model, frames, vertex_ids=t["vertex_ids"], fps=t["fps"],
                      l1="auto" if auto else float(self.l1.value),
                      temporal="auto" if auto else float(self.temporal.value),
-                     adapt=bool(self.adapt.value) if adapt is None else adapt, progress=progress)
+                     adapt=bool(self.adapt.value) if adapt is None else adapt, progress=progress, **options)
 
     def _on_lambda(self) -> None:
         """A λ slider moved by the user: they take over from the take's choice; re-track the window."""
@@ -327,9 +328,11 @@ class CapturePanel(ModelPanel):
         f = int(self.frame.value)
         a, b = max(0, f - WINDOW), min(self.result.n_frames - 1, f + WINDOW)
         frames = self.take["frames"][a : b + 1]
-        # the take's adapted rig carries on (a new one would redo its set-up for every slider move)
+        # the take's adapted rig carries on (a new one would redo its set-up for every slider move); its
+        # identity came from the take's neutral start, which a window in the middle of the take does not have
         adapted = self.result.info.get("adapted")
-        part = self._track(frames, adapt=adapted if adapted is not None else False)
+        options = {"neutral_start": False} if adapted is not None and self.result.kind == "clouds" else {}
+        part = self._track(frames, adapt=adapted if adapted is not None else False, **options)
         r = self.result
         W_, P_, E_ = np.array(r.weights), np.array(r.poses), np.array(r.errors)
         W_[a : b + 1], P_[a : b + 1], E_[a : b + 1] = part.weights, part.poses, part.errors

@@ -139,6 +139,11 @@ class AdaptiveModel:
         this model's vertices, ``m`` its neutral). :meth:`fit_neutral` then solves
         ``y`` with ``z0`` (eq. 1, ``β1 ||D_P y||²``); without it ``E`` doubles as the
         identity basis.
+    lazy_rows : bool, default False
+        Build the refinement's transfer rows (a sparse solve per shape with ``3K``
+        right-hand sides) only when a frame first needs them (:meth:`update` with weights). Until then :meth:`deltas_at`
+        transfers the current neutral exactly. For a rig whose identity is fitted at
+        the start and then held (``track_clouds`` without ``refine``).
 
     Attributes
     ----------
@@ -161,6 +166,8 @@ class AdaptiveModel:
     setup_seconds_ : float
     """
 
+    _cur_DS: NDArray[np.float64] | None
+
     def __init__(
         self,
         model: FaceModel,
@@ -174,6 +181,7 @@ class AdaptiveModel:
         max_vertices: int = 2000,
         progress: Callable[[float, str], Any] | None = None,
         identity: IdentityModel | None = None,
+        lazy_rows: bool = False,
     ) -> None:
         t0 = time.perf_counter()
         if not isinstance(model, FaceModel):
@@ -241,7 +249,12 @@ class AdaptiveModel:
         self._E3 = np.kron(self._E_S, np.eye(3))  # (3p, 3K)
         local = np.full(n, -1, np.int64)
         local[skin] = np.arange(skin.size)
-        self._rows = TransferRows(self.transfer_, E_skin, local[S], lambda f, msg: say(0.1 + 0.9 * f, msg), self._names)
+        # the transfer rows serve the per-frame refinement only: built on its first use (an identity
+        # fitted at the start and then held needs only exact transfers of the neutral, see deltas_at)
+        self._rows_inputs: tuple[Any, ...] | None = (E_skin, local[S], lambda f, msg: say(0.1 + 0.9 * f, msg))
+        self._rows_built: TransferRows | None = None
+        if not lazy_rows:
+            self._build_rows()
         self._template_b0S = V[S].copy()
         self._template_D0S = D[:, S].copy()
         self._P_S: NDArray[np.float64] | None = None
@@ -256,6 +269,18 @@ class AdaptiveModel:
         say(1.0, f"adaptive model ready ({self.setup_seconds_:.1f} s)")
 
     # ------------------------------------------------------------------ state
+    def _build_rows(self) -> TransferRows:
+        if self._rows_built is None:
+            assert self._rows_inputs is not None
+            E_skin, rows, say = self._rows_inputs
+            self._rows_built = TransferRows(self.transfer_, E_skin, rows, say, self._names)
+            self._rows_inputs = None
+        return self._rows_built
+
+    @property
+    def _rows(self) -> TransferRows:
+        return self._build_rows()
+
     def reset(self) -> AdaptiveModel:
         """Forget every frame: back to the template (``u = 0``), no statistics."""
         k = len(self._names)
@@ -316,7 +341,9 @@ class AdaptiveModel:
         U = self._u.reshape(-1, self.n_basis, 3)
         self._cur_b0S = self._b0S + ell * (self._E_S @ U[0])
         k = len(self._names)
-        if k:
+        if k and self._rows_built is None:
+            self._cur_DS = None  # no rows yet (no refinement): exact transfers of the neutral, on demand
+        elif k:
             K = self.n_basis
             corr = (self._E_S @ U[1:].transpose(1, 0, 2).reshape(K, 3 * k)).reshape(p, k, 3).transpose(1, 0, 2)
             self._cur_DS = self._D0S + ell * (self._rows.of_neutral(self._u[0]) + corr)
@@ -329,6 +356,12 @@ class AdaptiveModel:
 
     def deltas_at(self) -> NDArray[np.float64]:
         """The current deltas ``b_i − b0`` at :attr:`vertex_ids_`, (k, p, 3)."""
+        if self._cur_DS is None:
+            # T_i* b0 − b0 of the current neutral, exactly (one sparse solve per shape; the refinement's
+            # rows give the same to first order, as the transfer is linear in b0)
+            b0 = self.neutral_
+            S = self.vertex_ids_
+            self._cur_DS = np.stack([self.transfer_.delta(i, b0)[S] for i in range(len(self._names))])
         return self._cur_DS.copy()
 
     @property

@@ -13,9 +13,15 @@ age uniform between the macro targets, every local modifier pair
 ``N(0, spread²)`` clipped to its range, each lone shape ``U(0, spread)``) and
 keeps the principal components of those offsets.
 
-The mean ``m`` is the template's own neutral (MakeHuman's base mesh is its
-average person; the sampled offsets are centred), so ``y = 0`` is the template
-and every identity the adaptive model had before still holds with the PCA off.
+The mean ``m`` is the template's own neutral, so ``y = 0`` is the template
+and every identity the adaptive model had before still holds with the PCA off;
+the components are those of the sampled people's offsets *from the template*
+(uncentred: their second moment about ``m``). The sampled people's average is
+not the template — lone modifiers only add, the macro mixtures are not the base
+mesh — and a PCA of centred offsets left that direction (5.8 mm RMS over the
+skin, more than the first centred component's 3.8 mm) out of the model: on
+people it never saw, the neutral from one frame of points was 5.2 mm off with
+50 components, against 1.9 mm now (``benchmarks/bench_identity_pca.py``).
 
 :meth:`IdentityModel.fit` solves eq. 1's PCA part for given constraints,
 ``min ||A (m + P y) − c||² + β1 ||D_P y||²`` with ``β1`` in mm² as the
@@ -163,9 +169,9 @@ def _groups(names: list[str]) -> tuple[list[tuple[str, str]], list[str], dict[tu
 
 def sample_identities(
     targets: Mapping[str, ArrayLike], n_samples: int = 400, *, spread: float = 0.35, seed: int = 0,
-    neutral: ArrayLike | None = None,
+    neutral: ArrayLike | None = None, centre: bool = True,
 ) -> NDArray[np.float64]:
-    """Offsets of ``n_samples`` random people from MakeHuman-style targets (module docstring), (S, n, 3), centred.
+    """Offsets of ``n_samples`` random people from MakeHuman-style targets (module docstring), (S, n, 3).
 
     Parameters
     ----------
@@ -180,6 +186,10 @@ def sample_identities(
         The face the offsets apply to: each sampled face is then moved rigidly
         back onto it (the macro targets move the whole body, so the head also
         shifts and tilts; tracking finds the head pose, the identity must not).
+    centre : bool
+        Subtract the samples' mean (a population for a PCA). False: each offset is
+        that person's face minus the template's — to draw a few people to test on (a
+        single centred sample would be all zeros).
     """
     names = sorted(targets)
     pairs, lone, macro = _groups(names)
@@ -211,7 +221,7 @@ def sample_identities(
         for s in range(len(out)):
             M = fit_rigid(B + out[s], B)
             out[s] = (B + out[s]) @ M[:3, :3].T + M[:3, 3] - B
-    return out - out.mean(axis=0)
+    return out - out.mean(axis=0) if centre else out
 
 
 def sample_identity_model(
@@ -252,7 +262,8 @@ def sample_identity_model(
         model = base
     T = dict(targets) if targets is not None else identity_targets()
     say(0.1, "sampling identities")
-    X = sample_identities(T, n_samples, spread=spread, seed=seed, neutral=base.vertices)
+    # offsets from the template, not centred: m is the template (the module docstring)
+    X = sample_identities(T, n_samples, spread=spread, seed=seed, neutral=base.vertices, centre=False)
     n = int(model.n_vertices)
     if n != base.n_vertices:
         # the level from the vertex count alone; the operator is built once, for that level
@@ -275,7 +286,7 @@ def sample_identity_model(
     sv = np.sqrt(np.maximum(lam[order], 0.0))
     Vt = (U[:, order].T @ Xf) / np.maximum(sv, 1e-300)[:, None]
     basis = Vt.reshape(k, base.n_vertices, 3)
-    std = sv / np.sqrt(max(len(X) - 1, 1))
+    std = sv / np.sqrt(len(X))  # the RMS coefficient about m
     if S is not None:
         # subdivision is linear: subdivided components, re-orthonormalised (QR keeps their order)
         sub = np.stack([S @ b for b in basis]).reshape(k, -1)
