@@ -250,9 +250,11 @@ def track_clouds(
         Relative λ's (default :data:`CLOUD_L1`, or :data:`CLOUD_L1_REFINE` with
         ``refine``; :data:`CLOUD_TEMPORAL`).
     adapt : bool, dict, AdaptiveModel or None
-        Adapt the rig to the actor (None or True: an :class:`AdaptiveModel` with its
-        defaults on the tracker's samples; a dict: its options; an AdaptiveModel: that
-        one, updated in place — its ``vertex_ids_`` become the samples; False: off).
+        Adapt the rig to the actor (None or True: an :class:`AdaptiveModel` on the
+        tracker's samples, with :data:`CLOUD_IDENTITY_OPTIONS` — or, with ``refine``,
+        its own defaults; a dict: its options, over those; an AdaptiveModel: that
+        one — its ``vertex_ids_`` become the samples; its identity is fitted on the
+        neutral start and, with ``refine``, it is updated in place; False: off).
     refine : bool
         With ``adapt``: after the start's identity fit, keep refining the model on
         every frame (§3.2: the neutral and each shape's correctives, aggregated over
