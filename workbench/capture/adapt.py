@@ -357,11 +357,9 @@ class AdaptiveModel:
     def deltas_at(self) -> NDArray[np.float64]:
         """The current deltas ``b_i − b0`` at :attr:`vertex_ids_`, (k, p, 3)."""
         if self._cur_DS is None:
-            # T_i* b0 − b0 of the current neutral, exactly (one sparse solve per shape; the refinement's
-            # rows give the same to first order, as the transfer is linear in b0)
-            b0 = self.neutral_
-            S = self.vertex_ids_
-            self._cur_DS = np.stack([self.transfer_.delta(i, b0)[S] for i in range(len(self._names))])
+            # the exact transfer of the current neutral (no refinement yet, so no correctives); the
+            # refinement's rows give the same to first order, as the transfer is linear in b0
+            self._cur_DS = self.shapes_[:, self.vertex_ids_]
         return self._cur_DS.copy()
 
     @property
