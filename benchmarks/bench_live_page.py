@@ -7,6 +7,8 @@ for ``--seconds`` at each sample resolution. The page itself measures each
 frame (``widgets/js/src/camera.js``, its ``data-latency`` report):
 
 * ``grab``: the video frame drawn into a canvas and JPEG-encoded;
+* ``wait``: encoded → sent (the next frame is encoded while one is in
+  flight, timed to be ready about when the ack comes);
 * ``kernel``: decode, FaceMesh, the solve, the face's update sent (as the
   kernel's ack says);
 * ``transport``: the rest of the send → ack round trip (websocket, server,
@@ -16,7 +18,7 @@ frame (``widgets/js/src/camera.js``, its ``data-latency`` report):
 * ``total``: grab → drawn.
 
 Prints median / p90 per stage (ms) and the frames/s the page sent and the kernel
-acked (one frame in flight: the kernel's pace is the rate). Targets (issue 30):
+acked (one frame in flight: the round trip's pace is the rate). Targets (issue 30):
 ≥ 15 frames/s at 640×480 and ≤ 150 ms camera → face on 2 CPU cores.
 
 Usage::
@@ -39,7 +41,7 @@ from browser_session import REPO, NotebookPage, chromium_missing, each_resolutio
 sys.path.insert(0, str(REPO / "tests"))
 from capture_takes import render_take, write_y4m
 
-STAGES = ("grab", "kernel", "transport", "draw", "total")
+STAGES = ("grab", "wait", "kernel", "transport", "draw", "total")
 
 
 def fake_camera(folder: Path) -> Path:
@@ -100,7 +102,7 @@ def main() -> None:
     print(f"\nLive tab, camera frame → drawn face (ms, median / p90 over the last ≤120 frames), {args.seconds:g} s each")
     print(f"{'mesh':<6} {'frames':>6} " + " ".join(f"{k:>14}" for k in STAGES) + f" {'sent/s':>7} {'acked/s':>8}")
     for res, n, *st, sent, acked in rows:
-        cells = " ".join(f"{m:6.1f} / {p:5.1f}" for m, p in st)
+        cells = " ".join(f"{m:6.1f} / {p:5.1f}" if m is not None else f"{'–':>14}" for m, p in st)
         print(f"{res:<6} {n:>6} {cells} {sent:7.1f} {acked:8.1f}")
 
 

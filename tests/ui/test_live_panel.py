@@ -192,3 +192,57 @@ def test_show_head_pose_refuses_what_is_not_rigid(live_wb) -> None:
     with pytest.raises(ValueError, match="rigid"):
         wb.viewport.show_head_pose(np.diag([2.0, 1.0, 1.0, 1.0]))
     assert wb.viewport.sync.view_pose is None
+
+
+def test_the_sliders_follow_a_live_stream_at_their_own_pace_and_catch_up() -> None:
+    # the face follows every frame; 52 sliders (each echoed by the page) follow at STREAM_FOLLOW_S,
+    # not at all while hidden behind the Live tab, and catch up when shown or when the stream ends
+    import asyncio
+
+    from kernel_loop import in_kernel_loop
+
+    from widgets.panels.expressions import STREAM_FOLLOW_S, ExpressionPanel
+
+    async def main() -> None:
+        model = workbench.load_sample("head")
+        panel = ExpressionPanel(model)
+        a, b = model.shape_names[:2]
+        slider = panel.sliders[a]
+        updates: list[float] = []
+        slider.observe(lambda ch: updates.append(ch["new"]), "value")
+        try:
+            model.set_weights({a: 0.1})  # no stream: at once
+            assert slider.value == pytest.approx(0.1)
+            tok = model.begin_interaction("Live camera", kind="live")
+            for v in (0.2, 0.3, 0.4):
+                model.set_weights({a: v, b: v / 2})
+            assert slider.value == pytest.approx(0.1)  # frames came faster than the sliders follow
+            await asyncio.sleep(STREAM_FOLLOW_S + 0.2)
+            assert slider.value == pytest.approx(0.4) and panel.sliders[b].value == pytest.approx(0.2)
+            assert updates == pytest.approx([0.1, 0.4])  # one update for three frames
+            panel.set_shown(False)
+            model.set_weights({a: 0.6})
+            await asyncio.sleep(STREAM_FOLLOW_S + 0.2)
+            assert slider.value == pytest.approx(0.4)  # hidden: nothing sent
+            panel.set_shown(True)
+            assert slider.value == pytest.approx(0.6)
+            panel.set_shown(False)
+            model.set_weights({a: 0.7, b: 0.7})
+            model.cancel_interaction(tok)  # Stop camera: the weights go back, the sliders with them
+            assert model.weights[a] == pytest.approx(0.1) and slider.value == pytest.approx(0.1)
+            assert panel.sliders[b].value == pytest.approx(model.weights[b])
+            model.set_weights({a: 0.25})  # hidden, but no stream: at once
+            assert slider.value == pytest.approx(0.25)
+        finally:
+            panel.close()
+
+    in_kernel_loop(main)
+
+
+def test_the_shapes_tab_tells_its_sliders_when_they_are_hidden(live_wb) -> None:
+    _model, wb, _live, _acks = live_wb
+    assert wb.panel.shown
+    wb.tabs.selected_index = wb.tabs.titles.index("Live")
+    assert not wb.panel.shown
+    wb.tabs.selected_index = wb.tabs.titles.index("Shapes")
+    assert wb.panel.shown

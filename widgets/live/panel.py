@@ -32,6 +32,7 @@ from numpy.typing import NDArray
 from widgets.live.camera import CameraWidget
 from widgets.panels.base import ModelPanel, button
 from widgets.viewport.common import scene_key
+from workbench.blas import one_blas_thread
 
 __all__ = ["LivePanel"]
 
@@ -144,6 +145,12 @@ class LivePanel(ModelPanel):
         """One camera frame: track it and show its weights (the Live tab's frame callback)."""
         if self.tracker is None or not self.camera.active:
             return None  # a frame already on its way when the camera was stopped: dropped
+        # small dense work many times a second: threaded BLAS workers would spin between frames
+        # on the cores the browser needs (workbench.blas)
+        with one_blas_thread():
+            return self._push(image, t)
+
+    def _push(self, image: NDArray[np.uint8], t: float) -> Any:
         t0 = time.perf_counter()
         frame = self.tracker.push(image, t)
         self.last = frame

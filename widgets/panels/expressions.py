@@ -31,6 +31,18 @@ the last few values sent to it, and a value that is one of them snapped to the
 step is an echo, not a drag (without this, playing a take recorded a "Drag"
 step per shape and pulled the weights onto the grid).
 
+While a live stream drives the weights (an open interaction of kind
+``"live"``: the webcam, ``widgets/live``), the sliders follow at most every
+:data:`STREAM_FOLLOW_S` seconds, with the model's values at that time, and
+not at all while the panel is hidden (:meth:`ExpressionPanel.set_shown`: the
+Workbench's Live tab hides the Shapes tab) — they catch up when shown, or on
+the first change that is not the stream's; the viewport shows every frame. A
+slider is its own widget model, so mirroring every camera frame meant 52
+updates a frame, each snapped to the step and echoed back by the page (a
+message to the kernel, a busy/idle pair back): in the Live tab the kernel,
+server and page spent more on them than on the tracking (camera → face
+291 → 160 ms, 3.7 → 6.2 frames/s on the 5k head when they stopped).
+
 Corrective (combination) shapes (``model.shape_tools.correctives``) play the
 product of their drivers' weights: their sliders are disabled, carry a
 "= A × B" badge and show ``model.weights[name]``, refreshed on every
@@ -48,9 +60,14 @@ from typing import Any
 import ipywidgets as W
 import traitlets
 
-from widgets._threading import InteractionGrouper, close_interactions
+from widgets._threading import InteractionGrouper, UiTimer, close_interactions
 from widgets.panels.base import ModelPanel
 from widgets.slider_echoes import SliderEchoes
+
+#: seconds between slider refreshes while a live stream drives the weights (see the module docstring)
+STREAM_FOLLOW_S = 0.25
+#: interaction kinds whose weight changes the sliders follow at :data:`STREAM_FOLLOW_S`
+STREAM_KINDS = frozenset({"live"})
 
 GROUPS = ("brows", "eyes", "cheeks", "nose", "mouth", "jaw", "tongue", "other")
 _LEFT_TOKENS = {"l", "left", "lf", "lft"}
@@ -145,6 +162,11 @@ class ExpressionPanel(ModelPanel):
         self.sliders: dict[str, W.FloatSlider] = {}
         #: per slider, the last values the model sent it (echo detection, see the module docstring)
         self._echoes = SliderEchoes()
+        #: names a live stream changed since the sliders last followed it, and the timer that will
+        self._stream_names: set[str] = set()
+        self._stream_timer: UiTimer | None = None
+        #: on screen (see :meth:`set_shown`)
+        self.shown = True
         self.mutes: dict[str, W.Checkbox] = {}
         self.badges: dict[str, W.HTML] = {}
         self._badge_columns: dict[str, W.VBox] = {}  # slider over badge, in a corrective's cell
@@ -178,6 +200,7 @@ class ExpressionPanel(ModelPanel):
         self.listen(ev.shapes, self._on_model_shapes, "ExpressionPanel shapes")
         self.listen(ev.correctives, self._on_correctives, "ExpressionPanel correctives")
         self.on_close(self.grouper.flush)  # first: an open drag becomes its undo step
+        self.on_close(self._stop_following_stream)
         self._build()
 
     # ------------------------------------------------------------- building
@@ -302,7 +325,44 @@ class ExpressionPanel(ModelPanel):
             header.layout.display = None if any_visible else "none"
 
     # ------------------------------------------------------- model -> UI
+    def set_shown(self, shown: bool) -> None:
+        """The panel is on screen (True) or hidden behind another tab; shown again, the sliders catch up."""
+        self.shown = bool(shown)
+        if self.shown and self._stream_names:
+            self._follow_stream()
+
     def _on_model_weights(self, values: Mapping[str, float]) -> None:
+        token = self._model.interaction_token
+        if token is not None and token.kind in STREAM_KINDS:
+            self._stream_names.update(values)
+            if not self.shown:
+                return
+            if self._stream_timer is None or not self._stream_timer.armed:
+                self._stream_timer = UiTimer(STREAM_FOLLOW_S, self.errors.guard("follow live weights")(
+                    self._follow_stream))
+            if self._stream_timer.armed:
+                return
+            self._stream_names.clear()  # no event loop (a script): follow every change at once
+        elif self._stream_names:
+            self._follow_stream()  # the stream ended or another edit came: catch up first
+        self._set_sliders(values)
+
+    def _follow_stream(self) -> None:
+        """The sliders a live stream moved show the model's current values (the timer's turn, or catching up)."""
+        if self._stream_timer is not None:
+            self._stream_timer.cancel()
+        self._stream_timer = None
+        names, self._stream_names = self._stream_names, set()
+        played = self._model.weights
+        self._set_sliders({n: played[n] for n in names if n in played})
+
+    def _stop_following_stream(self) -> None:
+        if self._stream_timer is not None:
+            self._stream_timer.cancel()
+        self._stream_timer = None
+        self._stream_names.clear()
+
+    def _set_sliders(self, values: Mapping[str, float]) -> None:
         for name, v in values.items():
             s = self.sliders.get(name)
             if s is not None and s.value != v:

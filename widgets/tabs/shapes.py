@@ -19,8 +19,13 @@ def _build(wb: Any) -> tuple[Any, dict[str, Any]]:
     return tab, {"shape_tools": tools}
 
 
+def _show(wb: Any) -> None:
+    wb.panel.set_shown(True)
+
+
 def _hide(wb: Any) -> None:
     wb.shape_tools.end_preview()  # the split preview's colours belong to the Shapes tab
+    wb.panel.set_shown(False)  # a live stream's weights wait for the sliders' return
 
 
-TAB = register_tab(TabSpec("Shapes", 10, _build, on_hide=_hide, attrs=("shape_tools",)))
+TAB = register_tab(TabSpec("Shapes", 10, _build, on_show=_show, on_hide=_hide, attrs=("shape_tools",)))

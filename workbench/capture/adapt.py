@@ -83,7 +83,7 @@ import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
-from workbench._blas import one_blas_thread
+from workbench.blas import one_blas_thread
 from workbench.capture.block_statistics import BlockStatistics, spd_solve
 from workbench.capture.constraints import (
     check_vertex_ids,

@@ -27,7 +27,7 @@ def spd_solve(A: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.floa
     ~40× slower per 150×150 block on a loaded 2-core machine (scipy 1.17: extra checks,
     and a threaded BLAS whose threads wait for busy cores). These blocks are far too
     small to gain from threads: every public method of the adaptive model that solves
-    them holds BLAS to one thread with :func:`workbench._blas.one_blas_thread` once,
+    them holds BLAS to one thread with :func:`workbench.blas.one_blas_thread` once,
     around all its work.
     """
     return sla.cho_solve(sla.cho_factor(A, check_finite=False), b, check_finite=False)

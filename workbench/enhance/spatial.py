@@ -38,7 +38,7 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 
-from workbench._blas import one_blas_thread
+from workbench.blas import one_blas_thread
 from workbench.enhance.errors import DatabaseError
 
 if TYPE_CHECKING:

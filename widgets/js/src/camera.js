@@ -3,15 +3,20 @@
 // While `active` is true the page holds the user's camera (getUserMedia: the browser asks
 // for consent) and sends frames to the kernel as small JPEGs, at the rate the kernel keeps
 // up with (at most MAX_SEND_WIDTH wide): one frame in flight, the next one only after the
-// kernel's {type: "ack"} — a slow kernel makes frames drop, never queue. Turning `active` off, or closing the view, stops
-// the camera (every track of the stream).
+// kernel's {type: "ack"} — a slow kernel makes frames drop, never queue. The next frame is
+// grabbed and encoded while one is in flight, started so that it is ready by the time the ack
+// comes (schedulePregrab), and sent on the ack: the rate is set by the slower of the round
+// trip and the encode, not their sum, and a frame waits for the ack only as long as that
+// estimate is early (the "wait" stage). Turning `active` off, or
+// closing the view, stops the camera (every track of the stream).
 //
 // Messages to the kernel: {type: "frame", t, width, height} with the JPEG as buffer 0;
 // {type: "camera", state: "on" | "off" | "error", message}. From the kernel: {type: "ack",
 // kernel_ms} (the kernel's time on the frame: decode, tracking, the face's update sent).
 //
 // Latency, camera frame to drawn face, per stage (the last LATENCY_SAMPLES frames): "grab"
-// (the video frame into a canvas and JPEG-encoded), "kernel" (as the ack says), "transport"
+// (the video frame into a canvas and JPEG-encoded), "wait" (encoded → sent: the frame in
+// flight before it was not acked yet), "kernel" (as the ack says), "transport"
 // (the rest of the send → ack round trip: websocket, server, queueing), "draw" (ack → the
 // second animation frame after it: the face's update reached the page before the ack, on
 // the same kernel channel, so the first animation frame draws it and the second one starts
@@ -34,7 +39,9 @@ const JPEG_QUALITY = 0.8;
 // encode, send and decode.
 const MAX_SEND_WIDTH = 320;
 const LATENCY_SAMPLES = 120;
-const STAGES = ["grab", "kernel", "transport", "draw", "total"];
+const STAGES = ["grab", "wait", "kernel", "transport", "draw", "total"];
+// until this many frames were measured, the next frame is grabbed only on the ack
+const PREGRAB_AFTER = 3;
 
 function quantile(sorted, q) {
   if (!sorted.length) return NaN;
@@ -54,11 +61,13 @@ function view({ model, el }) {
   const canvas = document.createElement("canvas");
   let stream = null;
   let inFlight = false;
+  let grabbing = false; // a frame is being encoded
+  let ready = null; // a frame encoded while another was in flight: {buf, t, w, h, grab, encoded}
   let sent = 0;
   let acked = 0;
   let timer = null;
   let disposed = false;
-  let pending = null; // {grab, sent} times (ms) of the frame in flight
+  let pending = null; // {grab, encoded, sent} times (ms) of the frame in flight
   const source = `camera-${Math.random().toString(36).slice(2)}`; // this view, in the playback registry
   const latency = []; // the last frames' {stage: ms}
   let summary = null; // latencySummary() of `latency`, made once per measured frame
@@ -83,22 +92,38 @@ function view({ model, el }) {
       state === "error" ? `camera: ${message}` : state === "starting" ? "asking for the camera…" : "camera off";
   };
 
-  const stop = () => {
+  const clearTimer = () => {
     if (timer !== null) clearTimeout(timer);
     timer = null;
+  };
+
+  const stop = () => {
+    clearTimer();
     if (stream) stream.getTracks().forEach((t) => t.stop());
     stream = null;
     video.srcObject = null;
     inFlight = false;
+    grabbing = false;
+    ready = null;
     pending = null;
     announcePlayback(source, model.get("_scene"), false);
   };
 
-  const sendFrame = () => {
-    timer = null;
-    if (!stream || disposed) return;
-    if (inFlight || video.readyState < 2 || !video.videoWidth) {
-      timer = setTimeout(sendFrame, 10);
+  const send = (f) => {
+    inFlight = true;
+    sent += 1;
+    pending = { grab: f.grab, encoded: f.encoded, sent: performance.now() };
+    model.send({ type: "frame", t: f.t, width: f.w, height: f.h }, undefined, [f.buf]);
+    mark("on");
+    schedulePregrab();
+  };
+
+  // The next frame into a JPEG: sent at once when nothing is in flight, else kept for the ack.
+  const grab = () => {
+    clearTimer();
+    if (!stream || disposed || grabbing || ready) return;
+    if (video.readyState < 2 || !video.videoWidth) {
+      timer = setTimeout(grab, 10); // the video's first frame is not there yet
       return;
     }
     const scale = Math.min(1, MAX_SEND_WIDTH / video.videoWidth);
@@ -108,20 +133,32 @@ function view({ model, el }) {
     canvas.height = h;
     const grabbed = performance.now();
     canvas.getContext("2d").drawImage(video, 0, 0, w, h);
-    inFlight = true;
+    grabbing = true;
     const t = performance.now() / 1000;
     const session = stream;
     canvas.toBlob(async (blob) => {
-      if (!blob || stream !== session) { inFlight = false; return; }
-      const buf = await blob.arrayBuffer();
+      const buf = blob && stream === session ? await blob.arrayBuffer() : null;
+      grabbing = false;
       // stopped (or restarted) while the JPEG was made: drop it, and never mark a stopped camera "on"
-      if (stream !== session || disposed) { inFlight = false; return; }
-      sent += 1;
-      pending = { grab: grabbed, sent: performance.now() };
-      model.send({ type: "frame", t, width: w, height: h }, undefined, [buf]);
-      mark("on");
+      if (!buf || stream !== session || disposed) return;
+      const f = { buf, t, w, h, grab: grabbed, encoded: performance.now() };
+      if (inFlight) ready = f;
+      else send(f);
     }, "image/jpeg", JPEG_QUALITY);
-    timer = setTimeout(sendFrame, 5);
+  };
+
+  // While a frame is in flight, start the next one's grab so that it is encoded by the time the
+  // ack comes: a short round trip (its lower quartile over the measured frames) less a long
+  // encode (upper quartile) — ready before the ack about three times in four, waiting at most
+  // the round trip's spread; before PREGRAB_AFTER frames are measured, grab on the ack.
+  const schedulePregrab = () => {
+    clearTimer();
+    if (latency.length < PREGRAB_AFTER) return;
+    const sorted = (f) => latency.map(f).filter(Number.isFinite).sort((a, b) => a - b);
+    const trip = quantile(sorted((r) => r.kernel + r.transport), 0.25);
+    const encode = quantile(sorted((r) => r.grab), 0.75);
+    const lead = Math.max(0, trip - encode);
+    if (Number.isFinite(lead)) timer = setTimeout(grab, lead);
   };
 
   const start = async () => {
@@ -147,7 +184,7 @@ function view({ model, el }) {
       mark("on");
       model.send({ type: "camera", state: "on", message: "" });
       announcePlayback(source, model.get("_scene"), true);
-      sendFrame();
+      grab();
     } catch (err) {
       const message = `${err && err.name ? err.name + ": " : ""}${err && err.message ? err.message : err}`;
       mark("error", message);
@@ -166,6 +203,14 @@ function view({ model, el }) {
       el.setAttribute("data-acked", String(acked));
       const p = pending;
       pending = null;
+      // the next frame: the one encoded meanwhile, else the one being encoded (sent when done), else grab now
+      if (stream && !disposed) {
+        if (ready) {
+          const f = ready;
+          ready = null;
+          send(f);
+        } else if (!grabbing) grab();
+      }
       if (!p) return;
       const ack = performance.now();
       const kernel = Number(msg.kernel_ms);
@@ -173,7 +218,8 @@ function view({ model, el }) {
         if (disposed) return;
         const drawn = performance.now();
         const trip = ack - p.sent;
-        latency.push({ grab: p.sent - p.grab, kernel, transport: Number.isFinite(kernel) ? trip - kernel : NaN,
+        latency.push({ grab: p.encoded - p.grab, wait: p.sent - p.encoded, kernel,
+                       transport: Number.isFinite(kernel) ? trip - kernel : NaN,
                        draw: drawn - ack, total: drawn - p.grab });
         if (latency.length > LATENCY_SAMPLES) latency.shift();
         summary = latencySummary();

@@ -5,6 +5,13 @@ systems) gain nothing from threads, and on a busy 2-core machine a threaded
 BLAS makes each call wait for cores (measured ~40× slower per block in
 capture). The public methods that do such work hold BLAS to one thread once,
 around all of it.
+
+A threaded BLAS also keeps its worker threads spinning for a while after each
+call before they sleep: a loop of small calls a few dozen times a second (a
+live camera: the solve, the face's update) keeps a worker busy-waiting on a
+core the whole time — measured in the Live tab, 67 % of one of the machine's
+two cores, taken from the browser that draws the face. Such loops hold one
+BLAS thread around each step.
 """
 
 from __future__ import annotations
