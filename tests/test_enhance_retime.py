@@ -9,7 +9,7 @@ import pytest
 
 import workbench.enhance
 from workbench.enhance import RetimeResult, retime
-from workbench.enhance.retime import project_segments, sequence_projection
+from workbench.enhance.projection import project_segments, sequence_projection
 
 
 def _smoothstep(t):
