@@ -27,28 +27,26 @@ transfer** (Sumner & Popović: each frame's motion solved through the rig
 transfer's prefactored Poisson system, as a per-frame deformation-transfer
 solve; parts as in cloning).
 
-Measured 2026-11-29, 120 frames, on an otherwise idle machine (2 cores):
+Measured 2026-11-29 (evening), 120 frames, quiet machine (2 cores); the
+default motion model is now ``"field"`` (the Jacobian of a thin-plate map
+fitted to the correspondence, :mod:`workbench.rigging.clone_motion`):
 
     face                   vertices   clone   paper    copy      DT clone/copy set-up s clone f/s  DT f/s
-    warp + renumber            5084   0.035   0.050   0.207   0.120       0.17      4.2       880     708
-    proportions, mm            5084   0.138   0.133   0.421   0.227       0.33      4.3      1044     955
-    remesh + warp + bust      26951   0.057   0.080   0.405   0.107       0.14      5.6       403     144
-    foreign                   16235   0.073   0.078   0.305   0.088       0.24      4.8       344     279
+    warp + renumber            5084   0.024   0.050   0.207   0.120       0.12      4.7       833     700
+    proportions, mm            5084   0.104   0.133   0.421   0.227       0.25      4.7       883    1042
+    remesh + warp + bust      26951   0.046   0.080   0.405   0.107       0.11      5.9       396     149
+    foreign                   16235   0.073   0.078   0.305   0.088       0.24      5.4       543     232
 
-The correspondence comes from the rigging fit plus a point-to-plane tail
-(``RigTransfer(fine_fit=True)``, :func:`workbench.rigging.registration.planar_refine`):
-point-to-point ICP alone left a grown jaw under-stretched (its median tangential
-scale 1.04 where the warp's is 1.24; jaw correspondence error 5.6 mm of a 386 mm
-head, 0.8 mm with the tail). Before the tail, in the same benchmark: 0.043,
-0.253, 0.072, 0.116, set-up 1.7-2.8 s. Cloning beats the naive copy and
-deformation transfer on every face, and the paper's motion model on all but the
-proportions face (0.138 vs 0.133). Met: the issue's 10 % on a warped,
-re-triangulated, renumbered head and 5 % there (3.5 %); >= 100 frames/s at 27k
-(403) after <= 10 s of set-up (5.6 s). Not met: 5 % on the harder generated
-faces (proportions 13.8 %, remesh + bust 5.7 %, foreign 7.3 %). On the
-proportions face the fitted jaw still grows 1.175x where the warp grows it
-1.24x; with the true correspondence the error would be about 0.09 (true local
-maps too: 0.04), so what is left is the fit near lips and chin.
+With the one-ring ``"affine"`` model (the default before) the clone column was
+0.035, 0.138, 0.057, 0.073. The correspondence comes from the rigging fit plus a
+point-to-plane tail (``RigTransfer(fine_fit=True)``,
+:func:`workbench.rigging.registration.planar_refine`): point-to-point ICP alone
+left a grown jaw under-stretched. Cloning beats the naive copy, deformation
+transfer and the paper's motion model on every face. Met: the issue's 10 % on a
+warped, re-triangulated, renumbered head and 5 % there (2.4 %) and on the 27k
+bust (4.6 %); >= 100 frames/s at 27k (396) after <= 10 s of set-up (5.9 s). Not
+met: 5 % on the foreign face (7.3 %; a third of it is the tongue and lower
+teeth, moved as rigid parts) and the 1.25x jaw (10.4 %).
 """
 
 from __future__ import annotations

@@ -98,6 +98,22 @@ def test_sample_roles_on_a_warped_retriangulated_variant(head: FaceModel, asymme
     assert m.part_roles == SAMPLE_ROLES
 
 
+@pytest.mark.parametrize("seed", [4, 5, 18])
+def test_roles_of_foreign_faces_with_lopsided_busts_and_rolled_heads(head: FaceModel, seed: int) -> None:
+    # foreign faces whose bust made the skin's box lopsided (both eyes "left", teeth and tongue
+    # "other" when the mid-plane came from the box) or whose 10° roll moved the mouth off the eyes' middle
+    from workbench.testing import foreign_face
+
+    face = foreign_face(head, seed=seed).model
+    want = {"skin": 1, "tongue": 1, "lashes": 2, "eyeball_left": 1, "eyeball_right": 1, "teeth_lower": 1,
+            "teeth_upper": 1}
+    roles = face.part_roles
+    assert {r: roles.count(r) for r in set(roles)} == want, roles
+    lab, V = face.component_labels, face.vertices
+    left, right = (V[lab == roles.index(r)].mean(0) for r in ("eyeball_left", "eyeball_right"))
+    assert left[0] > right[0]  # the subject's left is +x on these faces (their metadata's frame)
+
+
 def test_sample_roles_in_another_frame_and_mirrored(head: FaceModel) -> None:
     V = head.vertices
     # Blender's frame: +z up, the face toward -y; the subject's left stays +x

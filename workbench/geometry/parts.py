@@ -20,13 +20,18 @@ mesh, through :func:`component_roles` (``model.part_roles`` on a model).
    least-squares sphere ``c, r``, directions from ``c`` covering the sphere),
    with a radius of 0.3–10 % of the skin's bounding-box diagonal and the centre
    inside that box. When there are more than two, the pair most alike in radius
-   and most mirror-symmetric about the skin's mid-plane wins. The side is that of
-   the centre along the lateral axis ``up × front`` (the subject's left, from
-   ``metadata.up_axis`` / ``front_axis``); a component holding both is ``"eyeball"``.
+   and most mirror-symmetric about the skin's mid-plane wins. The face's mid-plane
+   is then the one half-way between the eyes (the skin's box is off it when a
+   bust or a warp makes the shoulders lopsided: on generated foreign faces that
+   put both eyes on one side in 8 of 20, and their teeth and tongue off the
+   face). The side is that of the centre along the lateral axis ``up × front``
+   (the subject's left, from ``metadata.up_axis`` / ``front_axis``); a component
+   holding both is ``"eyeball"``.
 3. **Mouth interior** — with the eyes as the yardstick (inter-ocular distance
    ``d``; without eyes the nose tip, the skin's front-most vertex, and ``d`` =
-   0.35 × the skin's width): a component centred on the mid-plane (within
-   0.25 ``d``), 0.4–2.2 ``d`` below the eyes, lying behind the skin in front of it
+   0.35 × the skin's width): a component centred near the mid-plane (within
+   0.4 ``d``: a head rolled 10° moves the mouth ~0.2 ``d`` sideways of the eyes'
+   middle), 0.4–2.2 ``d`` below the eyes, lying behind the skin in front of it
    (enclosed by the lips). Teeth are arches — seen from above, the centroid lies
    in the empty middle of a U, covered by none of its triangles; a tongue is a
    solid blob that covers its centroid. Two teeth arches are ``"teeth_upper"``
@@ -358,6 +363,10 @@ def component_roles(
         for c in {e[0] for e in chosen}:
             roles[c] = "eyeball"
         eyes += chosen
+    if len(eyes) >= 2:
+        # the face's midline is between its eyes: the skin's box is off it when a bust or a
+        # warp makes the shoulders lopsided (both eyes on one side of the box's middle)
+        mid = 0.5 * float(min(e[1][0] for e in eyes) + max(e[1][0] for e in eyes))
     for c in {e[0] for e in eyes}:
         if roles[c] == "eyeball":
             sides = {np.sign(cen[0] - mid) for cc, cen, _ in eyes if cc == c}
@@ -389,7 +398,7 @@ def component_roles(
     for c in unknown:
         p = part(c)
         cen = p.centroid
-        if abs(cen[0] - mid) > 0.25 * iod or not (eye_up - 2.2 * iod <= cen[1] <= eye_up - 0.4 * iod):
+        if abs(cen[0] - mid) > 0.4 * iod or not (eye_up - 2.2 * iod <= cen[1] <= eye_up - 0.4 * iod):
             continue
         # enclosed: skin in front of it (the lips), within a window around its centre
         win = np.flatnonzero((np.abs(S[:, 0] - cen[0]) < 0.3 * iod) & (np.abs(S[:, 1] - cen[1]) < 0.3 * iod))

@@ -24,9 +24,12 @@ Neumann's expression cloning:
    (:mod:`~workbench.rigging.clone_motion`): ``motion="frames"`` is the paper
    as printed (local frames of the normal and one edge, ``R = F1 F0ᵀ``; one-ring
    bounding-box ratios with outliers filtered, ``T = S R``);
-   ``motion="affine"``, the default, is the fit's local linear map of each
-   one-ring (rotation, stretch and shear), smoothed — closer to the truth on
-   every generated face of the benchmark.
+   ``motion="affine"`` is the fit's local linear map of each one-ring
+   (rotation, stretch and shear), smoothed; ``motion="field"``, the default,
+   is the Jacobian of a smooth 3-D map fitted to the whole correspondence (a
+   thin-plate spline), which also knows how the face stretches along its
+   normal — what a one-ring cannot see — and is closer to the truth on the
+   generated faces of the benchmark.
 3. **Animation (eq. 17–18).** ``m' = T m`` at each source vertex, and each
    target vertex moves by the barycentric blend of its source triangle's
    ``m'``. Steps 2–3 are one sparse matrix (3 n_target × 3 n_source) built
@@ -81,9 +84,10 @@ class ExpressionCloner:
         Any face: other topology, vertex order, units and proportions.
     landmarks : sequence of (source_vertex, target_vertex), optional
         Corresponding vertex pairs (as :class:`~workbench.rigging.RigTransfer`).
-    motion : {"affine", "frames"}
+    motion : {"field", "affine", "frames"}
         How a motion vector turns and scales (:mod:`~workbench.rigging.clone_motion`):
-        the fit's smoothed local linear map (default), or the paper's frames and
+        the Jacobian of a smooth map fitted to the correspondence (default), the
+        fit's smoothed local linear map per one-ring, or the paper's frames and
         one-ring box ratios as printed.
     smoothing : float
         The affine model's smoothing length over the source's bounding diagonal.
@@ -98,14 +102,14 @@ class ExpressionCloner:
         Source skin motion (working frame) -> target skin motion (working frame), eq. 17–18.
     scales_ : (n_skin_s, 3) float
         The local scale factors (normal, tangent, tangent): the box ratios after the
-        outlier filter (``"frames"``), the map's stretches (``"affine"``).
+        outlier filter (``"frames"``), the map's stretches (``"field"``, ``"affine"``).
     transforms_ : (n_skin_s, 3, 3) float
         ``T`` per source skin vertex (working frame), ``m' = T m`` (eq. 16).
     setup_seconds_ : float
     """
 
     def __init__(self, source: FaceModel, target: FaceModel | str | PathLike[str], *,
-                 landmarks: Sequence[tuple[int, int]] | None = None, motion: MotionModel = "affine",
+                 landmarks: Sequence[tuple[int, int]] | None = None, motion: MotionModel = "field",
                  smoothing: float = AFFINE_SMOOTHING, progress: Progress = None) -> None:
         t0 = time.perf_counter()
         say = progress or (lambda f, m: None)
@@ -132,7 +136,8 @@ class ExpressionCloner:
         rt = self.transfer_
         self.motion = motion
         self.transforms_, self.scales_ = motion_transforms(
-            rt.src.skin_X, rt.fit.positions, np.asarray(rt.src.skin_faces, np.int64), motion, smoothing)
+            rt.src.skin_X, rt.fit.positions, np.asarray(rt.src.skin_faces, np.int64), motion, smoothing,
+            trusted=np.asarray(rt.fit.accepted, bool))
         self.operator_ = self._operator(self._rows, self.transforms_)
 
     @staticmethod
@@ -270,7 +275,7 @@ def _check_frames(frames: ArrayLike, n: int) -> NDArray[np.float64]:
 
 
 def clone_animation(frames: ArrayLike, source: FaceModel, target: FaceModel | str | PathLike[str], *,
-                    landmarks: Sequence[tuple[int, int]] | None = None, motion: MotionModel = "affine",
+                    landmarks: Sequence[tuple[int, int]] | None = None, motion: MotionModel = "field",
                     progress: Progress = None) -> NDArray[np.float64]:
     """Play a performance of ``source`` on ``target`` (expression cloning, Noh & Neumann 2001).
 
@@ -282,7 +287,7 @@ def clone_animation(frames: ArrayLike, source: FaceModel, target: FaceModel | st
     target : FaceModel or path
         Any topology, vertex order and units.
     landmarks : sequence of (source_vertex, target_vertex), optional
-    motion : {"affine", "frames"}
+    motion : {"field", "affine", "frames"}
         The motion model (:class:`ExpressionCloner`).
     progress : callable, optional
         ``progress(fraction, message)``.
