@@ -32,10 +32,10 @@ default motion model is now ``"field"`` (the Jacobian of a thin-plate map
 fitted to the correspondence, :mod:`workbench.rigging.clone_motion`):
 
     face                   vertices   clone   paper    copy      DT clone/copy set-up s clone f/s  DT f/s
-    warp + renumber            5084   0.024   0.050   0.207   0.120       0.12      4.7       833     700
-    proportions, mm            5084   0.104   0.133   0.421   0.227       0.25      4.7       883    1042
-    remesh + warp + bust      26951   0.046   0.080   0.405   0.107       0.11      5.9       396     149
-    foreign                   16235   0.073   0.078   0.305   0.088       0.24      5.4       543     232
+    warp + renumber            5084   0.021   0.050   0.207   0.120       0.10      5.7       922     758
+    proportions, mm            5084   0.098   0.133   0.421   0.227       0.23      5.6       808     875
+    remesh + warp + bust      26951   0.044   0.080   0.405   0.107       0.11      7.0       330     129
+    foreign                   16235   0.063   0.078   0.305   0.088       0.21      6.2       473     266
 
 With the one-ring ``"affine"`` model (the default before) the clone column was
 0.035, 0.138, 0.057, 0.073. The correspondence comes from the rigging fit plus a
@@ -43,10 +43,11 @@ point-to-plane tail (``RigTransfer(fine_fit=True)``,
 :func:`workbench.rigging.registration.planar_refine`): point-to-point ICP alone
 left a grown jaw under-stretched. Cloning beats the naive copy, deformation
 transfer and the paper's motion model on every face. Met: the issue's 10 % on a
-warped, re-triangulated, renumbered head and 5 % there (2.4 %) and on the 27k
-bust (4.6 %); >= 100 frames/s at 27k (396) after <= 10 s of set-up (5.9 s). Not
-met: 5 % on the foreign face (7.3 %; a third of it is the tongue and lower
-teeth, moved as rigid parts) and the 1.25x jaw (10.4 %).
+warped, re-triangulated, renumbered head and 5 % there (2.1 %) and on the 27k
+bust (4.4 %); >= 100 frames/s at 27k (330) after <= 10 s of set-up (7.0 s). Not
+met: 5 % on the foreign face (6.3 %) and the 1.25x jaw (9.8 %). Matched parts
+move by the field's map at each of their points (before: one map averaged over
+the skin around the part: foreign 7.3 %, jaw 10.4 %).
 """
 
 from __future__ import annotations

@@ -36,7 +36,11 @@ Neumann's expression cloning:
    once: a frame costs one sparse product.
 
 Eyes, teeth and tongue follow as in a rig transfer (matched parts carry the
-source part's motion; others move rigidly with the skin around them).
+source part's motion; others move rigidly with the skin around them), except
+that with ``motion="field"`` a matched part's motion is mapped by the field's
+Jacobian at each of its points — the field is a map of space, so it reaches
+inside the mouth — rather than by one map averaged over the skin around the
+part (foreign face 7.3 → 6.3 % of the motion, a 1.25× jaw 10.4 → 9.8 %).
 
 Hand-written because no kept library implements expression cloning; the
 correspondence, fit and parts are the rigging step's.
@@ -58,6 +62,8 @@ from workbench.rigging.clone_motion import (
     AFFINE_SMOOTHING,
     MotionModel,
     _adjacency,
+    field_jacobian,
+    fit_field,
     local_scales,
     motion_transforms,
 )
@@ -135,10 +141,27 @@ class ExpressionCloner:
         """``transforms_``, ``scales_`` and ``operator_`` of ``motion`` on this correspondence."""
         rt = self.transfer_
         self.motion = motion
+        X0, X1 = rt.src.skin_X, rt.fit.positions
+        field = fit_field(X0, X1, trusted=np.asarray(rt.fit.accepted, bool)) if motion == "field" else None
         self.transforms_, self.scales_ = motion_transforms(
-            rt.src.skin_X, rt.fit.positions, np.asarray(rt.src.skin_faces, np.int64), motion, smoothing,
-            trusted=np.asarray(rt.fit.accepted, bool))
+            X0, X1, np.asarray(rt.src.skin_faces, np.int64), motion, smoothing, field=field)
         self.operator_ = self._operator(self._rows, self.transforms_)
+        # matched parts (teeth, tongue, eyes) move by the field's map at each of their points
+        self._part_jacobian: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None = None
+        if field is not None:
+            h = 1e-4 * float(np.linalg.norm(X0.max(0) - X0.min(0)))
+            known: dict[bytes, NDArray[np.float64]] = {}  # the parts' points are the same every block of frames
+
+            def part_jacobian(P: NDArray[np.float64]) -> NDArray[np.float64]:
+                key = np.ascontiguousarray(P).tobytes()
+                if key not in known:
+                    known[key] = field_jacobian(field, P, h)
+                return known[key]
+
+            self._part_jacobian = part_jacobian
+            # evaluated now, in the set-up, not in the first frames played
+            rt.parts_motion.fill(np.zeros((1, rt.source.n_vertices, 3)), np.zeros((1, rt.target.n_vertices, 3)),
+                                 jacobian=part_jacobian)
 
     @staticmethod
     def _operator(B: sp.csr_matrix, T: NDArray[np.float64]) -> sp.csr_matrix:
@@ -197,7 +220,7 @@ class ExpressionCloner:
             m = work[:, src.skin_ids].reshape(b - a, -1).T  # (3 n_s, k)
             w = np.zeros((b - a, tgt_model.n_vertices, 3))
             w[:, tgt.skin_ids] = np.asarray(self.operator_ @ m).T.reshape(b - a, n_ts, 3)
-            rt.parts_motion.fill(motion, w)
+            rt.parts_motion.fill(motion, w, jacobian=self._part_jacobian)
             out[a:b] = tgt_model.vertices + tgt.frame.inverse_linear(w)
             if progress is not None:
                 progress(say_from + (1.0 - say_from) * b / Tn, f"cloned {b} of {Tn} frames")

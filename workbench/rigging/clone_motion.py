@@ -41,9 +41,11 @@ and the *deformed source* ``X1`` (the source fitted onto the target):
   where the field beat the one-ring map on each.
 
 Measured on the generated faces of ``benchmarks/bench_expression_cloning.py``
-(error over the mean motion; field / affine / frames): warp + renumber 2.4 /
-3.5 / 5.0 %; 27k remesh + bust 4.6 / 5.7 / 8.0 %; foreign 7.3 / 7.3 / 7.8 %;
-1.25× jaw 10.4 / 13.8 / 13.3 %.
+(error over the mean motion; field / affine / frames, the skin's motion model
+alone, parts as in a rig transfer): warp + renumber 2.4 / 3.5 / 5.0 %; 27k
+remesh + bust 4.6 / 5.7 / 8.0 %; foreign 7.3 / 7.3 / 7.8 %; 1.25× jaw 10.4 /
+13.8 / 13.3 %. The cloner also moves matched parts by the field
+(:mod:`~workbench.rigging.clone`): 2.1, 4.4, 6.3 and 9.8 %.
 
 Hand-written because no kept library implements these motion models; the
 spline is scipy's, the normals, Laplacian and mass matrix libigl's, the
@@ -52,7 +54,7 @@ factorization :class:`~workbench.geometry.sparse_cholesky.SparseSPDSolver`.
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Any, Literal
 
 import igl
 import numpy as np
@@ -198,20 +200,20 @@ def local_deformation(X0: NDArray[np.float64], X1: NDArray[np.float64], F: NDArr
     return J
 
 
-def field_deformation(X0: NDArray[np.float64], X1: NDArray[np.float64], *, trusted: NDArray[np.bool_] | None = None,
-                      centres: int = FIELD_CENTRES, smoothing: float = FIELD_SMOOTHING, seed: int = 0
-                      ) -> NDArray[np.float64]:
-    """(n, 3, 3) Jacobian at each source vertex of a smooth spatial map fitted to ``X0 → X1``.
+def fit_field(X0: NDArray[np.float64], X1: NDArray[np.float64], *, trusted: NDArray[np.bool_] | None = None,
+              centres: int = FIELD_CENTRES, smoothing: float = FIELD_SMOOTHING, seed: int = 0) -> Any:
+    """A smooth map of space fitted to ``X0 → X1``: the displacement as a thin-plate spline.
 
-    A thin-plate spline with an affine part (scipy's ``RBFInterpolator``) through the
-    displacement ``X1 − X0`` at up to ``centres`` source vertices (drawn with ``seed``),
-    differentiated by central differences. The surface alone fixes only the tangential
-    columns of a vertex's map; the spline's 3-D smoothness gives the normal one too.
+    scipy's ``RBFInterpolator`` (thin-plate kernel, affine part) through ``X1 − X0`` at up to
+    ``centres`` of the ``trusted`` source vertices (default all; drawn with ``seed``);
+    :func:`field_jacobian` differentiates it anywhere in space.
 
     Parameters
     ----------
     X0, X1 : (n, 3) float
         Source and deformed source vertices.
+    trusted : (n,) bool, optional
+        Vertices whose ``X1`` may be fitted (the fit's accepted correspondences).
     centres : int
     smoothing : float
         ``RBFInterpolator``'s smoothing (0 interpolates the centres exactly).
@@ -223,22 +225,39 @@ def field_deformation(X0: NDArray[np.float64], X1: NDArray[np.float64], *, trust
     if pool.size < 10:
         pool = np.arange(X0.shape[0])
     idx = pool if pool.size <= centres else np.sort(np.random.default_rng(seed).choice(pool, centres, replace=False))
-    rbf = RBFInterpolator(X0[idx], (X1 - X0)[idx], kernel="thin_plate_spline", degree=1, smoothing=smoothing)
-    h = 1e-4 * float(np.linalg.norm(X0.max(0) - X0.min(0)))
-    cols = [(rbf(X0 + h * e) - rbf(X0 - h * e)) / (2.0 * h) for e in np.eye(3)]
+    return RBFInterpolator(X0[idx], (X1 - X0)[idx], kernel="thin_plate_spline", degree=1, smoothing=smoothing)
+
+
+def field_jacobian(field: Any, P: NDArray[np.float64], h: float) -> NDArray[np.float64]:
+    """(p, 3, 3) Jacobian of the map ``x ↦ x + field(x)`` at the points ``P`` (central differences of step ``h``)."""
+    cols = [(field(P + h * e) - field(P - h * e)) / (2.0 * h) for e in np.eye(3)]
     return np.stack(cols, axis=2) + np.eye(3)[None]
+
+
+def field_deformation(X0: NDArray[np.float64], X1: NDArray[np.float64], *, trusted: NDArray[np.bool_] | None = None,
+                      centres: int = FIELD_CENTRES, smoothing: float = FIELD_SMOOTHING, seed: int = 0
+                      ) -> NDArray[np.float64]:
+    """(n, 3, 3) Jacobian at each source vertex of a smooth spatial map fitted to ``X0 → X1`` (:func:`fit_field`).
+
+    The surface alone fixes only the tangential columns of a vertex's map; the spline's
+    3-D smoothness gives the normal one too.
+    """
+    field = fit_field(X0, X1, trusted=trusted, centres=centres, smoothing=smoothing, seed=seed)
+    return field_jacobian(field, X0, 1e-4 * float(np.linalg.norm(X0.max(0) - X0.min(0))))
 
 
 def motion_transforms(X0: NDArray[np.float64], X1: NDArray[np.float64], F: NDArray[np.int64],
                       model: MotionModel = "field", smoothing: float = AFFINE_SMOOTHING,
-                      trusted: NDArray[np.bool_] | None = None) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+                      trusted: NDArray[np.bool_] | None = None, field: Any = None
+                      ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """``(T (n, 3, 3), S (n, 3))``: the motion transform of each source vertex and its scales.
 
     ``S`` is (normal, tangent, tangent): for ``"frames"`` the §2.2.2 box ratios, for
     ``"field"`` and ``"affine"`` the map's stretch of the source normal and its two
     singular values in the tangent plane. ``smoothing`` is the affine model's;
     ``trusted`` (n,) bool marks the source vertices whose ``X1`` the field may be
-    fitted to (the fit's accepted correspondences; default all).
+    fitted to (the fit's accepted correspondences; default all); ``field``, a
+    :func:`fit_field` already made from them.
     """
     if model not in MOTION_MODELS:
         raise ValueError(f"motion must be one of {list(MOTION_MODELS)}, got {model!r}")
@@ -253,7 +272,9 @@ def motion_transforms(X0: NDArray[np.float64], X1: NDArray[np.float64], F: NDArr
         S = local_scales(X0, X1, A, R, F1)
         return (F1 * S[:, None, :]) @ F1.transpose(0, 2, 1) @ R, S
     if model == "field":
-        J = field_deformation(X0, X1, trusted=trusted)
+        if field is None:
+            field = fit_field(X0, X1, trusted=trusted)
+        J = field_jacobian(field, X0, 1e-4 * float(np.linalg.norm(X0.max(0) - X0.min(0))))
     else:
         J = local_deformation(X0, X1, F, A, F0[:, :, 0], F1[:, :, 0], smoothing)
     tangent = np.linalg.svd(J @ F0[:, :, 1:], compute_uv=False)  # (n, 2)

@@ -9,6 +9,8 @@ parts (eyeballs, upper teeth without a partner) stay still.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
@@ -48,10 +50,14 @@ class PartsMotion:
         L = (self.corr.J_fit[near] * w[:, None, None]).sum(0) / max(float(w.sum()), 1e-300)
         return L if abs(np.linalg.det(L)) > 1e-9 else np.eye(3)
 
-    def fill(self, deltas: NDArray[np.float64], out: NDArray[np.float64]) -> None:
+    def fill(self, deltas: NDArray[np.float64], out: NDArray[np.float64], *,
+             jacobian: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None = None) -> None:
         """Fill the target parts' rows of ``out`` (k, n, 3), working frame, from template ``deltas`` (k, N, 3).
 
         The skin rows of ``out`` must hold the transferred skin already (parts follow it).
+        ``jacobian(points (p, 3)) -> (p, 3, 3)``, optional: the map of a matched part's motion at
+        each of its points (template working frame), in place of the one averaged over the
+        skin around the part (expression cloning's smooth field).
         """
         tgt = self.tgt
         skin_tree: cKDTree | None = None
@@ -60,7 +66,7 @@ class PartsMotion:
             if how == "fixed":
                 continue
             if how == "matched":
-                out[:, ids] = self._matched(deltas, tgt.X[ids], sc)
+                out[:, ids] = self._matched(deltas, tgt.X[ids], sc, jacobian)
                 continue
             # no partner: follow the target's own (already transferred) skin
             if skin_tree is None:
@@ -71,8 +77,10 @@ class PartsMotion:
             else:
                 out[:, ids] = self._rigid_with_skin(out, tgt.X[ids], skin_tree)
 
-    def _matched(self, deltas: NDArray[np.float64], Y: NDArray[np.float64], sc: int) -> NDArray[np.float64]:
-        """(k, p, 3): the motion of template part ``sc`` carried to the target part points ``Y``."""
+    def _matched(self, deltas: NDArray[np.float64], Y: NDArray[np.float64], sc: int,
+                 jacobian: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None = None
+                 ) -> NDArray[np.float64]:
+        """(k, p, 3): the motion of template part ``sc`` carried to the target part points ``Y`` (see :meth:`fill`)."""
         src = self.src
         lin = src.frame.scale * src.frame.R
         s_ids = np.flatnonzero(src.model.component_labels == sc)
@@ -100,6 +108,8 @@ class PartsMotion:
             C = Xs[nn]
             at = dpart[:, nn]
         at = at + np.einsum("qj,jkc->kqc", Xmap - C, lin_k)
+        if jacobian is not None:
+            return np.asarray(np.einsum("qij,kqj->kqi", jacobian(Xmap), at))
         return np.asarray(at @ Lp.T)
 
     def _rigid_with_skin(self, out: NDArray[np.float64], Y: NDArray[np.float64], skin_tree: cKDTree
