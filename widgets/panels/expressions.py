@@ -349,10 +349,8 @@ class ExpressionPanel(ModelPanel):
 
     def _follow_stream(self) -> None:
         """The sliders a live stream moved show the model's current values (the timer's turn, or catching up)."""
-        if self._stream_timer is not None:
-            self._stream_timer.cancel()
-        self._stream_timer = None
-        names, self._stream_names = self._stream_names, set()
+        names = set(self._stream_names)
+        self._stop_following_stream()
         played = self._model.weights
         self._set_sliders({n: played[n] for n in names if n in played})
 

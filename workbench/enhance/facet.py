@@ -38,7 +38,7 @@ from workbench.animation.tracks import Timeline, add_keys
 from workbench.core.shapes import ModelError
 from workbench.enhance.bake import EnhancedTake
 from workbench.enhance.layer import EnhancementState
-from workbench.enhance.retime import RetimeResult, retime
+from workbench.enhance.retime import SPACES, RetimeResult, retime
 from workbench.enhance.rig_space import RigBasis
 from workbench.enhance.spatial import Correspondence, Progress
 
@@ -261,8 +261,8 @@ class EnhanceFacet:
         changed = np.flatnonzero(np.abs(W[1] - W[0]) > 1e-9)
         if changed.size == 0:
             raise ModelError(f"retime: the weights at {a:g} s and {b:g} s are the same: nothing to retime")
-        if space not in ("auto", "mesh", "weights"):
-            raise ModelError(f"retime: space must be 'auto', 'mesh' or 'weights', got {space!r}")
+        if space not in SPACES:
+            raise ModelError(f"retime: space must be one of {SPACES}, got {space!r}")
         meshes = mesh_takes(database, m.n_vertices)
         if meshes is not None:
             # point caches: the keys are the faces shown at t0 and t1 (model space), matched in the model's

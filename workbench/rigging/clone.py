@@ -63,6 +63,7 @@ from workbench.rigging.clone_motion import (
     MotionModel,
     _adjacency,
     field_jacobian,
+    field_step,
     fit_field,
     local_scales,
     motion_transforms,
@@ -146,22 +147,12 @@ class ExpressionCloner:
         self.transforms_, self.scales_ = motion_transforms(
             X0, X1, np.asarray(rt.src.skin_faces, np.int64), motion, smoothing, field=field)
         self.operator_ = self._operator(self._rows, self.transforms_)
-        # matched parts (teeth, tongue, eyes) move by the field's map at each of their points
-        self._part_jacobian: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None = None
+        # matched parts (teeth, tongue, eyes) move by the field's map at each of their points, evaluated
+        # once here (their points do not change from frame to frame)
+        self._part_jacobians: dict[int, NDArray[np.float64]] | None = None
         if field is not None:
-            h = 1e-4 * float(np.linalg.norm(X0.max(0) - X0.min(0)))
-            known: dict[bytes, NDArray[np.float64]] = {}  # the parts' points are the same every block of frames
-
-            def part_jacobian(P: NDArray[np.float64]) -> NDArray[np.float64]:
-                key = np.ascontiguousarray(P).tobytes()
-                if key not in known:
-                    known[key] = field_jacobian(field, P, h)
-                return known[key]
-
-            self._part_jacobian = part_jacobian
-            # evaluated now, in the set-up, not in the first frames played
-            rt.parts_motion.fill(np.zeros((1, rt.source.n_vertices, 3)), np.zeros((1, rt.target.n_vertices, 3)),
-                                 jacobian=part_jacobian)
+            h = field_step(X0)
+            self._part_jacobians = {c: field_jacobian(field, P, h) for c, P in rt.parts_motion.matched_points().items()}
 
     @staticmethod
     def _operator(B: sp.csr_matrix, T: NDArray[np.float64]) -> sp.csr_matrix:
@@ -220,7 +211,7 @@ class ExpressionCloner:
             m = work[:, src.skin_ids].reshape(b - a, -1).T  # (3 n_s, k)
             w = np.zeros((b - a, tgt_model.n_vertices, 3))
             w[:, tgt.skin_ids] = np.asarray(self.operator_ @ m).T.reshape(b - a, n_ts, 3)
-            rt.parts_motion.fill(motion, w, jacobian=self._part_jacobian)
+            rt.parts_motion.fill(motion, w, jacobians=self._part_jacobians)
             out[a:b] = tgt_model.vertices + tgt.frame.inverse_linear(w)
             if progress is not None:
                 progress(say_from + (1.0 - say_from) * b / Tn, f"cloned {b} of {Tn} frames")

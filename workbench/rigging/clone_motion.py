@@ -228,6 +228,11 @@ def fit_field(X0: NDArray[np.float64], X1: NDArray[np.float64], *, trusted: NDAr
     return RBFInterpolator(X0[idx], (X1 - X0)[idx], kernel="thin_plate_spline", degree=1, smoothing=smoothing)
 
 
+def field_step(X0: NDArray[np.float64]) -> float:
+    """The central-difference step of :func:`field_jacobian` for a field fitted on ``X0``: 1e-4 of its diagonal."""
+    return 1e-4 * float(np.linalg.norm(X0.max(0) - X0.min(0)))
+
+
 def field_jacobian(field: Any, P: NDArray[np.float64], h: float) -> NDArray[np.float64]:
     """(p, 3, 3) Jacobian of the map ``x ↦ x + field(x)`` at the points ``P`` (central differences of step ``h``)."""
     cols = [(field(P + h * e) - field(P - h * e)) / (2.0 * h) for e in np.eye(3)]
@@ -243,21 +248,18 @@ def field_deformation(X0: NDArray[np.float64], X1: NDArray[np.float64], *, trust
     3-D smoothness gives the normal one too.
     """
     field = fit_field(X0, X1, trusted=trusted, centres=centres, smoothing=smoothing, seed=seed)
-    return field_jacobian(field, X0, 1e-4 * float(np.linalg.norm(X0.max(0) - X0.min(0))))
+    return field_jacobian(field, X0, field_step(X0))
 
 
 def motion_transforms(X0: NDArray[np.float64], X1: NDArray[np.float64], F: NDArray[np.int64],
-                      model: MotionModel = "field", smoothing: float = AFFINE_SMOOTHING,
-                      trusted: NDArray[np.bool_] | None = None, field: Any = None
+                      model: MotionModel = "field", smoothing: float = AFFINE_SMOOTHING, field: Any = None
                       ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """``(T (n, 3, 3), S (n, 3))``: the motion transform of each source vertex and its scales.
 
     ``S`` is (normal, tangent, tangent): for ``"frames"`` the §2.2.2 box ratios, for
     ``"field"`` and ``"affine"`` the map's stretch of the source normal and its two
     singular values in the tangent plane. ``smoothing`` is the affine model's;
-    ``trusted`` (n,) bool marks the source vertices whose ``X1`` the field may be
-    fitted to (the fit's accepted correspondences; default all); ``field``, a
-    :func:`fit_field` already made from them.
+    ``field`` the field model's :func:`fit_field` (default: fitted to every vertex).
     """
     if model not in MOTION_MODELS:
         raise ValueError(f"motion must be one of {list(MOTION_MODELS)}, got {model!r}")
@@ -272,9 +274,7 @@ def motion_transforms(X0: NDArray[np.float64], X1: NDArray[np.float64], F: NDArr
         S = local_scales(X0, X1, A, R, F1)
         return (F1 * S[:, None, :]) @ F1.transpose(0, 2, 1) @ R, S
     if model == "field":
-        if field is None:
-            field = fit_field(X0, X1, trusted=trusted)
-        J = field_jacobian(field, X0, 1e-4 * float(np.linalg.norm(X0.max(0) - X0.min(0))))
+        J = field_jacobian(fit_field(X0, X1) if field is None else field, X0, field_step(X0))
     else:
         J = local_deformation(X0, X1, F, A, F0[:, :, 0], F1[:, :, 0], smoothing)
     tangent = np.linalg.svd(J @ F0[:, :, 1:], compute_uv=False)  # (n, 2)

@@ -9,7 +9,7 @@ parts (eyeballs, upper teeth without a partner) stay still.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Mapping
 
 import numpy as np
 from numpy.typing import NDArray
@@ -50,14 +50,20 @@ class PartsMotion:
         L = (self.corr.J_fit[near] * w[:, None, None]).sum(0) / max(float(w.sum()), 1e-300)
         return L if abs(np.linalg.det(L)) > 1e-9 else np.eye(3)
 
+    def matched_points(self) -> dict[int, NDArray[np.float64]]:
+        """Per matched target part (component id), its points placed in the template part's frame, (p, 3)."""
+        tgt = self.tgt
+        return {c: self._placement(tgt.X[tgt.model.component_labels == c], sc)[2]
+                for c, how, sc in self.plan if how == "matched"}
+
     def fill(self, deltas: NDArray[np.float64], out: NDArray[np.float64], *,
-             jacobian: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None = None) -> None:
+             jacobians: Mapping[int, NDArray[np.float64]] | None = None) -> None:
         """Fill the target parts' rows of ``out`` (k, n, 3), working frame, from template ``deltas`` (k, N, 3).
 
         The skin rows of ``out`` must hold the transferred skin already (parts follow it).
-        ``jacobian(points (p, 3)) -> (p, 3, 3)``, optional: the map of a matched part's motion at
-        each of its points (template working frame), in place of the one averaged over the
-        skin around the part (expression cloning's smooth field).
+        ``jacobians``, optional: per matched part (component id), (p, 3, 3) maps of its motion
+        at each of its :meth:`matched_points`, in place of the one averaged over the skin
+        around the part (expression cloning's smooth field).
         """
         tgt = self.tgt
         skin_tree: cKDTree | None = None
@@ -66,7 +72,7 @@ class PartsMotion:
             if how == "fixed":
                 continue
             if how == "matched":
-                out[:, ids] = self._matched(deltas, tgt.X[ids], sc, jacobian)
+                out[:, ids] = self._matched(deltas, tgt.X[ids], sc, None if jacobians is None else jacobians.get(c))
                 continue
             # no partner: follow the target's own (already transferred) skin
             if skin_tree is None:
@@ -77,19 +83,25 @@ class PartsMotion:
             else:
                 out[:, ids] = self._rigid_with_skin(out, tgt.X[ids], skin_tree)
 
+    def _placement(self, Y: NDArray[np.float64], sc: int) -> tuple[NDArray[np.intp], NDArray[np.float64],
+                                                                     NDArray[np.float64]]:
+        """Template part ``sc``'s vertex ids, its linear map and the target part points ``Y`` in its frame.
+
+        The part's linear map: the fit's Jacobian averaged over the template skin around it; its
+        place: the parts' centroids.
+        """
+        s_ids = np.flatnonzero(self.src.model.component_labels == sc)
+        Xs = self.src.X[s_ids]
+        Lp = self.local_jacobian(Xs)
+        return s_ids, Lp, (Y - Y.mean(0)) @ np.linalg.inv(Lp).T + Xs.mean(0)
+
     def _matched(self, deltas: NDArray[np.float64], Y: NDArray[np.float64], sc: int,
-                 jacobian: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None = None
-                 ) -> NDArray[np.float64]:
+                 jacobian: NDArray[np.float64] | None = None) -> NDArray[np.float64]:
         """(k, p, 3): the motion of template part ``sc`` carried to the target part points ``Y`` (see :meth:`fill`)."""
         src = self.src
         lin = src.frame.scale * src.frame.R
-        s_ids = np.flatnonzero(src.model.component_labels == sc)
+        s_ids, Lp, Xmap = self._placement(Y, sc)
         Xs = src.X[s_ids]
-        # the part's linear map: the fit's Jacobian averaged over the template skin around it;
-        # its place: the parts' centroids
-        Lp = self.local_jacobian(Xs)
-        cs_, ct_ = Xs.mean(0), Y.mean(0)
-        Xmap = (Y - ct_) @ np.linalg.inv(Lp).T + cs_  # target part points in the template part's frame
         dpart = deltas[:, s_ids] @ lin.T  # (k, p, 3) working frame
         # the template part's motion at the closest point of its surface, plus its affine motion
         # (least squares over the part) across the offset from there: exact on the template's own
@@ -109,7 +121,7 @@ class PartsMotion:
             at = dpart[:, nn]
         at = at + np.einsum("qj,jkc->kqc", Xmap - C, lin_k)
         if jacobian is not None:
-            return np.asarray(np.einsum("qij,kqj->kqi", jacobian(Xmap), at))
+            return np.asarray(np.einsum("qij,kqj->kqi", jacobian, at))
         return np.asarray(at @ Lp.T)
 
     def _rigid_with_skin(self, out: NDArray[np.float64], Y: NDArray[np.float64], skin_tree: cKDTree
