@@ -7,7 +7,9 @@ weights (tests/capture_takes.py: a jawOpen ramp, a blink, a head turn), looped. 
 the mouse: open the Live tab, *Start camera* (the page sends frames, one in flight,
 the kernel acks each), the face follows (the viewport's pixels change with the video
 and jawOpen moves), *Record* / *Stop recording* (one undo step of keys), the take
-exports as .glb and Live Link CSV, *Stop camera* (the page lets the camera go).
+exports as .glb and Live Link CSV, *Stop camera* (the page lets the camera go). Behind
+the Live tab the Shapes tab's sliders stay still (no slider traffic per camera frame) and
+show the played weights once that tab is shown.
 """
 
 from __future__ import annotations
@@ -67,6 +69,13 @@ def test_the_face_follows_the_fake_camera_and_a_recorded_take_exports(open_noteb
     nb.wait_viewports(1)
     page.locator(".fwb-workbench").evaluate("e => e.scrollIntoView({block: 'start'})")
     page.locator(".fwb-tabs .lm-TabBar-tab", has_text="Live").click()
+    # count every change of the (hidden) Shapes tab's jawOpen readout while the camera runs
+    readout = page.locator(".fwb-slider-jawOpen .widget-readout")
+    still = readout.text_content()
+    page.evaluate("""() => { window.__fwbReadouts = 0;
+        new MutationObserver(() => { window.__fwbReadouts += 1; }).observe(
+            document.querySelector('.fwb-slider-jawOpen .widget-readout'),
+            {childList: true, characterData: true, subtree: true}); }""")
     page.locator(".fwb-live-start").click()
     cam = page.locator(".fwb-camera")
     wait_until("the camera", lambda: cam.get_attribute("data-camera"), lambda s: s in ("on", "error"), timeout=60)
@@ -106,9 +115,18 @@ def test_the_face_follows_the_fake_camera_and_a_recorded_take_exports(open_noteb
         "print(json.dumps([str(p) for p in paths]))")
     assert any(p.endswith(".glb") for p in out) and any(p.endswith(".csv") for p in out)
     nb.screenshot("recorded")
+    # the sliders behind the Live tab did not follow the camera, though the played jaw moved away from them
+    wait_until("the jaw away from the still slider", lambda: _state(nb)["jaw"],
+               lambda j: abs(j - float(still)) > 0.05, timeout=60)
+    assert page.evaluate("() => window.__fwbReadouts") == 0 and readout.text_content() == still
     # stop: the page lets the camera go
     page.locator(".fwb-live-start").click()
     wait_until("the camera off", lambda: cam.get_attribute("data-camera"), lambda s: s == "off")
     st = _state(nb)
     assert not st["active"] and len(st["undo"]) == n_undo + 1, st
     assert json.dumps(st["errors"]) == "[]"
+    # shown again, the Shapes tab's sliders show the weights the camera left
+    page.locator(".fwb-tabs .lm-TabBar-tab", has_text="Shapes").click()
+    wait_until("the jawOpen slider catching up", lambda: float(readout.text_content() or "nan"),
+               lambda v: abs(v - st["jaw"]) < 0.006, timeout=30)
+    nb.screenshot("shapes-after-live")
