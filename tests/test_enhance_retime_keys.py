@@ -119,6 +119,37 @@ def test_mesh_space_takes_time_the_keys_like_their_weights(takes) -> None:
         model.enhance.retime(0.0, 1.0, [caches[0][:, :10]])
 
 
+def test_point_cache_retime_follows_shape_edits(takes) -> None:
+    """The rig basis point caches are matched in is kept between calls, never stale: after a
+    shape edit the retiming is the one a model made with that edit gives."""
+    names, weight_takes = takes
+
+    def keyed(jaw_scale: float) -> workbench.FaceModel:
+        model = workbench.load_sample("head")
+        if jaw_scale != 1.0:
+            model.set_shape_delta("jawOpen", jaw_scale * np.asarray(model.shape("jawOpen").delta))
+        for t, w in ((0.0, 0.0), (1.0, 0.9)):
+            model.set_weights({"jawOpen": w})
+            model.timeline.key_weights(t, ["jawOpen"])
+        return model
+
+    model = keyed(1.0)
+    deltas = np.stack([s.delta for s in model.shapes]).astype(np.float64)
+    caches = [np.asarray(model.vertices) + np.einsum("tk,kvc->tvc", W, deltas) for W in weight_takes[:2]]
+    first = model.enhance.retime(0.0, 1.0, caches)
+    model.undo()
+    again = model.enhance.retime(0.0, 1.0, caches)
+    model.undo()
+    np.testing.assert_array_equal(again.s, first.s)
+    # a jaw half as strong: the caches' jaw needs weights past the slider (1.8), so the projection
+    # and the timing change; the edit is seen exactly as a model built with it sees it
+    model.set_shape_delta("jawOpen", 0.5 * deltas[names.index("jawOpen")])
+    edited = model.enhance.retime(0.0, 1.0, caches)
+    fresh = keyed(0.5).enhance.retime(0.0, 1.0, caches)
+    assert np.abs(edited.s - first.s).max() > 1e-3
+    np.testing.assert_allclose(edited.s, fresh.s, atol=1e-12)
+
+
 def test_takes_at_another_rate_are_resampled_to_the_timelines() -> None:
     """A 60 fps tracked take times a 30 fps timeline by seconds, not by frames."""
     from types import SimpleNamespace

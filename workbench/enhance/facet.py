@@ -121,10 +121,22 @@ def mesh_takes(database: Any, n_vertices: int) -> list[NDArray[np.float64]] | No
 
 
 class EnhanceFacet:
-    """Performance enhancement on one model (see the module docstring); keeps nothing of its own."""
+    """Performance enhancement on one model (see the module docstring).
+
+    Keeps nothing of its own but a cache: the rig basis point caches are matched in,
+    rebuilt only when the model's shapes change (their version) or other shapes are asked for.
+    """
 
     def __init__(self, model: FaceState) -> None:
         self._model = model
+        self._basis: tuple[tuple[int, tuple[str, ...]], RigBasis] | None = None
+
+    def _rig_basis(self, names: list[str]) -> RigBasis:
+        """:meth:`RigBasis.from_model` of ``names``, kept while the shapes' version and the names stay."""
+        key = (self._model.version("shapes"), tuple(names))
+        if self._basis is None or self._basis[0] != key:
+            self._basis = (key, RigBasis.from_model(self._model, names))
+        return self._basis[1]
 
     def __repr__(self) -> str:
         st = self.state
@@ -268,7 +280,7 @@ class EnhanceFacet:
             # point caches: the keys are the faces shown at t0 and t1 (model space), matched in the model's
             # weights (space="mesh": the raw vertices)
             ends = [np.asarray(m.evaluation_at(t).mesh, np.float64) for t in (a, b)]
-            basis = RigBasis.from_model(m, names) if names and space != "mesh" else None
+            basis = self._rig_basis(names) if names and space != "mesh" else None
             found = retime(meshes, ends[0], ends[1], n, extend=extend, method=method, basis=basis, space=space)
             # the timing found for the caches, keyed on the weights
             res = dataclasses.replace(found, frames=W[0][None, :] + found.s[:, None] * (W[1] - W[0])[None, :])
