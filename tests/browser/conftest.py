@@ -49,12 +49,13 @@ from harness import (
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    # Anything that starts JupyterLab is a browser test (select with -m browser / -m "not browser").
-    # Under pytest-xdist (the test command's -n 2 --dist loadgroup) they all run on one worker, one
-    # after another (one JupyterLab, one Chromium), while the other worker runs the rest.
+    # Anything that starts JupyterLab or Chromium is a browser test (select with -m browser /
+    # -m "not browser"). Under pytest-xdist (the test command's -n 2 --dist loadgroup) they all run
+    # on one worker, one after another (one server, one Chromium), while the other worker runs the
+    # rest; a module's own servers (the wheel's venv, a Voila app) are then also built once.
     xdist = config.pluginmanager.hasplugin("xdist")
     for item in items:
-        if "lab" in getattr(item, "fixturenames", ()):
+        if {"lab", "browser"} & set(getattr(item, "fixturenames", ())):
             item.add_marker(pytest.mark.browser)
             if xdist:
                 item.add_marker(pytest.mark.xdist_group("browser"))
