@@ -48,6 +48,17 @@ bust (4.4 %); >= 100 frames/s at 27k (330) after <= 10 s of set-up (7.0 s). Not
 met: 5 % on the foreign face (6.3 %) and the 1.25x jaw (9.8 %). Matched parts
 move by the field's map at each of their points (before: one map averaged over
 the skin around the part: foreign 7.3 %, jaw 10.4 %).
+
+Where the rest goes (2026-11-29, 60 frames, the 1.25x jaw / the foreign face, same run):
+the field's own settings do not matter — 2,000 or 6,000 centres, smoothing 3e-4 to
+3e-2 — 10.6-11.4 % / 6.2-6.5 %. The fitted correspondence does: with the exact one (the
+generator's), the same field gives 5.6 % / 2.9 % (4.7 % / 2.6 % at the least smoothing). Its error is a slide along
+the surface (median 0.12 % of the head's diagonal, p90 0.43 %; across it 0.01-0.02 %),
+spread over the moving face rather than at the lip line (the 6 % of the skin nearest
+the steepest motion holds 14 % of the error). Fourteen landmark pairs placed exactly
+(the rig's automatic ones, mapped by the generator) help the jaw (10.6 -> 8.8 %) but not
+the foreign face (6.3 -> 7.3 %). Closing it needs a registration that knows where
+features are along the surface, not only the surface.
 """
 
 from __future__ import annotations

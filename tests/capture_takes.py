@@ -47,19 +47,71 @@ YAW = np.deg2rad(10.0) * np.sin(np.linspace(0.0, 2.0 * np.pi, T))
 PITCH = np.deg2rad(4.0) * np.sin(np.linspace(0.0, np.pi, T))
 
 
-def render_take(model):
-    """(T, 480, 480, 3) uint8 frames of ``model`` playing the take above (needs pyvista)."""
+def _ramp(T: int, a: int, b: int, peak: float, hold: int = 4) -> np.ndarray:
+    """0 → ``peak`` → 0 over frames ``a``..``b`` (eased up, held ``hold`` frames, eased down)."""
+    w = np.zeros(T)
+    up = (b - a - hold) // 2
+    u = np.linspace(0.0, 1.0, up + 1)[1:]
+    ease = u * u * (3 - 2 * u)
+    w[a + 1 : a + 1 + up] = peak * ease
+    w[a + 1 + up : a + 1 + up + hold] = peak
+    w[a + 1 + up + hold : a + 1 + 2 * up + hold] = peak * ease[::-1]
+    return w
+
+
+def full_take() -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray]:
+    """The issue's whole video take, 150 frames (5 s at 30 fps): ``(weights by ARKit name, yaw, pitch)``.
+
+    Neutral (10 frames), the jaw opening and closing with a blink on the way, a smile whose
+    right side starts 4 frames late and peaks lower, the brows (inner up, then the outer ones
+    up, one higher), then all of it at once at half strength; the head turns ±12° and nods
+    ±5° throughout. Every other shape is 0.
+    """
+    T = 150
+    W = {n: np.zeros(T) for n in ("jawOpen", "eyeBlinkLeft", "eyeBlinkRight", "mouthSmileLeft", "mouthSmileRight",
+                                  "browInnerUp", "browOuterUpLeft", "browOuterUpRight")}
+    W["jawOpen"] += _ramp(T, 10, 40, 0.9)
+    blink = np.zeros(T)
+    blink[22:28] = [0.5, 1.0, 1.0, 1.0, 1.0, 0.5]
+    W["eyeBlinkLeft"] += blink
+    W["eyeBlinkRight"] += blink
+    W["mouthSmileLeft"] += _ramp(T, 40, 70, 0.9)
+    W["mouthSmileRight"] += np.roll(_ramp(T, 40, 70, 0.7), 4)
+    W["browInnerUp"] += _ramp(T, 70, 95, 0.9)
+    W["browOuterUpLeft"] += _ramp(T, 85, 112, 0.8)
+    W["browOuterUpRight"] += _ramp(T, 85, 112, 0.6)
+    for name in ("jawOpen", "mouthSmileLeft", "mouthSmileRight", "browInnerUp"):
+        W[name] += _ramp(T, 115, 148, 0.5, hold=8)
+    t = np.linspace(0.0, 1.0, T)
+    return W, np.deg2rad(12.0) * np.sin(2.0 * np.pi * 1.5 * t), np.deg2rad(5.0) * np.sin(2.0 * np.pi * t)
+
+
+def render_take(model, take=None, pose=None):
+    """(T, 480, 480, 3) uint8 frames of ``model`` playing a take (needs pyvista).
+
+    ``take``: ``(weights by shape name, yaw, pitch)`` (:func:`full_take`); default the short take
+    above (jaw ramp, blink, head turn). ``pose(weights) -> (n, 3)`` makes the mesh (default
+    the model's own shapes: neutral + weighted deltas; a
+    :class:`~workbench.testing.GeneratedFace`'s ``pose`` renders a face from its source's weights).
+    """
     from widgets.render import png_to_array, render_png
 
-    names = list(model.shape_names)
+    if take is None:
+        take = ({"jawOpen": JAW, "eyeBlinkLeft": BLINK, "eyeBlinkRight": BLINK}, YAW, PITCH)
+    weights, yaw, pitch = take
     V0 = np.asarray(model.vertices, np.float64)
+    if pose is None:
+        names = list(model.shape_names)
+        deltas = {k: np.asarray(model.shapes[names.index(k)].delta, np.float64) for k in weights}
+
+        def pose(w):
+            return V0 + sum(v * deltas[k] for k, v in w.items())
+
     centre = V0.mean(0)
-    deltas = {k: np.asarray(model.shapes[names.index(k)].delta, np.float64)
-              for k in ("jawOpen", "eyeBlinkLeft", "eyeBlinkRight")}
     frames = []
-    for f in range(T):
-        X = V0 + JAW[f] * deltas["jawOpen"] + BLINK[f] * (deltas["eyeBlinkLeft"] + deltas["eyeBlinkRight"])
-        cy, sy, cp, sp = np.cos(YAW[f]), np.sin(YAW[f]), np.cos(PITCH[f]), np.sin(PITCH[f])
+    for f in range(len(yaw)):
+        X = pose({k: float(v[f]) for k, v in weights.items()})
+        cy, sy, cp, sp = np.cos(yaw[f]), np.sin(yaw[f]), np.cos(pitch[f]), np.sin(pitch[f])
         R = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]]) @ np.array([[1, 0, 0], [0, cp, -sp], [0, sp, cp]])
         png = render_png(model, points=(X - centre) @ R.T + centre, size=SIZE, camera="front", antialias=False)
         frames.append(png_to_array(png))
