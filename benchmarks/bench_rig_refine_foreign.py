@@ -51,12 +51,16 @@ def main() -> None:
     ap.add_argument("--resolution", default="base")
     ap.add_argument("--seeds", type=int, nargs="+", default=[1, 2])
     ap.add_argument("--examples", type=int, default=20)
+    ap.add_argument("--bust-rings", type=int, default=None,
+                    help="rings of shoulders under the face (default: one per 2,000 face vertices); "
+                         "122 makes the base actor the issue's 27k vertices")
     args = ap.parse_args()
     head = workbench.load_sample("head", args.resolution)
     print("| seed | actor vertices | rig | shape error, all (median) | in examples | cut | wall s | CPU s |")
     print("|---|---|---|---|---|---|---|---|")
     for seed in args.seeds:
-        face = foreign_face(restyled_shapes(head, seed=seed), seed=seed)
+        face = foreign_face(restyled_shapes(head, seed=seed), seed=seed,
+                            bust=True if args.bust_rings is None else args.bust_rings)
         t = face.model
         bare = FaceModel(t.vertices, None, polygons=t.polygons, component_labels=t.component_labels,
                          component_names=t.component_names, metadata=t.metadata)

@@ -368,6 +368,13 @@ def test_a_foreign_face_is_seeded_and_keeps_its_truth(head: FaceModel) -> None:
     assert len(_skin_loops(m)) == 4  # the bust's bottom, the mouth, two eyes
     c = foreign_face(head, seed=2)
     assert c.model.n_vertices != m.n_vertices or np.abs(c.model.vertices - m.vertices).max() > 0.1
+    # shoulders: a number of rings adds still skin below the neck; none leaves the neck open
+    ring = foreign_face(head, seed=1, bust=4)
+    more = foreign_face(head, seed=1, bust=24)
+    bare = foreign_face(head, seed=1, bust=False)
+    assert bare.model.n_vertices < ring.model.n_vertices < more.model.n_vertices
+    assert (~bare.on_source).sum() < (~ring.on_source).sum() < (~more.on_source).sum()
+    np.testing.assert_allclose(more.truth("jawOpen")[~more.on_source], 0.0)
 
 
 # ----------------------------------------------------------------------------- grids

@@ -196,21 +196,23 @@ def unnamed_parts(x: FaceModel | GeneratedFace, *, merge: bool = False) -> FaceM
 
 
 def foreign_face(source: FaceModel, *, seed: int = 0, units: str = "cm", strength: float = 0.02,
-                 degrees: float = 10.0, eyes: float = 0.93, jaw: float = 1.08, bust: bool = True,
+                 degrees: float = 10.0, eyes: float = 0.93, jaw: float = 1.08, bust: bool | int = True,
                  open_mouth_and_eyes: bool = True, names: Renaming = "LR") -> GeneratedFace:
     """A face unlike the source in every way at once, with its true shapes.
 
     The source remeshed and renumbered, under its own proportions (``eyes``,
     ``jaw``) and a :func:`~workbench.testing.warps.random_warp` (``strength``,
-    ``degrees``), with shoulders (``bust``) and open mouth and eyes, in
+    ``degrees``), with shoulders (``bust``: True for a ring per 2,000 face vertices, at
+    least 4, or a number of rings; False for none) and open mouth and eyes, in
     ``units``; its symmetric shapes split into halves, every shape renamed
     (``names``) and its parts unnamed. Deterministic given ``seed``.
     """
     warp = compose(proportions_warp(source, eyes=eyes, jaw=jaw),
                    random_warp(source.vertices, seed=seed, strength=strength, degrees=degrees))
     face = remeshed(source, seed=seed, warp=warp, shapes=True, name=f"foreign face {seed}")
-    if bust:
-        face = with_bust(face, rings=max(4, face.model.n_vertices // 2000))
+    if bust is not False:
+        rings = max(4, face.model.n_vertices // 2000) if bust is True else int(bust)
+        face = with_bust(face, rings=rings)
     if open_mouth_and_eyes:
         face = opened(face)
     face = in_units(renumbered(face, seed=seed), units)
