@@ -10,6 +10,7 @@ parts (eyeballs, upper teeth without a partner) stay still.
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
@@ -20,6 +21,19 @@ from workbench.rigging.correspondence import Correspondence, PartPlan
 from workbench.rigging.sides import Side
 
 __all__ = ["PartsMotion"]
+
+
+@dataclass(frozen=True)
+class _MatchedPart:
+    """What carrying a template part's motion to a target part needs that no shape changes."""
+
+    s_ids: NDArray[np.intp]  # the template part's vertices
+    Lp: NDArray[np.float64]  # (3, 3) the fit's Jacobian averaged over the skin around it
+    Xmap: NDArray[np.float64]  # (q, 3) the target part's points in the template part's frame
+    at_ids: NDArray[np.intp]  # (q, 3) template vertices blended at each point's closest point ((q, 1) nearest)
+    at_w: NDArray[np.float64]  # (q, 3) their barycentric weights ((q, 1) ones)
+    offset: NDArray[np.float64]  # (q, 3) from that closest point to the point
+    affine: NDArray[np.float64]  # (4, p) least squares of an affine motion over the template part
 
 
 class PartsMotion:
@@ -38,6 +52,7 @@ class PartsMotion:
     def __init__(self, src: Side, tgt: Side, corr: Correspondence, plan: PartPlan) -> None:
         self.src, self.tgt, self.corr, self.plan = src, tgt, corr, plan
         self._tri_tree: cKDTree | None = None
+        self._parts: dict[int, _MatchedPart] = {}  # per matched target part, built on first use
 
     def local_jacobian(self, P: NDArray[np.float64], k: int = 8) -> NDArray[np.float64]:
         """(3, 3): the fit's Jacobian averaged (by area) over the template skin triangles nearest to the points ``P``."""
@@ -52,9 +67,7 @@ class PartsMotion:
 
     def matched_points(self) -> dict[int, NDArray[np.float64]]:
         """Per matched target part (component id), its points placed in the template part's frame, (p, 3)."""
-        tgt = self.tgt
-        return {c: self._placement(tgt.X[tgt.model.component_labels == c], sc)[2]
-                for c, how, sc in self.plan if how == "matched"}
+        return {c: self._matched_part(c, sc).Xmap for c, how, sc in self.plan if how == "matched"}
 
     def fill(self, deltas: NDArray[np.float64], out: NDArray[np.float64], *,
              jacobians: Mapping[int, NDArray[np.float64]] | None = None) -> None:
@@ -72,7 +85,8 @@ class PartsMotion:
             if how == "fixed":
                 continue
             if how == "matched":
-                out[:, ids] = self._matched(deltas, tgt.X[ids], sc, None if jacobians is None else jacobians.get(c))
+                out[:, ids] = self._matched(deltas, self._matched_part(c, sc),
+                                            None if jacobians is None else jacobians.get(c))
                 continue
             # no partner: follow the target's own (already transferred) skin
             if skin_tree is None:
@@ -83,46 +97,51 @@ class PartsMotion:
             else:
                 out[:, ids] = self._rigid_with_skin(out, tgt.X[ids], skin_tree)
 
-    def _placement(self, Y: NDArray[np.float64], sc: int) -> tuple[NDArray[np.intp], NDArray[np.float64],
-                                                                     NDArray[np.float64]]:
-        """Template part ``sc``'s vertex ids, its linear map and the target part points ``Y`` in its frame.
+    def _matched_part(self, c: int, sc: int) -> _MatchedPart:
+        """Target part ``c`` placed on template part ``sc`` (kept: cloning fills every block of frames).
 
         The part's linear map: the fit's Jacobian averaged over the template skin around it; its
-        place: the parts' centroids.
+        place: the parts' centroids. Each placed point reads the template part's motion at the
+        closest point of its surface.
         """
-        s_ids = np.flatnonzero(self.src.model.component_labels == sc)
-        Xs = self.src.X[s_ids]
-        Lp = self.local_jacobian(Xs)
-        return s_ids, Lp, (Y - Y.mean(0)) @ np.linalg.inv(Lp).T + Xs.mean(0)
-
-    def _matched(self, deltas: NDArray[np.float64], Y: NDArray[np.float64], sc: int,
-                 jacobian: NDArray[np.float64] | None = None) -> NDArray[np.float64]:
-        """(k, p, 3): the motion of template part ``sc`` carried to the target part points ``Y`` (see :meth:`fill`)."""
+        part = self._parts.get(c)
+        if part is not None:
+            return part
         src = self.src
-        lin = src.frame.scale * src.frame.R
-        s_ids, Lp, Xmap = self._placement(Y, sc)
+        Y = self.tgt.X[self.tgt.model.component_labels == c]
+        s_ids = np.flatnonzero(src.model.component_labels == sc)
         Xs = src.X[s_ids]
-        dpart = deltas[:, s_ids] @ lin.T  # (k, p, 3) working frame
-        # the template part's motion at the closest point of its surface, plus its affine motion
-        # (least squares over the part) across the offset from there: exact on the template's own
-        # part, first-order right for a part of another shape moving rigidly
-        A = np.c_[Xs - Xs.mean(0), np.ones(len(Xs))]
-        coef = np.linalg.pinv(A) @ dpart.transpose(1, 0, 2).reshape(len(Xs), -1)
-        lin_k = coef[:3].reshape(3, -1, 3)  # [j, shape, comp]: d_comp = sum_j x_j lin_k[j]
+        Lp = self.local_jacobian(Xs)
+        Xmap = (Y - Y.mean(0)) @ np.linalg.inv(Lp).T + Xs.mean(0)
         sF = np.asarray(src.model.faces, np.int64)
         lab = src.model.component_labels
         pf = sF[(lab[sF] == sc).all(1)]
         if pf.size:
             _, f, C, b = SurfaceQuery(src.X, pf).closest(Xmap)
-            at = np.einsum("qj,kqjc->kqc", b, deltas[:, pf[f]] @ lin.T)
+            at_ids, at_w = pf[f], b
         else:
             _, nn = cKDTree(Xs).query(Xmap)
-            C = Xs[nn]
-            at = dpart[:, nn]
-        at = at + np.einsum("qj,jkc->kqc", Xmap - C, lin_k)
+            C, at_ids, at_w = Xs[nn], s_ids[nn][:, None], np.ones((len(nn), 1))
+        affine = np.linalg.pinv(np.c_[Xs - Xs.mean(0), np.ones(len(Xs))])
+        part = self._parts[c] = _MatchedPart(s_ids, Lp, Xmap, at_ids, at_w, Xmap - C, affine)
+        return part
+
+    def _matched(self, deltas: NDArray[np.float64], part: _MatchedPart,
+                 jacobian: NDArray[np.float64] | None = None) -> NDArray[np.float64]:
+        """(k, q, 3): the motion of the template part carried to the target part's points (see :meth:`fill`)."""
+        src = self.src
+        lin = src.frame.scale * src.frame.R
+        dpart = deltas[:, part.s_ids] @ lin.T  # (k, p, 3) working frame
+        # the template part's motion at the closest point of its surface, plus its affine motion
+        # (least squares over the part) across the offset from there: exact on the template's own
+        # part, first-order right for a part of another shape moving rigidly
+        coef = part.affine @ dpart.transpose(1, 0, 2).reshape(len(part.s_ids), -1)
+        lin_k = coef[:3].reshape(3, -1, 3)  # [j, shape, comp]: d_comp = sum_j x_j lin_k[j]
+        at = np.einsum("qj,kqjc->kqc", part.at_w, deltas[:, part.at_ids] @ lin.T)
+        at = at + np.einsum("qj,jkc->kqc", part.offset, lin_k)
         if jacobian is not None:
             return np.asarray(np.einsum("qij,kqj->kqi", jacobian, at))
-        return np.asarray(at @ Lp.T)
+        return np.asarray(at @ part.Lp.T)
 
     def _rigid_with_skin(self, out: NDArray[np.float64], Y: NDArray[np.float64], skin_tree: cKDTree
                          ) -> NDArray[np.float64]:
