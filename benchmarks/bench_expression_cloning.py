@@ -27,29 +27,30 @@ transfer** (Sumner & Popović: each frame's motion solved through the rig
 transfer's prefactored Poisson system, as a per-frame deformation-transfer
 solve; parts as in cloning).
 
-Measured 2026-11-29 (evening), 120 frames, quiet machine (2 cores); the
-default motion model is now ``"field"`` (the Jacobian of a thin-plate map
-fitted to the correspondence, :mod:`workbench.rigging.clone_motion`):
+Measured 2026-11-30, 120 frames, quiet machine (2 cores), with the registration's soft tail
+falling to a half-millimetre smoothing length (:data:`~workbench.rigging.registration.FINE_SCHEDULE`):
 
     face                   vertices   clone   paper    copy      DT clone/copy set-up s clone f/s  DT f/s
-    warp + renumber            5084   0.021   0.050   0.207   0.120       0.10      5.7       922     758
-    proportions, mm            5084   0.098   0.133   0.421   0.227       0.23      5.6       808     875
-    remesh + warp + bust      26951   0.044   0.080   0.405   0.107       0.11      7.0       330     129
-    foreign                   16235   0.063   0.078   0.305   0.088       0.21      6.2       473     266
+    warp + renumber            5084   0.014   0.047   0.207   0.118       0.07      5.6      1040     703
+    proportions, mm            5084   0.087   0.122   0.421   0.213       0.21      5.9       915     985
+    remesh + warp + bust      26951   0.043   0.083   0.405   0.106       0.11      7.1       364     124
+    foreign                   16235   0.052   0.074   0.305   0.087       0.17      6.3       528     278
 
+With the tail's two stiffnesses before (1e-8, 3e-9): 0.021, 0.098, 0.044, 0.063.
 With the one-ring ``"affine"`` model (the default before) the clone column was
 0.035, 0.138, 0.057, 0.073. The correspondence comes from the rigging fit plus a
 point-to-plane tail (``RigTransfer(fine_fit=True)``,
 :func:`workbench.rigging.registration.planar_refine`): point-to-point ICP alone
 left a grown jaw under-stretched. Cloning beats the naive copy, deformation
 transfer and the paper's motion model on every face. Met: the issue's 10 % on a
-warped, re-triangulated, renumbered head and 5 % there (2.1 %) and on the 27k
-bust (4.4 %); >= 100 frames/s at 27k (330) after <= 10 s of set-up (7.0 s). Not
-met: 5 % on the foreign face (6.3 %) and the 1.25x jaw (9.8 %). Matched parts
+warped, re-triangulated, renumbered head and 5 % there (1.4 %) and on the 27k
+bust (4.3 %); >= 100 frames/s at 27k (364) after <= 10 s of set-up (7.1 s). Not
+met: 5 % on the foreign face (5.2 %) and the 1.25x jaw (8.7 %). Matched parts
 move by the field's map at each of their points (before: one map averaged over
 the skin around the part: foreign 7.3 %, jaw 10.4 %).
 
-Where the rest goes (2026-11-29, 60 frames, the 1.25x jaw / the foreign face, same run):
+Where the rest goes (2026-11-29, 60 frames, the 1.25x jaw / the foreign face, same run; with
+the tail before):
 the field's own settings do not matter — 2,000 or 6,000 centres, smoothing 3e-4 to
 3e-2 — 10.6-11.4 % / 6.2-6.5 %. The fitted correspondence does: with the exact one (the
 generator's), the same field gives 5.6 % / 2.9 % (4.7 % / 2.6 % at the least smoothing). Its error is a slide along
