@@ -41,6 +41,16 @@ Painting brows and lips on the render (vertex colours moving with the mesh) does
 change it (0.158). Nor does the solve's λ: l1 = 0.003 or 0 raise the RMSE (0.169–0.195),
 temporal = 0.05 lowers it a little (0.157 / 0.162), and none moves an amplitude by more
 than 0.01 — the shortfall is what FaceMesh reads, not the prior's shrinkage.
+
+Tried 2026-11-30 and not kept: learning the rig's landmark basis *as FaceMesh reads it* from
+renders of the rig with known weights, and solving with that basis instead of the vertices'
+deltas (a detector calibration). Each face shape rendered alone at 1 (or at 0.5 and 1) and pushed
+through FaceMesh's tracking mode one after another gave 0.099 / 0.077 on the whole take (sample
+head / foreign face) — but every other way of making the same renders gave 0.20–0.32: FaceMesh in
+static mode, a neutral frame between shapes, the head at ±10°, or 240 frames of a realistic take
+with head motion regressed onto their weights (with or without a ridge towards the rig's basis).
+The learned responses of the small shapes are as much FaceMesh's crop-to-crop noise as signal
+(a per-landmark gain instead of a basis: 0.24 / 0.23), so the one good number was luck.
 """
 
 from __future__ import annotations
