@@ -203,14 +203,14 @@ def foreign_face(source: FaceModel, *, seed: int = 0, units: str = "cm", strengt
     The source remeshed and renumbered, under its own proportions (``eyes``,
     ``jaw``) and a :func:`~workbench.testing.warps.random_warp` (``strength``,
     ``degrees``), with shoulders (``bust``: True for a ring per 2,000 face vertices, at
-    least 4, or a number of rings; False for none) and open mouth and eyes, in
+    least 4, or a number of rings; False or 0 for none) and open mouth and eyes, in
     ``units``; its symmetric shapes split into halves, every shape renamed
     (``names``) and its parts unnamed. Deterministic given ``seed``.
     """
     warp = compose(proportions_warp(source, eyes=eyes, jaw=jaw),
                    random_warp(source.vertices, seed=seed, strength=strength, degrees=degrees))
     face = remeshed(source, seed=seed, warp=warp, shapes=True, name=f"foreign face {seed}")
-    if bust is not False:
+    if bust:  # True, or a number of rings (0 rings: none, like False)
         rings = max(4, face.model.n_vertices // 2000) if bust is True else int(bust)
         face = with_bust(face, rings=rings)
     if open_mouth_and_eyes:
