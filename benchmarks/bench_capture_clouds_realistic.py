@@ -34,6 +34,15 @@ and the transferred shapes the same tracker gets 0.118 on the 5k head. The onlin
 does not close it: on a take with ~30 shapes active at once its correctives trade off against
 the weights.
 
+Tried 2026-11-30 and not kept (5k head, three takes): on the first frame, the identity and the
+weights solved together (the identity eliminated, the weights' bounded L1 problem solved on what
+is left, three rounds of correspondences) instead of the identity alone at zero weights, so a
+localised rest expression may go to the weights where the identity's bending prior makes it
+costly: 0.128 / 0.143 / 0.142 -> 0.126 / 0.142 / 0.140 (oracle 0.110 on the first); a bending prior
+three or ten times stronger moves more of the rest into the weights and is worse on two takes of
+three (up to 0.161). A rest expression held through the take is the identity's as much as the
+weights' as far as the points can tell.
+
 With ``--actor person --resolution base`` (a MakeHuman person + the warp; the set-up 1.2 s, then
 27 frames/s): defaults 0.1777; with the identity PCA 0.1585; ``refine=True`` 0.5797; adaptation
 off 0.4683; oracle 0.1184.

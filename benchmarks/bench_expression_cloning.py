@@ -60,6 +60,15 @@ the steepest motion holds 14 % of the error). Fourteen landmark pairs placed exa
 (the rig's automatic ones, mapped by the generator) help the jaw (10.6 -> 8.8 %) but not
 the foreign face (6.3 -> 7.3 %). Closing it needs a registration that knows where
 features are along the surface, not only the surface.
+
+Tried 2026-11-30 and not kept (60 frames, same faces): (1) the field's finite map instead of its
+Jacobian, ``m' = f(x + m) - f(x)`` (what a large jaw motion needs to second order): 9.3 -> 9.0 % on
+the jaw, 5.2 -> 5.1 % on the foreign face, the skin alone unchanged (7.9 / 5.0 %), at the cost
+of evaluating the spline per frame; (2) the matched parts' points (each target part point and its
+closest point on the source part) added to the field's centres, so the field inside the mouth is
+fitted rather than extrapolated: the jaw 9.3 -> 8.3 % (tongue 17 -> 15 %, skin 7.9 -> 7.3 %) but
+the foreign face 5.2 -> 6.6 % (its teeth and tongue are not scaled copies, and closest points on
+them are not correspondences).
 """
 
 from __future__ import annotations

@@ -54,6 +54,8 @@ def test_load_track_scrub_retrack_and_apply(take, tmp_path) -> None:
         cap = wb.capture
         wb.tabs.selected_index = wb.tabs.titles.index("Capture")
         assert cap.track_button.disabled and cap.apply_button.disabled
+        # no plot before a tracked take (an empty Image draws as a broken picture in the page)
+        assert cap.plot.layout.display == "none" and not cap.plot.value
         csv, mapping = _write_take(tmp_path, model, perf)
         cap.path.value, cap.map_path.value = str(csv), str(mapping)
         cap.load_button.click()
@@ -74,7 +76,7 @@ def test_load_track_scrub_retrack_and_apply(take, tmp_path) -> None:
         assert "frames/s" in cap.progress.label.value
         rmse = np.sqrt(np.mean((res.weights - perf.weights) ** 2))
         assert rmse < 0.08, rmse
-        assert cap.plot.value[:4] == b"\x89PNG"
+        assert cap.plot.value[:4] == b"\x89PNG" and cap.plot.layout.display is None
         # a stronger smoothness re-tracks the window around the current frame only
         before = np.array(res.weights)
         cap.frame.value = 45

@@ -96,18 +96,18 @@ class CapturePanel(ModelPanel):
                                          style={"description_width": "90px"})
         self.temporal.add_class("fwb-capture-temporal")
         self.auto = W.Checkbox(value=True, description="choose λ₁, λ₂ from the take (held-out markers)",
-                               indent=False)
+                               indent=False, layout=W.Layout(width="auto"))
         self.auto.add_class("fwb-capture-auto")
         self._syncing = False
         self.adapt = W.Checkbox(value=False, description="Adapt the rig to the actor (default: on for clouds)",
-                                indent=False)
+                                indent=False, layout=W.Layout(width="auto"))
         self.adapt.add_class("fwb-capture-adapt")
         self.mode = W.ToggleButtons(options=[("solve weights", "weights"), ("drive handles (shell)", "shell")],
                                     value="weights", description="markers",
                                     tooltips=["Blendshape weights + head pose per frame (Bouaziz et al. 2013)",
                                               "The markers drive the shell's handles over the rig's weights, "
                                               "with wrinkles from their strain (Bickel et al. 2008, Fig. 6)"],
-                                    style={"description_width": "60px", "button_width": "150px"})
+                                    style={"description_width": "60px", "button_width": "170px"})
         self.mode.add_class("fwb-capture-mode")
         #: the marker replay of the take (mode "shell"), or None
         self.replayed: Any = None
@@ -124,14 +124,15 @@ class CapturePanel(ModelPanel):
         self.save_adapted_button = button("Save adapted rig", "fwb-capture-save-adapted",
                                           "Save the rig adapted to the actor as a new model (.fwb)", "save")
         self.clone_path = W.Text(placeholder="performance: a face file whose timeline plays it (.fwb, .glb, .abc...)",
-                                 layout=W.Layout(width="98%"))
+                                 layout=W.Layout(flex="1 1 auto", width="auto"))
         self.clone_path.add_class("fwb-capture-clone-path")
         self.clone_button = button("Clone onto this face", "fwb-capture-clone",
                                    "Expression cloning (Noh & Neumann 2001): the performance's motion carried onto "
                                    "this face through a dense correspondence, as a marker take to track or replay",
                                    "clone")
         self.progress = ProgressRow("fwb-capture-progress", "fwb-capture-status")
-        self.plot = W.Image(format="png", layout=W.Layout(width="100%"))
+        # hidden until a tracked take has a plot (an empty Image draws as a broken picture)
+        self.plot = W.Image(format="png", layout=W.Layout(width="100%", display="none"))
         self.plot.add_class("fwb-capture-plot")
         g = self.guard
         self.load_button.on_click(g("load take")(lambda _b: self.load(self.path.value, self.map_path.value or None)))
@@ -416,6 +417,7 @@ class CapturePanel(ModelPanel):
         """Draw the current frame's input points and the plot."""
         if self.take is None:
             self._clear_points()
+            self.plot.layout.display = "none"
             return
         f = int(self.frame.value)
         color = MARKER_COLOR if self.take["kind"] == "markers" else CLOUD_COLOR

@@ -157,7 +157,7 @@ class PaintPanel(ModelPanel):
         self.mode = W.ToggleButtons(
             options=list(BRUSH_MODES),
             value=getattr(viewport, "brush_mode", "add"),
-            style={"button_width": "70px"},
+            style={"button_width": "84px"},
         )
         self.mirror = W.ToggleButton(
             value=bool(getattr(viewport, "brush_mirror", False)),
