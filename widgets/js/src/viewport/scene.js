@@ -1,5 +1,6 @@
 // One view of a viewport widget: renderer, scene, camera, controls, render loop, test hooks.
-// Its markers (./markers.js), picking (./picking.js) and pointer tools (./tools.js)
+// Its markers (./markers.js), picking (./picking.js) and pointer input (./pointer_input.js,
+// the tools of ./tools.js)
 // live in their own modules; the geometry comes from the widget model's Store (./sync.js).
 //
 // Test hooks (attributes of the root element): data-frame / data-version / data-frame-time
@@ -14,9 +15,9 @@ import { cameraLinkMethods } from "./camera_link.js";
 import { gpuViewMethods } from "./gpu_view.js";
 import { markerMethods } from "./markers.js";
 import { pickingMethods } from "./picking.js";
-import { BrushTool, MarkerTool } from "./tools.js";
+import { pointerInputMethods } from "./pointer_input.js";
 import {
-  BRUSH_COLOR, DRAFT_PIXEL_RATIO, TINT_STRENGTH, TINT_COLOR, SKIN,
+  DRAFT_PIXEL_RATIO, TINT_STRENGTH, TINT_COLOR, SKIN,
   colorForComponent, computeNormals, softwareWebGL, srgbToLinear, typed,
 } from "./util.js";
 
@@ -121,20 +122,6 @@ export class View {
     this.markerMesh = null;
     this.markersDirty = true;
     this.refreshMarkerCache();
-    // Brush cursor: a unit ring in the xy plane, placed on the surface along the normal.
-    const ringGeo = new THREE.RingGeometry(0.9, 1.0, 64);
-    const ringMat = new THREE.MeshBasicMaterial({
-      color: BRUSH_COLOR, transparent: true, opacity: 0.9, depthTest: false, side: THREE.DoubleSide,
-    });
-    this.brushRing = new THREE.Mesh(ringGeo, ringMat);
-    this.brushMirrorRing = new THREE.Mesh(ringGeo, ringMat.clone());
-    this.brushMirrorRing.material.opacity = 0.45;
-    for (const r of [this.brushRing, this.brushMirrorRing]) {
-      r.visible = false;
-      r.renderOrder = 2;
-      r.frustumCulled = false;
-      scene.add(r);
-    }
 
     const controls = new OrbitControls(camera, renderer.domElement);
     controls.enableDamping = false; // render on demand only: no animation loop
@@ -156,68 +143,10 @@ export class View {
     this.onCameraGroup = () => this.joinCameraGroup();
     this.model.on("change:camera_group", this.onCameraGroup);
 
-    // Pointer tools. Listeners sit on the container in the CAPTURE phase so a press on a
-    // handle marker (or on the face with the brush) is taken before OrbitControls sees it.
-    this.raycaster = new THREE.Raycaster();
-    this.drag = null; // the marker drag in progress (MarkerTool)
-    this.stroke = null; // the brush stroke in progress (BrushTool)
-    this.hover = -1;
-    this.tools = { drag: new MarkerTool(this), stroke: new BrushTool(this) };
     this.awaitFrame = []; // acked messages waiting for the frame that shows them
     this.renderedVersion = -1;
     this.renderedTime = 0;
-    // Test/benchmark hook: one entry per acked move {seq, input, send, ack, frame, kernel}
-    // (performance.now() ms): input = pointer event, frame = first render showing it.
-    this.dragStats = [];
-    el.fwbDragStats = this.dragStats;
-    // Same for stroke messages: {seq, input, send, ack, frame, kernel, dabs}.
-    this.strokeStats = [];
-    el.fwbStrokeStats = this.strokeStats;
-    const tool = () => (this.stroke || this.toolKind() === "stroke" ? this.tools.stroke : this.tools.drag);
-    this.listeners = {
-      pointerdown: (e) => {
-        if (!this.renderer) return;
-        const kind = this.toolKind();
-        if (kind === "stroke") this.tools.stroke.down(e);
-        else if (kind === "drag") this.tools.drag.down(e);
-      },
-      pointermove: (e) => tool().move(e),
-      pointerup: (e) => tool().up(e),
-      pointercancel: (e) => tool().up(e),
-    };
-    for (const [ev, fn] of Object.entries(this.listeners)) el.addEventListener(ev, fn, true);
-    // Escape during a drag or stroke cancels it (Python puts its edits back).
-    this.onKey = (e) => {
-      if (e.key !== "Escape") return;
-      if (this.drag) this.tools.drag.end(null, true);
-      if (this.stroke) this.tools.stroke.end(null, true);
-    };
-    window.addEventListener("keydown", this.onKey);
-    this.onLostCapture = (e) => {
-      if (this.drag && e.pointerId === this.drag.pointerId) this.tools.drag.end(null);
-      if (this.stroke && e.pointerId === this.stroke.pointerId) this.tools.stroke.end(null);
-    };
-    this.onLeave = () => {
-      this.pointerInside = false;
-      if (!this.stroke && this.brushRing.visible) {
-        this.brushRing.visible = false;
-        this.brushMirrorRing.visible = false;
-        this.requestRender();
-      }
-      if (!this.drag) {
-        // No marker stays lit once the pointer is elsewhere: neither the hovered one nor
-        // the last dragged one (selected_marker, cleared for every view).
-        this.clearHover();
-        if (this.model.get("selected_marker") >= 0) {
-          this.model.set("selected_marker", -1);
-          this.model.save_changes();
-          this.markersDirty = true;
-          this.requestRender();
-        }
-      }
-    };
-    renderer.domElement.addEventListener("pointerleave", this.onLeave);
-    renderer.domElement.addEventListener("lostpointercapture", this.onLostCapture);
+    this.initPointerInput(); // brush cursor, marker and brush tools, their listeners (./pointer_input.js)
     this.updateTool();
 
     this.resizeObserver = new ResizeObserver(() => this.resize());
@@ -639,24 +568,7 @@ export class View {
   dispose() {
     this.leaveCameraGroup();
     if (this.onCameraGroup) this.model.off("change:camera_group", this.onCameraGroup);
-    // Never leave Python inside a drag interaction when the view goes away.
-    if (this.tools) {
-      try { this.tools.drag.end(null); } catch (err) { /* closing */ }
-      try { this.tools.stroke.end(null); } catch (err) { /* closing */ }
-    }
-    if (this.onKey) window.removeEventListener("keydown", this.onKey);
-    if (this.listeners) {
-      for (const [ev, fn] of Object.entries(this.listeners)) this.el.removeEventListener(ev, fn, true);
-    }
-    if (this.renderer && this.onLostCapture) {
-      this.renderer.domElement.removeEventListener("lostpointercapture", this.onLostCapture);
-      this.renderer.domElement.removeEventListener("pointerleave", this.onLeave);
-    }
-    if (this.brushRing) {
-      this.brushRing.geometry.dispose();
-      this.brushRing.material.dispose();
-      this.brushMirrorRing.material.dispose();
-    }
+    this.disposePointerInput();
     if (this.resizeObserver) this.resizeObserver.disconnect();
     if (this.offPlayback) this.offPlayback();
     this.disposeGpu();
@@ -680,4 +592,4 @@ export class View {
 }
 
 
-Object.assign(View.prototype, markerMethods, pickingMethods, cameraLinkMethods, gpuViewMethods);
+Object.assign(View.prototype, markerMethods, pickingMethods, pointerInputMethods, cameraLinkMethods, gpuViewMethods);
