@@ -51,6 +51,12 @@ static mode, a neutral frame between shapes, the head at ±10°, or 240 frames o
 with head motion regressed onto their weights (with or without a ridge towards the rig's basis).
 The learned responses of the small shapes are as much FaceMesh's crop-to-crop noise as signal
 (a per-landmark gain instead of a basis: 0.24 / 0.23), so the one good number was luck.
+
+Also tried 2026-11-30 on the render (the camera's side, not the tracker): the open mouth shows a
+pink tongue filling it up to the upper lip, where a person's mouth is a dark cavity; drawn dark
+(the tongue and gums at sRGB 70, 28, 30) FaceMesh reads the jaw at 0.54 of the truth instead of
+0.43 (correlation 0.81 vs 0.74), but the whole take's RMSE hardly moves (0.165 -> 0.163): the
+smiles and the brows are what is left, and they do not depend on the mouth's inside.
 """
 
 from __future__ import annotations
