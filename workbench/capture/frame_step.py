@@ -70,9 +70,10 @@ class FrameStepper:
         m, kp = vis.size, space.plain.size
         flag = ""
         Yv = Yf[vis]
-        Dv = setup.D[vis].reshape(-1, kp)
+        Dv = setup.Dh[vis].reshape(-1, kp)  # weighted rows (MarkerSetup.marker_weights)
         nv = int(vis.sum())
-        G = (setup.G_all if nv == m else setup.Gm[vis].sum(0)) * (setup.norm / nv)
+        sw = setup.fit_weight(vis)
+        G = (setup.G_all if nv == m else setup.Gm[vis].sum(0)) * (setup.norm / sw)
         rig = vis & setup.is_rigid
         w, wf, M = self.w, self.wf, self.M
         for _it in range(self.iterations):
@@ -96,7 +97,7 @@ class FrameStepper:
             c = local - setup.X0[vis]
             if space.derived:
                 c = c - setup.derived_offset(wf, vis)
-            h = Dv.T @ c.reshape(-1) * (setup.norm / nv)
+            h = Dv.T @ c.reshape(-1) * (setup.norm / sw)
             w = solver.solve_gram(G, h, self.w_prev, self.w_prev2, w0=w)
             self.sweeps += solver.n_iter_
             if space.derived:
@@ -110,6 +111,10 @@ class FrameStepper:
         am = self.adaptive
         if adapt and am is not None and self.rows is not None:  # the frame refines the rig for the next frames
             local = (Yv - M[:3, 3]) @ M[:3, :3] - setup.rest_offsets[vis]
-            am.update_planes(np.repeat(self.rows[vis], 3), np.tile(np.eye(3), (nv, 1)), local.reshape(-1), wf)
+            # the markers weigh in the rig's refinement as in the weights' fit (unweighted, the
+            # correctives would learn what the weighting leaves out)
+            sq = np.repeat(np.sqrt(setup.marker_weights[vis]), 3)
+            am.update_planes(np.repeat(self.rows[vis], 3), np.tile(np.eye(3), (nv, 1)) * sq[:, None],
+                             local.reshape(-1) * sq, wf)
             setup.adopt(am, self.rows)
         return w, M, error, flag

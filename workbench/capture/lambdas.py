@@ -107,7 +107,7 @@ def paper_lambdas(setup: MarkerSetup, metres_per_unit: float) -> tuple[float, fl
     (an average shape's squared motion per marker in head sizes²), so
     ``λ_relative = λ_paper / ((1000 · mpu · size)² · m · ref)``.
     """
-    m = max(int(setup.ids.size), 1)
+    m = max(setup.fit_weight(), 1e-300)  # the markers' total weight (their count when unweighted)
     mm = 1000.0 * float(metres_per_unit) * float(setup.space.size)
     denom = mm * mm * m * float(setup.ref)
     if not (math.isfinite(denom) and denom > 0):
@@ -231,8 +231,9 @@ def choose_lambdas(setup: MarkerSetup, Y: NDArray[np.float64], visible: NDArray[
         for f in frames:
             vis = visible[f]
             nv = int(vis.sum())
-            G = setup.Gm[vis].sum(0) * (setup.norm / nv)
-            Dv = setup.D[vis].reshape(-1, kp)
+            sw = setup.fit_weight(vis)
+            G = setup.Gm[vis].sum(0) * (setup.norm / sw)
+            Dv = setup.Dh[vis].reshape(-1, kp)
             rig = vis & setup.is_rigid
             M = np.eye(4)
             c = np.zeros((nv, 3))
@@ -247,7 +248,7 @@ def choose_lambdas(setup: MarkerSetup, Y: NDArray[np.float64], visible: NDArray[
                 c = (Y[f, vis] - M[:3, 3]) @ M[:3, :3] - setup.X0[vis]
                 if space.derived:
                     c = c - setup.derived_offset(wf, vis)
-                w = solve(G, Dv.T @ c.reshape(-1) * (setup.norm / nv), l1_ref, t_ref, wp, wp2, w)
+                w = solve(G, Dv.T @ c.reshape(-1) * (setup.norm / sw), l1_ref, t_ref, wp, wp2, w)
             wp2, wp = wp, w.copy()
             full = np.full((m, 3), np.nan)
             full[vis] = c
@@ -272,9 +273,10 @@ def choose_lambdas(setup: MarkerSetup, Y: NDArray[np.float64], visible: NDArray[
         pos += len(run)
     nf = len(frames_all)
     Gm = setup.Gm
-    Dm = setup.D  # (m, 3, kp)
+    Dm = setup.Dh  # (m, 3, kp), weighted rows
+    sm = setup.marker_weights
     folds = []
-    count = 0
+    count = 0.0
     for fo in range(n_folds):
         held = fold_of == fo
         G_tr = np.zeros((nf, kp, kp))
@@ -285,28 +287,27 @@ def choose_lambdas(setup: MarkerSetup, Y: NDArray[np.float64], visible: NDArray[
         for i, (vis, c) in enumerate(frames_all):
             tr = vis & ~held
             ho = vis & held
-            ntr = int(tr.sum())
-            if ntr < 3:  # too few markers to fit this frame on: it is tracked on all, and not scored
+            if int(tr.sum()) < 3:  # too few markers to fit this frame on: it is tracked on all, and not scored
                 tr, ho = vis, np.zeros_like(vis)
-                ntr = int(vis.sum())
-            G_tr[i] = Gm[tr].sum(0) * (setup.norm / ntr)
-            h_tr[i] = np.einsum("mck,mc->k", Dm[tr], c[tr]) * (setup.norm / ntr)
+            str_ = float(sm[tr].sum())
+            G_tr[i] = Gm[tr].sum(0) * (setup.norm / str_)
+            h_tr[i] = np.einsum("mck,mc->k", Dm[tr], c[tr]) * (setup.norm / str_)
             G_ho[i] = Gm[ho].sum(0)
             h_ho[i] = np.einsum("mck,mc->k", Dm[ho], c[ho])
-            cc_ho[i] = float((c[ho] ** 2).sum())
-            count += int(ho.sum())
+            cc_ho[i] = float((sm[ho] * (c[ho] ** 2).sum(1)).sum())
+            count += float(sm[ho].sum())
         folds.append((G_tr, h_tr, G_ho, h_ho, cc_ho))
 
     scored: dict[tuple[float, float], float] = {}
 
     def score(l1: float, temporal: float) -> float:
-        """Held-out RMS marker error (model units) of one λ pair, over every fold."""
+        """Held-out RMS marker error (model units; weighted by the markers' weights) of one λ pair, over every fold."""
         key = (float(l1), float(temporal))
         if key not in scored:
             l1h = np.full(kp, 0.5 * l1 * ref)
             total = sum(max(float(_heldout_nb(*fold, starts, l1h, temporal * ref, lo, hi, tol, L, d, ix)), 0.0)
                         for fold in folds)
-            scored[key] = math.sqrt(total / max(count, 1))
+            scored[key] = math.sqrt(total / max(count, 1e-300))
         return scored[key]
 
     # coordinate search from the paper's values: the l1 line, the temporal line, the l1 line again

@@ -8,6 +8,7 @@ skin vertex (the iris landmarks: the eyeballs' vertices).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -28,7 +29,8 @@ from workbench.geometry.masks import eyeball_mask, skin_or_all_mask
 if TYPE_CHECKING:
     from workbench.core.state import FaceState
 
-__all__ = ["ANCHORS", "LandmarkRegistration", "landmark_vertex_map", "register_landmarks"]
+__all__ = ["ANCHORS", "FEATURE_LANDMARKS", "OTHER_LANDMARK_WEIGHT", "LandmarkRegistration", "landmark_vertex_map",
+           "landmark_weights", "register_landmarks"]
 
 #: FaceMesh landmark of each rig landmark (:func:`workbench.rigging.template_landmarks` names;
 #: ``*_left`` is the subject's left, on the image's right). Checked on the sample head: each
@@ -47,6 +49,44 @@ ANCHORS: Mapping[str, int] = {
 }
 #: a landmark's vertex moving less than this share of the head size under any shape is "still"
 _STILL = 0.01
+
+#: FaceMesh landmarks on what the detector sees in the image — the lips, the eye openings and
+#: lids, the brows, the nose (MediaPipe's FACEMESH_LIPS, _LEFT/RIGHT_EYE, _LEFT/RIGHT_EYEBROW
+#: and _NOSE contours; ``tests/test_live.py`` checks them against mediapipe's): 116 of the 478.
+#: The others (cheeks, forehead, jaw line, irises) are placed by the face model around them and
+#: follow an expression only part of the way.
+FEATURE_LANDMARKS: tuple[int, ...] = (
+    # lips
+    0, 13, 14, 17, 37, 39, 40, 61, 78, 80, 81, 82, 84, 87, 88, 91, 95, 146, 178, 181, 185, 191, 267, 269,
+    270, 291, 308, 310, 311, 312, 314, 317, 318, 321, 324, 375, 402, 405, 409, 415,
+    # eyes
+    7, 33, 133, 144, 145, 153, 154, 155, 157, 158, 159, 160, 161, 163, 173, 246, 249, 263, 362, 373, 374, 380,
+    381, 382, 384, 385, 386, 387, 388, 390, 398, 466,
+    # brows
+    46, 52, 53, 55, 63, 65, 66, 70, 105, 107, 276, 282, 283, 285, 293, 295, 296, 300, 334, 336,
+    # nose
+    1, 2, 4, 5, 6, 19, 45, 48, 64, 94, 97, 98, 115, 168, 195, 197, 220, 275, 278, 294, 326, 327, 344, 440,
+)
+#: the weight of the other landmarks in the fit of the weights (the feature landmarks weigh 1).
+#: Chosen on rendered takes (``benchmarks/bench_live.py``): against equal weights, the issue's take
+#: 0.165 -> 0.146 RMSE on the sample head and 0.173 -> 0.165 on a foreign face (blinks 0.67 -> 0.81
+#: and 0.27 -> 0.62 of the truth, the smile 0.49 -> 0.73), two dense realistic takes 0.169 / 0.174
+#: -> 0.171 / 0.163; 0.3 lies between, 0.03 is no better than 0.1, and 0 (the feature landmarks
+#: alone) gives 0.176 on the issue's take
+OTHER_LANDMARK_WEIGHT = 0.1
+
+
+def landmark_weights(other: float = OTHER_LANDMARK_WEIGHT) -> NDArray[np.float64]:
+    """(478,) each FaceMesh landmark's weight in the fit of the weights: 1 on :data:`FEATURE_LANDMARKS`, else ``other``.
+
+    For ``track(..., marker_weights=)`` with a :class:`LandmarkRegistration`'s ``vertex_ids``
+    (``track_video`` and the live tracker pass it).
+    """
+    if not (math.isfinite(other) and 0.0 <= other <= 1.0):
+        raise VideoError(f"other: a landmark weight in [0, 1], got {other!r}")
+    w = np.full(N_LANDMARKS, float(other))
+    w[list(FEATURE_LANDMARKS)] = 1.0
+    return w
 
 @dataclass(frozen=True, eq=False)
 class LandmarkRegistration:

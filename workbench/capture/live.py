@@ -11,7 +11,11 @@ L1 + temporal weights, warm-started), so a take pushed frame by frame gives what
 * **Start.** The first frame with a face registers the landmarks onto the rig
   (:func:`~workbench.capture.video.register_landmarks`: the landmark → vertex map)
   and calibrates on it as the actor's rest face (``track(..., neutral=0)``).
-  No calibration session is needed. With ``adapt`` the rig adapts to the actor as
+  No calibration session is needed. The weights are fitted with the landmarks on the
+  lips, eyes, brows and nose weighing ten times those on smooth skin
+  (:func:`~workbench.capture.landmark_registration.landmark_weights`: FaceMesh places the
+  latter from the former, and they follow an expression only part of the way); the head
+  pose uses them all. With ``adapt`` the rig adapts to the actor as
   frames arrive (the dynamic expression model, §4 — identity from the rest frame,
   correctives every few solved frames, :mod:`.adapt`); off by default (measured
   below).
@@ -205,7 +209,7 @@ class LiveTracker:
 
     def _start(self, L: NDArray[np.float64]) -> str:
         """Register on the first face (the actor at rest) and set the tracker up on it."""
-        from workbench.capture.landmark_registration import register_landmarks
+        from workbench.capture.landmark_registration import landmark_weights, register_landmarks
         from workbench.capture.track import (
             MarkerSetup,
             adaptive_for_markers,
@@ -216,7 +220,7 @@ class LiveTracker:
         assert self._image_size is not None
         reg = register_landmarks(self.model, L[None], frame=0, image_size=self._image_size)
         ids = np.asarray(reg.vertex_ids, np.intp)
-        setup = MarkerSetup(self.model, ids, self.l1, self.temporal, None)
+        setup = MarkerSetup(self.model, ids, self.l1, self.temporal, None, landmark_weights())
         Y0 = reg.to_model(L[None])
         check_marker_units(Y0, setup.X0, self.model)
         am, rows = adaptive_for_markers(self.adapt if self.adapt else None, self.model, ids, None)

@@ -169,18 +169,20 @@ class MarkerSetup:
     """Everything per take that does not change per frame."""
 
     def __init__(self, model: FaceState, ids: NDArray[np.intp], l1: float, temporal: float,
-                 rigid: ArrayLike | None) -> None:
+                 rigid: ArrayLike | None, marker_weights: NDArray[np.float64] | None = None) -> None:
         space = ExpressionSpace.from_model(model)
         self.space = space
         self.ids = ids
         self.X0, self.D = space.marker_basis(ids)  # (m, 3), (m, 3, kp)
         m, kp = ids.size, space.plain.size
-        self.Gm = np.einsum("mck,mcl->mkl", self.D, self.D)  # per-marker Gram blocks
-        self.G_all = self.Gm.sum(0)
+        #: (m,) each marker's weight in the fit (``Σ_m s_m ||x_m − y_m||²``; ones by default): the
+        #: Gram blocks ``Gm`` and the right-hand side rows ``Dh`` carry it, ``fit_weight`` sums it
+        self.marker_weights = np.ones(m) if marker_weights is None else np.asarray(marker_weights, np.float64)
+        self._weigh()
         s2 = space.size**2
         self.norm = 1.0 / s2
-        # the λ scale: an average shape's squared norm per marker, in head sizes², fixed for the take
-        ref = float(np.trace(self.G_all)) / max(kp, 1) / max(m, 1) * self.norm
+        # the λ scale: an average shape's squared norm per (weighted) marker, in head sizes², fixed for the take
+        ref = float(np.trace(self.G_all)) / max(kp, 1) / max(self.fit_weight(), 1e-300) * self.norm
         self.ref = ref if ref > 0 else 1.0
         self.solver = WeightSolver(space.lo, space.hi, l1=l1 * self.ref, temporal=temporal * self.ref,
                                    relative=False, tol=1e-6 * math.sqrt(self.ref))
@@ -214,9 +216,20 @@ class MarkerSetup:
         D_all = am.deltas_at()[:, rows]  # (k, m, 3)
         self.X0 = am.neutral_at()[rows] + self.rest_offsets
         self.D = np.ascontiguousarray(np.moveaxis(D_all[self.space.plain], 0, -1))
-        self.Gm = np.einsum("mck,mcl->mkl", self.D, self.D)
-        self.G_all = self.Gm.sum(0)
+        self._weigh()
         self.D_derived = D_all
+
+    def _weigh(self) -> None:
+        """The weighted Gram blocks ``Gm`` (m, kp, kp), their sum ``G_all`` and the weighted rows ``Dh`` (m, 3, kp)."""
+        s = self.marker_weights
+        self.Dh = self.D * s[:, None, None]  # h = Σ_m Dh_mᵀ c_m
+        self.Gm = np.einsum("mck,mcl->mkl", self.Dh, self.D)  # per-marker Gram blocks s_m D_mᵀ D_m
+        self.G_all = self.Gm.sum(0)
+
+    def fit_weight(self, vis: NDArray[np.bool_] | None = None) -> float:
+        """The markers' total weight (the visible ones): what the fit term is averaged over."""
+        s = self.marker_weights
+        return float(s.sum() if vis is None else s[vis].sum())
 
     def derived_offset(self, wf: NDArray[np.float64], vis: NDArray[np.bool_] | None = None) -> NDArray[np.float64]:
         """``(m, 3)`` (or at the ``vis`` markers): what the derived shapes add for the full weights ``wf``."""
@@ -235,6 +248,18 @@ class MarkerSetup:
         if self.space.derived:
             X += self.derived_offset(wf)
         return X
+
+
+def check_marker_weights(marker_weights: ArrayLike | None, m: int) -> NDArray[np.float64] | None:
+    """``marker_weights`` as (m,) float (None stays None), or :class:`TrackError` saying what was expected."""
+    if marker_weights is None:
+        return None
+    s = np.asarray(marker_weights, np.float64)
+    if s.shape != (m,):
+        raise TrackError(f"marker_weights must have one weight per marker ({m},), got shape {s.shape}")
+    if not np.isfinite(s).all() or (s < 0).any() or not (s > 0).any():
+        raise TrackError("marker_weights must be finite, ≥ 0 and not all 0")
+    return s
 
 
 def _spread_ok(P: NDArray[np.float64]) -> bool:
@@ -291,8 +316,9 @@ def start_from_neutral(setup: MarkerSetup, Y: NDArray[np.float64], neutral: Any,
         for _it in range(3):
             offsets = _calibrate(setup, Y, neutral)
             n_seen = int(seen.sum())
-            am.fit_neutral_planes(np.repeat(rows[seen], 3), np.tile(np.eye(3), (n_seen, 1)),
-                                  (setup.X0[seen] + offsets[seen]).reshape(-1))
+            sq = np.repeat(np.sqrt(setup.marker_weights[seen]), 3)  # weighted as in the weights' fit
+            am.fit_neutral_planes(np.repeat(rows[seen], 3), np.tile(np.eye(3), (n_seen, 1)) * sq[:, None],
+                                  (setup.X0[seen] + offsets[seen]).reshape(-1) * sq)
             setup.adopt(am, rows)
     # what the identity cannot explain (a marker or landmark that sits off its vertex) stays a
     # per-marker offset; the rig adapts to the motion beyond it
@@ -342,6 +368,7 @@ def track_markers(
     rigid: ArrayLike | None = None,
     neutral: int | ArrayLike | None = None,
     adapt: Any = None,
+    marker_weights: ArrayLike | None = None,
     progress: Progress | None = None,
 ) -> TrackResult:
     """Track ``(T, m, 3)`` markers or landmarks glued to ``vertex_ids`` (see the module docstring).
@@ -367,6 +394,11 @@ def track_markers(
     pose) instead of the per-marker offsets. ``info["adapted"]`` is the AdaptiveModel
     (None without adaptation); ``.to_model()`` is the adapted rig.
 
+    ``marker_weights`` (m,) ≥ 0 (default all 1): each marker's weight in the fit of the
+    weights (not of the head pose), e.g. :func:`~workbench.capture.landmark_registration.landmark_weights`
+    for FaceMesh landmarks, whose points on smooth skin lag the motion. The λ's keep their
+    meaning: the fit term is averaged over the markers' total weight.
+
     ``l1`` / ``temporal`` ``"auto"`` (the default; None is the same): chosen from the take by
     held-out markers (:func:`~workbench.capture.lambdas.choose_lambdas`); ``info["l1"]`` and
     ``info["temporal"]`` are the values used, ``info["lambda_choice"]`` what was tried (None
@@ -385,7 +417,7 @@ def track_markers(
         raise TrackError("model: it has no blendshapes to track")
     Y, ids = prepare_markers(model, frames, vertex_ids)
     T, m = Y.shape[:2]
-    setup = MarkerSetup(model, ids, l1_, temporal_, rigid)
+    setup = MarkerSetup(model, ids, l1_, temporal_, rigid, check_marker_weights(marker_weights, m))
     space = setup.space
     check_marker_units(Y, setup.X0, model)
     am, rows = adaptive_for_markers(adapt, model, ids, progress)
@@ -440,6 +472,7 @@ def track_markers(
         "markers",
         {"l1": l1_, "temporal": temporal_, "iterations": int(iterations), "min_markers": int(min_markers),
          "rigid_markers": setup.rigid.copy(), "vertex_ids": ids.copy(), "lambda_scale": setup.ref,
+         "marker_weights": setup.marker_weights.copy(),
          "neutral_offsets": offsets, "adapted": am,
          "solver_sweeps": sweeps, "lambda_auto": (l1_given is None, temporal_given is None),
          "lambda_choice": None if choice is None else choice.as_info()},
@@ -485,8 +518,8 @@ def track(
     progress : callable, optional
         ``progress(fraction, message)``, called as frames are tracked.
     **options
-        Passed on: for markers ``iterations``, ``min_markers``, ``rigid``
-        (:func:`track_markers`); for clouds, whatever ``track_clouds`` takes.
+        Passed on: for markers ``iterations``, ``min_markers``, ``rigid``, ``neutral``,
+        ``marker_weights`` (:func:`track_markers`); for clouds, whatever ``track_clouds`` takes.
 
     Returns
     -------

@@ -88,6 +88,7 @@ from workbench.capture.landmark_registration import (
     ANCHORS,
     LandmarkRegistration,
     landmark_vertex_map,
+    landmark_weights,
     register_landmarks,
 )
 
@@ -134,8 +135,9 @@ def track_video(
     :func:`video_landmarks` (unless ``source`` is a :class:`LandmarkSequence`), then
     :func:`register_landmarks` on ``rest_frame`` (the actor at rest), then
     :func:`workbench.capture.track` on :meth:`LandmarkRegistration.to_model` with
-    ``neutral=rest_frame`` (the landmark ↔ vertex offsets calibrated away) unless
-    ``track_options`` says otherwise. The registration is not kept: call the steps
+    ``neutral=rest_frame`` (the landmark ↔ vertex offsets calibrated away) and
+    ``marker_weights=landmark_weights()`` (the lips, eyes, brows and nose weigh ten times the
+    landmarks on smooth skin) unless ``track_options`` says otherwise. The registration is not kept: call the steps
     yourself to inspect it.
     """
     from workbench.capture.track import track
@@ -154,5 +156,6 @@ def track_video(
         seq = video_landmarks(source, fps=fps, max_frames=max_frames, static=static, progress=part(0.0, 0.7))
     reg = register_landmarks(model, seq, frame=rest_frame)
     track_options.setdefault("neutral", int(rest_frame))
+    track_options.setdefault("marker_weights", landmark_weights())  # the live tracker's weighting
     return track(model, reg.to_model(seq), vertex_ids=reg.vertex_ids, fps=seq.fps, progress=part(0.7, 1.0),
                  **track_options)

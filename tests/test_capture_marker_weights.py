@@ -1,0 +1,112 @@
+"""Per-marker weights in the marker tracker (``track(..., marker_weights=)``) and FaceMesh's landmark weights.
+
+Identities: unit weights are the unweighted tracker; weights scaled by a constant change
+nothing (the fit term is averaged over the total weight, so the λ's keep their meaning); a
+marker of weight 0 does not reach the weights however wrong it is. And the one place it is
+used: FaceMesh landmarks on features weigh more than those on smooth skin.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from capture_takes import marker_visible_shapes
+
+from workbench.capture import TrackError, synthetic_performance, track
+from workbench.capture.landmark_registration import (
+    FEATURE_LANDMARKS,
+    OTHER_LANDMARK_WEIGHT,
+    landmark_weights,
+)
+from workbench.capture.result import FLAG_HELD
+from workbench.samples import load_sample
+
+
+@pytest.fixture(scope="module")
+def head():
+    return load_sample()
+
+
+@pytest.fixture(scope="module")
+def take(head):
+    """60 frames, 100 markers with 0.5 mm noise, 5 % occluded, the head turning."""
+    return synthetic_performance(head, 60, fps=30.0, seed=3, noise=0.005, occlusion=0.05,
+                                 shapes=marker_visible_shapes(head))
+
+
+def _track(head, take, weights=None, markers=None, **kw):
+    return track(head, take.markers if markers is None else markers, vertex_ids=take.marker_ids,
+                 l1=0.01, temporal=0.25, marker_weights=weights, **kw)
+
+
+def test_unit_weights_are_the_unweighted_tracker(head, take) -> None:
+    plain = _track(head, take)
+    ones = _track(head, take, np.ones(take.marker_ids.size))
+    np.testing.assert_array_equal(ones.weights, plain.weights)
+    np.testing.assert_array_equal(ones.poses, plain.poses)
+    np.testing.assert_array_equal(plain.info["marker_weights"], np.ones(take.marker_ids.size))
+
+
+def test_weights_scaled_by_a_constant_change_nothing(head, take) -> None:
+    s = np.random.default_rng(0).uniform(0.2, 1.0, take.marker_ids.size)
+    a, b = _track(head, take, s), _track(head, take, 7.0 * s)
+    np.testing.assert_allclose(b.weights, a.weights, atol=1e-7)
+    # and they matter: the weighted fit is another fit
+    assert np.abs(a.weights - _track(head, take).weights).max() > 1e-3
+
+
+def test_a_marker_of_weight_zero_does_not_reach_the_weights(head, take) -> None:
+    # a marker that moves with the face (not one the head pose is fitted on), glued 2 cm off
+    res0 = _track(head, take)
+    moving = np.setdiff1d(np.arange(take.marker_ids.size), res0.info["rigid_markers"])
+    k = int(moving[0])
+    w = np.ones(take.marker_ids.size)
+    w[k] = 0.0
+    bad = take.markers.copy()
+    bad[:, k] += np.array([0.2, -0.1, 0.1])  # dm: 2.4 cm
+    clean, dirty = _track(head, take, w), _track(head, take, w, markers=bad)
+    np.testing.assert_allclose(dirty.weights, clean.weights, atol=1e-9)
+    # unweighted, the same marker pulls the weights away
+    assert np.abs(_track(head, take, markers=bad).weights - res0.weights).max() > 0.05
+
+
+def test_weights_keep_the_held_frames_and_the_lambda_choice_working(head, take) -> None:
+    Y = take.markers.copy()
+    Y[10] = np.nan
+    w = np.where(np.arange(take.marker_ids.size) % 2 == 0, 1.0, 0.25)
+    res = track(head, Y, vertex_ids=take.marker_ids, marker_weights=w)  # λ's chosen by held-out markers
+    assert res.flags[10] == FLAG_HELD
+    assert res.info["lambda_choice"] is not None and np.isfinite(res.info["lambda_choice"]["heldout"])
+    assert np.sqrt(np.mean((res.weights - take.weights) ** 2)) < 0.08
+
+
+@pytest.mark.parametrize(
+    ("weights", "match"),
+    [
+        (np.ones(5), r"marker_weights must have one weight per marker \(100,\), got shape \(5,\)"),
+        (-np.ones(100), "marker_weights must be finite, ≥ 0 and not all 0"),
+        (np.zeros(100), "marker_weights must be finite, ≥ 0 and not all 0"),
+        (np.full(100, np.nan), "marker_weights must be finite"),
+    ],
+)
+def test_bad_weights_are_named(head, take, weights, match) -> None:
+    with pytest.raises(TrackError, match=match):
+        _track(head, take, weights, markers=take.markers[:5])
+
+
+def test_facemesh_feature_landmarks_weigh_one_and_the_rest_less() -> None:
+    w = landmark_weights()
+    assert w.shape == (478,) and len(set(FEATURE_LANDMARKS)) == len(FEATURE_LANDMARKS) == 116
+    assert (w[list(FEATURE_LANDMARKS)] == 1.0).all()
+    assert np.count_nonzero(w == OTHER_LANDMARK_WEIGHT) == 478 - 116
+    assert (landmark_weights(1.0) == 1.0).all()
+    with pytest.raises(Exception, match=r"other: a landmark weight in \[0, 1\]"):
+        landmark_weights(2.0)
+
+
+def test_the_feature_landmarks_are_mediapipes_contours() -> None:
+    connections = pytest.importorskip("mediapipe.python.solutions.face_mesh_connections")
+    sets = (connections.FACEMESH_LIPS, connections.FACEMESH_LEFT_EYE, connections.FACEMESH_RIGHT_EYE,
+            connections.FACEMESH_LEFT_EYEBROW, connections.FACEMESH_RIGHT_EYEBROW, connections.FACEMESH_NOSE)
+    ids = {i for s in sets for pair in s for i in pair}
+    assert ids == set(FEATURE_LANDMARKS)
