@@ -113,8 +113,6 @@ class FrameStepper:
             local = (Yv - M[:3, 3]) @ M[:3, :3] - setup.rest_offsets[vis]
             # the markers weigh in the rig's refinement as in the weights' fit (unweighted, the
             # correctives would learn what the weighting leaves out)
-            sq = np.repeat(np.sqrt(setup.marker_weights[vis]), 3)
-            am.update_planes(np.repeat(self.rows[vis], 3), np.tile(np.eye(3), (nv, 1)) * sq[:, None],
-                             local.reshape(-1) * sq, wf)
+            am.update_planes(*setup.marker_planes(self.rows, vis, local), wf)
             setup.adopt(am, self.rows)
         return w, M, error, flag

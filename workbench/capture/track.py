@@ -226,6 +226,19 @@ class MarkerSetup:
         self.Gm = np.einsum("mck,mcl->mkl", self.Dh, self.D)  # per-marker Gram blocks s_m D_mᵀ D_m
         self.G_all = self.Gm.sum(0)
 
+    def marker_planes(self, rows: NDArray[np.intp], vis: NDArray[np.bool_], targets: NDArray[np.float64]
+                      ) -> tuple[NDArray[np.intp], NDArray[np.float64], NDArray[np.float64]]:
+        """The ``vis`` markers at ``targets`` ((n_vis, 3), model frame) as the adaptive model's plane rows.
+
+        Three axis-aligned planes per marker, each scaled by the square root of the marker's
+        weight, so the rig adapts to the markers as the weights are fitted to them. Returns
+        ``(rows, normals, targets)`` for :meth:`AdaptiveModel.update_planes` / ``fit_neutral_planes``
+        (``rows`` are each marker's row in the model's ``vertex_ids_``).
+        """
+        sq = np.repeat(np.sqrt(self.marker_weights[vis]), 3)
+        n = int(np.count_nonzero(vis))
+        return np.repeat(rows[vis], 3), np.tile(np.eye(3), (n, 1)) * sq[:, None], targets.reshape(-1) * sq
+
     def fit_weight(self, vis: NDArray[np.bool_] | None = None) -> float:
         """The markers' total weight (the visible ones): what the fit term is averaged over."""
         s = self.marker_weights
@@ -315,10 +328,7 @@ def start_from_neutral(setup: MarkerSetup, Y: NDArray[np.float64], neutral: Any,
         seen: NDArray[np.bool_] = np.asarray(np.isfinite(rest).all(1))
         for _it in range(3):
             offsets = _calibrate(setup, Y, neutral)
-            n_seen = int(seen.sum())
-            sq = np.repeat(np.sqrt(setup.marker_weights[seen]), 3)  # weighted as in the weights' fit
-            am.fit_neutral_planes(np.repeat(rows[seen], 3), np.tile(np.eye(3), (n_seen, 1)) * sq[:, None],
-                                  (setup.X0[seen] + offsets[seen]).reshape(-1) * sq)
+            am.fit_neutral_planes(*setup.marker_planes(rows, seen, setup.X0[seen] + offsets[seen]))
             setup.adopt(am, rows)
     # what the identity cannot explain (a marker or landmark that sits off its vertex) stays a
     # per-marker offset; the rig adapts to the motion beyond it
