@@ -6,7 +6,7 @@ permission prompt as a user clicking *Allow*): the sample head rendered with kno
 weights (tests/capture_takes.py: a jawOpen ramp, a blink, a head turn), looped. With
 the mouse: open the Live tab, *Start camera* (the page sends frames, one in flight,
 the kernel acks each), the face follows (the viewport's pixels change with the video
-and jawOpen moves), *Record* / *Stop recording* (one undo step of keys), the take
+and jawOpen moves), *Calibrate* shows its instructions and ends early when pressed again, *Record* / *Stop recording* (one undo step of keys), the take
 exports as .glb and Live Link CSV, *Stop camera* (the page lets the camera go). Behind
 the Live tab the Shapes tab's sliders stay still (no slider traffic per camera frame) and
 show the played weights once that tab is shown.
@@ -101,6 +101,19 @@ def test_the_face_follows_the_fake_camera_and_a_recorded_take_exports(open_noteb
     b = nb.canvas_shot("live-2")
     assert max(jaws) - min(jaws) > 0.05, jaws  # the video's jaw ramp moves the face
     assert pixel_change(a, b) > 0.001
+    # calibrate: the session's instructions show beside the camera and move on with its clock;
+    # pressed again, it ends early, fitted on the prompts reached
+    page.locator(".fwb-live-calibrate").click()
+    prompt = page.locator(".fwb-live-prompt")
+    wait_until("the first instruction", lambda: prompt.text_content() or "", lambda s: "1/8" in s, timeout=30)
+    wait_until("the second instruction", lambda: prompt.text_content() or "",
+               lambda s: "2/8" in s and "jaw" in s, timeout=60)
+    nb.screenshot("calibrating")
+    n_cal = _state(nb)["tracked"]
+    wait_until("frames of the jaw prompt", lambda: _state(nb), lambda s: s["tracked"] > n_cal + 3, timeout=60)
+    page.locator(".fwb-live-calibrate").click()
+    st = wait_until("calibrated", lambda: _state(nb), lambda s: "calibrated:" in s["status"] or s["errors"], timeout=30)
+    assert not st["errors"] and (prompt.text_content() or "") == "", st
     # record: one undo step of keys
     n_undo = len(st["undo"])
     page.locator(".fwb-live-record").click()

@@ -70,20 +70,32 @@ def test_live_frames_drive_the_face_record_keys_a_take_and_stop_restores(jpegs, 
     assert np.corrcoef(jaw[1:], JAW[1:12])[0, 1] > 0.9  # the face follows the video
     assert len(model.history.undo_labels) == n_undo  # watching adds no undo step
     assert "ms each" in live.status.value
-    # the range calibration on frames 6..12 (the jaw ramp's upper part) scales the jaw up
-    assert live.range_button.description == "Calibrate range" and not live.range_button.disabled
-    live.range_button.click()
-    assert live.range_button.description == "End calibration"
-    for f in range(6, 12):
-        _page_sends(live.camera, {"type": "frame", "t": (100 + f) / 30.0}, [jpegs[f]])
-    live.range_button.click()
-    assert live.tracker.gains_ is not None and "range set" in live.status.value, live.status.value
+    # the guided calibration: the prompt shows beside the camera and moves on with the frames' clock
+    assert live.calibrate_button.description == "Calibrate" and not live.calibrate_button.disabled
+    live.calibrate_button.click()
+    assert live.calibrate_button.description == "End calibration"
+    assert "1/8" in live.prompt.value and "Relax" in live.prompt.value
+    seen = []
+    for i in range(17):  # a frame a second through the 16-second session
+        _page_sends(live.camera, {"type": "frame", "t": 100.0 + i}, [jpegs[(6 * i) % len(jpegs)]])
+        seen.append(live.prompt.value)
+    assert "2/8" in seen[2] and "Open your jaw wide" in seen[2] and "8/8" in seen[15]
+    # it ended by itself: the map applies, the prompt is gone, the status says so
+    assert not live.tracker.calibrating and live.tracker.calibration_ is not None
+    assert live.prompt.value == "" and live.calibrate_button.description == "Calibrate"
+    assert "calibrated:" in live.status.value, live.status.value
     assert len(model.history.undo_labels) == n_undo
+    # ended early: fitted on the prompts reached
+    live.calibrate_button.click()
+    for i in range(5):
+        _page_sends(live.camera, {"type": "frame", "t": 120.0 + i}, [jpegs[(5 * i) % len(jpegs)]])
+    live.calibrate_button.click()
+    assert not live.tracker.calibrating and live.prompt.value == "" and "calibrated:" in live.status.value
     # record frames 12..24: one undo step with their keys
     live.record_button.click()
     assert live.record_button.description == "Stop recording"
     for f in range(12, 24):
-        _page_sends(live.camera, {"type": "frame", "t": (200 + f) / 30.0, "width": 480, "height": 480},
+        _page_sends(live.camera, {"type": "frame", "t": 200.0 + f / 30.0, "width": 480, "height": 480},
                     [jpegs[f]])
     live.record_button.click()
     assert len(model.history.undo_labels) == n_undo + 1 and "Record live take" in model.history.undo_labels[-1]
@@ -95,7 +107,7 @@ def test_live_frames_drive_the_face_record_keys_a_take_and_stop_restores(jpegs, 
     # the raw take saves; stopping the camera leaves the sliders as they were
     out = live.save_take(str(tmp_path / "take.npz"))
     saved = np.load(out)
-    assert saved["landmarks"].shape == (30, 478, 3) and saved["timestamps"].shape == (30,)
+    assert saved["landmarks"].shape == (46, 478, 3) and saved["timestamps"].shape == (46,)
     live.start_button.click()
     assert not live.camera.active and len(model.history.undo_labels) == n_undo + 1
     # no permission: a clear message, the camera off

@@ -59,7 +59,7 @@ class LivePanel(ModelPanel):
         self.recorded: Any = None
         self._token: Any = None
         self._record_from: int | None = None
-        self._calibrating = False
+        self._session: Any = None  # the calibration session running (ExpressionCalibration)
         #: the kernel's seconds for the last frames (the status line's median)
         self._seconds: deque[float] = deque(maxlen=30)
         self.camera = CameraWidget(on_frame=self.errors.guard("live frame")(self.push), _scene=scene_key(model))
@@ -67,9 +67,12 @@ class LivePanel(ModelPanel):
         self.start_button = button("Start camera", "fwb-live-start", "Open the webcam (the browser asks first)",
                                    "video-camera")
         self.record_button = button("Record", "fwb-live-record", "Record a take onto the timeline", "circle")
-        self.range_button = button("Calibrate range", "fwb-live-range",
-                                   "Press, make your extremes for a few seconds (jaw wide open, blinks, smiles, "
-                                   "brows), press again: each shape's range is set from them", "arrows-v")
+        self.calibrate_button = button("Calibrate", "fwb-live-calibrate",
+                                       "A 16-second guided session: relax, then make each expression shown here "
+                                       "and hold it; the tracker then reads you better (press again to end early)",
+                                       "sliders")
+        self.prompt = W.HTML("")
+        self.prompt.add_class("fwb-live-prompt")
         self.adapt = W.Checkbox(value=False, description="adapt the rig to me while tracking", indent=False)
         self.adapt.add_class("fwb-live-adapt")
         self.follow_head = W.Checkbox(value=True, description="show my head's turn", indent=False,
@@ -85,11 +88,11 @@ class LivePanel(ModelPanel):
         self.follow_head.observe(g("show head pose")(lambda _c: self._show_pose(self._last_pose())), "value")
         self.start_button.on_click(g("camera")(lambda _b: self.toggle_camera()))
         self.record_button.on_click(g("record")(lambda _b: self.toggle_record()))
-        self.range_button.on_click(g("calibrate range")(lambda _b: self.toggle_range()))
+        self.calibrate_button.on_click(g("calibrate")(lambda _b: self.toggle_calibration()))
         self.save_button.on_click(g("save take")(lambda _b: self.save_take(self.take_path.value)))
         self.children = [
             W.HTML("<b>Live</b> — the face follows your webcam"), self.camera,
-            W.HBox([self.start_button, self.adapt, self.follow_head]), W.HBox([self.range_button]),
+            W.HBox([self.start_button, self.adapt, self.follow_head]), W.HBox([self.calibrate_button, self.prompt]),
             W.HBox([self.record_button, self.tolerance]),
             W.HBox([self.take_path, self.save_button]), self.status,
         ]
@@ -109,7 +112,8 @@ class LivePanel(ModelPanel):
 
         self.flush()
         self.tracker = LiveTracker(self.model, adapt=bool(self.adapt.value))
-        self.last, self._calibrating = None, False
+        self.last, self._session = None, None
+        self.prompt.value = ""
         self._seconds.clear()
         self.camera.active = True
         self.status.value = "<i>asking the browser for the camera…</i>"
@@ -162,11 +166,16 @@ class LivePanel(ModelPanel):
                 self._show_pose(frame.pose)
                 m.set_weights(dict(zip(m.shape_names, frame.weights.tolist(), strict=True)))
         self._seconds.append(time.perf_counter() - t0)
+        self._show_prompt(frame)
         n = self.tracker.n_frames_
-        if n % 5 == 1 or not frame.ok:
+        if n % 5 == 1 or not frame.ok or frame.note:
             ms = 1000 * float(np.median(self._seconds))
             rec = f"; recording {n - self._record_from} frames" if self._record_from is not None else ""
-            note = f" — {html.escape(frame.note)}" if frame.note else ""
+            cal = self.tracker.calibration_
+            if frame.note:
+                note = f" — {html.escape(frame.note)}"
+            else:
+                note = f" — {html.escape(cal.summary())}" if cal is not None else ""
             self.status.value = (f"{n} frames, {ms:.0f} ms each in the kernel (≤ {1000 / max(ms, 1e-3):.0f} "
                                  f"frames/s){rec}{note}")
         return frame
@@ -188,24 +197,44 @@ class LivePanel(ModelPanel):
         """Another edit closed the live interaction (its weights stay); the next frame opens a new one."""
         self._token = None
 
-    # ------------------------------------------------------------------ range
-    def toggle_range(self) -> Any:
-        """Start the range calibration, or end it and show the gains it set."""
+    # ------------------------------------------------------------------ calibration
+    def toggle_calibration(self) -> Any:
+        """Start the guided calibration session, or end it early (fitted on the prompts reached)."""
         if self.tracker is None or not self.camera.active:
-            raise ValueError("Calibrate range: start the camera first")
-        if not self._calibrating:
-            self.tracker.begin_range()
-            self._calibrating = True
-            self.status.value = "<i>make your extremes now (jaw wide open, blinks, smiles, brows), then press again</i>"
+            raise ValueError("Calibrate: start the camera first")
+        if not self.tracker.calibrating:
+            self._session = self.tracker.begin_calibration()
+            self.prompt.value = self._prompt_html(0)
+            self.status.value = (f"<i>calibrating: do what is shown, {self._session.seconds:.0f} s each "
+                                 f"({self._session.duration:.0f} s in all)</i>")
         else:
-            self._calibrating = False
-            gains = self.tracker.end_range()
-            names = list(self.model.shape_names)
-            top = np.argsort(-gains)[:4]
-            self.status.value = "range set: " + ", ".join(f"{html.escape(names[i])} ×{gains[i]:.2f}" for i in top
-                                                          if gains[i] > 1.0)
+            try:
+                cal = self.tracker.end_calibration()
+            finally:
+                self._session, self.prompt.value = None, ""
+                self.refresh()
+            self.status.value = html.escape(cal.summary())
         self.refresh()
-        return self.tracker.gains_
+        return self.tracker.calibration_
+
+    def _prompt_html(self, i: int) -> str:
+        cal = self._session
+        p = cal.prompts_[i]
+        return (f"<span style='font-size:1.5em'><b>{i + 1}/{len(cal.prompts_)}</b> · "
+                f"{html.escape(p.instruction)}</span>")
+
+    def _show_prompt(self, frame: Any) -> None:
+        """The session's instruction beside the camera; its end note when it ends."""
+        if self._session is None:
+            return
+        if frame.prompt:
+            i = next(i for i, p in enumerate(self._session.prompts_) if p.instruction == frame.prompt)
+            text = self._prompt_html(i)
+            if self.prompt.value != text:
+                self.prompt.value = text
+        elif not self.tracker.calibrating:  # the session ended with this frame
+            self._session, self.prompt.value = None, ""
+            self.refresh()
 
     # ------------------------------------------------------------------ record
     def toggle_record(self) -> Any:
@@ -246,8 +275,9 @@ class LivePanel(ModelPanel):
         self.start_button.description = "Stop camera" if on else "Start camera"
         self.record_button.description = "Stop recording" if self._record_from is not None else "Record"
         self.record_button.disabled = not on
-        self.range_button.disabled = not on
-        self.range_button.description = "End calibration" if self._calibrating else "Calibrate range"
+        calibrating = self.tracker is not None and self.tracker.calibrating
+        self.calibrate_button.disabled = not on
+        self.calibrate_button.description = "End calibration" if calibrating else "Calibrate"
         self.adapt.disabled = on
 
 

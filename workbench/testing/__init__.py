@@ -64,6 +64,7 @@ from workbench.testing.meshes import (
 from workbench.testing.takes import (
     REAL_TAKE,
     TakeStatistics,
+    calibration_session,
     realistic_take,
     realistic_weights,
     take_markers,
@@ -92,6 +93,7 @@ __all__ = [
     "TakeStatistics",
     "Warp",
     "add_bust",
+    "calibration_session",
     "capture_actor_warp",
     "compose",
     "cropped",

@@ -41,9 +41,13 @@ from workbench.capture.rig import ExpressionSpace
 from workbench.capture.synthetic import SyntheticPerformance, synthetic_performance
 
 if TYPE_CHECKING:
+    from collections.abc import Sequence
+
+    from workbench.capture.expression_calibration import CalibrationPrompt
     from workbench.core.state import FaceState
 
-__all__ = ["REAL_TAKE", "TakeStatistics", "realistic_take", "realistic_weights", "take_markers", "take_statistics"]
+__all__ = ["REAL_TAKE", "TakeStatistics", "calibration_session", "realistic_take", "realistic_weights",
+           "take_markers", "take_statistics"]
 
 #: The real phone take's statistics (52 ARKit weights, 335 frames at 30 fps), from the notes:
 #: name → (measured value, low, high) where low..high is the range a generated take should land in.
@@ -254,6 +258,43 @@ def realistic_weights(
     plain[:, cols] = W
     plain[:, space.plain] = np.clip(plain[:, space.plain], space.lo, space.hi)
     return np.asarray(space.full_weights(plain[:, space.plain]))
+
+
+def calibration_session(
+    model: FaceState,
+    prompts: Sequence[CalibrationPrompt] | None = None,
+    *,
+    seconds: float = 2.0,
+    fps: float = 15.0,
+    seed: int = 0,
+) -> NDArray[np.float64]:
+    """Weights ``(T, k)`` of an actor following a guided calibration session, in ``model.shape_names`` order.
+
+    Each prompt (:data:`~workbench.capture.expression_calibration.DEFAULT_PROMPTS` by
+    default; the ones the rig cannot show are skipped, as the tracker skips them) lasts
+    ``seconds``: the actor reacts late (12–25 % of it: 0.25–0.5 s of a 2 s prompt), eases in
+    over 10–20 % of it to 0.85–1.0 of the expression (each shape 0.9–1.0 of that), holds, and
+    lets go before the next prompt — not the exact 1 the calibration assumes.
+    """
+    from workbench.capture.expression_calibration import ExpressionCalibration
+
+    if not (np.isfinite(seconds) and seconds > 0 and np.isfinite(fps) and fps > 0):
+        raise ValueError(f"seconds and fps must be numbers > 0, got {seconds!r}, {fps!r}")
+    rng = np.random.default_rng(seed)
+    names = list(model.shape_names)
+    cal = ExpressionCalibration(names, prompts, seconds=seconds)
+    n = max(1, round(seconds * fps))
+    t = np.arange(n) / float(fps)
+    W = np.zeros((n * len(cal.prompts_), len(names)))
+    for i, cols in enumerate(cal.columns_):
+        on, up = seconds * rng.uniform(0.12, 0.25), seconds * rng.uniform(0.1, 0.2)
+        off = seconds * (1.0 - rng.uniform(0.18, 0.35))
+        env = np.clip((t - on) / up, 0.0, 1.0) * np.clip(1.0 - (t - off) / (0.125 * seconds), 0.0, 1.0)
+        env = env * env * (3.0 - 2.0 * env)
+        level = rng.uniform(0.85, 1.0)
+        for j in cols:
+            W[i * n : (i + 1) * n, j] = level * rng.uniform(0.9, 1.0) * env
+    return W
 
 
 # ------------------------------------------------------------------ markers
