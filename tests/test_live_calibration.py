@@ -134,3 +134,21 @@ def test_a_rig_with_other_names_and_prompts_of_its_own() -> None:
     assert S.shape == (20, len(model.shape_names))
     j = cal.columns_[1][0]
     assert S[:10].max() == 0.0 and 0.75 < S[10:, j].max() <= 1.0
+
+
+def test_the_tracker_starts_ends_and_cancels_a_session() -> None:
+    from workbench.capture.facemesh import VideoError
+    from workbench.capture.live import LiveTracker
+
+    live = LiveTracker(workbench.load_sample("head"))
+    assert not live.calibrating and live.calibration_ is None
+    with pytest.raises(VideoError, match="begin_calibration first"):
+        live.end_calibration()
+    cal = live.begin_calibration(seconds=1.0)
+    assert live.calibrating and cal.duration == pytest.approx(8.0)
+    with pytest.raises(VideoError, match="neutral face"):  # no frame was tracked
+        live.end_calibration()
+    assert not live.calibrating and live.calibration_ is None  # nothing half-kept
+    live.begin_calibration()
+    live.cancel_calibration()
+    assert not live.calibrating and live.calibration_ is None
