@@ -291,6 +291,9 @@ def calibration_table(head, take, foreign, face_shapes) -> None:
             raw = np.array([live.push(img, t0 + f / 30.0).weights for f, img in enumerate(frames)])
             live.close()
 
+            def rmse(W, tr=tr):
+                return float(np.sqrt(np.mean((W - tr)[:, face_shapes] ** 2)))
+
             def through(cal, raw=raw):
                 W = raw.copy()
                 W[:, space.plain] = np.clip(cal.apply(raw[:, space.plain]), space.lo, space.hi)
@@ -299,16 +302,13 @@ def calibration_table(head, take, foreign, face_shapes) -> None:
             worst = 0.0
             for i in range(1, len(cal.prompts_)):
                 cal.fit(leave_out=(i,))
-                worst = max(worst, float(np.sqrt(np.mean((through(cal) - tr)[:, face_shapes] ** 2))))
+                worst = max(worst, rmse(through(cal)))
             cal.fit()
             guided = through(cal)
             peak = np.array(seen).max(0)
             gains = np.where(peak > 0.3, np.minimum(1.0 / np.maximum(peak, 1e-9), 3.0), 1.0)
             ranged = raw.copy()
             ranged[:, space.plain] = np.clip(raw[:, space.plain] * np.maximum(gains, 1.0), space.lo, space.hi)
-
-            def rmse(W, tr=tr):
-                return float(np.sqrt(np.mean((W - tr)[:, face_shapes] ** 2)))
 
             j = names.index("jawOpen")
             m = tr[:, j] > 0.5 * tr[:, j].max()

@@ -207,14 +207,14 @@ class LivePanel(ModelPanel):
             self.prompt.value = self._prompt_html(0)
             self.status.value = (f"<i>calibrating: do what is shown, {self._session.seconds:.0f} s each "
                                  f"({self._session.duration:.0f} s in all)</i>")
+            self.refresh()
         else:
             try:
                 cal = self.tracker.end_calibration()
-            finally:
+            finally:  # a failed fit ends the session too (the tracker keeps the last map)
                 self._session, self.prompt.value = None, ""
                 self.refresh()
             self.status.value = html.escape(cal.summary())
-        self.refresh()
         return self.tracker.calibration_
 
     def _prompt_html(self, i: int) -> str:

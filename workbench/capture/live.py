@@ -100,7 +100,6 @@ class LiveFrame:
     timestamp: float
     note: str = ""
     seconds: dict[str, float] = field(default_factory=dict)
-    #: the calibration session's instruction showing at this frame ("" outside a session)
     prompt: str = ""
 
 
