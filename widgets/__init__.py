@@ -28,10 +28,14 @@ this package.
   gallery, the examples with rough-weight sliders; *Open in Workbench*).
 - :func:`recovery_prompt`: offer to recover an autosaved session after a
   kernel crash or restart.
+- :func:`keep_every_iopub_message`: the kernel's IOPub channel keeps every
+  message for a server that fell behind (applied on import and before each
+  large burst of widgets; call it before a burst of your own).
 """
 
 from __future__ import annotations
 
+from widgets._iopub import keep_every_iopub_message
 from widgets.app import TAB_TITLES, Workbench, show_workbench
 from widgets.gallery import ExpressionGallery
 from widgets.panels import ExportPanel, ExpressionPanel, PaintPanel, SculptPanel
@@ -41,6 +45,9 @@ from widgets.rigging import RigStudio, show_rig_studio
 from widgets.timeline import TimelineWidget
 from widgets.viewport import Viewport
 from widgets.wrinkles import WrinklePanel
+
+# before any widget exists: on a busy machine no comm_open may be dropped (widgets._iopub)
+keep_every_iopub_message()
 
 __all__ = [
     "TAB_TITLES",
@@ -56,6 +63,7 @@ __all__ = [
     "Viewport",
     "Workbench",
     "WrinklePanel",
+    "keep_every_iopub_message",
     "recovery_prompt",
     "show_rig_studio",
     "show_workbench",

@@ -14,6 +14,7 @@ from typing import Any
 import ipywidgets as W
 import traitlets
 
+from widgets._iopub import keep_every_iopub_message
 from widgets._threading import ErrorSink, UiScheduler, close_interactions
 from widgets.gallery import ExpressionGallery
 from widgets.panels import ExpressionPanel, UndoRedoButtons
@@ -103,6 +104,7 @@ class Workbench(W.VBox):
         height: int = 520,
     ) -> None:
         self.model = model
+        keep_every_iopub_message()  # about 1,500 messages follow; a page that connected late
         self.errors = W.Output(layout=W.Layout(max_height="160px", overflow="auto"))
         self.errors.add_class("fwb-errors")
         self.sink = ErrorSink(self.errors)
@@ -203,6 +205,7 @@ class Workbench(W.VBox):
 
     # ------------------------------------------------------------ tabs and their panels
     def _build_tab(self, spec: TabSpec) -> Any:
+        keep_every_iopub_message()  # a tab's panel is a burst of its own
         widget, panels = spec.build(self)
         self.panels.update(panels)
         self._built.add(spec.title)

@@ -25,6 +25,7 @@ from typing import Any
 
 import ipywidgets as W
 
+from widgets._iopub import keep_every_iopub_message
 from widgets._threading import ErrorSink
 from widgets.panels.base import ModelPanel, button
 from widgets.rigging.examples import ExamplesPanel
@@ -65,6 +66,7 @@ class RigStudio(ModelPanel):
     def __init__(self, session: Any, target: Any = None, *, height: int = 360) -> None:
         from workbench.rigging import RigSession
 
+        keep_every_iopub_message()  # the studio is a burst of widgets (widgets._iopub)
         if not isinstance(session, RigSession):
             if target is None:
                 raise TypeError("RigStudio: give a RigSession, or a template FaceModel and a target")
