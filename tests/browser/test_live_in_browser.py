@@ -105,9 +105,9 @@ def test_the_face_follows_the_fake_camera_and_a_recorded_take_exports(open_noteb
     # pressed again, it ends early, fitted on the prompts reached
     page.locator(".fwb-live-calibrate").click()
     prompt = page.locator(".fwb-live-prompt")
-    wait_until("the first instruction", lambda: prompt.text_content() or "", lambda s: "1/8" in s, timeout=30)
+    wait_until("the first instruction", lambda: prompt.text_content() or "", lambda s: "1/10" in s, timeout=30)
     wait_until("the second instruction", lambda: prompt.text_content() or "",
-               lambda s: "2/8" in s and "jaw" in s, timeout=60)
+               lambda s: "2/10" in s and "jaw" in s, timeout=60)
     nb.screenshot("calibrating")
     n_cal = _state(nb)["tracked"]
     wait_until("frames of the jaw prompt", lambda: _state(nb), lambda s: s["tracked"] > n_cal + 3, timeout=60)

@@ -74,12 +74,13 @@ def test_live_frames_drive_the_face_record_keys_a_take_and_stop_restores(jpegs, 
     assert live.calibrate_button.description == "Calibrate" and not live.calibrate_button.disabled
     live.calibrate_button.click()
     assert live.calibrate_button.description == "End calibration"
-    assert "1/8" in live.prompt.value and "Relax" in live.prompt.value
+    assert "1/10" in live.prompt.value and "Relax" in live.prompt.value
     seen = []
-    for i in range(17):  # a frame a second through the 16-second session
+    for i in range(21):  # a frame a second through the 20-second session
         _page_sends(live.camera, {"type": "frame", "t": 100.0 + i}, [jpegs[(6 * i) % len(jpegs)]])
         seen.append(live.prompt.value)
-    assert "2/8" in seen[2] and "Open your jaw wide" in seen[2] and "8/8" in seen[15]
+    assert "2/10" in seen[2] and "Open your jaw wide" in seen[2] and "8/10" in seen[15]
+    assert "10/10" in seen[19] and "nod" in seen[19]  # the relaxed face nodding ends it
     # it ended by itself: the map applies, the prompt is gone, the status says so
     assert not live.tracker.calibrating and live.tracker.calibration_ is not None
     assert live.prompt.value == "" and live.calibrate_button.description == "Calibrate"
@@ -88,7 +89,7 @@ def test_live_frames_drive_the_face_record_keys_a_take_and_stop_restores(jpegs, 
     # ended early: fitted on the prompts reached
     live.calibrate_button.click()
     for i in range(5):
-        _page_sends(live.camera, {"type": "frame", "t": 120.0 + i}, [jpegs[(5 * i) % len(jpegs)]])
+        _page_sends(live.camera, {"type": "frame", "t": 130.0 + i}, [jpegs[(5 * i) % len(jpegs)]])
     live.calibrate_button.click()
     assert not live.tracker.calibrating and live.prompt.value == "" and "calibrated:" in live.status.value
     # record frames 12..24: one undo step with their keys
@@ -107,7 +108,7 @@ def test_live_frames_drive_the_face_record_keys_a_take_and_stop_restores(jpegs, 
     # the raw take saves; stopping the camera leaves the sliders as they were
     out = live.save_take(str(tmp_path / "take.npz"))
     saved = np.load(out)
-    assert saved["landmarks"].shape == (46, 478, 3) and saved["timestamps"].shape == (46,)
+    assert saved["landmarks"].shape == (50, 478, 3) and saved["timestamps"].shape == (50,)
     live.start_button.click()
     assert not live.camera.active and len(model.history.undo_labels) == n_undo + 1
     # no permission: a clear message, the camera off

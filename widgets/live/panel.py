@@ -33,6 +33,10 @@ from widgets.live.camera import CameraWidget
 from widgets.panels.base import ModelPanel, button
 from widgets.viewport.common import scene_key
 from workbench.blas import one_blas_thread
+from workbench.capture.expression_calibration import DEFAULT_PROMPTS, SECONDS_PER_PROMPT
+
+#: the guided calibration's length (its default prompts)
+SESSION_SECONDS = SECONDS_PER_PROMPT * len(DEFAULT_PROMPTS)
 
 __all__ = ["LivePanel"]
 
@@ -68,8 +72,9 @@ class LivePanel(ModelPanel):
                                    "video-camera")
         self.record_button = button("Record", "fwb-live-record", "Record a take onto the timeline", "circle")
         self.calibrate_button = button("Calibrate", "fwb-live-calibrate",
-                                       "A 16-second guided session: relax, then make each expression shown here "
-                                       "and hold it; the tracker then reads you better (press again to end early)",
+                                       f"A {SESSION_SECONDS:.0f}-second guided session: relax, make each expression "
+                                       "shown here and hold it, then turn and nod your head; the tracker then reads "
+                                       "you better (press again to end early)",
                                        "sliders")
         self.prompt = W.HTML("")
         self.prompt.add_class("fwb-live-prompt")

@@ -64,6 +64,7 @@ from workbench.testing.meshes import (
 from workbench.testing.takes import (
     REAL_TAKE,
     TakeStatistics,
+    calibration_head_motion,
     calibration_session,
     realistic_take,
     realistic_weights,
@@ -93,6 +94,7 @@ __all__ = [
     "TakeStatistics",
     "Warp",
     "add_bust",
+    "calibration_head_motion",
     "calibration_session",
     "capture_actor_warp",
     "compose",

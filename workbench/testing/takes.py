@@ -46,7 +46,7 @@ if TYPE_CHECKING:
     from workbench.capture.expression_calibration import CalibrationPrompt
     from workbench.core.state import FaceState
 
-__all__ = ["REAL_TAKE", "TakeStatistics", "calibration_session", "realistic_take", "realistic_weights",
+__all__ = ["REAL_TAKE", "TakeStatistics", "calibration_head_motion", "calibration_session", "realistic_take", "realistic_weights",
            "take_markers", "take_statistics"]
 
 #: The real phone take's statistics (52 ARKit weights, 335 frames at 30 fps), from the notes:
@@ -295,6 +295,47 @@ def calibration_session(
         for j in cols:
             W[i * n : (i + 1) * n, j] = level * rng.uniform(0.9, 1.0) * env
     return W
+
+
+def calibration_head_motion(
+    model: FaceState,
+    prompts: Sequence[CalibrationPrompt] | None = None,
+    *,
+    seconds: float = 2.0,
+    fps: float = 15.0,
+    seed: int = 0,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Yaw and pitch ``(T,)`` in radians of the actor's head through a guided session.
+
+    Frames as :func:`calibration_session` (same prompts, ``seconds``, ``fps``). The head
+    drifts a little throughout (±3° yaw, ±2° pitch, as a person holding still in front of a
+    camera does); in a prompt whose ``head`` is ``"turn"`` the actor, after the same late
+    reaction, turns left and right once (12–18°), in a ``"nod"`` prompt nods down and up
+    once (6–10°).
+    """
+    from workbench.capture.expression_calibration import ExpressionCalibration
+
+    if not (np.isfinite(seconds) and seconds > 0 and np.isfinite(fps) and fps > 0):
+        raise ValueError(f"seconds and fps must be numbers > 0, got {seconds!r}, {fps!r}")
+    rng = np.random.default_rng(seed)
+    cal = ExpressionCalibration(list(model.shape_names), prompts, seconds=seconds)
+    n = max(1, round(seconds * fps))
+    ts = np.arange(n * len(cal.prompts_)) / float(fps)
+    phase = rng.uniform(0.0, 2 * np.pi, 2)
+    yaw = np.deg2rad(3.0) * np.sin(2 * np.pi * 0.3 * ts + phase[0])
+    pitch = np.deg2rad(2.0) * np.sin(2 * np.pi * 0.2 * ts + phase[1])
+    t = np.arange(n) / float(fps)
+    for i, p in enumerate(cal.prompts_):
+        if p.head == "still":
+            continue
+        on = seconds * rng.uniform(0.12, 0.25)
+        u = np.clip((t - on) / (0.9 * seconds - on), 0.0, 1.0)  # back to the front before the next prompt
+        sweep = np.sin(2 * np.pi * u)
+        if p.head == "turn":
+            yaw[i * n : (i + 1) * n] += np.deg2rad(rng.uniform(12.0, 18.0)) * sweep
+        else:
+            pitch[i * n : (i + 1) * n] += np.deg2rad(rng.uniform(6.0, 10.0)) * sweep
+    return yaw, pitch
 
 
 # ------------------------------------------------------------------ markers
