@@ -14,7 +14,10 @@ opening 20,000 comms while its reader is stalled delivers about 6,500 of them.
 :func:`keep_every_iopub_message` raises that mark to :data:`IOPUB_HIGH_WATER_MARK`
 (100,000 messages per subscriber). A server that falls behind by any burst the Workbench
 makes then gets every message once it catches up; only a subscriber that stopped reading
-altogether is ever dropped, so what a dead reader can hold in the kernel stays bounded.
+altogether is ever dropped, so what a dead reader can hold in the kernel stays bounded
+(100,000 of the Workbench's usual messages, a slider's or a GPU frame's parameters of about
+1 KB, are about 100 MB; only full-geometry messages, which the GPU viewport sends once per
+rig, are larger).
 ipykernel has no setting for the mark and binds its socket at start-up, so it is raised at
 run time: libzmq (4.3) applies a new mark to the pipes *already connected*, but a reader
 that connects later (a reloaded page opens a new server connection) starts at the bind-time
