@@ -25,8 +25,12 @@ BURST = 20_000
 def _pair(kind: int) -> tuple[object, object, object]:
     ctx = zmq.Context()
     pub = ctx.socket(kind)
+    # small fixed TCP buffers (no autotuning): what the kernel buffers is then the mark's doing,
+    # on any machine
+    pub.setsockopt(zmq.SNDBUF, 1 << 16)
     port = pub.bind_to_random_port("tcp://127.0.0.1")
     sub = ctx.socket(zmq.SUB)
+    sub.setsockopt(zmq.RCVBUF, 1 << 16)
     sub.setsockopt(zmq.SUBSCRIBE, b"")
     sub.connect(f"tcp://127.0.0.1:{port}")
     return ctx, pub, sub
@@ -50,7 +54,7 @@ def _wait_subscribed(pub: object, sub: object) -> None:
 
 def _burst_with_a_stalled_reader(pub: object, sub: object) -> int:
     """Publish BURST messages while the subscriber reads nothing; then count what arrives."""
-    payload = b"x" * 2000  # more than loopback TCP buffers hold at once
+    payload = b"x" * 2000  # 40 MB in all: far more than the TCP buffers hold
     for i in range(BURST):
         pub.send_multipart([str(i).encode(), payload])
     got = 0
