@@ -43,7 +43,7 @@ from workbench.capture.synthetic import SyntheticPerformance, synthetic_performa
 if TYPE_CHECKING:
     from collections.abc import Sequence
 
-    from workbench.capture.expression_calibration import CalibrationPrompt
+    from workbench.capture.expression_calibration import CalibrationPrompt, ExpressionCalibration
     from workbench.core.state import FaceState
 
 __all__ = ["REAL_TAKE", "TakeStatistics", "calibration_head_motion", "calibration_session", "realistic_take", "realistic_weights",
@@ -260,6 +260,20 @@ def realistic_weights(
     return np.asarray(space.full_weights(plain[:, space.plain]))
 
 
+def _session_schedule(
+    model: FaceState, prompts: Sequence[CalibrationPrompt] | None, seconds: float, fps: float
+) -> tuple[ExpressionCalibration, int, NDArray[np.float64]]:
+    """The tracker's schedule of a guided session on ``model``: (its calibration, frames per prompt,
+    a prompt's frame times (n,))."""
+    from workbench.capture.expression_calibration import ExpressionCalibration
+
+    if not (np.isfinite(seconds) and seconds > 0 and np.isfinite(fps) and fps > 0):
+        raise ValueError(f"seconds and fps must be numbers > 0, got {seconds!r}, {fps!r}")
+    cal = ExpressionCalibration(list(model.shape_names), prompts, seconds=seconds)
+    n = max(1, round(seconds * fps))
+    return cal, n, np.arange(n) / float(fps)
+
+
 def calibration_session(
     model: FaceState,
     prompts: Sequence[CalibrationPrompt] | None = None,
@@ -276,16 +290,9 @@ def calibration_session(
     over 10–20 % of it to 0.85–1.0 of the expression (each shape 0.9–1.0 of that), holds, and
     lets go before the next prompt — not the exact 1 the calibration assumes.
     """
-    from workbench.capture.expression_calibration import ExpressionCalibration
-
-    if not (np.isfinite(seconds) and seconds > 0 and np.isfinite(fps) and fps > 0):
-        raise ValueError(f"seconds and fps must be numbers > 0, got {seconds!r}, {fps!r}")
+    cal, n, t = _session_schedule(model, prompts, seconds, fps)
     rng = np.random.default_rng(seed)
-    names = list(model.shape_names)
-    cal = ExpressionCalibration(names, prompts, seconds=seconds)
-    n = max(1, round(seconds * fps))
-    t = np.arange(n) / float(fps)
-    W = np.zeros((n * len(cal.prompts_), len(names)))
+    W = np.zeros((n * len(cal.prompts_), len(cal.shape_names)))
     for i, cols in enumerate(cal.columns_):
         on, up = seconds * rng.uniform(0.12, 0.25), seconds * rng.uniform(0.1, 0.2)
         off = seconds * (1.0 - rng.uniform(0.18, 0.35))
@@ -313,18 +320,12 @@ def calibration_head_motion(
     reaction, turns left and right once (12–18°), in a ``"nod"`` prompt nods down and up
     once (6–10°).
     """
-    from workbench.capture.expression_calibration import ExpressionCalibration
-
-    if not (np.isfinite(seconds) and seconds > 0 and np.isfinite(fps) and fps > 0):
-        raise ValueError(f"seconds and fps must be numbers > 0, got {seconds!r}, {fps!r}")
+    cal, n, t = _session_schedule(model, prompts, seconds, fps)
     rng = np.random.default_rng(seed)
-    cal = ExpressionCalibration(list(model.shape_names), prompts, seconds=seconds)
-    n = max(1, round(seconds * fps))
     ts = np.arange(n * len(cal.prompts_)) / float(fps)
     phase = rng.uniform(0.0, 2 * np.pi, 2)
     yaw = np.deg2rad(3.0) * np.sin(2 * np.pi * 0.3 * ts + phase[0])
     pitch = np.deg2rad(2.0) * np.sin(2 * np.pi * 0.2 * ts + phase[1])
-    t = np.arange(n) / float(fps)
     for i, p in enumerate(cal.prompts_):
         if p.head == "still":
             continue
