@@ -91,6 +91,16 @@ pink tongue filling it up to the upper lip, where a person's mouth is a dark cav
 (the tongue and gums at sRGB 70, 28, 30) FaceMesh reads the jaw at 0.54 of the truth instead of
 0.43 (correlation 0.81 vs 0.74), but the whole take's RMSE hardly moves (0.165 -> 0.163): the
 smiles and the brows are what is left, and they do not depend on the mouth's inside.
+
+Tried 2026-11-30 and not kept: leaving out the landmarks' depth (FaceMesh's z is its own estimate,
+and on the sample head the jaw's reading fell with the head's turn: tracked over true 0.61 at
+|yaw| 9 deg, 0.37 at 12 deg). The weights fitted on each landmark's offset in the image plane only
+(the camera axis, carried into the rig's frame by the head pose, projected out of the residual and
+the Gram) and the head pose by a 2D-3D fit (orthographic, Huber): uncalibrated, the whole take
+0.146 -> 0.124 on the sample head (jaw correlation 0.74 -> 0.99, level 0.45 -> 0.43) but 0.165 ->
+0.167 on the foreign face, the dense takes 0.171 -> 0.176 and 0.199 -> 0.203; after the guided
+calibration 0.097 / 0.107 (0.091 / 0.091 with the depth), jaw 0.73 / 0.89. The depth at a third of
+its weight, the pose in 3D: 0.131 / 0.167, dense 0.170 / 0.200.
 """
 
 from __future__ import annotations

@@ -148,11 +148,12 @@ def test_a_guided_calibration_restores_the_amplitude_and_quiets_the_rest(frames)
             got = [live.push(img, f / 10.0) for f, img in enumerate(session)]
             if calibrate:
                 assert got[0].prompt == prompts[0].instruction and got[15].prompt == prompts[1].instruction
+                assert [got[0].prompt_index, got[15].prompt_index] == [0, 1]
                 assert live.calibrating  # the last prompt's time is not over yet
             after = [live.push(img, 10.0 + f / 30.0) for f, img in enumerate(F)]
         if calibrate:
             assert not live.calibrating and after[0].note.startswith("calibrated: 2 expressions held")
-            assert after[1].prompt == "" and live.calibration_ is not None
+            assert after[1].prompt == "" and after[1].prompt_index == -1 and live.calibration_ is not None
         takes[calibrate] = np.array([g.weights for g in after])
     raw, cal = takes[False], takes[True]
     err = {k: float(np.sqrt(np.mean((W - truth) ** 2))) for k, W in takes.items()}

@@ -233,8 +233,7 @@ class LivePanel(ModelPanel):
         if self._session is None:
             return
         if frame.prompt:
-            i = next(i for i, p in enumerate(self._session.prompts_) if p.instruction == frame.prompt)
-            text = self._prompt_html(i)
+            text = self._prompt_html(frame.prompt_index)
             if self.prompt.value != text:
                 self.prompt.value = text
         elif not self.tracker.calibrating:  # the session ended with this frame

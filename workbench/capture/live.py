@@ -24,9 +24,9 @@ L1 + temporal weights, warm-started), so a take pushed frame by frame gives what
   session — a neutral face, then a few prompted expressions, two seconds each
   (:mod:`.expression_calibration`) — and fits a map from what was tracked to what was
   prompted, applied to every later frame. On the rendered takes of
-  ``benchmarks/bench_live.py`` it lowers the whole take's weight RMSE from 0.146 to
-  0.103 (sample head) and from 0.164 to 0.090 (a foreign face). A free "make your
-  extremes" range (a gain per shape, 1 / its peak), the way before, raised it (0.221 / 0.207):
+  ``benchmarks/bench_live.py`` (table 6) it lowers the whole take's weight RMSE from 0.148 to
+  0.091 (sample head) and from 0.158 to 0.091 (a foreign face). A free "make your
+  extremes" range (a gain per shape, 1 / its peak), the way before, raised it (0.197 / 0.195):
   it scaled up every shape the solve brushed.
 * **No face** in view: the frame holds the last weights and pose, ``ok`` is
   False and ``note`` says so. **Two faces**: the largest is tracked.
@@ -91,6 +91,9 @@ class LiveFrame:
     prompt : str
         During a calibration session (:meth:`LiveTracker.begin_calibration`), what the
         actor is asked to do now; empty otherwise.
+    prompt_index : int
+        That prompt's place in the session's ``prompts_`` (prompts may share an
+        instruction); -1 when no prompt shows.
     """
 
     weights: NDArray[np.float64]
@@ -101,6 +104,7 @@ class LiveFrame:
     note: str = ""
     seconds: dict[str, float] = field(default_factory=dict)
     prompt: str = ""
+    prompt_index: int = -1
 
 
 def _check_image(image: Any) -> NDArray[np.uint8]:
@@ -123,9 +127,9 @@ class LiveTracker:
         Adapt the rig to the actor while tracking (True: the default options; a dict:
         :class:`~workbench.capture.AdaptiveModel` options). Off by default: on FaceMesh
         landmarks of an actor who is not the rig (a warped head) it lowers the weight error
-        over the first three seconds (RMSE 0.18 → 0.13) but drifts back up over the next
-        ones (0.17 against 0.19 without by the ninth second), and on the rig's own face it
-        raises it (0.16 → 0.18); the landmark error falls only 11 %
+        over the first three seconds (RMSE 0.146 → 0.135) but drifts up over the next
+        ones (0.205 against 0.147 without by the ninth second), and on the rig's own face it
+        raises it (0.103 → 0.183); the landmark error falls only 9 %
         (``benchmarks/bench_live.py``).
     l1, temporal : float, optional
         The tracker's relative λ's (default: the marker tracker's fixed ones).
@@ -291,13 +295,14 @@ class LiveTracker:
             note = "no face in view: holding the last pose"
             if self._stepper is not None:
                 self._stepper.hold(self._stepper.w)
-        prompt = ""
+        prompt, prompt_index = "", -1
         cal = self._pending
         if cal is not None:
             if cal.done(t):
                 note = self._finish_calibration()
             else:
-                prompt = cal.prompts_[cal.prompt_index(t) or 0].instruction
+                prompt_index = cal.prompt_index(t) or 0
+                prompt = cal.prompts_[prompt_index].instruction
         self.n_frames_ += 1
         self._times.append(t)
         self._weights.append(self._last_w.copy())
@@ -305,7 +310,7 @@ class LiveTracker:
         self._errors.append(err)
         self._flags.append(flag)  # FLAG_HELD unless the frame was solved
         self._landmarks.append(L if L is not None else np.full((N_LANDMARKS, 3), np.nan))
-        return LiveFrame(self._last_w.copy(), self._last_pose.copy(), L, ok, t, note, secs, prompt)
+        return LiveFrame(self._last_w.copy(), self._last_pose.copy(), L, ok, t, note, secs, prompt, prompt_index)
 
     # ------------------------------------------------------------------ calibration
     def begin_calibration(self, prompts: list[CalibrationPrompt] | None = None, *,
