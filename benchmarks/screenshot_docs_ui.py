@@ -34,10 +34,11 @@ Writes into ``--out``:
                                     markers dragged up: forehead furrows and the strain-coloured
                                     feature graph
 
-The wrinkle picture comes from a second notebook: a copy of
-``notebooks/workbench.ipynb`` whose ``load_sample("head")`` asks for
-``resolution="25k"`` (~20k vertices). On the ~5k-vertex base head the learned
-furrows are about one triangle wide and do not read in a screenshot. The first
+The pictures use the notebook's own resolution (``WORKBENCH_RESOLUTION``, default
+25k). The wrinkle picture comes from a second notebook: a copy of
+``notebooks/workbench.ipynb`` pinned to ``"25k"`` (~20k vertices) whatever the
+environment says. On the ~5k-vertex base head the learned furrows are about one
+triangle wide and do not read in a screenshot. The first
 notebook is closed (kernel shut down) before the second opens: one JupyterLab,
 one browser, one kernel at a time.
 
@@ -52,6 +53,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
+import re
 import sys
 import time
 from collections.abc import Callable
@@ -501,23 +503,24 @@ def _close(lab: LabServer, ctx: Any, s: Session) -> None:
 
 
 def _notebook_at(resolution: str | None) -> str:
-    """notebooks/workbench.ipynb, optionally loading the sample head at ``resolution``."""
+    """notebooks/workbench.ipynb, optionally pinned to the sample head at ``resolution``.
+
+    The notebook reads its resolution from ``WORKBENCH_RESOLUTION`` with a default; pinning
+    replaces that one line, so the picture does not depend on the caller's environment.
+    """
     text = WORKBENCH_NB.read_text()
     if resolution is None:
         return text
     nb = json.loads(text)
-    old, new = (
-        'workbench.load_sample("head")',
-        f'workbench.load_sample("head", resolution="{resolution}")',
-    )
+    pattern = re.compile(r'^RESOLUTION = os\.environ\.get\("WORKBENCH_RESOLUTION", "[^"]*"\)$', re.M)
     hits = 0
     for cell in nb["cells"]:
         src = "".join(cell["source"]) if isinstance(cell["source"], list) else cell["source"]
-        if cell["cell_type"] == "code" and old in src:
-            cell["source"] = src.replace(old, new)
+        if cell["cell_type"] == "code" and pattern.search(src):
+            cell["source"] = pattern.sub(f'RESOLUTION = "{resolution}"', src)
             hits += 1
     if hits != 1:
-        raise RuntimeError(f"{WORKBENCH_NB} loads the sample head {hits} times; expected once")
+        raise RuntimeError(f"{WORKBENCH_NB} sets RESOLUTION from WORKBENCH_RESOLUTION in {hits} cells; expected one")
     return json.dumps(nb)
 
 
