@@ -86,6 +86,30 @@ def full_take() -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray]:
     return W, np.deg2rad(12.0) * np.sin(2.0 * np.pi * 1.5 * t), np.deg2rad(5.0) * np.sin(2.0 * np.pi * t)
 
 
+#: the expressions of :func:`other_take`, in order, with their peaks
+OTHER_EXPRESSIONS = (("mouthPucker", 0.9), ("eyeSquintLeft", 0.8), ("mouthLeft", 0.8), ("cheekPuff", 0.9),
+                     ("mouthFunnel", 0.8), ("noseSneerRight", 0.9), ("mouthPressLeft", 0.8), ("browDownLeft", 0.8),
+                     ("mouthRollLower", 0.8), ("jawLeft", 0.7))
+
+
+def other_take() -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray]:
+    """A held-out video take of ten expressions the whole take does not show, 180 frames (6 s at 30 fps).
+
+    :data:`OTHER_EXPRESSIONS` one after another (eased up, held, eased down, 16 frames each), some
+    with a weaker partner (the right squint at 0.6 of the left, the right brow 3 frames late at 0.7,
+    the jaw a little open in the "oo"); the head turns ±10° and nods ±4° throughout.
+    """
+    T = 180
+    W: dict[str, np.ndarray] = {}
+    for i, (name, peak) in enumerate(OTHER_EXPRESSIONS):
+        W[name] = _ramp(T, 6 + 17 * i, 6 + 17 * i + 16, peak, hold=4)
+    W["eyeSquintRight"] = 0.6 * W["eyeSquintLeft"]
+    W["browDownRight"] = np.roll(0.7 * W["browDownLeft"], 3)
+    W["jawOpen"] = 0.3 * W["mouthFunnel"]
+    t = np.linspace(0.0, 1.0, T)
+    return W, np.deg2rad(10.0) * np.sin(2 * np.pi * 1.2 * t + 0.7), np.deg2rad(4.0) * np.sin(2 * np.pi * 0.8 * t)
+
+
 def render_take(model, take=None, pose=None):
     """(T, 480, 480, 3) uint8 frames of ``model`` playing a take (needs pyvista).
 

@@ -27,14 +27,15 @@ there because the tracker misreads a turned head as expression: on a neutral fac
 its ``browDownLeft`` follows the yaw (correlation +0.69 on the rendered take),
 ``browDownRight`` and ``browOuterUpLeft`` against it (−0.61, −0.52); a map fitted
 only on a still head kept those readings. Measured on the rendered takes
-(``bench_live.py``, table 6): the whole take's RMSE over the face shapes falls from
-0.148 to 0.091 on the sample head and from 0.158 to 0.091 on a foreign face (with
-the still-head session before: 0.103 and 0.090); left out of the session, any one
-prompt still leaves it at or below 0.105 / 0.132; on dense co-articulated takes,
-most of whose shapes no prompt shows, it changes little (0.187 -> 0.187, 0.184 ->
-0.170, 0.186 -> 0.183, 0.188 -> 0.182). The jaw's level over the truth is 0.61 on
-the sample head (0.70 with the still-head session; 0.44 uncalibrated) and 0.95 on
-the foreign face. Tried and not kept: the head's yaw and pitch (and their squares)
+(``bench_live.py``, table 6, the live default ``LIVE_L1``): the whole take's RMSE over
+the face shapes falls from 0.113 to 0.087 on the sample head and from 0.125 to 0.081
+on a foreign face (at the markers' l1 = 0.01: 0.148 -> 0.091 and 0.158 -> 0.091; with
+the still-head session before that: 0.103 and 0.090); left out of the session, any one
+prompt still leaves it at or below 0.098 / 0.113; on dense co-articulated takes,
+most of whose shapes no prompt shows, it changes little (0.195 -> 0.192, 0.179 ->
+0.171, 0.191 -> 0.188, 0.182 -> 0.180). The jaw's level over the truth is 0.61 on
+the sample head (0.70 with the still-head session; 0.45 uncalibrated) and 0.90 on
+the foreign face. Tried and not kept (at l1 = 0.01): the head's yaw and pitch (and their squares)
 as inputs of the map besides the weights (0.087 / 0.084 on the same frames against
 0.088 / 0.085 without: the misreading is mostly a pattern of weights no expression
 makes, which the weights alone cancel); each prompt weighing the same instead of
