@@ -126,7 +126,10 @@ the Gram) and the head pose by a 2D-3D fit (orthographic, Huber): uncalibrated, 
 0.146 -> 0.124 on the sample head (jaw correlation 0.74 -> 0.99, level 0.45 -> 0.43) but 0.165 ->
 0.167 on the foreign face, the dense takes 0.171 -> 0.176 and 0.199 -> 0.203; after the guided
 calibration 0.097 / 0.107 (0.091 / 0.091 with the depth), jaw 0.73 / 0.89. The depth at a third of
-its weight, the pose in 3D: 0.131 / 0.167, dense 0.170 / 0.200.
+its weight, the pose in 3D: 0.131 / 0.167, dense 0.170 / 0.200. Nor is FaceMesh's depth mis-scaled:
+its z scaled by 0.6 or 1.5 before the registration gives 0.134 / 0.152 and 0.155 / 0.182 (at
+LIVE_L1; 0.114 / 0.132 as it is), and the sample head's browDownLeft follows the yaw either way
+(correlation +0.65 to +0.69).
 """
 
 from __future__ import annotations
