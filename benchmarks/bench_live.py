@@ -41,9 +41,9 @@ Tables:
 7. held out (no default was chosen on them): a take of ten other expressions one after another
    (``tests/capture_takes.py:other_take``: pucker, squint, mouthLeft, cheek puff, funnel, sneer,
    press, brow down, roll, jawLeft; head ±10°) and a dense realistic take of another seed, from
-   both faces, at ``l1`` = 0.01 (the marker tracker's), :data:`~workbench.capture.LIVE_L1` and 0.05.
+   both faces, at ``l1`` = 0.01 (the marker tracker's), :data:`~workbench.capture.LANDMARK_L1` and 0.05.
 
-Tables 4, 5 and 7 track at the live default :data:`~workbench.capture.LIVE_L1` = 0.03 and at the
+Tables 4, 5 and 7 track at the live default :data:`~workbench.capture.LANDMARK_L1` = 0.03 and at the
 marker tracker's 0.01 (the live default until 2026-11-30). Measured 2026-11-30 (quiet machine):
 table 1, 13.4 ms a frame median (74.7 frames/s); table 2, jaw correlation 0.98, peak 0.56, blink
 0.70, RMSE 0.082 (0.103 at 0.01); table 3, adapting every 5th frame the warped actor's RMSE is 0.102
@@ -128,7 +128,7 @@ the Gram) and the head pose by a 2D-3D fit (orthographic, Huber): uncalibrated, 
 calibration 0.097 / 0.107 (0.091 / 0.091 with the depth), jaw 0.73 / 0.89. The depth at a third of
 its weight, the pose in 3D: 0.131 / 0.167, dense 0.170 / 0.200. Nor is FaceMesh's depth mis-scaled:
 its z scaled by 0.6 or 1.5 before the registration gives 0.134 / 0.152 and 0.155 / 0.182 (at
-LIVE_L1; 0.114 / 0.132 as it is), and the sample head's browDownLeft follows the yaw either way
+LANDMARK_L1; 0.114 / 0.132 as it is), and the sample head's browDownLeft follows the yaw either way
 (correlation +0.65 to +0.69).
 """
 
@@ -143,7 +143,7 @@ from pathlib import Path
 import numpy as np
 
 import workbench
-from workbench.capture import LIVE_L1, LiveTracker
+from workbench.capture import LANDMARK_L1, LiveTracker
 from workbench.capture.track import DEFAULT_L1
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
@@ -164,7 +164,7 @@ def camera_frames(model, loops: int, take=None, pose=None) -> list[bytes]:
 
 
 def run(model, jpegs, *, adapt: bool, adapt_every: int = 5, workbench_view=None, l1=None):
-    """Push the frames (30 frames/s); ``l1`` None: the live default (:data:`~workbench.capture.LIVE_L1`)."""
+    """Push the frames (30 frames/s); ``l1`` None: the live default (:data:`~workbench.capture.LANDMARK_L1`)."""
     from widgets.live.camera import decode_jpeg
 
     live = LiveTracker(model, adapt=adapt, adapt_every=adapt_every, l1=l1)
@@ -262,7 +262,7 @@ def main() -> None:
     foreign = foreign_face(head, seed=2)
     for label, jp in (("sample head", camera_frames(head, 2, take)),
                       ("foreign face", camera_frames(foreign.model, 2, take, foreign.pose))):
-        for l1 in (LIVE_L1, DEFAULT_L1):  # the live default; the marker tracker's (the default before)
+        for l1 in (LANDMARK_L1, DEFAULT_L1):  # the live default; the marker tracker's (the default before)
             W = run(head, jp, adapt=False, l1=l1)[0].weights[-T:]
             cells = []
             for n in shown:
@@ -283,7 +283,7 @@ def main() -> None:
         Wd[:, ~face_shapes] = 0.0
         dense = ({n: Wd[:, i] for i, n in enumerate(names)}, take[1], take[2])
         jp = camera_frames(head, 2, dense)
-        for l1 in (LIVE_L1, DEFAULT_L1):
+        for l1 in (LANDMARK_L1, DEFAULT_L1):
             W = run(head, jp, adapt=False, l1=l1)[0].weights[-T:][:, face_shapes]
             print(f"seed {seed:<3d} {l1:5.3f} " + _dense_cells(W, Wd, face_shapes), flush=True)
 
@@ -338,7 +338,7 @@ def held_out_table(head, foreign, face_shapes) -> None:
           "level over the truth where it is above half its peak (correlation)")
     for label, model, pose in (("sample head", head, None), ("foreign face", foreign.model, foreign.pose)):
         jp, jd = camera_frames(model, 2, other, pose), camera_frames(model, 2, dense, pose)
-        for l1 in (DEFAULT_L1, LIVE_L1, 0.05):
+        for l1 in (DEFAULT_L1, LANDMARK_L1, 0.05):
             W = run(head, jp, adapt=False, l1=l1)[0].weights[-T:]
             rmse = float(np.sqrt(np.mean((W - truth)[:, face_shapes] ** 2)))
             Wx = run(head, jd, adapt=False, l1=l1)[0].weights[-150:][:, face_shapes]

@@ -42,12 +42,12 @@ def frames():
 
 @pytest.mark.ui
 def test_pushing_the_take_frame_by_frame_gives_the_offline_tracking(frames) -> None:
-    from workbench.capture import LIVE_L1
+    from workbench.capture import LANDMARK_L1
     from workbench.capture.track import DEFAULT_TEMPORAL
     from workbench.capture.video import track_video
 
     model, F = frames
-    offline = track_video(model, F, l1=LIVE_L1, temporal=DEFAULT_TEMPORAL)
+    offline = track_video(model, F, l1=LANDMARK_L1, temporal=DEFAULT_TEMPORAL)
     with LiveTracker(model, adapt=False) as live:
         got = [live.push(img, f / 30.0) for f, img in enumerate(F)]
     assert all(g.ok for g in got) and got[0].note.startswith("registered")
@@ -65,11 +65,11 @@ def test_pushing_the_take_frame_by_frame_gives_the_offline_tracking(frames) -> N
 
 @pytest.mark.ui
 def test_the_live_sparsity_drops_false_readings_and_keeps_the_expressions(frames) -> None:
-    """LIVE_L1 against the marker tracker's l1 on the rendered take (jaw ramp, blink, head turn): FaceMesh
+    """LANDMARK_L1 against the marker tracker's l1 on the rendered take (jaw ramp, blink, head turn): FaceMesh
     misreads the jaw and the turn as a mix of other shapes; the live default keeps far fewer of them, so
     its error beats all-zero weights (the markers' l1 did not: 0.125 against 0.122), and the jaw and
     blink read as well."""
-    from workbench.capture import LIVE_L1
+    from workbench.capture import LANDMARK_L1
     from workbench.capture.track import DEFAULT_L1
 
     model, F = frames
@@ -80,16 +80,16 @@ def test_the_live_sparsity_drops_false_readings_and_keeps_the_expressions(frames
     face = np.array([not n.startswith("eyeLook") and n != "tongueOut" for n in names])
     still = face & (truth.max(0) == 0)  # face shapes the take never moves
     got = {}
-    for l1 in (DEFAULT_L1, LIVE_L1):
+    for l1 in (DEFAULT_L1, LANDMARK_L1):
         with LiveTracker(model, l1=l1) as live:
             got[l1] = np.array([live.push(img, f / 30.0).weights for f, img in enumerate(F)])
     false = {k: float(W[:, still].sum(1).mean()) for k, W in got.items()}
     rmse = {k: float(np.sqrt(np.mean((W - truth)[:, face] ** 2))) for k, W in got.items()}
     zeros = float(np.sqrt(np.mean(truth[:, face] ** 2)))
     print("false readings", false, "RMSE", rmse, "zeros", zeros)
-    assert LIVE_L1 > DEFAULT_L1 and false[LIVE_L1] < 0.7 * false[DEFAULT_L1]
-    assert rmse[LIVE_L1] < min(zeros, rmse[DEFAULT_L1])
-    W = got[LIVE_L1]
+    assert LANDMARK_L1 > DEFAULT_L1 and false[LANDMARK_L1] < 0.7 * false[DEFAULT_L1]
+    assert rmse[LANDMARK_L1] < min(zeros, rmse[DEFAULT_L1])
+    W = got[LANDMARK_L1]
     assert np.corrcoef(W[:, names.index("jawOpen")], JAW)[0, 1] > 0.95
     blink = W[:, names.index("eyeBlinkLeft")]
     assert blink[BLINK == 1.0].mean() > blink[BLINK == 0.0].mean() + 0.3
@@ -200,7 +200,7 @@ def test_a_guided_calibration_restores_the_amplitude_and_quiets_the_rest(frames)
 @pytest.mark.ui
 def test_a_saved_take_re_tracks_offline_as_it_was_tracked_live(frames, tmp_path) -> None:
     """Save take → ``track_video(model, "take.npz")``: the same landmarks, so the same weights with the same λ's."""
-    from workbench.capture import LIVE_L1
+    from workbench.capture import LANDMARK_L1
     from workbench.capture.facemesh import LandmarkSequence
     from workbench.capture.track import DEFAULT_TEMPORAL
     from workbench.capture.video import track_video
@@ -213,8 +213,10 @@ def test_a_saved_take_re_tracks_offline_as_it_was_tracked_live(frames, tmp_path)
     seq = LandmarkSequence.load_take(path)
     assert seq.n_frames == 12 and seq.fps == pytest.approx(24.0) and seq.image_size == live.image_size
     np.testing.assert_array_equal(seq.landmarks, live.landmarks)
-    offline = track_video(model, str(path), l1=LIVE_L1, temporal=DEFAULT_TEMPORAL)
+    offline = track_video(model, str(path), l1=LANDMARK_L1, temporal=DEFAULT_TEMPORAL)
     np.testing.assert_allclose(offline.weights, live.take().weights, atol=1e-6)
+    # by default the sparsity is the live tracker's too (landmarks cannot choose it: see track_video)
+    assert track_video(model, str(path)).info["l1"] == LANDMARK_L1 == live.take().info["l1"]
 
 
 def test_a_file_that_is_not_a_saved_take_is_named(tmp_path) -> None:

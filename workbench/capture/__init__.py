@@ -35,7 +35,8 @@ from typing import Any
 from workbench.capture.adapt import AdaptiveModel
 from workbench.capture.clouds import CloudTrackError, track_clouds
 from workbench.capture.identity import IdentityModel, sample_identity_model
-from workbench.capture.live import LIVE_L1, LiveFrame, LiveTracker
+from workbench.capture.landmark_registration import LANDMARK_L1
+from workbench.capture.live import LiveFrame, LiveTracker
 from workbench.capture.replay import ReplayResult, replay
 from workbench.capture.result import TrackError, TrackResult
 from workbench.capture.solver import WeightSolver
@@ -43,7 +44,7 @@ from workbench.capture.synthetic import SyntheticPerformance, synthetic_performa
 from workbench.capture.track import track
 
 __all__ = [
-    "LIVE_L1",
+    "LANDMARK_L1",
     "AdaptiveModel",
     "CloudTrackError",
     "IdentityModel",

@@ -27,7 +27,7 @@ there because the tracker misreads a turned head as expression: on a neutral fac
 its ``browDownLeft`` follows the yaw (correlation +0.69 on the rendered take),
 ``browDownRight`` and ``browOuterUpLeft`` against it (−0.61, −0.52); a map fitted
 only on a still head kept those readings. Measured on the rendered takes
-(``bench_live.py``, table 6, the live default ``LIVE_L1``): the whole take's RMSE over
+(``bench_live.py``, table 6, the live default ``LANDMARK_L1``): the whole take's RMSE over
 the face shapes falls from 0.113 to 0.087 on the sample head and from 0.125 to 0.081
 on a foreign face (at the markers' l1 = 0.01: 0.148 -> 0.091 and 0.158 -> 0.091; with
 the still-head session before that: 0.103 and 0.090); left out of the session, any one

@@ -36,7 +36,7 @@ L1 + temporal weights, warm-started), so a take pushed frame by frame gives what
 
 The λ's cannot be chosen from a take that has not happened, so they are fixed:
 the marker tracker's temporal term (:data:`~workbench.capture.track.DEFAULT_TEMPORAL`)
-and a sparsity of its own, :data:`LIVE_L1`, three times the markers' (see there).
+and a sparsity of its own, :data:`LANDMARK_L1`, three times the markers' (see there).
 Hand-written glue over the kept modules.
 """
 
@@ -59,29 +59,14 @@ from workbench.capture.expression_calibration import (
 )
 from workbench.capture.facemesh import N_LANDMARKS, VideoError, mediapipe_face_mesh
 from workbench.capture.frame_step import FrameStepper
+from workbench.capture.landmark_registration import LANDMARK_L1
 from workbench.capture.result import FLAG_HELD, TrackResult
 
 if TYPE_CHECKING:
     from workbench.capture.landmark_registration import LandmarkRegistration
     from workbench.core.state import FaceState
 
-__all__ = ["LIVE_L1", "LiveFrame", "LiveTracker"]
-
-#: the live tracker's sparsity (relative, as :data:`~workbench.capture.track.DEFAULT_L1` = 0.01 for
-#: markers). FaceMesh misreads an expression as a mix — the parting lips also as ``mouthFrown*`` and
-#: ``mouthLowerDown*``, a smile also as ``mouthShrugLower`` and ``mouthDimple*``, a turned head as
-#: ``browDownLeft`` — and at the markers' 0.01 those false readings cost more than the true ones
-#: give: on the issue's whole rendered take the RMSE over the face shapes was 0.146 (sample head)
-#: and 0.165 (a foreign face), against 0.112 for all-zero weights. Chosen on the rendered takes of
-#: ``benchmarks/bench_live.py`` (tables 4–6, both faces) as the largest that costs nothing on dense
-#: co-articulated takes, with or without the guided calibration: at 0.03 the whole take is 0.114 /
-#: 0.132, dense takes within ±0.01 of 0.01's, calibrated 0.087 / 0.081 (0.091 / 0.091); table 7's
-#: held-out takes agree (ten other expressions 0.115 / 0.131, 0.129 / 0.152 at 0.01 — but all-zero
-#: weights give 0.095 there: squints, puffs, funnels and presses are barely read at all). Stronger
-#: sparsity goes on trading weak true readings for false ones: at 0.05 the uncalibrated takes gain
-#: another 0.01, the calibrated dense ones lose as much, and ``mouthRollLower`` falls to 0.19 of its
-#: truth (0.47 at 0.01); at 0.1 the inner brow reads 0.16 of its truth (0.74 at 0.01)
-LIVE_L1 = 0.03
+__all__ = ["LiveFrame", "LiveTracker"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -149,7 +134,7 @@ class LiveTracker:
         raises it (0.082 → 0.123); the landmark error falls only 9 %
         (``benchmarks/bench_live.py``).
     l1, temporal : float, optional
-        The tracker's relative λ's (default: :data:`LIVE_L1` and the marker tracker's
+        The tracker's relative λ's (default: :data:`LANDMARK_L1` and the marker tracker's
         ``DEFAULT_TEMPORAL``).
     iterations : int
         Pose / weight alternations per frame.
@@ -189,7 +174,7 @@ class LiveTracker:
             raise VideoError(f"min_confidence must be in (0, 1), got {min_confidence!r}")
         self.model = model
         self.adapt = adapt
-        self.l1 = LIVE_L1 if l1 is None else float(l1)
+        self.l1 = LANDMARK_L1 if l1 is None else float(l1)
         self.temporal = DEFAULT_TEMPORAL if temporal is None else float(temporal)
         self.iterations = int(iterations)
         self.min_markers = int(min_markers)

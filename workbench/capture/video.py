@@ -86,6 +86,7 @@ from workbench.capture.facemesh import (
 )
 from workbench.capture.landmark_registration import (
     ANCHORS,
+    LANDMARK_L1,
     LandmarkRegistration,
     landmark_vertex_map,
     landmark_weights,
@@ -137,8 +138,14 @@ def track_video(
     :func:`workbench.capture.track` on :meth:`LandmarkRegistration.to_model` with
     ``neutral=rest_frame`` (the landmark ↔ vertex offsets calibrated away) and
     ``marker_weights=landmark_weights()`` (the lips, eyes, brows and nose weigh ten times the
-    landmarks on smooth skin) unless ``track_options`` says otherwise. The registration is not kept: call the steps
-    yourself to inspect it.
+    landmarks on smooth skin) and ``l1=LANDMARK_L1`` (the live tracker's sparsity) unless
+    ``track_options`` says otherwise. The sparsity is fixed, not chosen from the take as for
+    markers (``l1="auto"``): held-out landmarks favour the weights that explain FaceMesh's
+    misreadings best, the densest, and chose 0.003-0.01 on the rendered takes of
+    ``benchmarks/bench_live.py``, where ``LANDMARK_L1`` is 0.114 / 0.131 on the issue's whole take
+    (sample head / a foreign face; the choice 0.141 / 0.161, all-zero weights 0.112) and better on
+    three dense takes of four. ``temporal`` is still chosen from the take. The registration is
+    not kept: call the steps yourself to inspect it.
     """
     from workbench.capture.track import track
 
@@ -157,5 +164,6 @@ def track_video(
     reg = register_landmarks(model, seq, frame=rest_frame)
     track_options.setdefault("neutral", int(rest_frame))
     track_options.setdefault("marker_weights", landmark_weights())  # the live tracker's weighting
+    track_options.setdefault("l1", LANDMARK_L1)  # and its sparsity
     return track(model, reg.to_model(seq), vertex_ids=reg.vertex_ids, fps=seq.fps, progress=part(0.7, 1.0),
                  **track_options)
