@@ -84,7 +84,7 @@ OTHER_LANDMARK_WEIGHT = 0.1
 #: and 0.165 (a foreign face), against 0.112 for all-zero weights. Chosen on the rendered takes of
 #: ``benchmarks/bench_live.py`` (tables 4–6, both faces) as the largest that costs nothing on dense
 #: co-articulated takes, with or without the guided calibration: at 0.03 the whole take is 0.114 /
-#: 0.132, dense takes within ±0.01 of 0.01's, calibrated 0.087 / 0.081 (0.091 / 0.091); table 7's
+#: 0.132 (still not below all-zero weights: the true readings are short), dense takes within ±0.01 of 0.01's, calibrated 0.087 / 0.081 (0.091 / 0.091); table 7's
 #: held-out takes agree (ten other expressions 0.115 / 0.131, 0.129 / 0.152 at 0.01 — but all-zero
 #: weights give 0.095 there: squints, puffs, funnels and presses are barely read at all). Stronger
 #: sparsity goes on trading weak true readings for false ones: at 0.05 the uncalibrated takes gain
