@@ -202,3 +202,32 @@ def test_the_tracker_starts_ends_and_cancels_a_session() -> None:
     live.begin_calibration()
     live.cancel_calibration()
     assert not live.calibrating and live.calibration_ is None
+
+
+def test_the_summary_names_the_expressions_the_tracker_barely_read() -> None:
+    """Hand-made readings: the jaw read at 0.6 while prompted, the eyes at 0.5, the pucker at only 0.05
+    and the 'oo' never: the readings are those levels over each hold, and the summary names the two."""
+    from workbench.capture.expression_calibration import WEAK_READING
+
+    names = ["jawOpen", "eyeBlinkLeft", "eyeBlinkRight", "mouthPucker", "mouthFunnel"]
+    by_shape = {p.shapes: p for p in DEFAULT_PROMPTS}
+    prompts = [DEFAULT_PROMPTS[0], by_shape[("jawOpen",)], by_shape[("eyeBlinkLeft", "eyeBlinkRight")],
+               by_shape[("mouthPucker",)], by_shape[("mouthFunnel",)]]
+    level = {"jawOpen": 0.6, "eyeBlinkLeft": 0.5, "eyeBlinkRight": 0.5, "mouthPucker": 0.05, "mouthFunnel": 0.0}
+    cal = ExpressionCalibration(names, prompts, seconds=1.0)
+    for f in range(50):  # 10 frames a prompt: half reaction, half held
+        i = f // 10
+        w = np.zeros(len(names))
+        if f % 10 >= 5:
+            for s in prompts[i].shapes:
+                w[names.index(s)] = level[s]
+        cal.add(f / 10.0, w)
+    with pytest.raises(ValueError, match="no frame of the neutral face"):
+        ExpressionCalibration(names, prompts).fit()
+    assert ExpressionCalibration(names, prompts).summary() == "not calibrated yet"
+    cal.fit()
+    assert cal.readings_ is not None and np.isnan(cal.readings_[0])  # the neutral face shows no shape
+    np.testing.assert_allclose(cal.readings_[1:], [0.6, 0.5, 0.05, 0.0])
+    assert cal.weak_prompts() == [3, 4] and WEAK_READING > 0.05
+    s = cal.summary()
+    assert s.startswith("calibrated: 3 expressions held") and s.endswith("read weakly: mouthPucker 0.05, mouthFunnel 0.00")

@@ -55,8 +55,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from workbench.arkit import canonical_arkit_name
 
-__all__ = ["DEFAULT_PROMPTS", "HEAD_MOTIONS", "HOLD", "RIDGE", "SECONDS_PER_PROMPT", "CalibrationPrompt", "ExpressionCalibration",
-           "fit_weight_map", "held_frames"]
+__all__ = ["DEFAULT_PROMPTS", "HEAD_MOTIONS", "HOLD", "RIDGE", "SECONDS_PER_PROMPT", "WEAK_READING", "CalibrationPrompt",
+           "ExpressionCalibration", "fit_weight_map", "held_frames"]
 
 #: seconds each prompt shows (a reaction, about a second held, a release)
 SECONDS_PER_PROMPT = 2.0
@@ -67,6 +67,13 @@ HOLD = 0.8
 #: decide too much (one prompt left out: up to 0.143)
 RIDGE = 0.01
 
+
+#: a prompted expression read below this (its shapes' mean tracked weight over the hold) is named in
+#: :meth:`ExpressionCalibration.summary`: the map can only scale up what the tracker reads, so a
+#: shape read this weakly, or not at all, stays unreliable (on the rendered sessions of
+#: ``benchmarks/bench_live.py`` the sample head's "oo" was never read and the foreign face's frown
+#: 0.0; the others 0.2-0.9)
+WEAK_READING = 0.15
 
 #: what the head may do during a prompt
 HEAD_MOTIONS = ("still", "turn", "nod")
@@ -192,6 +199,10 @@ class ExpressionCalibration:
         ``C`` once :meth:`fit` ran.
     held_ : (n_prompts,) int or None
         Frames held per prompt in the fit.
+    readings_ : (n_prompts,) float or None
+        Each prompted expression's tracked level over its hold (its shapes' mean weight, before
+        the map; 0 when they never rose): what the tracker sees of it. NaN for the neutral and
+        head prompts and for prompts not reached or left out.
     """
 
     def __init__(self, shape_names: Sequence[str], prompts: Sequence[CalibrationPrompt] | None = None, *,
@@ -228,6 +239,7 @@ class ExpressionCalibration:
         self.columns_ = tuple(cols)
         self.weight_map_: NDArray[np.float64] | None = None
         self.held_: NDArray[np.intp] | None = None
+        self.readings_: NDArray[np.float64] | None = None
         self._start: float | None = None
         self._frames: list[tuple[int, NDArray[np.float64]]] = []
 
@@ -277,11 +289,14 @@ class ExpressionCalibration:
         rows: list[NDArray[np.float64]] = []
         targets: list[NDArray[np.float64]] = []
         held = np.zeros(len(self.prompts_), np.intp)
+        readings = np.full(len(self.prompts_), np.nan)
         for i, cols in enumerate(self.columns_):
             R = np.array([w for p, w in self._frames if p == i]).reshape(-1, k)
             if R.shape[0] == 0 or i in leave_out:
                 continue
             sel = held_frames(R, cols, hold=self.hold)
+            if cols:
+                readings[i] = float(R[sel][:, list(cols)].mean()) if sel.any() else 0.0
             y = np.zeros(k)
             y[list(cols)] = 1.0
             rows.append(R[sel])
@@ -294,15 +309,31 @@ class ExpressionCalibration:
             raise ValueError("calibration: no prompted expression was tracked (was a face in view?)")
         self.weight_map_ = fit_weight_map(np.vstack(rows), np.vstack(targets), ridge=self.ridge)
         self.held_ = held
+        self.readings_ = readings
         return self.weight_map_
 
+    def weak_prompts(self) -> list[int]:
+        """Indices into :attr:`prompts_` of the prompted expressions read below :data:`WEAK_READING` (after :meth:`fit`)."""
+        if self.readings_ is None:
+            return []
+        return [i for i, r in enumerate(self.readings_) if np.isfinite(r) and r < WEAK_READING]
+
     def summary(self) -> str:
-        """One line on the fit: ``"calibrated: 7 expressions held (96 frames)"``."""
-        if self.held_ is None:
+        """One line on the fit: ``"calibrated: 7 expressions held (96 frames)"``, and the expressions read weakly.
+
+        E.g. ``"…; read weakly: mouthFunnel 0.00, browDownLeft/browDownRight 0.08"`` (the prompted
+        shapes' mean tracked weight over the hold, before the map).
+        """
+        if self.held_ is None or self.readings_ is None:
             return "not calibrated yet"
         shown = sum(1 for i, c in enumerate(self.columns_) if c and self.held_[i])
-        return (f"calibrated: {shown} expression{'' if shown == 1 else 's'} held "
+        text = (f"calibrated: {shown} expression{'' if shown == 1 else 's'} held "
                 f"({int(self.held_.sum())} frames)")
+        weak = self.weak_prompts()
+        if weak:
+            text += "; read weakly: " + ", ".join(
+                f"{'/'.join(self.shape_names[j] for j in self.columns_[i])} {self.readings_[i]:.2f}" for i in weak)
+        return text
 
     def apply(self, weights: ArrayLike) -> NDArray[np.float64]:
         """``weights @ C`` (unclipped; (k,) or (T, k)); unchanged before :meth:`fit`."""
