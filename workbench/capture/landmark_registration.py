@@ -76,20 +76,21 @@ FEATURE_LANDMARKS: tuple[int, ...] = (
 OTHER_LANDMARK_WEIGHT = 0.1
 
 #: the sparsity for FaceMesh landmarks, live (:class:`~workbench.capture.LiveTracker`) and offline
-#: (:func:`~workbench.capture.track_video`) (relative, as :data:`~workbench.capture.track.DEFAULT_L1` = 0.01 for
-#: markers). FaceMesh misreads an expression as a mix — the parting lips also as ``mouthFrown*`` and
-#: ``mouthLowerDown*``, a smile also as ``mouthShrugLower`` and ``mouthDimple*``, a turned head as
-#: ``browDownLeft`` — and at the markers' 0.01 those false readings cost more than the true ones
-#: give: on the issue's whole rendered take the RMSE over the face shapes was 0.146 (sample head)
-#: and 0.165 (a foreign face), against 0.112 for all-zero weights. Chosen on the rendered takes of
-#: ``benchmarks/bench_live.py`` (tables 4–6, both faces) as the largest that costs nothing on dense
+#: (:func:`~workbench.capture.track_video`) (relative, as :data:`~workbench.capture.track.DEFAULT_L1` =
+#: 0.01 for markers). FaceMesh misreads an expression as a mix — the parting lips also as
+#: ``mouthFrown*`` and ``mouthLowerDown*``, a smile also as ``mouthShrugLower`` and ``mouthDimple*``, a
+#: turned head as ``browDownLeft`` — and at the markers' 0.01 those false readings cost more than the
+#: true ones give: on the issue's whole rendered take the RMSE over the face shapes was 0.146 (sample
+#: head) and 0.165 (a foreign face), against 0.112 for all-zero weights. Chosen on the rendered takes
+#: of ``benchmarks/bench_live.py`` (tables 4–6, both faces) as the largest that costs nothing on dense
 #: co-articulated takes, with or without the guided calibration: at 0.03 the whole take is 0.114 /
-#: 0.132 (still not below all-zero weights: the true readings are short), dense takes within ±0.01 of 0.01's, calibrated 0.087 / 0.081 (0.091 / 0.091); table 7's
-#: held-out takes agree (ten other expressions 0.115 / 0.131, 0.129 / 0.152 at 0.01 — but all-zero
-#: weights give 0.095 there: squints, puffs, funnels and presses are barely read at all). Stronger
-#: sparsity goes on trading weak true readings for false ones: at 0.05 the uncalibrated takes gain
-#: another 0.01, the calibrated dense ones lose as much, and ``mouthRollLower`` falls to 0.19 of its
-#: truth (0.47 at 0.01); at 0.1 the inner brow reads 0.16 of its truth (0.74 at 0.01)
+#: 0.132 (still not below all-zero weights: the true readings are short), dense takes within ±0.01 of
+#: 0.01's, calibrated 0.087 / 0.081 (0.091 / 0.091); table 7's held-out takes agree (ten other
+#: expressions 0.115 / 0.131, 0.129 / 0.152 at 0.01 — but all-zero weights give 0.095 there: squints,
+#: puffs, funnels and presses are barely read at all). Stronger sparsity goes on trading weak true
+#: readings for false ones: at 0.05 the uncalibrated takes gain another 0.01, the calibrated dense ones
+#: lose as much, and ``mouthRollLower`` falls to 0.19 of its truth (0.47 at 0.01); at 0.1 the inner
+#: brow reads 0.16 of its truth (0.74 at 0.01)
 LANDMARK_L1 = 0.03
 
 
