@@ -253,9 +253,7 @@ def main() -> None:
     take = full_take()
     weights, yaw, _ = take
     T = len(yaw)
-    truth = np.zeros((T, len(names)))
-    for k, v in weights.items():
-        truth[:, names.index(k)] = v
+    truth = _truth(weights, names, T)
     face_shapes = np.array([not n.startswith("eyeLook") and n != "tongueOut" for n in names])
     shown = ("jawOpen", "eyeBlinkLeft", "mouthSmileLeft", "mouthSmileRight", "browInnerUp", "browOuterUpLeft")
     print(f"\nthe whole take ({T} frames: jaw + blink, smile, brows, all at once; head ±12°), tracked onto the "
@@ -268,11 +266,7 @@ def main() -> None:
                       ("foreign face", camera_frames(foreign.model, 2, take, foreign.pose))):
         for l1 in (LANDMARK_L1, DEFAULT_L1):  # the live default; the marker tracker's (the default before)
             W = run(head, jp, adapt=False, l1=l1)[0].weights[-T:]
-            cells = []
-            for n in shown:
-                j, v = names.index(n), weights[n]
-                m = v > 0.5 * v.max()
-                cells.append(f"{W[m, j].mean() / v[m].mean():.2f} ({_corr(W[:, j], v):+.2f})")
+            cells = _level_cells(W, truth, names, shown)
             rmse = float(np.sqrt(np.mean((W - truth)[:, face_shapes] ** 2)))
             print(f"{label:14s} {l1:5.3f} {rmse:6.3f} " + " ".join(f"{c:>16s}" for c in cells), flush=True)
 
@@ -310,14 +304,27 @@ def _dense_cells(W, Wd, face_shapes) -> str:
             f"{_corr(W.ravel(), tr.ravel()):6.3f}")
 
 
-def _levels(W, truth, names, shown) -> str:
+def _truth(weights, names, T: int):
+    """(T, k) true weights of a take's ``{shape name: (T,) weights}`` (every other shape 0)."""
+    truth = np.zeros((T, len(names)))
+    for k, v in weights.items():
+        truth[:, names.index(k)] = v
+    return truth
+
+
+def _level_cells(W, truth, names, shown) -> list[str]:
     """Per shape: the tracked level over the truth where the truth is above half its peak (correlation)."""
     cells = []
     for n in shown:
         j = names.index(n)
         m = truth[:, j] > 0.5 * truth[:, j].max()
-        cells.append(f"{n} {W[m, j].mean() / truth[m, j].mean():.2f} ({_corr(W[:, j], truth[:, j]):+.2f})")
-    return ", ".join(cells)
+        cells.append(f"{W[m, j].mean() / truth[m, j].mean():.2f} ({_corr(W[:, j], truth[:, j]):+.2f})")
+    return cells
+
+
+def _levels(W, truth, names, shown) -> str:
+    """:func:`_level_cells` on one line, each after its shape's name."""
+    return ", ".join(f"{n} {c}" for n, c in zip(shown, _level_cells(W, truth, names, shown), strict=True))
 
 
 def held_out_table(head, foreign, face_shapes) -> None:
@@ -329,9 +336,7 @@ def held_out_table(head, foreign, face_shapes) -> None:
     names = list(head.shape_names)
     weights, yaw, pitch = other = other_take()
     T = len(yaw)
-    truth = np.zeros((T, len(names)))
-    for k, v in weights.items():
-        truth[:, names.index(k)] = v
+    truth = _truth(weights, names, T)
     Wd = realistic_weights(head, 150, seed=11)
     Wd[:, ~face_shapes] = 0.0
     dense = ({n: Wd[:, i] for i, n in enumerate(names)}, yaw[:150], pitch[:150])
@@ -365,9 +370,7 @@ def calibration_table(head, take, foreign, face_shapes) -> None:
     names = list(head.shape_names)
     weights, yaw, pitch = take
     T = len(yaw)
-    truth = np.zeros((T, len(names)))
-    for k, v in weights.items():
-        truth[:, names.index(k)] = v
+    truth = _truth(weights, names, T)
     S = calibration_session(head, seed=0)
     session = ({n: S[:, j] for j, n in enumerate(names)}, *calibration_head_motion(head, seed=0))
     space = ExpressionSpace.from_model(head)
@@ -382,9 +385,7 @@ def calibration_table(head, take, foreign, face_shapes) -> None:
     from capture_takes import OTHER_EXPRESSIONS, other_take
 
     ow, oyaw, _ = other = other_take()
-    otruth = np.zeros((len(oyaw), len(names)))
-    for k, v in ow.items():
-        otruth[:, names.index(k)] = v
+    otruth = _truth(ow, names, len(oyaw))
     dense = []
     for seed in (5, 7):
         Wd = realistic_weights(head, T, seed=seed)
