@@ -44,7 +44,33 @@ Tables:
    both faces, at ``l1`` = 0.01 (the marker tracker's), :data:`~workbench.capture.LANDMARK_L1` and 0.05.
 
 Tables 4, 5 and 7 track at the live default :data:`~workbench.capture.LANDMARK_L1` = 0.03 and at the
-marker tracker's 0.01 (the live default until 2026-11-30). Measured 2026-11-30 (quiet machine):
+marker tracker's 0.01 (the live default until 2026-11-30).
+
+Measured 2026-11-30 (afternoon), with the registration putting each inner-lip landmark on its own
+lip (8 of the 9 pairs had shared one vertex), the weights fitted across FaceMesh's depth
+(``LandmarkRegistration.view_axis``) and the face's outline weighing 0.03: table 1, 11.4 ms a frame
+median (88 frames/s, a machine busy with other work); table 2, jaw correlation 0.97, peak 0.97,
+blink 0.81, RMSE 0.068; table 3, not adapting the warped actor's RMSE is 0.093 / 0.095 (first /
+last loop), adapting every 5th frame 0.094 -> 0.126, landmark error 0.0235 -> 0.0202 (1.16x; 0.0367
+not adapting: the error counts the depth the fit leaves out); table 4 (all-zero weights 0.112),
+**0.096** on the sample head's video (0.130 at 0.01) — jaw 0.80, blink 0.92, smile 0.61 / 0.47,
+inner brow 0.54, outer brows 0.02 — and 0.121 on the foreign face's (0.179) — jaw 1.02, blink 0.73,
+smile 0.51 / 0.64, inner brow 0.91, outer brow 0.36; table 5, dense takes 0.173 / 0.149 (zeros 0.185
+/ 0.170); table 6, the whole take 0.103 -> **0.078** (worst prompt left out 0.086) and 0.114 ->
+**0.088** (0.104), jaw 0.81 -> 0.88 and 0.95 -> 1.08, range gains 0.146 / 0.143, dense takes 0.190
+-> 0.183, 0.178 -> 0.171, 0.186 -> 0.186, 0.180 -> 0.178, the held-out other expressions 0.114 ->
+0.092 and 0.106 -> 0.093 (zeros 0.095); table 7, the other expressions 0.119 / 0.134 (0.111 / 0.120
+at 0.05), the dense take of seed 11 0.183 / 0.217 (zeros 0.184). Against the paragraph below: better
+everywhere but the foreign face's calibrated whole take (0.081 -> 0.088) and table 7 (+0.003-0.004).
+Each change alone: the lips parted with the depth still in the fit read the jaw further (0.48 ->
+0.59) but as ``jawForward`` and ``mouthLowerDown*`` too (whole take 0.114 -> 0.134), since FaceMesh's
+lower lip does not go back with the jaw (2 mm toward the camera where the lip goes 14 mm back);
+the depth left out of the fit with the lips as they were, 0.104 / 0.132 (jaw 0.48 / 0.63); both
+with the outline at 0.1, 0.110 / 0.136 (the chin and jaw outline follow the jaw half-way and
+pull it back to ``mouthLowerDown*``), at 0 0.096 / 0.123. The depth at a quarter or half of its
+weight (the outline at 0.1): 0.121 / 0.147 and 0.127 / 0.149.
+
+Before those changes, measured 2026-11-30 (quiet machine):
 table 1, 13.4 ms a frame median (74.7 frames/s); table 2, jaw correlation 0.98, peak 0.56, blink
 0.70, RMSE 0.082 (0.103 at 0.01); table 3, adapting every 5th frame the warped actor's RMSE is 0.102
 over the first loop against 0.114 not adapting, 0.142 by the third, landmark error 0.0227 -> 0.0208
@@ -118,7 +144,8 @@ pink tongue filling it up to the upper lip, where a person's mouth is a dark cav
 0.43 (correlation 0.81 vs 0.74), but the whole take's RMSE hardly moves (0.165 -> 0.163): the
 smiles and the brows are what is left, and they do not depend on the mouth's inside.
 
-Tried 2026-11-30 and not kept: leaving out the landmarks' depth (FaceMesh's z is its own estimate,
+Tried 2026-11-30 and not kept then (kept later, with the inner lips parted: see the top): leaving
+out the landmarks' depth (FaceMesh's z is its own estimate,
 and on the sample head the jaw's reading fell with the head's turn: tracked over true 0.61 at
 |yaw| 9 deg, 0.37 at 12 deg). The weights fitted on each landmark's offset in the image plane only
 (the camera axis, carried into the rig's frame by the head pose, projected out of the residual and

@@ -3,7 +3,9 @@
 Identities: unit weights are the unweighted tracker; weights scaled by a constant change
 nothing (the fit term is averaged over the total weight, so the λ's keep their meaning); a
 marker of weight 0 does not reach the weights however wrong it is. And the one place it is
-used: FaceMesh landmarks on features weigh more than those on smooth skin.
+used: FaceMesh landmarks on features weigh more than those on smooth skin. And the depth axis
+(``depth_axis=``: a monocular detector's guessed depth): markers moved along it do not reach the
+weights, and a rig moving only along it reads none.
 """
 
 from __future__ import annotations
@@ -110,3 +112,37 @@ def test_the_feature_landmarks_are_mediapipes_contours() -> None:
             connections.FACEMESH_LEFT_EYEBROW, connections.FACEMESH_RIGHT_EYEBROW, connections.FACEMESH_NOSE)
     ids = {i for s in sets for pair in s for i in pair}
     assert ids == set(FEATURE_LANDMARKS)
+
+
+def test_moving_markers_along_the_depth_axis_does_not_reach_the_weights(head, take) -> None:
+    # a monocular detector's depth: markers shifted along the camera's axis (carried by each frame's
+    # head pose), by a different amount per marker and frame, fit the same weights across that axis
+    axis = np.array([0.3, -0.2, 1.0]) / np.linalg.norm([0.3, -0.2, 1.0])
+    clean = _track(head, take, depth_axis=axis)
+    moving = np.setdiff1d(np.arange(take.marker_ids.size), clean.info["rigid_markers"])
+    shift = np.random.default_rng(1).uniform(-0.1, 0.1, (take.markers.shape[0], moving.size))  # dm: ±1 cm
+    bad = take.markers.copy()
+    bad[:, moving] += shift[..., None] * (clean.poses[:, None, :3, :3] @ axis)
+    dirty = _track(head, take, markers=bad, depth_axis=axis)
+    np.testing.assert_allclose(dirty.weights, clean.weights, atol=1e-4)  # the solver's tolerance (measured 5e-6)
+    np.testing.assert_allclose(clean.info["depth_axis"], axis)
+    # the λ's keep their scale (an average shape's motion in all three coordinates)
+    assert clean.info["lambda_scale"] == _track(head, take).info["lambda_scale"]
+    # without the axis the same shifts pull the weights away
+    assert np.abs(_track(head, take, markers=bad).weights - _track(head, take).weights).max() > 0.05
+
+
+def test_a_rig_moving_only_along_the_depth_axis_reads_no_weights(head, take) -> None:
+    import workbench
+
+    flat = workbench.FaceModel(head.vertices, head.faces, [
+        workbench.BlendShape(s.name, np.asarray(s.delta) * np.array([0.0, 0.0, 1.0])) for s in head.shapes[:5]])
+    res = track(flat, take.markers, vertex_ids=take.marker_ids, l1=0.01, temporal=0.25, depth_axis=(0, 0, 2.0))
+    assert np.abs(res.weights).max() < 1e-9
+    assert np.abs(track(flat, take.markers, vertex_ids=take.marker_ids, l1=0.01, temporal=0.25).weights).max() > 0.05
+
+
+@pytest.mark.parametrize("axis", [(0.0, 0.0, 0.0), (1.0, 2.0), (np.nan, 0.0, 1.0), "z"])
+def test_a_bad_depth_axis_is_named(head, take, axis) -> None:
+    with pytest.raises(TrackError, match="depth_axis must be a"):
+        _track(head, take, markers=take.markers[:5], depth_axis=axis)

@@ -18,6 +18,7 @@ import pytest
 from capture_takes import BLINK, JAW, PITCH, SIZE, YAW, T, render_take  # noqa: F401  (the rendered take's truth)
 
 import workbench
+from workbench.capture.landmark_registration import INNER_LIP_PAIRS
 from workbench.capture.video import (
     ANCHORS,
     IRIS,
@@ -145,6 +146,10 @@ def test_map_by_registration_lands_where_the_camera_sees_the_landmarks(take):
     assert np.percentile(err[:468], 90) < 9.0  # measured 7.4 px: the jaw outline
     assert np.median(reg.surface_distance[:468]) * 100.0 < 1.5  # mm; measured 0.9
     assert reg.inliers[:468].mean() > 0.75 and not reg.inliers[468:].any()
+    # the closed mouth's inner-lip landmarks each on their own lip: the lower one opens with the jaw
+    jaw = np.linalg.norm(np.asarray(model.shapes[list(model.shape_names).index("jawOpen")].delta), axis=1)
+    for up, lo in INNER_LIP_PAIRS:
+        assert jaw[ids[lo]] > jaw[ids[up]] + 0.2 * jaw.max(), (up, lo)  # was 8 of 9 pairs on one vertex
     # the anchors end near the rig landmarks they started from
     from workbench.rigging import template_landmarks
 
@@ -168,7 +173,8 @@ def test_tracking_video_landmarks_follows_the_jaw_ramp_the_blink_and_the_head_tu
     jaw = W[:, names.index("jawOpen")]
     blink = W[:, [names.index("eyeBlinkLeft"), names.index("eyeBlinkRight")]].mean(1)
     assert np.corrcoef(jaw, JAW)[0, 1] > 0.9  # measured 0.99
-    assert jaw[-1] > 0.3 and jaw[0] < 0.05  # coarser than markers: about 0.5 at the top (see the module)
+    # coarser than markers (see the module): 0.68 at the top, 0.56 with the inner lips on one vertex
+    assert jaw[-1] > 0.6 and jaw[0] < 0.05
     # the blink: closed while the lids are shut, open elsewhere
     assert blink[13:17].mean() > 0.4  # measured 0.6
     assert np.abs(np.r_[blink[:11], blink[19:]]).max() < 0.15

@@ -157,7 +157,10 @@ def test_a_take_with_dropped_frames_keys_them_at_their_own_times(frames) -> None
 @pytest.mark.ui
 def test_a_guided_calibration_restores_the_amplitude_and_quiets_the_rest(frames) -> None:
     """A session of a neutral face, the jaw wide open and closed eyes (rendered, the actor's timing and
-    reach not exact), then the take: the jaw reaches its true 1.0 within 15 % and the weight error falls."""
+    reach not exact), then the take: the jaw stays within 15 % of its true 1.0 and the weight error falls.
+
+    Uncalibrated the jaw peaks at 0.96 (0.56 with the inner lips on one vertex and FaceMesh's
+    depth in the fit, when the calibration had to restore it)."""
     from workbench.capture.expression_calibration import DEFAULT_PROMPTS
     from workbench.testing import calibration_session
 
@@ -191,8 +194,9 @@ def test_a_guided_calibration_restores_the_amplitude_and_quiets_the_rest(frames)
     raw, cal = takes[False], takes[True]
     err = {k: float(np.sqrt(np.mean((W - truth) ** 2))) for k, W in takes.items()}
     print("jaw peak raw / calibrated", raw[:, jaw].max(), cal[:, jaw].max(), "RMSE", err)
-    assert raw[:, jaw].max() < 0.7 and abs(cal[:, jaw].max() - 1.0) <= 0.15, (raw[:, jaw].max(), cal[:, jaw].max())
-    assert err[True] < 0.85 * err[False], err
+    assert abs(raw[:, jaw].max() - 1.0) <= 0.15 and abs(cal[:, jaw].max() - 1.0) <= 0.15, (raw[:, jaw].max(),
+                                                                                           cal[:, jaw].max())
+    assert err[True] < 0.85 * err[False], err  # measured 0.068 -> 0.051
     lo, hi = model.shape("jawOpen").slider_min, model.shape("jawOpen").slider_max
     assert (lo <= cal[:, jaw]).all() and (cal[:, jaw] <= hi).all()
 

@@ -1,9 +1,9 @@
 """Expression calibration: a short guided session of known expressions corrects what the tracker reads.
 
 On camera frames FaceMesh reads an expression short and mixed with others: on the
-rendered takes of ``benchmarks/bench_live.py`` the jaw reaches about half of its
-true motion and the parting lips are explained partly by ``mouthShrugLower``,
-``mouthLowerDown*`` and ``mouthFrown*``. Much of that is systematic — the same
+rendered takes of ``benchmarks/bench_live.py`` the smiles reach half to two thirds
+of their truth, the outer brows nearly nothing, a turned head reads as ``browDownLeft``
+and the parting lips are explained partly by ``mouthLowerDown*`` and ``mouthPucker``. Much of that is systematic — the same
 expression gives the same misreading — so it can be measured once per actor and
 camera, the way face-capture tools calibrate (a neutral face, then a handful of
 prompted expressions held for a moment):
@@ -27,15 +27,16 @@ there because the tracker misreads a turned head as expression: on a neutral fac
 its ``browDownLeft`` follows the yaw (correlation +0.69 on the rendered take),
 ``browDownRight`` and ``browOuterUpLeft`` against it (−0.61, −0.52); a map fitted
 only on a still head kept those readings. Measured on the rendered takes
-(``bench_live.py``, table 6, the live default ``LANDMARK_L1``): the whole take's RMSE over
-the face shapes falls from 0.113 to 0.087 on the sample head and from 0.125 to 0.081
-on a foreign face (at the markers' l1 = 0.01: 0.148 -> 0.091 and 0.158 -> 0.091; with
-the still-head session before that: 0.103 and 0.090); left out of the session, any one
-prompt still leaves it at or below 0.098 / 0.113; on dense co-articulated takes,
-most of whose shapes no prompt shows, it changes little (0.195 -> 0.192, 0.179 ->
-0.171, 0.191 -> 0.188, 0.182 -> 0.180). The jaw's level over the truth is 0.61 on
-the sample head (0.70 with the still-head session; 0.45 uncalibrated) and 0.90 on
-the foreign face. Tried and not kept (at l1 = 0.01): the head's yaw and pitch (and their squares)
+(``bench_live.py``, table 6, the live defaults): the whole take's RMSE over the face
+shapes falls from 0.103 to 0.078 on the sample head and from 0.114 to 0.088 on a
+foreign face (before the inner lips were parted and the depth left the tracker's fit:
+0.113 -> 0.087 and 0.125 -> 0.081); left out of the session, any one prompt still
+leaves it at or below 0.086 / 0.104; on dense co-articulated takes, most of whose
+shapes no prompt shows, it changes little (0.190 -> 0.183, 0.178 -> 0.171, 0.186 ->
+0.186, 0.180 -> 0.178); on a held-out take of ten other expressions 0.114 -> 0.092 and
+0.106 -> 0.093 (all-zero weights 0.095). The jaw's level over the truth goes from 0.81
+to 0.88 on the sample head and from 0.95 to 1.08 on the foreign face (0.61 and 0.90
+before). Tried and not kept (at l1 = 0.01): the head's yaw and pitch (and their squares)
 as inputs of the map besides the weights (0.087 / 0.084 on the same frames against
 0.088 / 0.085 without: the misreading is mostly a pattern of weights no expression
 makes, which the weights alone cancel); each prompt weighing the same instead of

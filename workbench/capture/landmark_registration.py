@@ -3,7 +3,14 @@
 On a frame of the actor at rest: a robust similarity from anchor landmarks to
 the rig's named landmarks (:data:`ANCHORS`), trimmed similarity ICP of the face
 mesh landmarks onto the skin surface, then each landmark's nearest front-facing
-skin vertex (the iris landmarks: the eyeballs' vertices).
+skin vertex (the iris landmarks: the eyeballs' vertices), with the inner lips
+parted: on a closed mouth an upper-lip landmark and its lower-lip partner sit at
+one point, and each is put on its own lip by the rig's jawOpen
+(:data:`INNER_LIP_PAIRS`; on the sample head 8 of the 9 pairs shared one vertex
+and the jaw read at half its truth). :attr:`LandmarkRegistration.view_axis` is
+the camera's axis in the model's frame, along which the trackers do not fit the
+weights (FaceMesh's depth is a guess), and :func:`landmark_weights` what each
+landmark counts for across it.
 """
 
 from __future__ import annotations
@@ -29,7 +36,7 @@ from workbench.geometry.masks import eyeball_mask, skin_or_all_mask
 if TYPE_CHECKING:
     from workbench.core.state import FaceState
 
-__all__ = ["ANCHORS", "FEATURE_LANDMARKS", "LANDMARK_L1", "OTHER_LANDMARK_WEIGHT", "LandmarkRegistration", "landmark_vertex_map",
+__all__ = ["ANCHORS", "FEATURE_LANDMARKS", "INNER_LIP_PAIRS", "LANDMARK_L1", "OTHER_LANDMARK_WEIGHT", "LandmarkRegistration", "landmark_vertex_map",
            "landmark_weights", "register_landmarks"]
 
 #: FaceMesh landmark of each rig landmark (:func:`workbench.rigging.template_landmarks` names;
@@ -47,6 +54,12 @@ ANCHORS: Mapping[str, int] = {
     "upper_lip": 0,
     "lower_lip": 16,
 }
+#: FaceMesh's inner lip contours as (upper, lower) pairs from one corner to the other (MediaPipe's
+#: lipsUpperInner and lipsLowerInner without their shared corners 78 and 308). On a closed mouth the
+#: two landmarks of a pair sit at one point, where the rig's upper and lower lips meet.
+INNER_LIP_PAIRS: tuple[tuple[int, int], ...] = (
+    (191, 95), (80, 88), (81, 178), (82, 87), (13, 14), (312, 317), (311, 402), (310, 318), (415, 324),
+)
 #: a landmark's vertex moving less than this share of the head size under any shape is "still"
 _STILL = 0.01
 
@@ -68,12 +81,15 @@ FEATURE_LANDMARKS: tuple[int, ...] = (
     1, 2, 4, 5, 6, 19, 45, 48, 64, 94, 97, 98, 115, 168, 195, 197, 220, 275, 278, 294, 326, 327, 344, 440,
 )
 #: the weight of the other landmarks in the fit of the weights (the feature landmarks weigh 1).
-#: Chosen on rendered takes (``benchmarks/bench_live.py``): against equal weights, the issue's take
-#: 0.165 -> 0.146 RMSE on the sample head and 0.173 -> 0.165 on a foreign face (blinks 0.67 -> 0.81
-#: and 0.27 -> 0.62 of the truth, the smile 0.49 -> 0.73), two dense realistic takes 0.169 / 0.174
-#: -> 0.171 / 0.163; 0.3 lies between, 0.03 is no better than 0.1, and 0 (the feature landmarks
-#: alone) gives 0.176 on the issue's take
-OTHER_LANDMARK_WEIGHT = 0.1
+#: Chosen on rendered takes (``benchmarks/bench_live.py``) with the inner lips each on their own
+#: lip and the weights fitted in the image plane (:attr:`LandmarkRegistration.view_axis`): the jaw
+#: outline and the chin follow an opening jaw half-way (13 of 28 px at the chin) while the lips
+#: follow it (45 of 48), so at 0.1 the jaw was read as mouthLowerDown. On the issue's whole take
+#: 0.1 / 0.03 / 0 give 0.110 / 0.096 / 0.096 RMSE on the sample head and 0.136 / 0.121 / 0.123 on a
+#: foreign face (jawOpen 0.70 / 0.80 / 0.83 and 0.90 / 1.02 / 1.07 of the truth), dense takes
+#: 0.170 / 0.173 / 0.177 and 0.190 / 0.192 / 0.193. (Before those two fixes 0.1 was best: equal
+#: weights 0.165, 0.1 0.146, 0 0.176.)
+OTHER_LANDMARK_WEIGHT = 0.03
 
 #: the sparsity for FaceMesh landmarks, live (:class:`~workbench.capture.LiveTracker`) and offline
 #: (:func:`~workbench.capture.track_video`) (relative, as :data:`~workbench.capture.track.DEFAULT_L1` =
@@ -90,7 +106,10 @@ OTHER_LANDMARK_WEIGHT = 0.1
 #: puffs, funnels and presses are barely read at all). Stronger sparsity goes on trading weak true
 #: readings for false ones: at 0.05 the uncalibrated takes gain another 0.01, the calibrated dense ones
 #: lose as much, and ``mouthRollLower`` falls to 0.19 of its truth (0.47 at 0.01); at 0.1 the inner
-#: brow reads 0.16 of its truth (0.74 at 0.01)
+#: brow reads 0.16 of its truth (0.74 at 0.01). (Those numbers are from before the inner lips were
+#: parted and the depth left the fit; since then 0.03 against 0.01: the whole take 0.096 / 0.121
+#: against 0.130 / 0.179, the dense takes 0.173 / 0.149 against 0.185 / 0.154, the held-out ones
+#: 0.119 / 0.134 and 0.183 / 0.217 against 0.138 / 0.156 and 0.187 / 0.221.)
 LANDMARK_L1 = 0.03
 
 
@@ -154,6 +173,19 @@ class LandmarkRegistration:
         """``(..., 3)`` pixel-frame points (:meth:`LandmarkSequence.points`) → the model's frame."""
         P = np.asarray(points, np.float64)
         return P @ self.matrix[:3, :3].T + self.matrix[:3, 3]
+
+    @property
+    def view_axis(self) -> NDArray[np.float64]:
+        """(3,) the camera's axis (toward the camera) in the model's frame: where FaceMesh's depth points.
+
+        FaceMesh's depth is its face model's guess, not a measurement: on the sample head's
+        rendered jaw opening (jawOpen 0.9) its lower-lip landmarks come 2 mm toward the camera where
+        the lip goes 14 mm back, and its chin goes 4 mm back where the chin goes 23 (in the image
+        plane the lip's landmarks follow: 22 mm down of 24). ``track_markers(..., depth_axis=view_axis)``
+        fits the weights across it.
+        """
+        a = self.matrix[:3, :3] @ np.array([0.0, 0.0, 1.0])
+        return np.asarray(a / np.linalg.norm(a), np.float64)
 
     def to_model(self, landmarks: LandmarkSequence | ArrayLike, *, rescale: bool = False) -> NDArray[np.float64]:
         """Landmarks of every frame in the model's frame and units, for :func:`workbench.capture.track`.
@@ -221,6 +253,42 @@ def _rest_landmarks(landmarks: Any, frame: int, image_size: tuple[int, int] | No
     if L.shape != (N_LANDMARKS, 3):
         raise VideoError(f"{where}: expected ({N_LANDMARKS}, 3) FaceMesh landmarks, got shape {L.shape}")
     return L, image_size or (1, 1), where
+
+
+def _part_the_lips(ids: NDArray[np.intp], X: NDArray[np.float64], VW: NDArray[np.float64], idx: NDArray[np.intp],
+                   W: NDArray[np.float64], jaw: NDArray[np.float64], k: int = 12) -> None:
+    """Move an inner-lip landmark that sits on the wrong lip onto the right one (``ids`` in place).
+
+    On a closed mouth FaceMesh's upper and lower inner-lip landmarks coincide, and so do the
+    rig's two lips: the nearest vertex is a coin flip, and an upper-lip landmark on a lower-lip
+    vertex reads the parting lips as a misfit. On the sample head 8 of the 18 fell on the wrong
+    lip and jawOpen was read at about half of its truth. The rig's ``jaw`` (each vertex's motion
+    under jawOpen) tells the lips apart: for a pair (:data:`INNER_LIP_PAIRS`) whose upper landmark
+    moves with the jaw at least as much as its lower one, the ``k`` vertices nearest the pair are
+    split at the middle of their jaw motion, and each landmark takes its nearest vertex on its
+    side. A pair with no such jump around it (no seam there) is left as it was.
+
+    ``VW`` : (n, 3) the vertices in the nearest-vertex metric; ``idx`` the candidate vertices;
+    ``X`` : (478, 3) the registered landmarks; ``W`` the metric (``X @ W`` compares with ``VW``).
+    """
+    from scipy.spatial import cKDTree
+
+    if idx.size < 2:
+        return
+    tree = cKDTree(VW[idx])
+    for up, lo in INNER_LIP_PAIRS:
+        if jaw[ids[up]] < jaw[ids[lo]]:
+            continue
+        _, j = tree.query(0.5 * (X[up] + X[lo]) @ W, k=min(k, idx.size))
+        cand = idx[np.atleast_1d(j)]
+        m = jaw[cand]
+        mid = 0.5 * (m.min() + m.max())
+        upper, lower = cand[m < mid], cand[m > mid]
+        if upper.size == 0 or lower.size == 0:
+            continue
+        new_up = upper[np.argmin(np.linalg.norm(VW[upper] - X[up] @ W, axis=1))]
+        new_lo = lower[np.argmin(np.linalg.norm(VW[lower] - X[lo] @ W, axis=1))]
+        ids[up], ids[lo] = new_up, new_lo
 
 
 def register_landmarks(
@@ -342,6 +410,9 @@ def register_landmarks(
     ids[N_MESH:] = nearest(X[N_MESH:], eyes_f if eyes_f.any() else skin_f)
 
     space = ExpressionSpace.from_model(model)
+    if "jawOpen" in space.shape_names:
+        jaw = np.linalg.norm(np.asarray(space.deltas[space.shape_names.index("jawOpen")], np.float64), axis=1)
+        _part_the_lips(ids, X, V @ W, np.flatnonzero(skin_f), W, jaw)
     still = space.motion(ids) / space.size <= _STILL
     still[N_MESH:] = False
     if int(still.sum()) < 4:

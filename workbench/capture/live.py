@@ -12,20 +12,21 @@ L1 + temporal weights, warm-started), so a take pushed frame by frame gives what
   (:func:`~workbench.capture.video.register_landmarks`: the landmark → vertex map)
   and calibrates on it as the actor's rest face (``track(..., neutral=0)``).
   No calibration session is needed. The weights are fitted with the landmarks on the
-  lips, eyes, brows and nose weighing ten times those on smooth skin
-  (:func:`~workbench.capture.landmark_registration.landmark_weights`: FaceMesh places the
-  latter from the former, and they follow an expression only part of the way); the head
-  pose uses them all. With ``adapt`` the rig adapts to the actor as
+  lips, eyes, brows and nose weighing 1 and those on smooth skin and the face's outline
+  0.03 (:func:`~workbench.capture.landmark_registration.landmark_weights`: FaceMesh places
+  the latter from the former, and they follow an expression only part of the way), in the
+  image plane only (FaceMesh's depth is its face model's guess and does not follow the
+  jaw; ``depth=True`` fits it too); the head pose uses them all, in 3-D. With ``adapt`` the rig adapts to the actor as
   frames arrive (the dynamic expression model, §4 — identity from the rest frame,
   correctives every few solved frames, :mod:`.adapt`); off by default (measured
   below).
-* **Calibrate** (optional; FaceMesh reads the jaw about half-way and mixes other
-  shapes into the parting lips): :meth:`~LiveTracker.begin_calibration` runs a guided
+* **Calibrate** (optional; FaceMesh reads some expressions short and mixes other
+  shapes into them): :meth:`~LiveTracker.begin_calibration` runs a guided
   session — a neutral face, then a few prompted expressions, two seconds each
   (:mod:`.expression_calibration`) — and fits a map from what was tracked to what was
   prompted, applied to every later frame. On the rendered takes of
-  ``benchmarks/bench_live.py`` (table 6) it lowers the whole take's weight RMSE from 0.113 to
-  0.087 (sample head) and from 0.125 to 0.081 (a foreign face). A free "make your
+  ``benchmarks/bench_live.py`` (table 6) it lowers the whole take's weight RMSE from 0.103 to
+  0.078 (sample head) and from 0.114 to 0.088 (a foreign face). A free "make your
   extremes" range (a gain per shape, 1 / its peak), the way before, raised it (0.153 / 0.155):
   it scaled up every shape the solve brushed.
 * **No face** in view: the frame holds the last weights and pose, ``ok`` is
@@ -128,11 +129,11 @@ class LiveTracker:
     adapt : bool or dict
         Adapt the rig to the actor while tracking (True: the default options; a dict:
         :class:`~workbench.capture.AdaptiveModel` options). Off by default: on FaceMesh
-        landmarks of an actor who is not the rig (a warped head) it lowers the weight error
-        over the first three seconds (RMSE 0.114 → 0.102) but drifts up over the next
-        ones (0.142 against 0.114 without by the ninth second), and on the rig's own face it
-        raises it (0.082 → 0.123); the landmark error falls only 9 %
-        (``benchmarks/bench_live.py``).
+        landmarks of an actor who is not the rig (a warped head) it leaves the weight error
+        over the first three seconds as it was (RMSE 0.094 against 0.093) and drifts up over
+        the next ones (0.126 against 0.095 without by the ninth second), and on the rig's own
+        face it raises it (0.068 → 0.132); from loop to loop the landmark error falls 16 %
+        (``benchmarks/bench_live.py``, table 3).
     l1, temporal : float, optional
         The tracker's relative λ's (default: :data:`LANDMARK_L1` and the marker tracker's
         ``DEFAULT_TEMPORAL``).
@@ -146,6 +147,12 @@ class LiveTracker:
         With ``adapt``: every this many solved frames refine the rig (an update costs
         ~70 ms at 478 landmarks on one core, a frame without one ~7 ms: the default keeps
         the kernel at ≥ 20 frames/s while the rig converges over the first seconds).
+    depth : bool
+        Fit the weights on FaceMesh's depth too. Off by default: the weights are fitted on
+        each landmark's offset in the image plane (``depth_axis`` of
+        :func:`~workbench.capture.track.track_markers`, the registration's
+        :attr:`~workbench.capture.landmark_registration.LandmarkRegistration.view_axis`), since
+        FaceMesh's depth is a guess that does not follow the jaw; the head pose uses all three.
 
     Attributes
     ----------
@@ -162,7 +169,7 @@ class LiveTracker:
 
     def __init__(self, model: FaceState, *, adapt: bool | dict[str, Any] = False, l1: float | None = None,
                  temporal: float | None = None, iterations: int = 2, min_markers: int = 4,
-                 min_confidence: float = 0.5, adapt_every: int = 5) -> None:
+                 min_confidence: float = 0.5, adapt_every: int = 5, depth: bool = False) -> None:
         from workbench.capture.track import DEFAULT_TEMPORAL
 
         if not model.shapes:
@@ -182,6 +189,7 @@ class LiveTracker:
         if isinstance(adapt_every, bool) or not isinstance(adapt_every, int) or adapt_every < 1:
             raise VideoError(f"adapt_every must be an int ≥ 1, got {adapt_every!r}")
         self.adapt_every = adapt_every
+        self.depth = bool(depth)
         self.registration_: LandmarkRegistration | None = None
         self.adapted_: Any = None
         self.n_frames_ = 0
@@ -238,7 +246,8 @@ class LiveTracker:
         assert self._image_size is not None
         reg = register_landmarks(self.model, L[None], frame=0, image_size=self._image_size)
         ids = np.asarray(reg.vertex_ids, np.intp)
-        setup = MarkerSetup(self.model, ids, self.l1, self.temporal, None, landmark_weights())
+        setup = MarkerSetup(self.model, ids, self.l1, self.temporal, None, landmark_weights(),
+                            None if self.depth else reg.view_axis)
         Y0 = reg.to_model(L[None])
         check_marker_units(Y0, setup.X0, self.model)
         am, rows = adaptive_for_markers(self.adapt if self.adapt else None, self.model, ids, None)

@@ -169,7 +169,8 @@ class MarkerSetup:
     """Everything per take that does not change per frame."""
 
     def __init__(self, model: FaceState, ids: NDArray[np.intp], l1: float, temporal: float,
-                 rigid: ArrayLike | None, marker_weights: NDArray[np.float64] | None = None) -> None:
+                 rigid: ArrayLike | None, marker_weights: NDArray[np.float64] | None = None,
+                 depth_axis: NDArray[np.float64] | None = None) -> None:
         space = ExpressionSpace.from_model(model)
         self.space = space
         self.ids = ids
@@ -178,12 +179,19 @@ class MarkerSetup:
         #: (m,) each marker's weight in the fit (``Σ_m s_m ||x_m − y_m||²``; ones by default): the
         #: Gram blocks ``Gm`` and the right-hand side rows ``Dh`` carry it, ``fit_weight`` sums it
         self.marker_weights = np.ones(m) if marker_weights is None else np.asarray(marker_weights, np.float64)
+        #: (3, 3) ``I − a aᵀ`` for a ``depth_axis`` a (None: all three coordinates fit the weights)
+        self.fit_projection: NDArray[np.float64] | None = None
         self._weigh()
         s2 = space.size**2
         self.norm = 1.0 / s2
         # the λ scale: an average shape's squared norm per (weighted) marker, in head sizes², fixed for the take
+        # (from all three coordinates, so an l1 means the same with a depth axis as without)
         ref = float(np.trace(self.G_all)) / max(kp, 1) / max(self.fit_weight(), 1e-300) * self.norm
         self.ref = ref if ref > 0 else 1.0
+        if depth_axis is not None:
+            a = np.asarray(depth_axis, np.float64) / np.linalg.norm(depth_axis)
+            self.fit_projection = np.eye(3) - np.outer(a, a)
+            self._weigh()
         self.solver = WeightSolver(space.lo, space.hi, l1=l1 * self.ref, temporal=temporal * self.ref,
                                    relative=False, tol=1e-6 * math.sqrt(self.ref))
         # rigid markers
@@ -220,10 +228,17 @@ class MarkerSetup:
         self.D_derived = D_all
 
     def _weigh(self) -> None:
-        """The weighted Gram blocks ``Gm`` (m, kp, kp), their sum ``G_all`` and the weighted rows ``Dh`` (m, 3, kp)."""
+        """The weighted Gram blocks ``Gm`` (m, kp, kp), their sum ``G_all`` and the weighted rows ``Dh`` (m, 3, kp).
+
+        With a depth axis the rows are projected across it (``P D``, ``P = I − a aᵀ``): since ``P``
+        is symmetric and idempotent, ``Dhᵀ c = s Dᵀ P c`` and ``Gm = s Dᵀ P D`` fit each marker's
+        offset in the plane across the axis only, with no change to the targets ``c``.
+        """
         s = self.marker_weights
-        self.Dh = self.D * s[:, None, None]  # h = Σ_m Dh_mᵀ c_m
-        self.Gm = np.einsum("mck,mcl->mkl", self.Dh, self.D)  # per-marker Gram blocks s_m D_mᵀ D_m
+        P = self.fit_projection
+        Dp = self.D if P is None else np.einsum("ij,mjk->mik", P, self.D)
+        self.Dh = Dp * s[:, None, None]  # h = Σ_m Dh_mᵀ c_m
+        self.Gm = np.einsum("mck,mcl->mkl", self.Dh, Dp)  # per-marker Gram blocks s_m D_mᵀ P D_m
         self.G_all = self.Gm.sum(0)
 
     def marker_planes(self, rows: NDArray[np.intp], vis: NDArray[np.bool_], targets: NDArray[np.float64]
@@ -261,6 +276,20 @@ class MarkerSetup:
         if self.space.derived:
             X += self.derived_offset(wf)
         return X
+
+
+def check_depth_axis(depth_axis: ArrayLike | None) -> NDArray[np.float64] | None:
+    """``depth_axis`` as a (3,) unit vector (None stays None), or :class:`TrackError` saying what was expected."""
+    if depth_axis is None:
+        return None
+    try:
+        a = np.asarray(depth_axis, np.float64)
+    except (TypeError, ValueError):
+        raise TrackError(f"depth_axis must be a (3,) direction, got {depth_axis!r}") from None
+    n = float(np.linalg.norm(a)) if a.shape == (3,) and np.isfinite(a).all() else 0.0
+    if n == 0.0:
+        raise TrackError(f"depth_axis must be a finite, non-zero (3,) direction, got {depth_axis!r}")
+    return a / n
 
 
 def check_marker_weights(marker_weights: ArrayLike | None, m: int) -> NDArray[np.float64] | None:
@@ -379,6 +408,7 @@ def track_markers(
     neutral: int | ArrayLike | None = None,
     adapt: Any = None,
     marker_weights: ArrayLike | None = None,
+    depth_axis: ArrayLike | None = None,
     progress: Progress | None = None,
 ) -> TrackResult:
     """Track ``(T, m, 3)`` markers or landmarks glued to ``vertex_ids`` (see the module docstring).
@@ -409,6 +439,13 @@ def track_markers(
     for FaceMesh landmarks, whose points on smooth skin lag the motion. The λ's keep their
     meaning: the fit term is averaged over the markers' total weight.
 
+    ``depth_axis`` (3,), in the model's frame (default None): a direction along which the
+    markers' positions are a guess — a monocular detector's depth, e.g.
+    :attr:`~workbench.capture.landmark_registration.LandmarkRegistration.view_axis` for FaceMesh
+    landmarks. The weights are then fitted on each marker's offset across it only (the head
+    pose, the rest offsets and the adaptation still use all three coordinates). The axis is
+    fixed in the rig's frame: a head turned by θ lets ``sin² θ`` of the depth back in (4 % at 12°).
+
     ``l1`` / ``temporal`` ``"auto"`` (the default; None is the same): chosen from the take by
     held-out markers (:func:`~workbench.capture.lambdas.choose_lambdas`); ``info["l1"]`` and
     ``info["temporal"]`` are the values used, ``info["lambda_choice"]`` what was tried (None
@@ -427,7 +464,8 @@ def track_markers(
         raise TrackError("model: it has no blendshapes to track")
     Y, ids = prepare_markers(model, frames, vertex_ids)
     T, m = Y.shape[:2]
-    setup = MarkerSetup(model, ids, l1_, temporal_, rigid, check_marker_weights(marker_weights, m))
+    setup = MarkerSetup(model, ids, l1_, temporal_, rigid, check_marker_weights(marker_weights, m),
+                        check_depth_axis(depth_axis))
     space = setup.space
     check_marker_units(Y, setup.X0, model)
     am, rows = adaptive_for_markers(adapt, model, ids, progress)
@@ -483,6 +521,7 @@ def track_markers(
         {"l1": l1_, "temporal": temporal_, "iterations": int(iterations), "min_markers": int(min_markers),
          "rigid_markers": setup.rigid.copy(), "vertex_ids": ids.copy(), "lambda_scale": setup.ref,
          "marker_weights": setup.marker_weights.copy(),
+         "depth_axis": None if setup.fit_projection is None else check_depth_axis(depth_axis),
          "neutral_offsets": offsets, "adapted": am,
          "solver_sweeps": sweeps, "lambda_auto": (l1_given is None, temporal_given is None),
          "lambda_choice": None if choice is None else choice.as_info()},
@@ -529,7 +568,7 @@ def track(
         ``progress(fraction, message)``, called as frames are tracked.
     **options
         Passed on: for markers ``iterations``, ``min_markers``, ``rigid``, ``neutral``,
-        ``marker_weights`` (:func:`track_markers`); for clouds, whatever ``track_clouds`` takes.
+        ``marker_weights``, ``depth_axis`` (:func:`track_markers`); for clouds, whatever ``track_clouds`` takes.
 
     Returns
     -------

@@ -54,15 +54,20 @@ depth is weakest. Landmarks take about 15 ms per frame on one CPU core, the
 registration 0.2 s.
 
 Weights tracked from video landmarks are **coarser** than from markers:
-MediaPipe's depth is relative and approximate, its face's scale wobbles by
-±2 % with the expression, and on the rendered head it reports only part of the
-jaw's motion (the chin against a neck of the same colour). On a 30-frame take
-with a jawOpen ramp 0 → 1, a blink and a head turn (yaw ±10°), jawOpen follows
-the ramp with correlation 0.99 but reaches about 0.5 (the rest is taken by
-``mouthLowerDown*``, and ``jawForward`` / ``mouthFrown*`` / ``mouthPucker``
-wander up to 0.4–0.6); a full blink reads about 0.6 with the lids open ≤ 0.02;
-the head's yaw is within 2°. Calibrating on a rest frame
-(``track(..., neutral=0)``) removes the constant landmark ↔ vertex offsets.
+MediaPipe's depth is its face model's guess (an opening jaw's lower lip comes
+2 mm toward the camera where the lip goes 14 mm back), its face's scale wobbles
+by ±2 % with the expression, and on the rendered head its chin and jaw outline
+follow the jaw half-way while its lips follow it (the chin against a neck of the
+same colour). So the weights are fitted across the camera's axis
+(``depth_axis=reg.view_axis``; the head pose uses all three coordinates) and the
+lips, eyes, brows and nose weigh more than the outline
+(:func:`~workbench.capture.landmark_registration.landmark_weights`). On a 30-frame
+take with a jawOpen ramp 0 → 1, a blink and a head turn (yaw ±10°), jawOpen
+follows the ramp with correlation 0.99 and reaches 0.95 (0.56 with the depth in
+the fit and the inner lips on one vertex); ``mouthShrugUpper``, ``mouthPucker``,
+``mouthLowerDown*`` and ``browInnerUp`` wander up to 0.3–0.6; a full blink reads
+about 0.8 with the lids open ≤ 0.04; the head's yaw is within 2°. Calibrating on a
+rest frame (``track(..., neutral=0)``) removes the constant landmark ↔ vertex offsets.
 """
 
 
@@ -137,15 +142,18 @@ def track_video(
     :func:`register_landmarks` on ``rest_frame`` (the actor at rest), then
     :func:`workbench.capture.track` on :meth:`LandmarkRegistration.to_model` with
     ``neutral=rest_frame`` (the landmark ↔ vertex offsets calibrated away) and
-    ``marker_weights=landmark_weights()`` (the lips, eyes, brows and nose weigh ten times the
-    landmarks on smooth skin) and ``l1=LANDMARK_L1`` (the live tracker's sparsity) unless
-    ``track_options`` says otherwise. The sparsity is fixed, not chosen from the take as for
-    markers (``l1="auto"``): held-out landmarks favour the weights that explain FaceMesh's
-    misreadings best, the densest, and chose 0.003-0.01 on the rendered takes of
-    ``benchmarks/bench_live.py``, where ``LANDMARK_L1`` is 0.114 / 0.131 on the issue's whole take
-    (sample head / a foreign face; the choice 0.141 / 0.161, all-zero weights 0.112) and better on
-    three dense takes of four. ``temporal`` is still chosen from the take. The registration is
-    not kept: call the steps yourself to inspect it.
+    ``marker_weights=landmark_weights()`` (the lips, eyes, brows and nose weigh more than the
+    landmarks on smooth skin), ``l1=LANDMARK_L1`` (the live tracker's sparsity) and
+    ``depth_axis=reg.view_axis`` (the weights fitted across FaceMesh's depth; ``None`` fits
+    them on it too) unless ``track_options`` says otherwise. The sparsity is fixed, not chosen
+    from the take as for markers (``l1="auto"``): held-out landmarks favour the weights that
+    explain FaceMesh's misreadings best, the densest, and chose 0.003-0.01 on the rendered takes
+    of ``benchmarks/bench_live.py`` (the issue's whole take 0.141 / 0.161 against 0.114 / 0.131 at
+    ``LANDMARK_L1``, before the depth left the fit). With these defaults the whole take is 0.096 /
+    0.120 (sample head / a foreign face; with the depth in the fit 0.121 / 0.145, all-zero
+    weights 0.112); dense takes and the held-out take of other expressions move by ≤ 0.004
+    either way. ``temporal`` is still chosen from the take. The registration is not kept:
+    call the steps yourself to inspect it.
     """
     from workbench.capture.track import track
 
@@ -165,5 +173,6 @@ def track_video(
     track_options.setdefault("neutral", int(rest_frame))
     track_options.setdefault("marker_weights", landmark_weights())  # the live tracker's weighting
     track_options.setdefault("l1", LANDMARK_L1)  # and its sparsity
+    track_options.setdefault("depth_axis", reg.view_axis)  # and its fit across FaceMesh's depth
     return track(model, reg.to_model(seq), vertex_ids=reg.vertex_ids, fps=seq.fps, progress=part(0.7, 1.0),
                  **track_options)
