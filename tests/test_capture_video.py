@@ -173,8 +173,9 @@ def test_tracking_video_landmarks_follows_the_jaw_ramp_the_blink_and_the_head_tu
     jaw = W[:, names.index("jawOpen")]
     blink = W[:, [names.index("eyeBlinkLeft"), names.index("eyeBlinkRight")]].mean(1)
     assert np.corrcoef(jaw, JAW)[0, 1] > 0.9  # measured 0.99
-    # coarser than markers (see the module): 0.68 at the top, 0.56 with the inner lips on one vertex
-    assert jaw[-1] > 0.6 and jaw[0] < 0.05
+    # coarser than markers (see the module): 0.95 at the top (0.56 with the inner lips on one vertex,
+    # FaceMesh's depth in the fit and the outline at 0.1)
+    assert jaw[-1] > 0.8 and jaw[0] < 0.05
     # the blink: closed while the lids are shut, open elsewhere
     assert blink[13:17].mean() > 0.4  # measured 0.6
     assert np.abs(np.r_[blink[:11], blink[19:]]).max() < 0.15
