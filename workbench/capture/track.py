@@ -170,7 +170,7 @@ class MarkerSetup:
 
     def __init__(self, model: FaceState, ids: NDArray[np.intp], l1: float, temporal: float,
                  rigid: ArrayLike | None, marker_weights: NDArray[np.float64] | None = None,
-                 depth_axis: NDArray[np.float64] | None = None) -> None:
+                 depth_axis: ArrayLike | None = None) -> None:
         space = ExpressionSpace.from_model(model)
         self.space = space
         self.ids = ids
@@ -179,19 +179,16 @@ class MarkerSetup:
         #: (m,) each marker's weight in the fit (``Σ_m s_m ||x_m − y_m||²``; ones by default): the
         #: Gram blocks ``Gm`` and the right-hand side rows ``Dh`` carry it, ``fit_weight`` sums it
         self.marker_weights = np.ones(m) if marker_weights is None else np.asarray(marker_weights, np.float64)
-        #: (3, 3) ``I − a aᵀ`` for a ``depth_axis`` a (None: all three coordinates fit the weights)
-        self.fit_projection: NDArray[np.float64] | None = None
+        #: (3,) the unit axis the weights are not fitted along (None: all three coordinates fit them)
+        self.depth_axis = check_depth_axis(depth_axis)
         self._weigh()
         s2 = space.size**2
         self.norm = 1.0 / s2
-        # the λ scale: an average shape's squared norm per (weighted) marker, in head sizes², fixed for the take
-        # (from all three coordinates, so an l1 means the same with a depth axis as without)
-        ref = float(np.trace(self.G_all)) / max(kp, 1) / max(self.fit_weight(), 1e-300) * self.norm
+        # the λ scale: an average shape's squared norm per (weighted) marker, in head sizes², fixed for the take;
+        # the trace of the unprojected Gram, Σ_m s_m ||D_m||², so an l1 means the same with a depth axis as without
+        ref = float(self.marker_weights @ np.einsum("mck,mck->m", self.D, self.D)) / max(kp, 1) \
+            / max(self.fit_weight(), 1e-300) * self.norm
         self.ref = ref if ref > 0 else 1.0
-        if depth_axis is not None:
-            a = np.asarray(depth_axis, np.float64) / np.linalg.norm(depth_axis)
-            self.fit_projection = np.eye(3) - np.outer(a, a)
-            self._weigh()
         self.solver = WeightSolver(space.lo, space.hi, l1=l1 * self.ref, temporal=temporal * self.ref,
                                    relative=False, tol=1e-6 * math.sqrt(self.ref))
         # rigid markers
@@ -235,8 +232,8 @@ class MarkerSetup:
         offset in the plane across the axis only, with no change to the targets ``c``.
         """
         s = self.marker_weights
-        P = self.fit_projection
-        Dp = self.D if P is None else np.einsum("ij,mjk->mik", P, self.D)
+        a = self.depth_axis
+        Dp = self.D if a is None else np.einsum("ij,mjk->mik", np.eye(3) - np.outer(a, a), self.D)
         self.Dh = Dp * s[:, None, None]  # h = Σ_m Dh_mᵀ c_m
         self.Gm = np.einsum("mck,mcl->mkl", self.Dh, Dp)  # per-marker Gram blocks s_m D_mᵀ P D_m
         self.G_all = self.Gm.sum(0)
@@ -464,8 +461,7 @@ def track_markers(
         raise TrackError("model: it has no blendshapes to track")
     Y, ids = prepare_markers(model, frames, vertex_ids)
     T, m = Y.shape[:2]
-    setup = MarkerSetup(model, ids, l1_, temporal_, rigid, check_marker_weights(marker_weights, m),
-                        check_depth_axis(depth_axis))
+    setup = MarkerSetup(model, ids, l1_, temporal_, rigid, check_marker_weights(marker_weights, m), depth_axis)
     space = setup.space
     check_marker_units(Y, setup.X0, model)
     am, rows = adaptive_for_markers(adapt, model, ids, progress)
@@ -521,7 +517,7 @@ def track_markers(
         {"l1": l1_, "temporal": temporal_, "iterations": int(iterations), "min_markers": int(min_markers),
          "rigid_markers": setup.rigid.copy(), "vertex_ids": ids.copy(), "lambda_scale": setup.ref,
          "marker_weights": setup.marker_weights.copy(),
-         "depth_axis": None if setup.fit_projection is None else check_depth_axis(depth_axis),
+         "depth_axis": setup.depth_axis,
          "neutral_offsets": offsets, "adapted": am,
          "solver_sweeps": sweeps, "lambda_auto": (l1_given is None, temporal_given is None),
          "lambda_choice": None if choice is None else choice.as_info()},
