@@ -46,6 +46,24 @@ Tables:
 Tables 4, 5 and 7 track at the live default :data:`~workbench.capture.LANDMARK_L1` = 0.03 and at the
 marker tracker's 0.01 (the live default until 2026-11-30).
 
+Measured 2026-11-30 (evening), with the depth left out of the fit along the camera's axis as each
+frame's head pose turns it onto the rig (``MarkerSetup.depth_in_rig``: before, the axis was held in
+the rig's frame, and a head turned by θ let ``sin θ`` of FaceMesh's depth back in, 21 % at 12°):
+table 1, 10.9 ms a frame median (91.5 frames/s; the solve 2.9 ms); table 2, jaw correlation 0.98,
+peak 0.91, blink 0.83, RMSE 0.074; table 3 as before (adapting every 5th frame 0.097 -> 0.124,
+landmark error 0.0232 -> 0.0200, 1.16x); table 4 **0.094** / 0.120 (jaw 0.80 / 1.00, smiles 0.48-0.66);
+table 5 0.170 / 0.149; table 6 uncalibrated 0.100 / 0.109, guided **0.079 / 0.083** (worst prompt
+left out 0.087 / 0.100), jaw 0.89 / 1.10, the held-out other expressions 0.091 / 0.092; table 7 0.116
+/ 0.134, the dense take of seed 11 0.186 / 0.217. Against the paragraph below: table 2 is worse
+(0.068 -> 0.074, peak 0.97 -> 0.91), table 7's dense take by 0.003, the rest the same or better
+(the foreign face's calibrated take 0.088 -> 0.083). It does not remove what a turned head does to
+the reading (``browDownLeft`` follows the yaw, an opening jaw at 12° reads partly as one side's
+``mouthLowerDown``): a neutral face rendered through a near-orthographic lens (3° instead of 24°)
+shows the same (``browDownLeft`` 0.52 at +12°), so it is FaceMesh's reading of a turned face, not
+the camera's perspective. Adapting across the depth only (two planes per landmark instead of
+three) lowers the fit's error across it 0.0203 -> 0.0141 but the weights get worse (0.094 -> 0.205
+by the third loop): not kept.
+
 Measured 2026-11-30 (afternoon), with the registration putting each inner-lip landmark on its own
 lip (8 of the 9 pairs had shared one vertex), the weights fitted across FaceMesh's depth
 (``LandmarkRegistration.view_axis``) and the face's outline weighing 0.03: table 1, 11.4 ms a frame

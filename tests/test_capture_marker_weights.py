@@ -4,8 +4,9 @@ Identities: unit weights are the unweighted tracker; weights scaled by a constan
 nothing (the fit term is averaged over the total weight, so the λ's keep their meaning); a
 marker of weight 0 does not reach the weights however wrong it is. And the one place it is
 used: FaceMesh landmarks on features weigh more than those on smooth skin. And the depth axis
-(``depth_axis=``: a monocular detector's guessed depth): markers moved along it do not reach the
-weights, and a rig moving only along it reads none.
+(``depth_axis=``: a monocular detector's guessed depth, along the camera's axis, which stays put while
+the head turns under it): markers moved along it reach neither the weights nor the λ choice, and a
+rig moving only along it reads none.
 """
 
 from __future__ import annotations
@@ -115,14 +116,15 @@ def test_the_feature_landmarks_are_mediapipes_contours() -> None:
 
 
 def test_moving_markers_along_the_depth_axis_does_not_reach_the_weights(head, take) -> None:
-    # a monocular detector's depth: markers shifted along the camera's axis (carried by each frame's
-    # head pose), by a different amount per marker and frame, fit the same weights across that axis
+    # a monocular detector's depth: markers shifted along the camera's axis (fixed in the frames'
+    # coordinates while the head turns under it), by a different amount per marker and frame, fit
+    # the same weights across that axis
     axis = np.array([0.3, -0.2, 1.0]) / np.linalg.norm([0.3, -0.2, 1.0])
     clean = _track(head, take, depth_axis=axis)
     moving = np.setdiff1d(np.arange(take.marker_ids.size), clean.info["rigid_markers"])
     shift = np.random.default_rng(1).uniform(-0.1, 0.1, (take.markers.shape[0], moving.size))  # dm: ±1 cm
     bad = take.markers.copy()
-    bad[:, moving] += shift[..., None] * (clean.poses[:, None, :3, :3] @ axis)
+    bad[:, moving] += shift[..., None] * axis
     dirty = _track(head, take, markers=bad, depth_axis=axis)
     np.testing.assert_allclose(dirty.weights, clean.weights, atol=1e-4)  # the solver's tolerance (measured 5e-6)
     np.testing.assert_allclose(clean.info["depth_axis"], axis)
@@ -132,14 +134,67 @@ def test_moving_markers_along_the_depth_axis_does_not_reach_the_weights(head, ta
     assert np.abs(_track(head, take, markers=bad).weights - _track(head, take).weights).max() > 0.05
 
 
-def test_a_rig_moving_only_along_the_depth_axis_reads_no_weights(head, take) -> None:
+def test_the_lambda_choice_does_not_see_the_depth_axis(head, take) -> None:
+    # the held-out markers score the λ's across the axis, as the tracker fits: shifts along it change nothing
+    axis = np.array([0.3, -0.2, 1.0]) / np.linalg.norm([0.3, -0.2, 1.0])
+    kw = dict(vertex_ids=take.marker_ids, l1="auto", temporal="auto", depth_axis=axis)
+    clean = track(head, take.markers, **kw)
+    moving = np.setdiff1d(np.arange(take.marker_ids.size), clean.info["rigid_markers"])
+    bad = take.markers.copy()
+    bad[:, moving] += np.random.default_rng(4).uniform(-0.1, 0.1, (bad.shape[0], moving.size))[..., None] * axis
+    dirty = track(head, bad, **kw)
+    a, b = clean.info["lambda_choice"], dirty.info["lambda_choice"]
+    assert (dirty.info["l1"], dirty.info["temporal"]) == (clean.info["l1"], clean.info["temporal"])
+    np.testing.assert_allclose(np.array(b["grid"])[:, 2], np.array(a["grid"])[:, 2], rtol=1e-5)
+    # without the axis the same shifts are held-out error
+    plain = track(head, bad, **{**kw, "depth_axis": None}).info["lambda_choice"]
+    assert plain["heldout"] > 1.5 * a["heldout"]
+
+
+def test_a_rig_moving_only_along_the_depth_axis_reads_no_weights(head) -> None:
     import workbench
 
     flat = workbench.FaceModel(head.vertices, head.faces, [
         workbench.BlendShape(s.name, np.asarray(s.delta) * np.array([0.0, 0.0, 1.0])) for s in head.shapes[:5]])
-    res = track(flat, take.markers, vertex_ids=take.marker_ids, l1=0.01, temporal=0.25, depth_axis=(0, 0, 2.0))
+    # the head still: the camera's axis is the rig's z in every frame
+    still = synthetic_performance(head, 30, fps=30.0, seed=3, noise=0.005, head_motion=0.0,
+                                  shapes=marker_visible_shapes(head))
+    res = track(flat, still.markers, vertex_ids=still.marker_ids, l1=0.01, temporal=0.25, depth_axis=(0, 0, 2.0))
     assert np.abs(res.weights).max() < 1e-9
-    assert np.abs(track(flat, take.markers, vertex_ids=take.marker_ids, l1=0.01, temporal=0.25).weights).max() > 0.05
+    assert np.abs(track(flat, still.markers, vertex_ids=still.marker_ids, l1=0.01, temporal=0.25).weights).max() > 0.05
+
+
+def test_the_depth_axis_stays_with_the_camera_as_the_head_turns(head) -> None:
+    # a rig seen from a camera looking along z, its head turned 30° about y: markers moved along the
+    # camera's z do not reach the weights; along the rig's own z (which the turn has moved off the
+    # camera's axis) they do, by what the turn brings into the image plane
+    model = workbench_model(head)
+    ids = np.arange(0, head.n_vertices, max(head.n_vertices // 150, 1))
+    k = len(model.shapes)
+    W = np.random.default_rng(2).uniform(0.0, 0.6, (12, k))
+    c, s = np.cos(np.deg2rad(30.0)), np.sin(np.deg2rad(30.0))
+    R = np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+    X = np.asarray(head.vertices)[ids][None] + np.einsum("tk,knc->tnc", W, np.stack(
+        [np.asarray(sh.delta)[ids] for sh in model.shapes]))
+    Y = X @ R.T
+    kw = dict(vertex_ids=ids, l1=0.0, temporal=0.0, iterations=4)
+    exact = track(model, Y, depth_axis=(0, 0, 1), **kw)
+    along = np.random.default_rng(3).uniform(-0.1, 0.1, Y.shape[:2])[..., None]
+    along[:, exact.info["rigid_markers"]] = 0.0  # the head pose's markers stay put
+    camera = track(model, Y + along * np.array([0.0, 0.0, 1.0]), depth_axis=(0, 0, 1), **kw)
+    rig_z = track(model, Y + along * (R @ np.array([0.0, 0.0, 1.0])), depth_axis=(0, 0, 1), **kw)
+    np.testing.assert_allclose(exact.weights, W, atol=2e-3)
+    np.testing.assert_allclose(camera.weights, exact.weights, atol=1e-8)  # measured 5e-13
+    assert np.abs(rig_z.weights - exact.weights).max() > 0.02
+
+
+def workbench_model(head):
+    """The head with five of the shapes that move its skin (the eyeball and tongue shapes move none)."""
+    import workbench
+
+    return workbench.FaceModel(head.vertices, head.faces, [
+        workbench.BlendShape(head.shapes[i].name, np.asarray(head.shapes[i].delta))
+        for i in marker_visible_shapes(head)[:5]])
 
 
 @pytest.mark.parametrize("axis", [(0.0, 0.0, 0.0), (1.0, 2.0), (np.nan, 0.0, 1.0), "z"])

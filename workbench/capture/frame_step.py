@@ -73,7 +73,9 @@ class FrameStepper:
         Dv = setup.Dh[vis].reshape(-1, kp)  # weighted rows (MarkerSetup.marker_weights)
         nv = int(vis.sum())
         sw = setup.fit_weight(vis)
-        G = (setup.G_all if nv == m else setup.Gm[vis].sum(0)) * (setup.norm / sw)
+        sel = None if nv == m else vis
+        G0 = setup.gram(sel)
+        G = G0 * (setup.norm / sw)
         rig = vis & setup.is_rigid
         w, wf, M = self.w, self.wf, self.M
         for _it in range(self.iterations):
@@ -97,6 +99,10 @@ class FrameStepper:
             c = local - setup.X0[vis]
             if space.derived:
                 c = c - setup.derived_offset(wf, vis)
+            d = setup.depth_in_rig(R)  # the camera's axis under this pose: the fit is across it
+            if d is not None:
+                G = (G0 - setup.depth_gram(sel, d)) * (setup.norm / sw)
+                c = setup.across(c, d)
             h = Dv.T @ c.reshape(-1) * (setup.norm / sw)
             w = solver.solve_gram(G, h, self.w_prev, self.w_prev2, w0=w)
             self.sweeps += solver.n_iter_

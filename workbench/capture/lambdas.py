@@ -184,6 +184,12 @@ def _stretches(good: NDArray[np.bool_]) -> list[NDArray[np.intp]]:
     return [idx[s : s + STRETCH_FRAMES] for s in starts]
 
 
+def _gram_across(setup: MarkerSetup, sel: NDArray[np.bool_], d: NDArray[np.float64] | None) -> NDArray[np.float64]:
+    """The markers ``sel``'s Gram across the frame's depth direction ``d`` (all three coordinates when None)."""
+    G = setup.gram(sel)
+    return G if d is None else G - setup.depth_gram(sel, d)
+
+
 def choose_lambdas(setup: MarkerSetup, Y: NDArray[np.float64], visible: NDArray[np.bool_],
                    good: NDArray[np.bool_], *, metres_per_unit: float = 1.0, fix_l1: float | None = None,
                    fix_temporal: float | None = None, iterations: int = 2) -> LambdaChoice:
@@ -223,7 +229,8 @@ def choose_lambdas(setup: MarkerSetup, Y: NDArray[np.float64], visible: NDArray[
     l1_ref = paper[0] if fix_l1 is None else float(fix_l1)
     t_ref = paper[1] if fix_temporal is None else float(fix_temporal)
     l1_ref, t_ref = min(l1_ref, 3e-3), min(max(t_ref, 0.03), 0.25)  # a mild start when the paper's are extreme
-    runs: list[list[tuple[NDArray[np.bool_], NDArray[np.float64]]]] = []
+    # per stretch, each frame's (visible markers, their offsets across the depth, the depth direction or None)
+    runs: list[list[tuple[NDArray[np.bool_], NDArray[np.float64], NDArray[np.float64] | None]]] = []
     for frames in _stretches(good):
         w = np.zeros(kp)
         wp = wp2 = None
@@ -232,11 +239,12 @@ def choose_lambdas(setup: MarkerSetup, Y: NDArray[np.float64], visible: NDArray[
             vis = visible[f]
             nv = int(vis.sum())
             sw = setup.fit_weight(vis)
-            G = setup.Gm[vis].sum(0) * (setup.norm / sw)
+            G0 = setup.gram(vis)
             Dv = setup.Dh[vis].reshape(-1, kp)
             rig = vis & setup.is_rigid
             M = np.eye(4)
             c = np.zeros((nv, 3))
+            depth = None
             for _it in range(int(iterations)):
                 wf = space.full_weights(w)
                 X = setup.marker_positions(w, wf)
@@ -248,11 +256,14 @@ def choose_lambdas(setup: MarkerSetup, Y: NDArray[np.float64], visible: NDArray[
                 c = (Y[f, vis] - M[:3, 3]) @ M[:3, :3] - setup.X0[vis]
                 if space.derived:
                     c = c - setup.derived_offset(wf, vis)
-                w = solve(G, Dv.T @ c.reshape(-1) * (setup.norm / sw), l1_ref, t_ref, wp, wp2, w)
+                depth = setup.depth_in_rig(M[:3, :3])  # fitted across the camera's axis, as the tracker does
+                G = G0 if depth is None else G0 - setup.depth_gram(vis, depth)
+                c = setup.across(c, depth)
+                w = solve(G * (setup.norm / sw), Dv.T @ c.reshape(-1) * (setup.norm / sw), l1_ref, t_ref, wp, wp2, w)
             wp2, wp = wp, w.copy()
             full = np.full((m, 3), np.nan)
             full[vis] = c
-            run.append((vis, full))
+            run.append((vis, full, depth))
         runs.append(run)
 
     # 2. folds of the markers that move with the expression
@@ -265,14 +276,13 @@ def choose_lambdas(setup: MarkerSetup, Y: NDArray[np.float64], visible: NDArray[
     n_folds = min(FOLDS, moving.size)
 
     # 3. per fold, the training and held-out normal equations of every stretch frame
-    frames_all = [(vis, c) for run in runs for vis, c in run]
+    frames_all = [(vis, c, depth) for run in runs for vis, c, depth in run]
     starts = np.zeros(len(frames_all), bool)
     pos = 0
     for run in runs:
         starts[pos] = True
         pos += len(run)
     nf = len(frames_all)
-    Gm = setup.Gm
     Dm = setup.Dh  # (m, 3, kp), weighted rows
     sm = setup.marker_weights
     folds = []
@@ -284,15 +294,15 @@ def choose_lambdas(setup: MarkerSetup, Y: NDArray[np.float64], visible: NDArray[
         G_ho = np.zeros((nf, kp, kp))
         h_ho = np.zeros((nf, kp))
         cc_ho = np.zeros(nf)
-        for i, (vis, c) in enumerate(frames_all):
+        for i, (vis, c, depth) in enumerate(frames_all):
             tr = vis & ~held
             ho = vis & held
             if int(tr.sum()) < 3:  # too few markers to fit this frame on: it is tracked on all, and not scored
                 tr, ho = vis, np.zeros_like(vis)
             str_ = float(sm[tr].sum())
-            G_tr[i] = Gm[tr].sum(0) * (setup.norm / str_)
+            G_tr[i] = _gram_across(setup, tr, depth) * (setup.norm / str_)
             h_tr[i] = np.einsum("mck,mc->k", Dm[tr], c[tr]) * (setup.norm / str_)
-            G_ho[i] = Gm[ho].sum(0)
+            G_ho[i] = _gram_across(setup, ho, depth)
             h_ho[i] = np.einsum("mck,mc->k", Dm[ho], c[ho])
             cc_ho[i] = float((sm[ho] * (c[ho] ** 2).sum(1)).sum())
             count += float(sm[ho].sum())

@@ -8,8 +8,9 @@ parted: on a closed mouth an upper-lip landmark and its lower-lip partner sit at
 one point, and each is put on its own lip by the rig's jawOpen
 (:data:`INNER_LIP_PAIRS`; on the sample head 8 of the 9 pairs shared one vertex
 and the jaw read at half its truth). :attr:`LandmarkRegistration.view_axis` is
-the camera's axis in the model's frame, along which the trackers do not fit the
-weights (FaceMesh's depth is a guess), and :func:`landmark_weights` what each
+the camera's axis in the model's frame (where :meth:`~LandmarkRegistration.to_model`
+puts the landmarks; each frame's head pose carries it onto the rig), along which the
+trackers do not fit the weights (FaceMesh's depth is a guess), and :func:`landmark_weights` what each
 landmark counts for across it.
 """
 
@@ -177,6 +178,9 @@ class LandmarkRegistration:
     @property
     def view_axis(self) -> NDArray[np.float64]:
         """(3,) the camera's axis (toward the camera) in the model's frame: where FaceMesh's depth points.
+
+        It is fixed in the coordinates :meth:`to_model` gives; the head turns under it (the
+        trackers carry it onto the rig by each frame's head pose).
 
         FaceMesh's depth is its face model's guess, not a measurement: on the sample head's
         rendered jaw opening (jawOpen 0.9) its lower-lip landmarks come 2 mm toward the camera where

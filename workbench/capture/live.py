@@ -25,8 +25,8 @@ L1 + temporal weights, warm-started), so a take pushed frame by frame gives what
   session — a neutral face, then a few prompted expressions, two seconds each
   (:mod:`.expression_calibration`) — and fits a map from what was tracked to what was
   prompted, applied to every later frame. On the rendered takes of
-  ``benchmarks/bench_live.py`` (table 6) it lowers the whole take's weight RMSE from 0.103 to
-  0.078 (sample head) and from 0.114 to 0.088 (a foreign face). A free "make your
+  ``benchmarks/bench_live.py`` (table 6) it lowers the whole take's weight RMSE from 0.100 to
+  0.079 (sample head) and from 0.109 to 0.083 (a foreign face). A free "make your
   extremes" range (a gain per shape, 1 / its peak), the way before, raised it (0.153 / 0.155):
   it scaled up every shape the solve brushed.
 * **No face** in view: the frame holds the last weights and pose, ``ok`` is
@@ -130,9 +130,9 @@ class LiveTracker:
         Adapt the rig to the actor while tracking (True: the default options; a dict:
         :class:`~workbench.capture.AdaptiveModel` options). Off by default: on FaceMesh
         landmarks of an actor who is not the rig (a warped head) it leaves the weight error
-        over the first three seconds as it was (RMSE 0.094 against 0.093) and drifts up over
-        the next ones (0.126 against 0.095 without by the ninth second), and on the rig's own
-        face it raises it (0.068 → 0.132); from loop to loop the landmark error falls 16 %
+        over the first three seconds about as it was (RMSE 0.097 against 0.093) and drifts up
+        over the next ones (0.124 against 0.094 without by the ninth second), and on the rig's
+        own face it raises it (0.074 → 0.147); from loop to loop the landmark error falls 16 %
         (``benchmarks/bench_live.py``, table 3).
     l1, temporal : float, optional
         The tracker's relative λ's (default: :data:`LANDMARK_L1` and the marker tracker's

@@ -179,7 +179,8 @@ class MarkerSetup:
         #: (m,) each marker's weight in the fit (``Σ_m s_m ||x_m − y_m||²``; ones by default): the
         #: Gram blocks ``Gm`` and the right-hand side rows ``Dh`` carry it, ``fit_weight`` sums it
         self.marker_weights = np.ones(m) if marker_weights is None else np.asarray(marker_weights, np.float64)
-        #: (3,) the unit axis the weights are not fitted along (None: all three coordinates fit them)
+        #: (3,) the unit axis, in the frames' coordinates, the weights are not fitted along (None: all three
+        #: coordinates fit them); :meth:`depth_in_rig` carries it onto the rig for a frame's pose
         self.depth_axis = check_depth_axis(depth_axis)
         self._weigh()
         s2 = space.size**2
@@ -225,18 +226,38 @@ class MarkerSetup:
         self.D_derived = D_all
 
     def _weigh(self) -> None:
-        """The weighted Gram blocks ``Gm`` (m, kp, kp), their sum ``G_all`` and the weighted rows ``Dh`` (m, 3, kp).
-
-        With a depth axis the rows are projected across it (``P D``, ``P = I − a aᵀ``): since ``P``
-        is symmetric and idempotent, ``Dhᵀ c = s Dᵀ P c`` and ``Gm = s Dᵀ P D`` fit each marker's
-        offset in the plane across the axis only, with no change to the targets ``c``.
-        """
-        s = self.marker_weights
-        a = self.depth_axis
-        Dp = self.D if a is None else np.einsum("ij,mjk->mik", np.eye(3) - np.outer(a, a), self.D)
-        self.Dh = Dp * s[:, None, None]  # h = Σ_m Dh_mᵀ c_m
-        self.Gm = np.einsum("mck,mcl->mkl", self.Dh, Dp)  # per-marker Gram blocks s_m D_mᵀ P D_m
+        """The weighted Gram blocks ``Gm`` (m, kp, kp), their sum ``G_all`` and the weighted rows ``Dh`` (m, 3, kp)."""
+        self.Dh = self.D * self.marker_weights[:, None, None]  # h = Σ_m Dh_mᵀ c_m
+        self.Gm = np.einsum("mck,mcl->mkl", self.Dh, self.D)  # per-marker Gram blocks s_m D_mᵀ D_m
         self.G_all = self.Gm.sum(0)
+
+    def depth_in_rig(self, R: NDArray[np.float64]) -> NDArray[np.float64] | None:
+        """(3,) the depth axis in the rig's frame for a frame whose head rotation is ``R`` (None without one).
+
+        The axis is the camera's, fixed in the frames' coordinates; the head turns under it, so
+        what the fit leaves out turns with the pose: ``Rᵀ a``.
+        """
+        return None if self.depth_axis is None else R.T @ self.depth_axis
+
+    def gram(self, sel: NDArray[np.bool_] | None = None) -> NDArray[np.float64]:
+        """(kp, kp) ``Σ_m s_m D_mᵀ D_m`` over the markers ``sel`` (None: all)."""
+        return self.G_all.copy() if sel is None else self.Gm[sel].sum(0)
+
+    def depth_gram(self, sel: NDArray[np.bool_] | None, d: NDArray[np.float64]) -> NDArray[np.float64]:
+        """(kp, kp) ``Σ_m s_m D_mᵀ d dᵀ D_m`` over the markers ``sel`` (None: all): the Gram's part along ``d``.
+
+        ``gram(sel) − depth_gram(sel, d)`` is ``Σ_m s_m D_mᵀ P D_m`` with ``P = I − d dᵀ``; with
+        ``P`` symmetric and idempotent, it and the targets projected by :meth:`across`
+        (``h = Σ_m s_m D_mᵀ P c_m``) fit each marker's offset across ``d`` only.
+        """
+        E = np.einsum("c,mck->mk", d, self.D if sel is None else self.D[sel])  # (m_sel, kp)
+        s = self.marker_weights if sel is None else self.marker_weights[sel]
+        return np.asarray((E * s[:, None]).T @ E)
+
+    @staticmethod
+    def across(c: NDArray[np.float64], d: NDArray[np.float64] | None) -> NDArray[np.float64]:
+        """(n, 3) offsets ``c`` with their component along ``d`` removed (``c`` itself when ``d`` is None)."""
+        return c if d is None else c - np.outer(c @ d, d)
 
     def marker_planes(self, rows: NDArray[np.intp], vis: NDArray[np.bool_], targets: NDArray[np.float64]
                       ) -> tuple[NDArray[np.intp], NDArray[np.float64], NDArray[np.float64]]:
@@ -436,12 +457,14 @@ def track_markers(
     for FaceMesh landmarks, whose points on smooth skin lag the motion. The λ's keep their
     meaning: the fit term is averaged over the markers' total weight.
 
-    ``depth_axis`` (3,), in the model's frame (default None): a direction along which the
-    markers' positions are a guess — a monocular detector's depth, e.g.
+    ``depth_axis`` (3,), in the frames' coordinates (default None): a direction along which the
+    markers' positions are a guess — a monocular detector's depth, the camera's axis, e.g.
     :attr:`~workbench.capture.landmark_registration.LandmarkRegistration.view_axis` for FaceMesh
     landmarks. The weights are then fitted on each marker's offset across it only (the head
-    pose, the rest offsets and the adaptation still use all three coordinates). The axis is
-    fixed in the rig's frame: a head turned by θ lets ``sin² θ`` of the depth back in (4 % at 12°).
+    pose, the rest offsets and the adaptation still use all three coordinates). The axis stays
+    with the camera: each frame's head rotation ``R`` carries it onto the rig (``Rᵀ a``), so a
+    turned head's depth stays out of the fit (held in the rig's frame, a head turned by θ let
+    ``sin θ`` of it back in: 21 % at 12°).
 
     ``l1`` / ``temporal`` ``"auto"`` (the default; None is the same): chosen from the take by
     held-out markers (:func:`~workbench.capture.lambdas.choose_lambdas`); ``info["l1"]`` and

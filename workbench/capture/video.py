@@ -149,8 +149,8 @@ def track_video(
     from the take as for markers (``l1="auto"``): held-out landmarks favour the weights that
     explain FaceMesh's misreadings best, the densest, and chose 0.003-0.01 on the rendered takes
     of ``benchmarks/bench_live.py`` (the issue's whole take 0.141 / 0.161 against 0.114 / 0.131 at
-    ``LANDMARK_L1``, before the depth left the fit). With these defaults the whole take is 0.096 /
-    0.120 (sample head / a foreign face; with the depth in the fit 0.121 / 0.145, all-zero
+    ``LANDMARK_L1``, before the depth left the fit). With these defaults the whole take is 0.093 /
+    0.118 (sample head / a foreign face; with the depth in the fit 0.121 / 0.145, all-zero
     weights 0.112); dense takes and the held-out take of other expressions move by ≤ 0.004
     either way. ``temporal`` is still chosen from the take. The registration is not kept:
     call the steps yourself to inspect it.
