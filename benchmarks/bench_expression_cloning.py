@@ -82,6 +82,17 @@ at the true correspondence the turned template normal and the template mesh's ow
 0.64 deg (median, p90 2.1; 2.4 deg against the target's interpolated normal), a slide of 0.08 % —
 the median error itself — where the surface's radius is 0.07 head; only lips, lids and nose curve
 enough. On a slid copy of the head itself it works (0.17 -> 0.07 %).
+
+Tried 2026-11-30 (evening) and not kept (60 frames; a machine busy with a test run, so set-up times
+doubled): an inverse-consistent correspondence — the target skin also fitted onto the source
+(``fit_template`` the other way, with the soft tail), inverted at the source vertices (closest point
+on the fitted target mesh, its barycentric coordinates on the target's own vertices) and averaged
+with the forward fit where both are trusted, then put back on the target surface. An elastic fit's
+bias towards the template's proportions runs the opposite way in the two directions, so the mean
+should cancel it: the 1.25x jaw 9.3 -> 8.8 % (the backward fit alone 8.9 %), the foreign face 5.16
+-> 5.05 %, the points moving by a median 0.02-0.03 % of the head — the slide is not that bias — for a
+second fit of 5 s on the jaw and 26 s on the foreign face's 16k vertices with a bust (29 % of the
+source then untrusted), past the 10 s set-up.
 """
 
 from __future__ import annotations

@@ -60,7 +60,12 @@ left out 0.087 / 0.100), jaw 0.89 / 1.10, the held-out other expressions 0.091 /
 the reading (``browDownLeft`` follows the yaw, an opening jaw at 12° reads partly as one side's
 ``mouthLowerDown``): a neutral face rendered through a near-orthographic lens (3° instead of 24°)
 shows the same (``browDownLeft`` 0.52 at +12°), so it is FaceMesh's reading of a turned face, not
-the camera's perspective. Adapting across the depth only (two planes per landmark instead of
+the camera's perspective; nor is it the head pose — the estimate is off by up to 2-3° at the turn's
+ends, but given the true pose the neutral face reads the same (``browInnerUp`` 0.63 at -12°, 0.50
+estimated) — nor the depth FaceMesh gave the brows at rest (2-8 mm in front of the rig's brow, kept
+in the rest offsets, which a turn carries into the image plane): put on the rig's surface for the
+weights' fit, ``browDownLeft`` at +12° goes 0.34 -> 0.25 and ``browInnerUp`` at -12° 0.50 -> 0.54.
+FaceMesh's landmarks on a turned face are not the frontal ones turned. Adapting across the depth only (two planes per landmark instead of
 three) lowers the fit's error across it 0.0203 -> 0.0141 but the weights get worse (0.094 -> 0.205
 by the third loop): not kept.
 
