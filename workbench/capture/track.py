@@ -54,6 +54,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from workbench.blas import one_blas_thread
 from workbench.capture.adapt import AdaptiveModel, adaptive_model
 from workbench.capture.frame_step import FrameStepper
 from workbench.capture.pose import PoseError, fit_rigid_robust
@@ -230,6 +231,11 @@ class MarkerSetup:
         self.Dh = self.D * self.marker_weights[:, None, None]  # h = Σ_m Dh_mᵀ c_m
         self.Gm = np.einsum("mck,mcl->mkl", self.Dh, self.D)  # per-marker Gram blocks s_m D_mᵀ D_m
         self.G_all = self.Gm.sum(0)
+        #: (3, 3, kp, kp) ``Σ_m s_m D_m[a]ᵀ D_m[b]`` over all markers, by coordinate pair, with a depth
+        #: axis: the Gram's part along any direction ``d`` is ``Σ_ab d_a d_b`` of them (:meth:`depth_gram`)
+        self.G_axes: NDArray[np.float64] | None = None
+        if self.depth_axis is not None:
+            self.G_axes = np.stack([np.stack([self.Dh[:, a].T @ self.D[:, b] for b in range(3)]) for a in range(3)])
 
     def depth_in_rig(self, R: NDArray[np.float64]) -> NDArray[np.float64] | None:
         """(3,) the depth axis in the rig's frame for a frame whose head rotation is ``R`` (None without one).
@@ -250,7 +256,11 @@ class MarkerSetup:
         ``P`` symmetric and idempotent, it and the targets projected by :meth:`across`
         (``h = Σ_m s_m D_mᵀ P c_m``) fit each marker's offset across ``d`` only.
         """
-        E = np.einsum("c,mck->mk", d, self.D if sel is None else self.D[sel])  # (m_sel, kp)
+        kp = self.D.shape[2]
+        if sel is None and self.G_axes is not None:  # every marker: 9 blocks summed, not m rows
+            return np.asarray((np.outer(d, d).reshape(9) @ self.G_axes.reshape(9, kp * kp)).reshape(kp, kp))
+        D = self.D if sel is None else self.D[sel]
+        E = D[:, 0] * d[0] + D[:, 1] * d[1] + D[:, 2] * d[2]  # (m_sel, kp): each row along d
         s = self.marker_weights if sel is None else self.marker_weights[sel]
         return np.asarray((E * s[:, None]).T @ E)
 
@@ -497,37 +507,39 @@ def track_markers(
             f"(at most {int(visible.sum(1).max())} of {m})"
         )
 
-    choice = None
-    if l1_given is None or temporal_given is None:
-        from workbench.capture.lambdas import choose_lambdas
+    # per frame small dense blocks (kp × kp): BLAS threads only wait for busy cores (workbench.blas)
+    with one_blas_thread():
+        choice = None
+        if l1_given is None or temporal_given is None:
+            from workbench.capture.lambdas import choose_lambdas
 
-        if progress is not None:
-            progress(0.0, "choosing λ₁, λ₂ from held-out markers")
-        mpu = float(getattr(getattr(model, "metadata", None), "metres_per_unit", 1.0) or 1.0)
-        choice = choose_lambdas(setup, Y, visible, good, metres_per_unit=mpu, fix_l1=l1_given,
-                                fix_temporal=temporal_given, iterations=int(iterations))
-        l1_, temporal_ = choice.l1, choice.temporal
-        setup.solver.l1 = l1_ * setup.ref
-        setup.solver.temporal = temporal_ * setup.ref
+            if progress is not None:
+                progress(0.0, "choosing λ₁, λ₂ from held-out markers")
+            mpu = float(getattr(getattr(model, "metadata", None), "metres_per_unit", 1.0) or 1.0)
+            choice = choose_lambdas(setup, Y, visible, good, metres_per_unit=mpu, fix_l1=l1_given,
+                                    fix_temporal=temporal_given, iterations=int(iterations))
+            l1_, temporal_ = choice.l1, choice.temporal
+            setup.solver.l1 = l1_ * setup.ref
+            setup.solver.temporal = temporal_ * setup.ref
 
-    kp = space.plain.size
-    W = np.zeros((T, kp))
-    poses = np.tile(np.eye(4), (T, 1, 1))
-    errors = np.full(T, np.nan)
-    flags = [""] * T
-    stepper = FrameStepper(setup, int(iterations), am, rows)
-    every = max(1, T // 100)
-    first = int(np.argmax(good))
-    for f in range(T):
-        if progress is not None and f % every == 0:
-            progress(f / T, f"tracking frame {f + 1} of {T}")
-        if not good[f]:
-            flags[f] = FLAG_HELD
-            if f > first:  # hold the previous frame
-                W[f], poses[f] = W[f - 1], poses[f - 1]
-                stepper.hold(W[f])
-            continue
-        W[f], poses[f], errors[f], flags[f] = stepper.step(Y[f], visible[f])
+        kp = space.plain.size
+        W = np.zeros((T, kp))
+        poses = np.tile(np.eye(4), (T, 1, 1))
+        errors = np.full(T, np.nan)
+        flags = [""] * T
+        stepper = FrameStepper(setup, int(iterations), am, rows)
+        every = max(1, T // 100)
+        first = int(np.argmax(good))
+        for f in range(T):
+            if progress is not None and f % every == 0:
+                progress(f / T, f"tracking frame {f + 1} of {T}")
+            if not good[f]:
+                flags[f] = FLAG_HELD
+                if f > first:  # hold the previous frame
+                    W[f], poses[f] = W[f - 1], poses[f - 1]
+                    stepper.hold(W[f])
+                continue
+            W[f], poses[f], errors[f], flags[f] = stepper.step(Y[f], visible[f])
     sweeps = stepper.sweeps
     # frames before the first solvable one take its values
     W[:first], poses[:first] = W[first], poses[first]
