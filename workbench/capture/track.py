@@ -187,9 +187,8 @@ class MarkerSetup:
         s2 = space.size**2
         self.norm = 1.0 / s2
         # the λ scale: an average shape's squared norm per (weighted) marker, in head sizes², fixed for the take;
-        # the trace of the unprojected Gram, Σ_m s_m ||D_m||², so an l1 means the same with a depth axis as without
-        ref = float(self.marker_weights @ np.einsum("mck,mck->m", self.D, self.D)) / max(kp, 1) \
-            / max(self.fit_weight(), 1e-300) * self.norm
+        # the trace of the Gram (all three coordinates, Σ_m s_m ||D_m||²), so an l1 means the same with a depth axis
+        ref = float(np.trace(self.G_all)) / max(kp, 1) / max(self.fit_weight(), 1e-300) * self.norm
         self.ref = ref if ref > 0 else 1.0
         self.solver = WeightSolver(space.lo, space.hi, l1=l1 * self.ref, temporal=temporal * self.ref,
                                    relative=False, tol=1e-6 * math.sqrt(self.ref))
