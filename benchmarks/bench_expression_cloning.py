@@ -93,6 +93,16 @@ should cancel it: the 1.25x jaw 9.3 -> 8.8 % (the backward fit alone 8.9 %), the
 -> 5.05 %, the points moving by a median 0.02-0.03 % of the head — the slide is not that bias — for a
 second fit of 5 s on the jaw and 26 s on the foreign face's 16k vertices with a bust (29 % of the
 source then untrusted), past the 10 s set-up.
+
+Where the slide sits (2026-11-30, night; foreign face, 40 frames, the correspondence replaced by the
+generator's exact one for a second run): clone error 5.6 -> 3.7 %; the fitted template is off by a
+median 0.12 % of the head (p90 0.54 %), its largest slides (top 10 %) mostly over the target's holes
+(the mouth bag, the eye sockets), where no target vertex reads them; the extra error is only mildly
+concentrated at the mouth and eye borders (the 21 % of target vertices within 1 % of the diagonal of
+a border hold 31 % of it), so a border-to-border term (the template's over-holes outline pulled onto
+the target's hole borders) would reach a third of it at most; not built. The same slide limits §5.4
+on this face (``bench_detail_transfer.py``: squint 0.69 -> 0.94, brow down 0.81 -> 0.93 with the
+exact correspondence).
 """
 
 from __future__ import annotations
