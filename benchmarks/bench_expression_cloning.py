@@ -99,8 +99,9 @@ generator's exact one for a second run): clone error 5.6 -> 3.7 %; the fitted te
 median 0.12 % of the head (p90 0.54 %), its largest slides (top 10 %) mostly over the target's holes
 (the mouth bag, the eye sockets), where no target vertex reads them; the extra error is only mildly
 concentrated at the mouth and eye borders (the 21 % of target vertices within 1 % of the diagonal of
-a border hold 31 % of it), so a border-to-border term (the template's over-holes outline pulled onto
-the target's hole borders) would reach a third of it at most; not built. The same slide limits §5.4
+a border hold 31 % of it). As an upper bound on a border-to-border term (the template's over-holes
+outline pulled onto the target's hole borders), the template vertices within 1 % / 2 % / 4 % of the head
+of a target border put at their exact places, the rest as fitted: 5.6 -> 5.4 / 5.3 / 4.8 %; not built. The same slide limits §5.4
 on this face (``bench_detail_transfer.py``: squint 0.69 -> 0.94, brow down 0.81 -> 0.93 with the
 exact correspondence).
 """
