@@ -110,7 +110,8 @@ def main() -> None:
         st = transfer_pose_space(head, A, dm)
         t_printed = time.perf_counter() - t0
         # direct: the true detailed examples fitted on the target, on its true shapes under the template's names
-        true = [BlendShape(sh.name, face.truth(sh.name).astype(np.float32), sh.slider_min, sh.slider_max)
+        truth = {sh.name: face.truth(sh.name) for sh in head.shapes}
+        true = [BlendShape(sh.name, truth[sh.name].astype(np.float32), sh.slider_min, sh.slider_max)
                 for sh in head.shapes]
         D = bare(face.model, shapes=true)
         D.handles.set(HandleSet(st.handles))
@@ -123,7 +124,7 @@ def main() -> None:
             warped_example = face.warp(face.points + face.W @ (detailed - head.vertices))
             ex[n] = (w, warped_example)
             # the same detail on the target's own blend of the same weights (see the module docstring)
-            blend = rest + sum(float(v) * face.truth(k) for k, v in w.items())
+            blend = rest + sum(float(v) * truth[k] for k, v in w.items())
             exc[n] = (w, blend + (warped_example - face.pose(w)))
         D.wrinkles.fit(ex)
         C.wrinkles.fit(exc)

@@ -7,6 +7,7 @@ import pytest
 
 import workbench
 from workbench.animation.baked_frames import baked_frames_model
+from workbench.core.shapes import BlendShape
 from workbench.geometry.masks import skin_or_all_mask
 from workbench.methods.handles.handle_set import HandleSet
 from workbench.methods.wrinkles.family import fit_sample_wrinkles
@@ -16,9 +17,10 @@ from workbench.testing import random_warp, remeshed, renumbered, sample_head_war
 from workbench.testing.takes import realistic_weights
 
 
-def _bare(m: FaceModel) -> FaceModel:
-    return FaceModel(m.vertices, m.faces, list(m.shapes), polygons=m.polygons, component_labels=m.component_labels,
-                     component_names=list(m.component_names), metadata=m.metadata)
+def _bare(m: FaceModel, shapes=None) -> FaceModel:
+    return FaceModel(m.vertices, m.faces, list(m.shapes if shapes is None else shapes), polygons=m.polygons,
+                     component_labels=m.component_labels, component_names=list(m.component_names),
+                     metadata=m.metadata)
 
 
 def _details(m: FaceModel, names, w) -> np.ndarray:
@@ -29,6 +31,14 @@ def _details(m: FaceModel, names, w) -> np.ndarray:
 
 def _corr(a, b, mask) -> float:
     return float(np.corrcoef(a[mask].ravel(), b[mask].ravel())[0, 1])
+
+
+def _with_detail(D: FaceModel, names, W):
+    """``(weights, D's details)`` at each pose of ``W`` where D has any detail."""
+    for w in W:
+        d = _details(D, names, w)
+        if np.abs(d).max() > 0:
+            yield w, d
 
 
 @pytest.fixture(scope="module")
@@ -49,25 +59,16 @@ def _direct(head, face, nodes, *, on_blend: bool = False) -> FaceModel:
     blend plus detail; otherwise the whole warped example, whose large-scale shape the target's
     linear blend misses where the warp bends a large motion (that miss is then fitted as detail).
     """
-    names = list(head.shape_names)
-    shapes = None
-    if on_blend:
-        from workbench.core.shapes import BlendShape
-
-        shapes = [BlendShape(n, face.truth(n).astype(np.float32)) for n in names]
-    D = _bare(face.model) if shapes is None else FaceModel(
-        face.model.vertices, face.model.faces, shapes, polygons=face.model.polygons,
-        component_labels=face.model.component_labels, component_names=list(face.model.component_names),
-        metadata=face.model.metadata)
+    truth = {n: face.truth(n) for n in head.shape_names} if on_blend else {}
+    D = _bare(face.model, [BlendShape(n, d.astype(np.float32)) for n, d in truth.items()] if on_blend else None)
     D.handles.set(HandleSet(nodes))
     fac = head.wrinkles
-    rest = np.asarray(face.model.vertices, np.float64)
     ex = {}
     for n, w in zip(fac.example_names, fac.example_weights, strict=True):
         _, detailed = fac.example_detailed(n)
         example = face.warp(face.points + face.W @ (detailed - head.vertices))
         if on_blend:
-            blend = rest + sum(float(v) * face.truth(k) for k, v in w.items())
+            blend = face.model.vertices + sum(float(v) * truth[k] for k, v in w.items())
             example = blend + (example - face.pose(w))
         ex[n] = (w, example)
     D.wrinkles.fit(ex)
@@ -87,10 +88,7 @@ def test_transferred_details_match_the_details_fitted_on_the_warped_face(setup) 
     skin = skin_or_all_mask(face.model)
     names = list(head.shape_names)
     printed, refit = [], []
-    for w in W:
-        d = _details(D, names, w)
-        if np.abs(d).max() == 0:
-            continue
+    for w, d in _with_detail(D, names, W):
         printed.append(_corr(_details(A, names, w), d, skin))
         refit.append(_corr(_details(E, names, w), d, skin))
     assert len(printed) >= 3
@@ -109,10 +107,7 @@ def test_details_carried_onto_a_remeshed_face_match_the_details_fitted_there(set
     skin = skin_or_all_mask(face.model)
     names = list(head.shape_names)
     r, amp = [], []
-    for w in W:
-        d = _details(D, names, w)
-        if np.abs(d).max() == 0:
-            continue
+    for w, d in _with_detail(D, names, W):
         a = _details(A, names, w)
         r.append(_corr(a, d, skin))
         amp.append(np.linalg.norm(a[skin]) / np.linalg.norm(d[skin]))
