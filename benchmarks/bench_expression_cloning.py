@@ -104,6 +104,26 @@ outline pulled onto the target's hole borders), the template vertices within 1 %
 of a target border put at their exact places, the rest as fitted: 5.6 -> 5.4 / 5.3 / 4.8 %; not built. The same slide limits §5.4
 on this face (``bench_detail_transfer.py``: squint 0.69 -> 0.94, brow down 0.81 -> 0.93 with the
 exact correspondence).
+
+What the fitted correspondence costs, split (2026-11-30, late; 40 frames, each part's share of the
+whole face's error over the mean motion): on the foreign face the skin holds 3.95 of the 5.6 %, the
+tongue 0.68, the eyes 0.57, the teeth 0.17; on the 1.25x jaw the skin 6.4 of 8.9 %, the tongue 1.7,
+the lower teeth 0.3. Reading the motion at the exact source points with the same field lowers the
+skin only to 3.7 / 5.6 % (the parts not at all); the true warp's Jacobian at those points gives 0.45
+/ 0.74 % — so it is the field's Jacobian, fitted through a slid correspondence, that carries most of
+the error, not where the motion is read. Inside a grown region it under-scales: on the jaw face the
+field's Jacobian has 0.74 of the true determinant in the tongue and teeth (a linear 0.90) and 0.90
+in the eyes, as the fitted skin's edges come out short there. Tried and not kept: each matched part
+registered on its own (the field's prediction of the template part, then 10-30 steps of trimmed
+affine ICP onto the target part) to fit the part's interior instead of extrapolating the skin's field
+there — the ICP leaves the scale where the field put it (the tongue's determinant 1.419 -> 1.420: a
+smaller tongue slides on the target's open tongue sheet), and as extra field centres for the parts'
+Jacobians it gives 8.9 -> 8.7 % on the jaw and 5.6 -> 6.0 % on the foreign face; the part's affine
+map alone, 9.2 %. Nor the field fitted where the correspondence has a grip along the surface (the
+data term is point-to-plane, so a flat stretch slides freely): centres only where the template's mean
+curvature is above its 50th / 70th percentile take the foreign face 5.6 -> 5.33 / 5.26 % (the flat
+ones kept as point-to-plane rows of a hand-solved spline, 5.27 %: no better than leaving them out) but
+the jaw 8.9 -> 9.4 / 9.7 % (11.9 % at the 90th): a grown chin is flat, and its scale is in those points.
 """
 
 from __future__ import annotations
