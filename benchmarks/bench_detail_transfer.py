@@ -121,7 +121,7 @@ def main() -> None:
         rest = np.asarray(face.model.vertices, np.float64)
         for n, w in zip(fac.example_names, fac.example_weights, strict=True):
             _, detailed = fac.example_detailed(n)
-            warped_example = face.warp(face.points + face.W @ (detailed - head.vertices))
+            warped_example = face.displaced(detailed - head.vertices)
             ex[n] = (w, warped_example)
             # the same detail on the target's own blend of the same weights (see the module docstring)
             blend = rest + sum(float(v) * truth[k] for k, v in w.items())

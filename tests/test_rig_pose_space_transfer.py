@@ -66,7 +66,7 @@ def _direct(head, face, nodes, *, on_blend: bool = False) -> FaceModel:
     ex = {}
     for n, w in zip(fac.example_names, fac.example_weights, strict=True):
         _, detailed = fac.example_detailed(n)
-        example = face.warp(face.points + face.W @ (detailed - head.vertices))
+        example = face.displaced(detailed - head.vertices)
         if on_blend:
             blend = face.model.vertices + sum(float(v) * truth[k] for k, v in w.items())
             example = blend + (example - face.pose(w))

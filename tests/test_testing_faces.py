@@ -209,6 +209,10 @@ def test_true_shapes_poses_and_places_agree(head: FaceModel, face: GeneratedFace
     both = face.pose({"jawOpen": 0.5, "eyeBlinkLeft": 1.0})
     p = face.points + face.W @ (0.5 * head.shape("jawOpen").delta + head.shape("eyeBlinkLeft").delta)
     np.testing.assert_allclose(both, face.warp(p), atol=1e-9)
+    # a whole source mesh carried over is the pose of the same displacement
+    sculpt = head.vertices + 0.5 * head.shape("jawOpen").delta + head.shape("eyeBlinkLeft").delta
+    np.testing.assert_allclose(face.displaced(sculpt - head.vertices), both, atol=1e-9)
+    np.testing.assert_allclose(face.displaced(np.zeros_like(head.vertices)), m.vertices, atol=1e-12)
     tip = int(np.argmax(head.vertices[:, 2]))
     np.testing.assert_allclose(face.place([tip]), face.warp(head.vertices[[tip]]))
     assert face.on_source.all()

@@ -113,6 +113,14 @@ class GeneratedFace:
         d = self.W @ _delta(self.source.shape(name))
         return np.asarray(self.warp(self.points + d) - self.warp(self.points))
 
+    def displaced(self, displacement: ArrayLike) -> NDArray[np.float64]:
+        """``(n, 3)``: this face with a source displacement ``(n_source, 3)`` on it, pushed through the warp.
+
+        A whole source mesh ``M`` (a sculpted or detailed pose) is ``displaced(M - source.vertices)``.
+        """
+        d = np.asarray(displacement, np.float64)
+        return np.asarray(self.warp(self.points + self.W @ d))
+
     def pose(self, weights: Mapping[str, float]) -> NDArray[np.float64]:
         """``(n, 3)``: the true mesh of this face with source shapes at ``weights`` (summed before the warp)."""
         d = np.zeros_like(self.points)
