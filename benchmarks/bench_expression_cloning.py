@@ -124,6 +124,19 @@ data term is point-to-plane, so a flat stretch slides freely): centres only wher
 curvature is above its 50th / 70th percentile take the foreign face 5.6 -> 5.33 / 5.26 % (the flat
 ones kept as point-to-plane rows of a hand-solved spline, 5.27 %: no better than leaving them out) but
 the jaw 8.9 -> 9.4 / 9.7 % (11.9 % at the 90th): a grown chin is flat, and its scale is in those points.
+
+The skin's error by the direction of the source motion (2026-11-30, night; 40 frames, every third
+target skin vertex; the field's Jacobian against the warp's, on the source motion split along and
+across the source normal, each part over the mean true motion): with the fitted correspondence the
+foreign face's skin is 4.75 % (motion along the normal alone 3.65 %, along the surface 2.2 %; the two
+do not add), the jaw's 7.1 % (5.2 / 3.9 %). With the generator's exact correspondence the foreign
+face falls to 1.75 % (1.5 / 0.8 %) but the jaw only to 4.2 % (3.95 / 1.9 %): the field maps the jaw
+face's normal 4.3 % off the warp's (median; 1.3 % on the foreign face). How a warp stretches space
+*across* a surface is not in any pair of surfaces — only a 3D warp has it, and a face has no such
+truth — and on the 1.25x jaw the exact correspondence leaves the whole face at 5.6 % (4.7 % at the
+field's least smoothing; above), which leaves a fitted one almost no room under the 5 %. Not kept: the normal's image rescaled to the field's own
+tangential area scale (the warp's normal stretch over its tangential one is 1.016, p10-p90 0.92-1.07,
+so the guess is no better): the skin 7.1 -> 7.4 % on the jaw, 4.75 -> 4.5 % on the foreign face.
 """
 
 from __future__ import annotations
