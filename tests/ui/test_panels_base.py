@@ -177,6 +177,32 @@ def test_listen_guards_and_close_disconnects_exactly_once(tiny_model) -> None:
     assert len(p.seen) == seen
 
 
+def test_link_and_observe_trait_hold_until_close(tiny_model) -> None:
+    out = W.Output()
+    p = _Panel(tiny_model, errors=out)
+    a, b, other = W.FloatSlider(value=0.1), W.FloatSlider(value=0.7), W.Checkbox(value=False)
+    p.link((a, "value"), (b, "value"))
+    assert b.value == 0.1  # the source's value wins, as traitlets.link does
+    b.value = 0.4
+    assert a.value == 0.4
+    seen: list[bool] = []
+
+    def slot(change) -> None:
+        seen.append(change["new"])
+        if change["new"] is False:
+            raise ValueError("bad tick")
+
+    p.observe_trait(other, slot, "value", "test tick")
+    other.value = True
+    other.value = False  # raises inside the slot: reported, not raised into the trait's notify
+    assert seen == [True, False]
+    assert "[test tick]" in _errors(out) and "ValueError" in _errors(out)
+    p.close()
+    a.value = 0.9
+    other.value = True
+    assert b.value == 0.4 and seen == [True, False]  # both let go on close
+
+
 def test_close_runs_every_teardown_even_if_one_raises(tiny_model) -> None:
     m = tiny_model
     before = _counts(m)

@@ -8,7 +8,8 @@ repeat:
   and the ``before_edit`` callables (another panel's slider burst, the
   viewport's open drag or stroke) that end before a whole-model edit;
 * :meth:`listen`: connect a model event to a slot guarded by the error sink,
-  and :meth:`on_close` for any other teardown (viewport links, listener lists,
+  :meth:`link` and :meth:`observe_trait` for another widget's traits (the
+  viewport's brush, tool), and :meth:`on_close` for any other teardown (viewport links, listener lists,
   progress callbacks); :meth:`close` undoes all of it exactly once, last in
   first out, then closes the widget;
 * :meth:`flush` (end every open interaction, then the ``before_edit``
@@ -25,6 +26,7 @@ from collections.abc import Callable, Iterable
 from typing import Any, TypeVar
 
 import ipywidgets as W
+import traitlets
 
 from widgets._threading import ErrorSink, close_interactions
 from widgets.panels.undo_redo import UndoRedoButtons
@@ -122,6 +124,20 @@ class ModelPanel(W.VBox):
         guarded = self.errors.guard(what)(slot)
         listeners.append(guarded)
         self.on_close(_remove, listeners, guarded)
+        return guarded
+
+    def link(self, source: tuple[Any, str], target: tuple[Any, str]) -> None:
+        """Keep two traits equal (``traitlets.link``) until :meth:`close`."""
+        self.on_close(traitlets.link(source, target).unlink)
+
+    def observe_trait(self, obj: Any, slot: Callable[..., Any], name: str, what: str) -> Callable[..., Any]:
+        """Observe trait ``name`` of ``obj`` with ``slot`` (guarded under ``what``) until :meth:`close`.
+
+        Returns the guarded slot that was connected.
+        """
+        guarded = self.errors.guard(what)(slot)
+        obj.observe(guarded, name)
+        self.on_close(obj.unobserve, guarded, name)
         return guarded
 
     def on_close(self, fn: Callable[..., Any], *args: Any) -> None:

@@ -39,7 +39,6 @@ from typing import Any
 
 import ipywidgets as W
 import numpy as np
-import traitlets as t
 
 from widgets._threading import InteractionGrouper
 from widgets.gallery import ExpressionGallery
@@ -274,15 +273,11 @@ class PaintPanel(ModelPanel):
         self.gallery.on_select(cb_select)
         self.on_close(self.gallery.on_select, cb_select, True)  # remove=True
         if viewport is not None:
-            for link in (
-                t.link((self.radius, "value"), (viewport, "brush_radius")),
-                t.link((self.opacity, "value"), (viewport, "brush_opacity")),
-                t.link((self.falloff, "value"), (viewport, "brush_falloff")),
-                t.link((self.mode, "value"), (viewport, "brush_mode")),
-                t.link((self.mirror, "value"), (viewport, "brush_mirror")),
-                t.link((self.overlay, "value"), (viewport.tools["paint"], "overlay")),
-            ):
-                self.on_close(link.unlink)
+            for trait, viewport_trait in (("radius", "brush_radius"), ("opacity", "brush_opacity"),
+                                          ("falloff", "brush_falloff"), ("mode", "brush_mode"),
+                                          ("mirror", "brush_mirror")):
+                self.link((getattr(self, trait), "value"), (viewport, viewport_trait))
+            self.link((self.overlay, "value"), (viewport.tools["paint"], "overlay"))
             self.add_listener(
                 viewport.stroke_listeners, self._on_stroke_end, "PaintPanel stroke stats"
             )

@@ -26,7 +26,6 @@ from collections.abc import Callable, Iterable
 from typing import Any
 
 import ipywidgets as W
-import traitlets as t
 
 from widgets.panels.base import ModelPanel, button
 from widgets.panels.names import next_free_name
@@ -163,11 +162,8 @@ class SculptPanel(ModelPanel):
         self.k_s.observe(g("k_s")(self._on_stiffness), "value")
         self.k_b.observe(g("k_b")(self._on_stiffness), "value")
         if viewport is not None:
-            for link in (
-                t.link((self.symmetric, "value"), (viewport, "symmetric")),
-                t.link((self.add_on_click, "value"), (viewport, "add_on_click")),
-            ):
-                self.on_close(link.unlink)
+            self.link((self.symmetric, "value"), (viewport, "symmetric"))
+            self.link((self.add_on_click, "value"), (viewport, "add_on_click"))
             self.add_listener(viewport.drag_listeners, self._on_drag_end, "SculptPanel drag stats")
         ev = model.events
         self.listen(ev.handles, self._on_model_handles, "SculptPanel handles")

@@ -42,7 +42,6 @@ from typing import Any
 
 import ipywidgets as W
 import numpy as np
-import traitlets as t
 from numpy.typing import NDArray
 
 from widgets.panels.base import ModelPanel, button
@@ -212,14 +211,9 @@ class WrinklePanel(ModelPanel):
         self.enabled.observe(g("wrinkles on/off")(self._on_enabled), "value")
         self.strength.observe(g("wrinkle strength")(self._on_strength), "value")
         if viewport is not None:
-            for link in (
-                t.link((self.show_graph, "value"), (viewport, "feature_graph")),
-                t.link((self.erase_radius, "value"), (viewport, "brush_radius")),
-            ):
-                self.on_close(link.unlink)
-            cb_tool = g("WrinklePanel tool")(self._erase.on_tool)
-            viewport.observe(cb_tool, "tool")
-            self.on_close(viewport.unobserve, cb_tool, "tool")
+            self.link((self.show_graph, "value"), (viewport, "feature_graph"))
+            self.link((self.erase_radius, "value"), (viewport, "brush_radius"))
+            self.observe_trait(viewport, self._erase.on_tool, "tool", "WrinklePanel tool")
             self.add_listener(viewport.drag_listeners, self._on_drag_end, "WrinklePanel drag stats")
         ev = model.events
         self.listen(ev.wrinkles, self._on_wrinkles, "WrinklePanel wrinkles")

@@ -255,9 +255,7 @@ class ShapeToolsPanel(_ShapeActions):
         self.listen(ev.expressions, self._refresh_expressions, "ShapeToolsPanel expressions")
         self.listen(ev.paint_layers, self._refresh_paint, "ShapeToolsPanel paint")
         if sliders is not None:
-            follow = g("shape tools: follow the sliders")(self._on_slider_selected)
-            sliders.observe(follow, "selected")
-            self.on_close(sliders.unobserve, follow, "selected")
+            self.observe_trait(sliders, self._on_slider_selected, "selected", "shape tools: follow the sliders")
         self.on_close(self.end_preview)  # first on close: the viewport gets its colours back
         self._refresh_shapes()
         self._refresh_expressions()
