@@ -74,6 +74,19 @@ adapting further would have to learn (and that costs the weights, 0.074 -> 0.147
 three) lowers the fit's error across it 0.0203 -> 0.0141 but the weights get worse (0.094 -> 0.205
 by the third loop): not kept.
 
+Table 3's error split (2026-11-30, night; the same three loops, the residual before each frame's
+adaptation, means over the last loop): in 3D / in the image plane (across FaceMesh's depth, what the
+weights are fitted on), the warped actor not adapting 0.0354 / 0.0200 and adapting every 5th frame
+0.0199 / 0.0147 (1.78x / 1.36x); the rig's own face 0.0321 / 0.0200 and 0.0188 / 0.0145 (1.71x /
+1.38x). Adapting lowers the rig's own face's error as much as the actor's: what the correctives learn
+is FaceMesh's misfit (most of it the depth FaceMesh gives), not the actor's identity, which adds
+0.003 in 3D and nothing in the plane. The first ten frames (the face at rest) are at 0.017 / 0.014
+either way; the error grows with the expression. The foreign face (table 4's, rendered playing this
+short take) differs more from the rig: 0.0422 / 0.0250 not adapting, 0.0230 / 0.0197 adapting (1.83x
+/ 1.27x), and the weights get worse for it (RMSE 0.135 -> 0.146, the jaw's peak 0.86 -> 0.78). So the
+2x the issue asks of adaptation is not reached through FaceMesh on either actor: what adapting can
+learn is mostly the detector's own misfit, and the actor's identity little above it.
+
 Measured 2026-11-30 (afternoon), with the registration putting each inner-lip landmark on its own
 lip (8 of the 9 pairs had shared one vertex), the weights fitted across FaceMesh's depth
 (``LandmarkRegistration.view_axis``) and the face's outline weighing 0.03: table 1, 11.4 ms a frame
