@@ -85,7 +85,11 @@ either way; the error grows with the expression. The foreign face (table 4's, re
 short take) differs more from the rig: 0.0422 / 0.0250 not adapting, 0.0230 / 0.0197 adapting (1.83x
 / 1.27x), and the weights get worse for it (RMSE 0.135 -> 0.146, the jaw's peak 0.86 -> 0.78). So the
 2x the issue asks of adaptation is not reached through FaceMesh on either actor: what adapting can
-learn is mostly the detector's own misfit, and the actor's identity little above it.
+learn is mostly the detector's own misfit, and the actor's identity little above it. Not kept:
+adapting along the camera's axis only (one plane per landmark; the weights are fitted across it, so
+it should not cost them, and the actor's longer nose and chin lie mostly along it): the warped
+actor's 3D error 0.0354 -> 0.0255 (1.39x; the plane's 0.0200 -> 0.0225), the weights' RMSE 0.094 ->
+0.102 by the third loop (0.143 over the first) — the head pose, fitted in 3D, moves with it.
 
 Measured 2026-11-30 (afternoon), with the registration putting each inner-lip landmark on its own
 lip (8 of the 9 pairs had shared one vertex), the weights fitted across FaceMesh's depth
