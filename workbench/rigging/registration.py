@@ -64,9 +64,9 @@ DEFAULT_SCHEDULE: tuple[tuple[float, int], ...] = (
 #: spread down to a smoothing length of ~1e-3 head (0.5 mm). Chosen on five held-out faces (other
 #: warps, proportions, a remesh, two foreign faces): cloning error 5.0 -> 4.2 % of the motion on
 #: average (each face: 2.4 -> 2.0, 6.9 -> 5.9, 4.1 -> 4.3, 6.1 -> 4.3, 5.6 -> 4.4 %; two stages of
-#: 10 steps, 1e-8 and 3e-9, before); going on to 1e-12, changing ``eps`` or three times the steps
-#: (the jaw face 8.9 -> 9.0 %, the foreign face 5.60 -> 5.59 %, twice the set-up) gained nothing more, and
-#: the set-up time is unchanged (the same number of factorisations). What it does not change: a
+#: 10 steps, 1e-8 and 3e-9, before), at the same set-up time (the same number of factorisations).
+#: Going on to 1e-12, changing ``eps`` or three times the steps (the jaw face 8.9 -> 9.0 %, the foreign
+#: face 5.60 -> 5.59 %, twice the set-up) gained nothing more. What it does not change: a
 #: grown part's stretch — a 1.25x jaw's edges come out 0.96-0.97 of their true length, the shrunk
 #: side's 1.03 (the bending, not the data, places a vertex along the surface).
 FINE_SCHEDULE: tuple[tuple[float, int], ...] = (
