@@ -41,7 +41,8 @@ CHROMIUM_ARGS = [
     "--disable-sync",
     "--no-first-run",
 ]
-# Test-only JupyterLab settings on top of the shipped overrides: no news/update pop-ups.
+# On top of whichever settings file a test starts from (the shipped overrides have them too): no
+# news/update pop-ups.
 TEST_SETTINGS = {
     "@jupyterlab/apputils-extension:notification": {
         "fetchNews": "false",

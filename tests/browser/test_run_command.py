@@ -153,6 +153,9 @@ def test_run_command_opens_the_workbench_notebook(keep_notebook, run_command, br
         head = nb.canvas_shot("workbench_drawn")
         # a drawn, shaded head, not an empty canvas: many distinct grey levels
         assert len(np.unique(head[..., :3].reshape(-1, 3) // 8, axis=0)) > 50
+        # JupyterLab asks for news consent in a toast over the tabs a few seconds after it opens
+        # (shown by now without the run command's overrides.json); the workbench's lab asks nothing
+        assert page.get_by_text("Jupyter news").count() == 0
     except Exception:
         # what the user would have seen, the cells' state and the page's console, for the diagnosis
         with contextlib.suppress(Exception):
