@@ -9,8 +9,8 @@ repeat:
   viewport's open drag or stroke) that end before a whole-model edit;
 * :meth:`listen`: connect a model event to a slot guarded by the error sink,
   :meth:`link` and :meth:`observe_trait` for another widget's traits (the
-  viewport's brush, tool), and :meth:`on_close` for any other teardown (viewport links, listener lists,
-  progress callbacks); :meth:`close` undoes all of it exactly once, last in
+  viewport's brush, tool), and :meth:`on_close` for any other teardown (listener
+  lists, progress callbacks); :meth:`close` undoes all of it exactly once, last in
   first out, then closes the widget;
 * :meth:`flush` (end every open interaction, then the ``before_edit``
   callables), :meth:`undo` / :meth:`redo` after it, and

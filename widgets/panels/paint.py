@@ -273,10 +273,10 @@ class PaintPanel(ModelPanel):
         self.gallery.on_select(cb_select)
         self.on_close(self.gallery.on_select, cb_select, True)  # remove=True
         if viewport is not None:
-            for trait, viewport_trait in (("radius", "brush_radius"), ("opacity", "brush_opacity"),
-                                          ("falloff", "brush_falloff"), ("mode", "brush_mode"),
-                                          ("mirror", "brush_mirror")):
-                self.link((getattr(self, trait), "value"), (viewport, viewport_trait))
+            for control, brush_trait in ((self.radius, "brush_radius"), (self.opacity, "brush_opacity"),
+                                         (self.falloff, "brush_falloff"), (self.mode, "brush_mode"),
+                                         (self.mirror, "brush_mirror")):
+                self.link((control, "value"), (viewport, brush_trait))
             self.link((self.overlay, "value"), (viewport.tools["paint"], "overlay"))
             self.add_listener(
                 viewport.stroke_listeners, self._on_stroke_end, "PaintPanel stroke stats"

@@ -123,10 +123,10 @@ class GeneratedFace:
 
     def pose(self, weights: Mapping[str, float]) -> NDArray[np.float64]:
         """``(n, 3)``: the true mesh of this face with source shapes at ``weights`` (summed before the warp)."""
-        d = np.zeros_like(self.points)
+        d = np.zeros((self.source.n_vertices, 3))
         for name, w in weights.items():
-            d += self.W @ (float(w) * _delta(self.source.shape(name)))
-        return np.asarray(self.warp(self.points + d))
+            d += float(w) * _delta(self.source.shape(name))
+        return self.displaced(d)
 
     def place(self, source_vertices: ArrayLike) -> NDArray[np.float64]:
         """``(k, 3)``: where source vertices really are on this face (its warp of them)."""
