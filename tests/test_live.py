@@ -175,8 +175,11 @@ def test_a_guided_calibration_restores_the_amplitude_and_quiets_the_rest(frames)
     truth[:, names.index("eyeBlinkLeft")] = truth[:, names.index("eyeBlinkRight")] = BLINK
     jaw = names.index("jawOpen")
     takes = {}
-    for calibrate in (False, True):
+    for calibrate in (False, True, "after an open jaw"):
         with LiveTracker(model) as live:
+            if calibrate == "after an open jaw":  # the camera started on the open jaw, then the session
+                for f, img in enumerate(F[-5:]):
+                    live.push(img, -1.0 + f / 10.0)
             if calibrate:
                 with pytest.raises(VideoError, match="begin_calibration"):
                     live.end_calibration()
@@ -186,19 +189,58 @@ def test_a_guided_calibration_restores_the_amplitude_and_quiets_the_rest(frames)
                 assert got[0].prompt == prompts[0].instruction and got[15].prompt == prompts[1].instruction
                 assert [got[0].prompt_index, got[15].prompt_index] == [0, 1]
                 assert live.calibrating  # the last prompt's time is not over yet
+                # the neutral comes from the relax prompt's later half, as its first frame after it says
+                assert got[12].note.startswith("neutral set from the relax prompt: registered"), got[12].note
+                assert live.neutral_at_ == (0.6, 1.1)
             after = [live.push(img, 10.0 + f / 30.0) for f, img in enumerate(F)]
         if calibrate:
             assert not live.calibrating and after[0].note.startswith("calibrated: 2 expressions held")
             assert after[1].prompt == "" and after[1].prompt_index == -1 and live.calibration_ is not None
         takes[calibrate] = np.array([g.weights for g in after])
-    raw, cal = takes[False], takes[True]
+    raw, cal, late = takes[False], takes[True], takes["after an open jaw"]
     err = {k: float(np.sqrt(np.mean((W - truth) ** 2))) for k, W in takes.items()}
     print("jaw peak raw / calibrated", raw[:, jaw].max(), cal[:, jaw].max(), "RMSE", err)
     assert abs(raw[:, jaw].max() - 1.0) <= 0.15 and abs(cal[:, jaw].max() - 1.0) <= 0.15, (raw[:, jaw].max(),
                                                                                            cal[:, jaw].max())
     assert err[True] < 0.85 * err[False], err  # measured 0.068 -> 0.051
+    # the session mended the start: as good as calibrated from a relaxed one (measured 0.050)
+    assert err["after an open jaw"] < err[True] + 0.02 and abs(late[:, jaw].max() - 1.0) <= 0.15, err
     lo, hi = model.shape("jawOpen").slider_min, model.shape("jawOpen").slider_max
     assert (lo <= cal[:, jaw]).all() and (cal[:, jaw] <= hi).all()
+
+
+@pytest.mark.ui
+def test_a_start_mid_expression_is_mended_by_set_neutral(frames) -> None:
+    """The camera starts on the open jaw (the take's last frames), then plays the take: read against
+    the open jaw, the take's jaw is lost; ``set_neutral`` before its first (relaxed) frame reads it as
+    a tracker started relaxed does (the rendered whole take: ``bench_live.py`` table 8)."""
+    model, F = frames
+    names = list(model.shape_names)
+    jaw = names.index("jawOpen")
+    truth = np.zeros((len(F), len(names)))
+    truth[:, jaw] = JAW
+    truth[:, names.index("eyeBlinkLeft")] = truth[:, names.index("eyeBlinkRight")] = BLINK
+    with LiveTracker(model) as relaxed:
+        want = np.array([relaxed.push(img, f / 30.0).weights for f, img in enumerate(F)])
+    got = {}
+    for press in (False, True):
+        with LiveTracker(model) as live:
+            first = [live.push(img, f / 30.0) for f, img in enumerate(F[-5:])]
+            assert first[0].note.startswith("registered") and live.neutral_at_ == (0.0, 0.0)
+            if press:
+                live.set_neutral()
+            after = [live.push(img, 1.0 + f / 30.0) for f, img in enumerate(F)]
+        if press:
+            assert after[0].note.startswith("neutral set on this frame: registered")
+            assert live.neutral_at_ == (1.0, 1.0) and not after[1].note
+        got[press] = np.array([a.weights for a in after])
+    err = {k: float(np.sqrt(np.mean((W - truth) ** 2))) for k, W in got.items()}
+    relaxed_err = float(np.sqrt(np.mean((want - truth) ** 2)))
+    print("RMSE started on the open jaw / then set_neutral / started relaxed", err, relaxed_err)
+    assert got[False][:, jaw].max() < 0.5 and np.corrcoef(got[True][:, jaw], JAW)[0, 1] > 0.95
+    # measured 0.241 -> 0.081, started relaxed 0.069 (FaceMesh's tracking mode remembers the open jaw
+    # a few frames, so the frames are not the relaxed start's one for one)
+    assert err[True] < 0.5 * err[False] and err[True] < relaxed_err + 0.03, (err, relaxed_err)
 
 
 @pytest.mark.ui

@@ -91,6 +91,31 @@ def test_the_schedule_follows_the_frames_clock_and_any_spelling_of_the_names() -
     assert cal.add(18.0, np.ones(4)) is None  # after the session: not recorded
 
 
+def test_the_neutral_window_is_the_still_relax_prompt_and_its_frames_can_be_read_again() -> None:
+    names = ["jawOpen", "eyeBlinkLeft"]
+    cal = ExpressionCalibration(names, seconds=2.0)
+    assert cal.neutral_window() is None  # before the session's first frame
+    cal.add(5.0, [0.3, 0.0])  # read against a start that was not relaxed
+    cal.add(6.0, [0.4, 0.1])
+    cal.add(7.5, [0.9, 0.0])  # the jaw prompt
+    assert cal.neutral_window() == (5.0, 7.0)
+    cal.reread(0, np.zeros((3, 2)))  # the relax prompt's frames read again against the new neutral
+    cal.fit()
+    assert cal.held_ is not None and list(cal.held_[:2]) == [3, 1]
+    np.testing.assert_allclose(cal.apply([0.0, 0.0]), [0.0, 0.0])
+    with pytest.raises(ValueError, match="index must be a prompt"):
+        cal.reread(9, np.zeros((1, 2)))
+    # a session that does not begin with a still neutral face has no window
+    moving = ExpressionCalibration(names, [CalibrationPrompt("Open your jaw", ("jawOpen",)),
+                                           CalibrationPrompt("Relax", ())])
+    moving.add(0.0, [0.0, 0.0])
+    assert moving.neutral_window() is None
+    turning = ExpressionCalibration(names, [CalibrationPrompt("Relax and turn", head="turn"),
+                                            CalibrationPrompt("Open your jaw", ("jawOpen",))])
+    turning.add(0.0, [0.0, 0.0])
+    assert turning.neutral_window() is None
+
+
 def _misread(truth: np.ndarray, names: list[str], rng) -> np.ndarray:
     """A tracker's reading: the jaw at half, a third of it read as mouthShrugLower, blinks at 70 %, noise."""
     j, s, bl, br = (names.index(n) for n in ("jawOpen", "mouthShrugLower", "eyeBlinkLeft", "eyeBlinkRight"))

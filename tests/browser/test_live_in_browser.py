@@ -6,7 +6,8 @@ permission prompt as a user clicking *Allow*): the sample head rendered with kno
 weights (tests/capture_takes.py: a jawOpen ramp, a blink, a head turn), looped. With
 the mouse: open the Live tab, *Start camera* (the page sends frames, one in flight,
 the kernel acks each), the face follows (the viewport's pixels change with the video
-and jawOpen moves), *Calibrate* shows its instructions and ends early when pressed again, *Record* / *Stop recording* (one undo step of keys), the take
+and jawOpen moves), *Calibrate* shows its instructions (taking the neutral from its relax prompt) and ends early
+when pressed again, *Neutral* takes the next frame as the neutral, *Record* / *Stop recording* (one undo step of keys), the take
 exports as .glb and Live Link CSV, *Stop camera* (the page lets the camera go). Behind
 the Live tab the Shapes tab's sliders stay still (no slider traffic per camera frame) and
 show the played weights once that tab is shown.
@@ -50,6 +51,7 @@ _l = wb.live
 print(json.dumps({
     "active": bool(_l.camera.active), "state": _l.camera.state, "received": _l.camera.frames_received,
     "tracked": 0 if _l.tracker is None else _l.tracker.n_frames_,
+    "neutral": None if _l.tracker is None else _l.tracker.neutral_at_,
     "ok": bool(_l.last is not None and _l.last.ok), "jaw": float(model.weights["jawOpen"]),
     "undo": model.history.undo_labels, "recorded": None if _l.recorded is None else _l.recorded.n_frames,
     "status": _l.status.value, "errors": [o.get("text", "") for o in wb.errors.outputs]}))
@@ -115,6 +117,9 @@ def test_the_face_follows_the_fake_camera_and_a_recorded_take_exports(open_noteb
     page.locator(".fwb-live-calibrate").click()
     st = wait_until("calibrated", lambda: _state(nb), lambda s: "calibrated:" in s["status"] or s["errors"], timeout=30)
     assert not st["errors"] and (prompt.text_content() or "") == "", st
+    # the session took the neutral from its relax prompt's later half (a span of frames)
+    first, last = st["neutral"]
+    assert 0 < first < last, st["neutral"]
     # record: one undo step of keys
     n_undo = len(st["undo"])
     page.locator(".fwb-live-record").click()
@@ -133,6 +138,11 @@ def test_the_face_follows_the_fake_camera_and_a_recorded_take_exports(open_noteb
     wait_until("the jaw away from the still slider", lambda: _state(nb)["jaw"],
                lambda j: abs(j - float(still)) > 0.05, timeout=60)
     assert page.evaluate("() => window.__fwbReadouts") == 0 and readout.text_content() == still
+    # Neutral (last: the fake camera's next frame may be mid-jaw): that frame is taken as the neutral
+    page.locator(".fwb-live-neutral").click()
+    st = wait_until("the neutral taken again", lambda: _state(nb),
+                    lambda s: s["neutral"][0] == s["neutral"][1] > last or s["errors"], timeout=60)
+    assert not st["errors"], st
     # stop: the page lets the camera go
     page.locator(".fwb-live-start").click()
     wait_until("the camera off", lambda: cam.get_attribute("data-camera"), lambda s: s == "off")

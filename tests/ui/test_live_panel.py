@@ -54,7 +54,7 @@ def _page_sends(camera, content, buffers=()):
 
 def test_live_frames_drive_the_face_record_keys_a_take_and_stop_restores(jpegs, live_wb, tmp_path) -> None:
     model, wb, live, acks = live_wb
-    assert "Live" in wb.tabs.titles and live.record_button.disabled
+    assert "Live" in wb.tabs.titles and live.record_button.disabled and live.neutral_button.disabled
     live.start_button.click()
     assert live.camera.active and live.start_button.description == "Stop camera"
     _page_sends(live.camera, {"type": "camera", "state": "on", "message": ""})
@@ -70,6 +70,14 @@ def test_live_frames_drive_the_face_record_keys_a_take_and_stop_restores(jpegs, 
     assert np.corrcoef(jaw[1:], JAW[1:12])[0, 1] > 0.9  # the face follows the video
     assert len(model.history.undo_labels) == n_undo  # watching adds no undo step
     assert "ms each" in live.status.value
+    assert live.tracker.neutral_at_ == (0.0, 0.0)  # the first face
+    # Neutral: the next frame is taken as the actor's neutral
+    assert not live.neutral_button.disabled
+    live.neutral_button.click()
+    assert "neutral from the next frame" in live.status.value
+    _page_sends(live.camera, {"type": "frame", "t": 50.0, "width": 480, "height": 480}, [jpegs[0]])
+    assert live.tracker.neutral_at_ == (50.0, 50.0) and "neutral set on this frame" in live.status.value
+    assert len(model.history.undo_labels) == n_undo
     # the guided calibration: the prompt shows beside the camera and moves on with the frames' clock
     assert live.calibrate_button.description == "Calibrate" and not live.calibrate_button.disabled
     live.calibrate_button.click()
@@ -80,6 +88,7 @@ def test_live_frames_drive_the_face_record_keys_a_take_and_stop_restores(jpegs, 
         _page_sends(live.camera, {"type": "frame", "t": 100.0 + i}, [jpegs[(6 * i) % len(jpegs)]])
         seen.append(live.prompt.value)
     assert "2/10" in seen[2] and "Open your jaw wide" in seen[2] and "8/10" in seen[15]
+    assert live.tracker.neutral_at_ == (101.0, 101.0)  # the relax prompt's later half: its frame at 101 s
     assert "10/10" in seen[19] and "nod" in seen[19]  # the relaxed face nodding ends it
     # it ended by itself: the map applies, the prompt is gone, the status says so
     assert not live.tracker.calibrating and live.tracker.calibration_ is not None
@@ -108,7 +117,7 @@ def test_live_frames_drive_the_face_record_keys_a_take_and_stop_restores(jpegs, 
     # the raw take saves; stopping the camera leaves the sliders as they were
     out = live.save_take(str(tmp_path / "take.npz"))
     saved = np.load(out)
-    assert saved["landmarks"].shape == (50, 478, 3) and saved["timestamps"].shape == (50,)
+    assert saved["landmarks"].shape == (51, 478, 3) and saved["timestamps"].shape == (51,)
     live.start_button.click()
     assert not live.camera.active and len(model.history.undo_labels) == n_undo + 1
     # no permission: a clear message, the camera off

@@ -8,7 +8,9 @@ history and *Stop* puts the sliders back as they were. *Record* / *Stop recordin
 keys what was tracked in between onto the timeline as one undo step
 (``model.capture.apply``, reduced to keys within the tolerance); *Save take* writes
 the raw landmarks and timestamps (``.npz``) to re-track offline with other settings
-(``track_video(model, "take.npz", ...)``).
+(``track_video(model, "take.npz", ...)``). The first face the camera sees is taken as the
+actor's neutral; *Neutral* takes the next frame instead (a start mid-smile reads every later
+frame against the smile), and *Calibrate* takes it from its "relax" prompt.
 
 With *show my head's turn* (on by default) the viewport draws the face under the
 tracked head pose (:meth:`~widgets.viewport.Viewport.show_head_pose`, a view-only
@@ -76,6 +78,9 @@ class LivePanel(ModelPanel):
                                        "shown here and hold it, then turn and nod your head; the tracker then reads "
                                        "you better (press again to end early)",
                                        "sliders")
+        self.neutral_button = button("Neutral", "fwb-live-neutral",
+                                     "Relax your face, eyes open, and press: the tracker takes this face as your "
+                                     "neutral (it took the first face it saw; Calibrate does it too)", "user")
         self.prompt = W.HTML("")
         self.prompt.add_class("fwb-live-prompt")
         self.adapt = W.Checkbox(value=False, description="adapt the rig to me while tracking", indent=False)
@@ -94,10 +99,12 @@ class LivePanel(ModelPanel):
         self.start_button.on_click(g("camera")(lambda _b: self.toggle_camera()))
         self.record_button.on_click(g("record")(lambda _b: self.toggle_record()))
         self.calibrate_button.on_click(g("calibrate")(lambda _b: self.toggle_calibration()))
+        self.neutral_button.on_click(g("neutral")(lambda _b: self.set_neutral()))
         self.save_button.on_click(g("save take")(lambda _b: self.save_take(self.take_path.value)))
         self.children = [
             W.HTML("<b>Live</b> — the face follows your webcam"), self.camera,
-            W.HBox([self.start_button, self.adapt, self.follow_head]), W.HBox([self.calibrate_button, self.prompt]),
+            W.HBox([self.start_button, self.adapt, self.follow_head]),
+            W.HBox([self.neutral_button, self.calibrate_button, self.prompt]),
             W.HBox([self.record_button, self.tolerance]),
             W.HBox([self.take_path, self.save_button]), self.status,
         ]
@@ -147,7 +154,8 @@ class LivePanel(ModelPanel):
             kept = f"; the take so far is kept — {self.status.value}" if recording else ""
             self.status.value = f"<b>Camera:</b> {html.escape(message)}{kept}"
         elif state == "on":
-            self.status.value = "<i>camera on: looking for a face…</i>"
+            self.status.value = ("<i>camera on: looking for a face — relax, eyes open: the first face is taken as "
+                                 "your neutral (press Neutral to take it again)</i>")
         self.refresh()
 
     def push(self, image: NDArray[np.uint8], t: float) -> Any:
@@ -202,7 +210,14 @@ class LivePanel(ModelPanel):
         """Another edit closed the live interaction (its weights stay); the next frame opens a new one."""
         self._token = None
 
-    # ------------------------------------------------------------------ calibration
+    # ------------------------------------------------------------------ neutral and calibration
+    def set_neutral(self) -> None:
+        """Take the next camera frame as the actor's neutral (:meth:`workbench.capture.LiveTracker.set_neutral`)."""
+        if self.tracker is None or not self.camera.active:
+            raise ValueError("Neutral: start the camera first")
+        self.tracker.set_neutral()
+        self.status.value = "<i>taking your neutral from the next frame: relax, eyes open…</i>"
+
     def toggle_calibration(self) -> Any:
         """Start the guided calibration session, or end it early (fitted on the prompts reached)."""
         if self.tracker is None or not self.camera.active:
@@ -281,6 +296,7 @@ class LivePanel(ModelPanel):
         self.record_button.disabled = not on
         calibrating = self.tracker is not None and self.tracker.calibrating
         self.calibrate_button.disabled = not on
+        self.neutral_button.disabled = not on
         self.calibrate_button.description = "End calibration" if calibrating else "Calibrate"
         self.adapt.disabled = on
 

@@ -271,6 +271,28 @@ class ExpressionCalibration:
             self._frames.append((i, w.copy()))
         return i
 
+    def neutral_window(self) -> tuple[float, float] | None:
+        """``(start, end)`` seconds of the session's first prompt if it is a still neutral face, else None.
+
+        None too before the session's first frame. :class:`~workbench.capture.LiveTracker`
+        takes the actor's neutral from these frames when the prompt ends.
+        """
+        first = self.prompts_[0]
+        if self._start is None or self.columns_[0] or first.head != "still":
+            return None
+        return self._start, self._start + self.seconds
+
+    def reread(self, index: int, weights: ArrayLike) -> None:
+        """Replace the frames recorded for prompt ``index`` by ``weights`` ((n, k)): the same frames read again.
+
+        The tracker reads the neutral prompt's frames again once it has taken its neutral
+        from them, so that the fit sees them as read from then on.
+        """
+        W = np.asarray(weights, np.float64).reshape(-1, len(self.shape_names))
+        if not 0 <= index < len(self.prompts_):
+            raise ValueError(f"index must be a prompt of the session (0–{len(self.prompts_) - 1}), got {index!r}")
+        self._frames = [(i, w) for i, w in self._frames if i != index] + [(index, w.copy()) for w in W]
+
     def done(self, t: float) -> bool:
         """The session is over at time ``t``."""
         return self._start is not None and self.prompt_index(t) is None

@@ -11,7 +11,13 @@ L1 + temporal weights, warm-started), so a take pushed frame by frame gives what
 * **Start.** The first frame with a face registers the landmarks onto the rig
   (:func:`~workbench.capture.video.register_landmarks`: the landmark → vertex map)
   and calibrates on it as the actor's rest face (``track(..., neutral=0)``).
-  No calibration session is needed. The weights are fitted with the landmarks on the
+  No calibration session is needed, but the actor must be relaxed then: a face that
+  registers smiling or talking is read against that expression from then on
+  (``bench_live.py`` table 8: the whole take started at its open jaw and blink reads at
+  weight RMSE 0.343 against 0.094 started at rest; at its smile 0.246, at all four
+  expressions at half 0.158). :meth:`~LiveTracker.set_neutral` takes the next face as the
+  neutral instead (0.086-0.087 after those starts), and a calibration session takes it
+  from its "relax" prompt. The weights are fitted with the landmarks on the
   lips, eyes, brows and nose weighing 1 and those on smooth skin and the face's outline
   0.03 (:func:`~workbench.capture.landmark_registration.landmark_weights`: FaceMesh places
   the latter from the former, and they follow an expression only part of the way), in the
@@ -165,6 +171,9 @@ class LiveTracker:
     calibration_ : ExpressionCalibration or None
         The last calibration session (:meth:`begin_calibration`); its ``weight_map_``
         applies to every frame after it ended.
+    neutral_at_ : (float, float) or None
+        The timestamps (first, last) of the frames the actor's neutral was taken from: the
+        first face, the frame after :meth:`set_neutral`, or a calibration's relax prompt.
     """
 
     def __init__(self, model: FaceState, *, adapt: bool | dict[str, Any] = False, l1: float | None = None,
@@ -194,6 +203,9 @@ class LiveTracker:
         self.adapted_: Any = None
         self.n_frames_ = 0
         self.calibration_: ExpressionCalibration | None = None
+        self.neutral_at_: tuple[float, float] | None = None
+        self._neutral_next = False  # set_neutral: register again on the next face
+        self._relax_pending = False  # the running session's relax prompt has not given the neutral yet
         self._pending: ExpressionCalibration | None = None  # the session running
         self._solved = 0
         self._mesh: Any = None
@@ -283,9 +295,18 @@ class LiveTracker:
         ok = False
         err, flag = float("nan"), FLAG_HELD
         if L is not None:
-            if self._stepper is None:
+            if self._stepper is None or self._neutral_next:
                 t1 = time.perf_counter()
+                again = self._stepper is not None
                 note = self._start(L)
+                if again:
+                    note = "neutral set on this frame: " + note
+                self._neutral_next = False
+                self.neutral_at_ = (t, t)
+                secs["register"] = time.perf_counter() - t1
+            elif self._pending is not None and self._relax_over(self._pending, t):
+                t1 = time.perf_counter()
+                note = self._neutral_from_session(self._pending)
                 secs["register"] = time.perf_counter() - t1
             assert self._stepper is not None and self.registration_ is not None
             t1 = time.perf_counter()
@@ -324,6 +345,50 @@ class LiveTracker:
         self._landmarks.append(L if L is not None else np.full((N_LANDMARKS, 3), np.nan))
         return LiveFrame(self._last_w.copy(), self._last_pose.copy(), L, ok, t, note, secs, prompt, prompt_index)
 
+    # ------------------------------------------------------------------ the neutral
+    def set_neutral(self) -> None:
+        """Take the next frame with a face as the actor's neutral (relaxed face, eyes open).
+
+        The tracker registers again on it (the landmark → vertex map and the rest offsets:
+        see the module docstring's *Start*), as on the first face, and reads every later
+        frame against it; with ``adapt`` the rig starts adapting again from it. A calibration's
+        map stays (a session takes the neutral from its own relax prompt). Frames already
+        pushed keep what they read.
+        """
+        self._neutral_next = True
+
+    def _relax_over(self, cal: ExpressionCalibration, t: float) -> bool:
+        """The session's relax prompt ended before ``t`` and the neutral was not yet taken from it."""
+        window = cal.neutral_window()
+        return self._relax_pending and window is not None and t >= window[1]
+
+    def _neutral_from_session(self, cal: ExpressionCalibration) -> str:
+        """Register again on the relax prompt's later half (the landmarks' median) and re-read its frames.
+
+        The actor may have started the camera mid-expression; the session's first prompt is
+        the relaxed face, held for seconds. Its frames read again against the new neutral go
+        into the session, so its fit sees them as every later frame is read.
+        """
+        window = cal.neutral_window()
+        assert window is not None and self._stepper is not None
+        self._relax_pending = False
+        ts = np.array(self._times)
+        inside = np.flatnonzero((ts >= window[0]) & (ts < window[1]))
+        faces = [i for i in inside if np.isfinite(self._landmarks[i]).all()]
+        assert faces, "a session starts at its first solved frame, which is in its relax prompt"
+        later = faces[len(faces) // 2:]
+        note = self._start(np.median(np.array([self._landmarks[i] for i in later]), axis=0))
+        assert self._stepper is not None and self.registration_ is not None
+        self.neutral_at_ = (float(ts[later[0]]), float(ts[later[-1]]))
+        reread = []
+        for i in faces:
+            Y = self.registration_.to_model(self._landmarks[i][None])[0]
+            vis = np.asarray(np.isfinite(Y).all(1))
+            if int(vis.sum()) >= self.min_markers:
+                reread.append(self._stepper.step(Y, vis, adapt=False)[0])
+        cal.reread(0, np.array(reread))
+        return "neutral set from the relax prompt: " + note
+
     # ------------------------------------------------------------------ calibration
     def begin_calibration(self, prompts: list[CalibrationPrompt] | None = None, *,
                           seconds: float = SECONDS_PER_PROMPT) -> ExpressionCalibration:
@@ -333,12 +398,17 @@ class LiveTracker:
         session ends by itself after ``seconds`` per prompt (by the frames' timestamps) and
         its map applies from then on (a frame's ``note`` says so), or earlier with
         :meth:`end_calibration`. A new session replaces the last one's map when it ends.
+        When its first prompt is a still neutral face (the default's "Relax"), the tracker
+        takes the actor's neutral from that prompt's later half as it ends (as
+        :meth:`set_neutral` does from one frame), so a session also mends a start that was
+        not relaxed.
         """
         from workbench.capture.rig import ExpressionSpace
 
         space = ExpressionSpace.from_model(self.model)
         cal = ExpressionCalibration([space.shape_names[i] for i in space.plain], prompts, seconds=seconds)
         self._pending = cal
+        self._relax_pending = True
         return cal
 
     @property
