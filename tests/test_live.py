@@ -265,6 +265,32 @@ def test_a_saved_take_re_tracks_offline_as_it_was_tracked_live(frames, tmp_path)
     assert track_video(model, str(path)).info["l1"] == LANDMARK_L1 == live.take().info["l1"]
 
 
+@pytest.mark.ui
+def test_a_saved_take_re_tracks_offline_from_the_neutral_the_session_took(frames, tmp_path) -> None:
+    """Started on the open jaw, then ``set_neutral``: the saved take keeps that frame, and
+    ``track_video`` registers on it unless told another ``rest_frame``."""
+    from workbench.capture.facemesh import LandmarkSequence
+    from workbench.capture.track import DEFAULT_TEMPORAL
+    from workbench.capture.video import track_video
+
+    model, F = frames
+    jaw = list(model.shape_names).index("jawOpen")
+    with LiveTracker(model) as live:
+        for f, img in enumerate(F[-5:]):
+            live.push(img, f / 30.0)
+        live.set_neutral()
+        for f, img in enumerate(F):
+            live.push(img, 1.0 + f / 30.0)
+    path = live.save_take(tmp_path / "take.npz")
+    assert LandmarkSequence.load_take(path).rest_frame == 5  # the take's first frame after the press
+    offline = track_video(model, str(path), temporal=DEFAULT_TEMPORAL)  # the live tracker's λ's
+    live_w = live.take().weights
+    assert np.corrcoef(offline.weights[5:, jaw], JAW)[0, 1] > 0.95
+    # the same registration: after the first frames the two runs agree (the temporal prior's start differs)
+    np.testing.assert_allclose(offline.weights[15:], live_w[15:], atol=0.05)
+    assert track_video(model, str(path), rest_frame=0).weights[5:, jaw].max() < 0.5  # the open jaw as the neutral
+
+
 def test_a_file_that_is_not_a_saved_take_is_named(tmp_path) -> None:
     from workbench.capture.facemesh import LandmarkSequence
 
@@ -277,6 +303,12 @@ def test_a_file_that_is_not_a_saved_take_is_named(tmp_path) -> None:
         LandmarkSequence.load_take(bad)
     np.savez(bad, landmarks=np.zeros((2, 10, 3)), timestamps=[0.0, 0.1], image_size=[640, 480])
     with pytest.raises(VideoError, match=r"other\.npz: LandmarkSequence: landmarks must be"):
+        LandmarkSequence.load_take(bad)
+    np.savez(bad, landmarks=np.zeros((2, 478, 3)), timestamps=[0.0, 0.1], image_size=[640, 480], neutral_frame=[0, 1])
+    with pytest.raises(VideoError, match=r"other\.npz: neutral_frame must be one frame index"):
+        LandmarkSequence.load_take(bad)
+    np.savez(bad, landmarks=np.zeros((2, 478, 3)), timestamps=[0.0, 0.1], image_size=[640, 480], neutral_frame=2)
+    with pytest.raises(VideoError, match=r"other\.npz: LandmarkSequence: rest_frame must be a frame with a face"):
         LandmarkSequence.load_take(bad)
     (tmp_path / "junk.npz").write_bytes(b"not a zip")
     with pytest.raises(VideoError, match=r"junk\.npz: not a saved live take"):

@@ -106,6 +106,10 @@ class LandmarkSequence:
         The frame of the source each row comes from (0-based).
     source : str
         The file read, or ``"<frames>"``.
+    rest_frame : int or None
+        A saved live take's frame the session last took the actor's neutral from
+        (:attr:`LiveTracker.neutral_at_ <workbench.capture.LiveTracker>`); None otherwise.
+        :func:`~workbench.capture.video.track_video` registers on it unless told another.
     """
 
     landmarks: NDArray[np.float64]
@@ -113,6 +117,7 @@ class LandmarkSequence:
     fps: float
     frame_numbers: NDArray[np.int64]
     source: str = "<frames>"
+    rest_frame: int | None = None
 
     def __post_init__(self) -> None:
         L = np.asarray(self.landmarks, np.float64)
@@ -126,19 +131,26 @@ class LandmarkSequence:
         object.__setattr__(self, "landmarks", L)
         object.__setattr__(self, "frame_numbers", n)
         object.__setattr__(self, "image_size", (int(self.image_size[0]), int(self.image_size[1])))
+        if self.rest_frame is not None:
+            r = int(self.rest_frame)
+            if not 0 <= r < L.shape[0] or not np.isfinite(L[r]).all():
+                raise ValueError(f"LandmarkSequence: rest_frame must be a frame with a face (0–{L.shape[0] - 1}), "
+                                 f"got {self.rest_frame!r}")
+            object.__setattr__(self, "rest_frame", r)
 
     @classmethod
     def load_take(cls, path: str | Path) -> LandmarkSequence:
         """A live take saved by :meth:`LiveTracker.save_take` (``.npz``: landmarks, timestamps, image size).
 
         ``fps`` is the take's achieved rate (its median frame interval); ``frame_numbers``
-        count the frames pushed. No pickle is read.
+        count the frames pushed; ``rest_frame`` is the frame the session took the neutral
+        from (``neutral_frame``; takes saved before it was written have none). No pickle is read.
         """
         p = Path(path)
         fields = ("landmarks", "timestamps", "image_size")
         try:
             with np.load(p, allow_pickle=False) as z:
-                arrays = {k: np.asarray(z[k]) for k in fields if k in z.files}
+                arrays = {k: np.asarray(z[k]) for k in (*fields, "neutral_frame") if k in z.files}
                 missing = sorted(set(fields) - set(z.files))
         except (OSError, ValueError) as exc:
             raise VideoError(f"{p.name}: not a saved live take ({exc})") from None
@@ -151,8 +163,12 @@ class LandmarkSequence:
         if size.shape != (2,) or not np.all(size > 0):
             raise VideoError(f"{p.name}: image_size must be (width, height) > 0, got {size.tolist()}")
         fps = 1.0 / float(np.median(np.diff(ts))) if ts.size > 1 else 30.0
+        rest = arrays.get("neutral_frame")
+        if rest is not None and (rest.shape != () or rest.dtype.kind not in "iu"):
+            raise VideoError(f"{p.name}: neutral_frame must be one frame index, got {rest.tolist()!r}")
         try:
-            return cls(arrays["landmarks"], (int(size[0]), int(size[1])), fps, np.arange(ts.size), str(p))
+            return cls(arrays["landmarks"], (int(size[0]), int(size[1])), fps, np.arange(ts.size), str(p),
+                       None if rest is None else int(rest))
         except ValueError as exc:
             raise VideoError(f"{p.name}: {exc}") from None
 

@@ -463,10 +463,12 @@ class LiveTracker:
         return self._image_size
 
     def save_take(self, path: str | Path) -> Path:
-        """Write the raw take — landmarks, timestamps, image size — as ``.npz`` (atomically).
+        """Write the raw take — landmarks, timestamps, image size, the neutral's frame — as ``.npz`` (atomically).
 
-        Re-track it offline with other settings: ``np.load`` it into a
-        :class:`~workbench.capture.LandmarkSequence` for :func:`~workbench.capture.track_video`.
+        Re-track it offline with other settings: ``track_video(model, path)`` (through
+        :meth:`~workbench.capture.LandmarkSequence.load_take`) registers on the frame the
+        session last took the neutral from (``neutral_frame``: the first face's frame, the frame
+        after :meth:`set_neutral`, or the middle of a calibration's relax prompt's later half).
         """
         from workbench.export.base import atomic_path
 
@@ -476,9 +478,19 @@ class LiveTracker:
         if out.suffix.lower() != ".npz":
             raise VideoError(f"save_take: {out.name}: expected a .npz path")
         with atomic_path(out) as tmp, open(tmp, "wb") as fh:
-            np.savez_compressed(fh, landmarks=self.landmarks, timestamps=self.timestamps,
-                                image_size=np.array(self._image_size, np.int64))
+            arrays: dict[str, Any] = {"landmarks": self.landmarks, "timestamps": self.timestamps,
+                                      "image_size": np.array(self._image_size, np.int64), **self._neutral_frame()}
+            np.savez_compressed(fh, **arrays)
         return out
+
+    def _neutral_frame(self) -> dict[str, NDArray[np.int64]]:
+        """``{"neutral_frame": index}``: the frame with a face nearest the middle of :attr:`neutral_at_` ({} before one)."""
+        if self.neutral_at_ is None:
+            return {}
+        ts = self.timestamps
+        face = np.isfinite(self.landmarks).all(axis=(1, 2))
+        gap = np.where(face, np.abs(ts - 0.5 * (self.neutral_at_[0] + self.neutral_at_[1])), np.inf)
+        return {"neutral_frame": np.array(int(np.argmin(gap)), np.int64)}
 
     @property
     def timestamps(self) -> NDArray[np.float64]:

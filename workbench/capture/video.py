@@ -125,7 +125,7 @@ def track_video(
     model: FaceState,
     source: str | Path | ArrayLike | LandmarkSequence,
     *,
-    rest_frame: int = 0,
+    rest_frame: int | None = None,
     fps: float | None = None,
     max_frames: int | None = None,
     static: bool = False,
@@ -139,7 +139,8 @@ def track_video(
     :meth:`LandmarkSequence.load_take`) to re-track with other settings.
 
     :func:`video_landmarks` (unless ``source`` is a :class:`LandmarkSequence`), then
-    :func:`register_landmarks` on ``rest_frame`` (the actor at rest), then
+    :func:`register_landmarks` on ``rest_frame`` (the actor at rest; default the sequence's own
+    :attr:`LandmarkSequence.rest_frame` — a saved live take's neutral — or else 0), then
     :func:`workbench.capture.track` on :meth:`LandmarkRegistration.to_model` with
     ``neutral=rest_frame`` (the landmark ↔ vertex offsets calibrated away) and
     ``marker_weights=landmark_weights()`` (the lips, eyes, brows and nose weigh more than the
@@ -169,6 +170,8 @@ def track_video(
         seq = LandmarkSequence.load_take(source)  # a live take saved by LiveTracker.save_take
     else:
         seq = video_landmarks(source, fps=fps, max_frames=max_frames, static=static, progress=part(0.0, 0.7))
+    if rest_frame is None:
+        rest_frame = 0 if seq.rest_frame is None else seq.rest_frame
     reg = register_landmarks(model, seq, frame=rest_frame)
     track_options.setdefault("neutral", int(rest_frame))
     track_options.setdefault("marker_weights", landmark_weights())  # the live tracker's weighting
