@@ -304,6 +304,8 @@ def test_a_file_that_is_not_a_saved_take_is_named(tmp_path) -> None:
     np.savez(bad, landmarks=np.zeros((2, 10, 3)), timestamps=[0.0, 0.1], image_size=[640, 480])
     with pytest.raises(VideoError, match=r"other\.npz: LandmarkSequence: landmarks must be"):
         LandmarkSequence.load_take(bad)
+    np.savez(bad, landmarks=np.zeros((2, 478, 3)), timestamps=[0.0, 0.1], image_size=[640, 480])
+    assert LandmarkSequence.load_take(bad).rest_frame is None  # a take saved before neutral_frame was written
     np.savez(bad, landmarks=np.zeros((2, 478, 3)), timestamps=[0.0, 0.1], image_size=[640, 480], neutral_frame=[0, 1])
     with pytest.raises(VideoError, match=r"other\.npz: neutral_frame must be one frame index"):
         LandmarkSequence.load_take(bad)
