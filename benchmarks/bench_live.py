@@ -419,11 +419,12 @@ def neutral_table(head, foreign, face_shapes) -> None:
     S = calibration_session(head, seed=0)
     session = ({n: S[:, j] for j, n in enumerate(names)}, *calibration_head_motion(head, seed=0))
     smile = {"mouthSmileLeft": np.full(15, 0.8), "mouthSmileRight": np.full(15, 0.7), "jawOpen": np.full(15, 0.2)}
-    for label, model, pose in (("sample head", head, None), ("foreign face", foreign.model, foreign.pose)):
-        whole = frames(model, (weights, yaw, pitch), pose)
+    videos = (("sample head", head, None), ("foreign face", foreign.model, foreign.pose))
+    wholes = {label: frames(model, (weights, yaw, pitch), pose) for label, model, pose in videos}
+    for label, _model, _pose in videos:
+        whole = wholes[label]
         for s, what in ((25, "open jaw + blink"), (58, "smile"), (130, "all four at half")):
-            rolled = frames(model, ({k: np.roll(v, -s) for k, v in weights.items()}, np.roll(yaw, -s),
-                                    np.roll(pitch, -s)), pose)
+            rolled = whole[s:] + whole[:s]  # the take started at frame s (each frame renders on its own)
             got = []
             for press in (False, True):
                 live = LiveTracker(head)
@@ -439,8 +440,8 @@ def neutral_table(head, foreign, face_shapes) -> None:
           "RMSE of the whole take after it, jaw level; peer: the neutral left where the camera started")
     print(f"{'video':14s} {'start':9s} {'where the camera started':>24s} {'from the relax prompt':>21s}")
     own = LiveTracker._relax_over
-    for label, model, pose in (("sample head", head, None), ("foreign face", foreign.model, foreign.pose)):
-        whole = frames(model, (weights, yaw, pitch), pose)
+    for label, model, pose in videos:
+        whole = wholes[label]
         ses = frames(model, session, pose)
         pre = frames(model, (smile, np.zeros(15), np.zeros(15)), pose)
         for start, before in (("relaxed", []), ("smiling", pre)):

@@ -477,20 +477,14 @@ class LiveTracker:
         out = Path(path)
         if out.suffix.lower() != ".npz":
             raise VideoError(f"save_take: {out.name}: expected a .npz path")
+        L, ts = self.landmarks, self.timestamps
+        arrays: dict[str, Any] = {"landmarks": L, "timestamps": ts, "image_size": np.array(self._image_size, np.int64)}
+        if self.neutral_at_ is not None:  # the frame with a face nearest the middle of the neutral's frames
+            gap = np.where(np.isfinite(L).all(axis=(1, 2)), np.abs(ts - 0.5 * sum(self.neutral_at_)), np.inf)
+            arrays["neutral_frame"] = np.array(int(np.argmin(gap)), np.int64)
         with atomic_path(out) as tmp, open(tmp, "wb") as fh:
-            arrays: dict[str, Any] = {"landmarks": self.landmarks, "timestamps": self.timestamps,
-                                      "image_size": np.array(self._image_size, np.int64), **self._neutral_frame()}
             np.savez_compressed(fh, **arrays)
         return out
-
-    def _neutral_frame(self) -> dict[str, NDArray[np.int64]]:
-        """``{"neutral_frame": index}``: the frame with a face nearest the middle of :attr:`neutral_at_` ({} before one)."""
-        if self.neutral_at_ is None:
-            return {}
-        ts = self.timestamps
-        face = np.isfinite(self.landmarks).all(axis=(1, 2))
-        gap = np.where(face, np.abs(ts - 0.5 * (self.neutral_at_[0] + self.neutral_at_[1])), np.inf)
-        return {"neutral_frame": np.array(int(np.argmin(gap)), np.int64)}
 
     @property
     def timestamps(self) -> NDArray[np.float64]:
