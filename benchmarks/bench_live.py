@@ -49,10 +49,58 @@ Tables:
    first loop; then the guided calibration (:meth:`~workbench.capture.LiveTracker.begin_calibration`,
    the tracker's own session) from a relaxed start and from one smiling with the jaw a little open
    (15 frames), with the neutral taken from its relax prompt or left where the camera started (the
-   way before, patched in as a peer).
+   way before, patched in as a peer);
+9. the actor's distance (``--table 9`` runs it alone): the whole take rendered at a size that changes
+   over its two loops (the frame scaled about its centre: a drift to 1.05, leaning in to 1.15 or back
+   to 0.87, a sway of ±2 % or ±8 % with a 4 s period), the weight RMSE over the face shapes of the
+   second loop with the head pose a similarity (:attr:`~workbench.capture.LiveTracker.fit_scale`, the
+   default since 2026-12-01) and rigid (the peer: the tracker before), and the fitted scale over the
+   true one.
 
 Tables 4, 5 and 7 track at the live default :data:`~workbench.capture.LANDMARK_L1` = 0.03 and at the
 marker tracker's 0.01 (the live default until 2026-11-30).
+
+Measured 2026-12-01 (quiet machine), with the head pose a similarity (``fit_scale``, the default
+since): table 9 — the whole take with the actor at a fixed distance reads at 0.094 / 0.120 (sample
+head / foreign face) with a rigid pose and 0.104 / 0.121 with the similarity; drifting 5 % closer
+0.127 / 0.187 against 0.103 / 0.120, leaning in to 1.15 0.332 / 0.362 against 0.103 / 0.123, back to
+0.87 0.361 / 0.344 against 0.103 / 0.123, a ±2 % sway 0.095 / 0.121 against 0.103 / 0.120, a ±8 % sway
+0.159 / 0.181 against 0.102 / 0.121; the fitted scale is within 0.998-1.020 / 0.993-1.012 of the true
+one (p5-p95): FaceMesh's face grows ~2 % as the brows rise and the jaw opens (the scale's correlation
+with browInnerUp +0.54 on the sample head, with the blink -0.88 on the foreign face), and the scale
+takes that much of those expressions — the fixed-distance cost. The other tables with it: table 1,
+10.2 ms a frame median (98 frames/s; the solve 2.3 ms); table 2, jaw correlation 0.97, peak 0.90,
+blink 0.82, RMSE 0.080 (0.074 rigid); table 3, not adapting 0.0343 / 0.0344 (first / third loop),
+adapting every 5th frame 0.0229 -> 0.0181 (1.26x loop to loop, 1.9x below not adapting) but the
+weights 0.099 -> 0.181 (not adapting 0.091 / 0.093); table 4, 0.104 / 0.121 (jaw 0.74 / 1.02, blink
+0.93 / 0.70, smiles 0.48-0.64, inner brow 0.34 / 0.86); table 5, 0.171 / 0.151; table 6, the whole
+take 0.107 -> 0.079 guided (worst prompt left out 0.087) on the sample head and 0.112 -> 0.086
+(0.101) on the foreign face, jaw 0.74 -> 0.86 and 0.98 -> 1.12, the range gains 0.168 / 0.142, the
+held-out other expressions 0.113 -> 0.091 and 0.104 -> 0.093; table 7, the other expressions 0.118 /
+0.127 (0.116 / 0.134 rigid), the dense take of seed 11 0.187 / 0.211 (0.186 / 0.217); table 8, as
+registered 0.157-0.356 / 0.180-0.335, after ``set_neutral`` 0.086-0.087 / 0.110-0.112, the guided
+session from a relaxed start 0.079 -> 0.075 / 0.086 -> 0.088, from a smiling one 0.102 -> 0.075 /
+0.093 -> 0.088.
+
+Tried the same day and not kept: (1) the scale smoothed over time (an exponential filter of 0.3 s or
+1 s, a running median of 0.5-2 s, a dead band of 1-2 %), since a distance changes slowly and the
+wobble is short: at a fixed distance 0.096-0.103 on the sample head and 0.119-0.129 on the foreign
+face, no better than per frame, and the ±8 % sway costs up to 0.19 with the longer filters; (2) the
+scale from a few landmarks FaceMesh keeps still (the eye corners, the nose's bridge, tip and alar
+base; with or without the face's sides at the ears): 0.102-0.116 / 0.126-0.145; (3) the scale
+along the face's width only (brows and jaw move the face's height): 0.110 / 0.117 (per frame on
+all of them 0.104 / 0.121). (4) For the
+foreign face's 0.120 without a calibration (not the distance): per-landmark rest offsets that
+depend on the head's turn (linear or quadratic in its rotation vector), since on the foreign face's
+take at rest FaceMesh's landmarks move with the yaw (RMSE 0.084 at rest with no expression at
+all). Fitted on a render of the same face at rest at the take's poses (an oracle) it brings the
+rest take to 0.011-0.025 but the whole take only 0.120 -> 0.105-0.108 and the sample head's 0.094 ->
+0.098-0.101; fitted on the rig's own render it does not carry to another face (0.158 / 0.140);
+learned online from every frame (a least-squares fit of each landmark's offset on the rotation) it
+gives 0.095-0.105 / 0.105-0.106 on the whole take and 0.092-0.093 / 0.089-0.090 on the held-out
+other expressions (0.116 / 0.134 before), but absorbs what co-articulated expressions do while the
+head turns: the dense takes 0.170 -> 0.173-0.176 and 0.149 -> 0.162-0.163 on the sample head, 0.141
+-> 0.160-0.162 on the foreign face (its other seed 0.192 -> 0.175-0.180).
 
 Measured 2026-12-01, table 8 (quiet machine): the camera started on the whole take's open jaw and
 blink, its smile, or all four expressions at half reads the loop after at 0.343 / 0.246 / 0.158 on
@@ -252,27 +300,29 @@ from workbench.capture import LANDMARK_L1, LiveTracker
 from workbench.capture.track import DEFAULT_L1
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-from capture_takes import BLINK, JAW, full_take, render_take, warped_actor
+from capture_takes import BLINK, JAW, full_take, render_take, warped_actor, zoomed
 
 
-def camera_frames(model, loops: int, take=None, pose=None) -> list[bytes]:
+def camera_frames(model, loops: int, take=None, pose=None, zoom=None) -> list[bytes]:
+    """The take rendered, in 640×480 JPEG frames, looped; ``zoom`` (loops × T,): each frame's size factor."""
     from PIL import Image
 
+    frames = list(render_take(model, take, pose)) * loops
     out = []
-    for img in render_take(model, take, pose):
+    for f, img in enumerate(frames):
         wide = np.full((480, 640, 3), 235, np.uint8)
-        wide[:, 80:560] = img
+        wide[:, 80:560] = img if zoom is None else zoomed(img, float(zoom[f]))
         buf = io.BytesIO()
         Image.fromarray(wide).save(buf, format="JPEG", quality=80)
         out.append(buf.getvalue())
-    return out * loops
+    return out
 
 
-def run(model, jpegs, *, adapt: bool, adapt_every: int = 5, workbench_view=None, l1=None):
+def run(model, jpegs, *, adapt: bool, adapt_every: int = 5, workbench_view=None, l1=None, fit_scale=True):
     """Push the frames (30 frames/s); ``l1`` None: the live default (:data:`~workbench.capture.LANDMARK_L1`)."""
     from widgets.live.camera import decode_jpeg
 
-    live = LiveTracker(model, adapt=adapt, adapt_every=adapt_every, l1=l1)
+    live = LiveTracker(model, adapt=adapt, adapt_every=adapt_every, l1=l1, fit_scale=fit_scale)
     stages: dict[str, list[float]] = {"decode": [], "landmarks": [], "solve": [], "face": [], "total": []}
     for f, data in enumerate(jpegs):
         t0 = time.perf_counter()
@@ -297,16 +347,16 @@ def run(model, jpegs, *, adapt: bool, adapt_every: int = 5, workbench_view=None,
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--loops", type=int, default=3)
-    ap.add_argument("--table", type=int, choices=(8,), help="run only this table")
+    ap.add_argument("--table", type=int, choices=(8, 9), help="run only this table")
     args = ap.parse_args()
     from widgets import Workbench
 
     head = workbench.load_sample("head")
     face_shapes = np.array([not n.startswith("eyeLook") and n != "tongueOut" for n in head.shape_names])
-    if args.table == 8:
+    if args.table in (8, 9):
         from workbench.testing import foreign_face
 
-        neutral_table(head, foreign_face(head, seed=2), face_shapes)
+        (neutral_table if args.table == 8 else distance_table)(head, foreign_face(head, seed=2), face_shapes)
         return
     jpegs = camera_frames(head, args.loops)
     names = list(head.shape_names)
@@ -395,6 +445,36 @@ def main() -> None:
     calibration_table(head, take, foreign, face_shapes)
     held_out_table(head, foreign, face_shapes)
     neutral_table(head, foreign, face_shapes)
+    distance_table(head, foreign, face_shapes)
+
+
+def distance_table(head, foreign, face_shapes) -> None:
+    """Table 9: the actor moving toward or away from the camera (:attr:`LiveTracker.fit_scale`)."""
+    names = list(head.shape_names)
+    take = full_take()
+    T = len(take[1])
+    truth = _truth(take[0], names, T)
+    sway = np.sin(2.0 * np.pi * np.arange(2 * T) / 30.0 / 4.0)  # a 4 s period
+    schedules = {"still": np.ones(2 * T),
+                 "drift to 1.05": np.r_[np.linspace(1.0, 1.05, T), np.full(T, 1.05)],
+                 "lean in to 1.15": np.r_[np.linspace(1.0, 1.15, T), np.full(T, 1.15)],
+                 "lean back to 0.87": np.r_[np.linspace(1.0, 0.87, T), np.full(T, 0.87)],
+                 "sway ±2 %, 4 s": 1.0 + 0.02 * sway,
+                 "sway ±8 %, 4 s": 1.0 + 0.08 * sway}
+    print("\nthe actor's distance: the whole take rendered at a size that changes over two loops (1.15: the face "
+          "15 % larger, the actor closer), weight RMSE over the face shapes of the 2nd loop; the peer is the "
+          "tracker with a rigid head pose (fit_scale=False, the default before)")
+    print(f"{'video':14s} {'distance':20s} {'rigid':>7s} {'fit_scale':>9s} {'scale p5-p95 (2nd loop)':>24s}")
+    for label, model, pose in (("sample head", head, None), ("foreign face", foreign.model, foreign.pose)):
+        for name, zoom in schedules.items():
+            jp = camera_frames(model, 2, take, pose, zoom)
+            cells = []
+            for fit_scale in (False, True):
+                res = run(head, jp, adapt=False, fit_scale=fit_scale)[0]
+                cells.append(float(np.sqrt(np.mean((res.weights[-T:] - truth)[:, face_shapes] ** 2))))
+            sc = res.info["scales"][-T:] / zoom[-T:]  # the fitted scale over the true one
+            print(f"{label:14s} {name:20s} {cells[0]:7.3f} {cells[1]:9.3f} "
+                  f"{np.percentile(sc, 5):11.3f} - {np.percentile(sc, 95):.3f}", flush=True)
 
 
 def neutral_table(head, foreign, face_shapes) -> None:

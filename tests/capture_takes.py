@@ -159,3 +159,23 @@ def write_y4m(path, frames, fps=30):
             fh.write(b"FRAME\n")
             for plane in (y[f], half(u)[f], half(v)[f]):
                 fh.write(np.clip(np.rint(plane), 0, 255).astype(np.uint8).tobytes())
+
+
+def zoomed(img: np.ndarray, s: float) -> np.ndarray:
+    """``img`` scaled by ``s`` about its centre, cropped or padded with its corner's colour (the background).
+
+    The actor ``1/s`` times the distance from the camera (a weak-perspective camera: the face is
+    small in the frame and the lens's change of perspective is left out)."""
+    from PIL import Image
+
+    h, w = img.shape[:2]
+    a = np.asarray(Image.fromarray(img).resize((round(w * s), round(h * s)), Image.BILINEAR))
+    H, W = a.shape[:2]
+    if s >= 1:
+        y0, x0 = (H - h) // 2, (W - w) // 2
+        return a[y0:y0 + h, x0:x0 + w].copy()
+    out = np.empty_like(img)
+    out[:] = img[0, 0]
+    y0, x0 = (h - H) // 2, (w - W) // 2
+    out[y0:y0 + H, x0:x0 + W] = a
+    return out

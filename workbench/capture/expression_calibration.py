@@ -27,16 +27,16 @@ there because the tracker misreads a turned head as expression: on a neutral fac
 its ``browDownLeft`` follows the yaw (correlation +0.69 on the rendered take),
 ``browDownRight`` and ``browOuterUpLeft`` against it (−0.61, −0.52); a map fitted
 only on a still head kept those readings. Measured on the rendered takes
-(``bench_live.py``, table 6, the live defaults): the whole take's RMSE over the face
-shapes falls from 0.100 to 0.079 on the sample head and from 0.109 to 0.083 on a
-foreign face (before the inner lips were parted and the depth left the tracker's fit:
-0.113 -> 0.087 and 0.125 -> 0.081); left out of the session, any one prompt still
-leaves it at or below 0.087 / 0.100; on dense co-articulated takes, most of whose
-shapes no prompt shows, it changes little (0.186 -> 0.184, 0.178 -> 0.172, 0.185 ->
-0.187, 0.180 -> 0.178); on a held-out take of ten other expressions 0.111 -> 0.091 and
-0.105 -> 0.092 (all-zero weights 0.095). The jaw's level over the truth goes from 0.80
-to 0.89 on the sample head and from 0.92 to 1.10 on the foreign face (0.61 and 0.90
-before). Tried and not kept (at l1 = 0.01): the head's yaw and pitch (and their squares)
+(``bench_live.py``, table 6, the live defaults, 2026-12-01 with the head pose a
+similarity): the whole take's RMSE over the face shapes falls from 0.107 to 0.079 on
+the sample head and from 0.112 to 0.086 on a foreign face (before the inner lips were
+parted and the depth left the tracker's fit: 0.113 -> 0.087 and 0.125 -> 0.081); left
+out of the session, any one prompt still leaves it at or below 0.087 / 0.101; on dense
+co-articulated takes, most of whose shapes no prompt shows, it changes little (0.188 ->
+0.187, 0.180 -> 0.175, 0.186 -> 0.189, 0.180 -> 0.180); on a held-out take of ten other
+expressions 0.113 -> 0.091 and 0.104 -> 0.093 (all-zero weights 0.095). The jaw's level
+over the truth goes from 0.74 to 0.86 on the sample head and from 0.98 to 1.12 on the
+foreign face (0.61 and 0.90 before the lips and the depth). Tried and not kept (at l1 = 0.01): the head's yaw and pitch (and their squares)
 as inputs of the map besides the weights (0.087 / 0.084 on the same frames against
 0.088 / 0.085 without: the misreading is mostly a pattern of weights no expression
 makes, which the weights alone cancel); each prompt weighing the same instead of

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
-from workbench.capture.pose import PoseError, fit_rigid_robust
+from workbench.capture.pose import PoseError, fit_rigid_robust, pose_matrix
 from workbench.capture.result import FLAG_POSE_ALL
 
 if TYPE_CHECKING:
@@ -39,11 +39,27 @@ class FrameStepper:
         Refined by every solved frame's markers; the set-up adopts it.
     rows : (m,) int, optional
         The markers' rows in ``adaptive.vertex_ids_``.
+    fit_scale : bool
+        Fit the head pose as a similarity: a uniform scale with the rotation and translation,
+        on the rigid markers at the frame's expression (Umeyama's scale). For landmarks from a
+        camera whose distance to the actor changes — FaceMesh's coordinates scale with the face's
+        size in the image, so an actor leaning 15 % closer would otherwise read as every shape
+        that widens the face (``bench_live.py`` table 9). The scale is removed before the
+        weights' fit; the pose returned stays rigid and :attr:`scale` holds the scale. Off for
+        markers in metric units (a motion-capture take: the actor's size does not change).
+
+    Attributes
+    ----------
+    scale : float
+        The last solved frame's scale (1 until one is fitted; > 1: the face is larger than the
+        rig's frame, e.g. the actor closer to the camera than at the neutral).
     """
 
     def __init__(self, setup: MarkerSetup, iterations: int, adaptive: AdaptiveModel | None = None,
-                 rows: NDArray[np.intp] | None = None) -> None:
+                 rows: NDArray[np.intp] | None = None, *, fit_scale: bool = False) -> None:
         self.setup = setup
+        self.fit_scale = bool(fit_scale)
+        self.scale = 1.0
         self.iterations = int(iterations)
         self.adaptive = adaptive
         self.rows = rows
@@ -77,25 +93,25 @@ class FrameStepper:
         G0 = setup.gram(sel)
         G = G0 * (setup.norm / sw)
         rig = vis & setup.is_rigid
-        w, wf, M = self.w, self.wf, self.M
+        w, wf, M, s = self.w, self.wf, self.M, self.scale
         for _it in range(self.iterations):
             X = setup.marker_positions(w, wf)
             pose = None
             if rig.sum() >= 3:
                 try:
-                    pose = fit_rigid_robust(X[rig], Yf[rig], max_iter=10, tol=POSE_TOL)
+                    pose = fit_rigid_robust(X[rig], Yf[rig], scale=self.fit_scale, max_iter=10, tol=POSE_TOL)
                 except PoseError:
                     pose = None
             if pose is None:
                 flag = FLAG_POSE_ALL
                 try:
-                    pose = fit_rigid_robust(X[vis], Yv, max_iter=10, tol=POSE_TOL)
+                    pose = fit_rigid_robust(X[vis], Yv, scale=self.fit_scale, max_iter=10, tol=POSE_TOL)
                 except PoseError:
                     pose = None
             if pose is not None:
-                M = pose.matrix
+                M, s = pose_matrix(pose.rotation, pose.translation), pose.scale
             R, t = M[:3, :3], M[:3, 3]
-            local = (Yv - t) @ R  # Rᵀ (y − t), row-wise
+            local = (Yv - t) @ R / s  # Rᵀ (y − t) / s, row-wise
             c = local - setup.X0[vis]
             if space.derived:
                 c = c - setup.derived_offset(wf, vis)
@@ -110,13 +126,13 @@ class FrameStepper:
                 wf = space.full_weights(w)
         wf = space.full_weights(w)
         X = setup.marker_positions(w, wf)
-        r = X[vis] @ M[:3, :3].T + M[:3, 3] - Yv
+        r = s * X[vis] @ M[:3, :3].T + M[:3, 3] - Yv
         error = float(np.sqrt((r * r).sum(1).mean()))
-        self.w, self.wf, self.M = w, wf, M
+        self.w, self.wf, self.M, self.scale = w, wf, M, s
         self.w_prev2, self.w_prev = self.w_prev, w.copy()
         am = self.adaptive
         if adapt and am is not None and self.rows is not None:  # the frame refines the rig for the next frames
-            local = (Yv - M[:3, 3]) @ M[:3, :3] - setup.rest_offsets[vis]
+            local = (Yv - M[:3, 3]) @ M[:3, :3] / s - setup.rest_offsets[vis]
             # the markers weigh in the rig's refinement as in the weights' fit (unweighted, the
             # correctives would learn what the weighting leaves out)
             am.update_planes(*setup.marker_planes(self.rows, vis, local), wf)

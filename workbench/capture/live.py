@@ -14,10 +14,15 @@ L1 + temporal weights, warm-started), so a take pushed frame by frame gives what
   No calibration session is needed, but the actor must be relaxed then: a face that
   registers smiling or talking is read against that expression from then on
   (``bench_live.py`` table 8: the whole take started at its open jaw and blink reads at
-  weight RMSE 0.343 against 0.094 started at rest; at its smile 0.246, at all four
-  expressions at half 0.158). :meth:`~LiveTracker.set_neutral` takes the next face as the
+  weight RMSE 0.356 against 0.104 started at rest; at its smile 0.246, at all four
+  expressions at half 0.157). :meth:`~LiveTracker.set_neutral` takes the next face as the
   neutral instead (0.086-0.087 after those starts), and a calibration session takes it
-  from its "relax" prompt. The weights are fitted with the landmarks on the
+  from its "relax" prompt.
+* **Distance.** The head pose is a similarity (``fit_scale``, on by default): each frame's
+  uniform scale — the actor leaning in or sitting back — is fitted with the rotation on the
+  landmarks no expression moves and taken off before the weights' fit. With a rigid pose a
+  face 15 % larger in the frame read as every shape that widens it (table 9: RMSE 0.33
+  against 0.10; a 5 % drift 0.127 / 0.187 on the sample head / a foreign face). The weights are fitted with the landmarks on the
   lips, eyes, brows and nose weighing 1 and those on smooth skin and the face's outline
   0.03 (:func:`~workbench.capture.landmark_registration.landmark_weights`: FaceMesh places
   the latter from the former, and they follow an expression only part of the way), in the
@@ -31,9 +36,9 @@ L1 + temporal weights, warm-started), so a take pushed frame by frame gives what
   session — a neutral face, then a few prompted expressions, two seconds each
   (:mod:`.expression_calibration`) — and fits a map from what was tracked to what was
   prompted, applied to every later frame. On the rendered takes of
-  ``benchmarks/bench_live.py`` (table 6) it lowers the whole take's weight RMSE from 0.100 to
-  0.079 (sample head) and from 0.109 to 0.083 (a foreign face). A free "make your
-  extremes" range (a gain per shape, 1 / its peak), the way before, raised it (0.153 / 0.155):
+  ``benchmarks/bench_live.py`` (table 6) it lowers the whole take's weight RMSE from 0.107 to
+  0.079 (sample head) and from 0.112 to 0.086 (a foreign face). A free "make your
+  extremes" range (a gain per shape, 1 / its peak), the way before, raised it (0.168 / 0.142):
   it scaled up every shape the solve brushed.
 * **No face** in view: the frame holds the last weights and pose, ``ok`` is
   False and ``note`` says so. **Two faces**: the largest is tracked.
@@ -103,6 +108,9 @@ class LiveFrame:
     prompt_index : int
         That prompt's place in the session's ``prompts_`` (prompts may share an
         instruction); -1 when no prompt shows.
+    scale : float
+        The face's size over its size at the neutral (``fit_scale``; > 1: the actor is closer
+        to the camera), held like the pose; 1 without ``fit_scale``.
     """
 
     weights: NDArray[np.float64]
@@ -114,6 +122,7 @@ class LiveFrame:
     seconds: dict[str, float] = field(default_factory=dict)
     prompt: str = ""
     prompt_index: int = -1
+    scale: float = 1.0
 
 
 def _check_image(image: Any) -> NDArray[np.uint8]:
@@ -136,10 +145,10 @@ class LiveTracker:
         Adapt the rig to the actor while tracking (True: the default options; a dict:
         :class:`~workbench.capture.AdaptiveModel` options). Off by default: on FaceMesh
         landmarks of an actor who is not the rig (a warped head) it leaves the weight error
-        over the first three seconds about as it was (RMSE 0.097 against 0.093) and drifts up
-        over the next ones (0.124 against 0.094 without by the ninth second), and on the rig's
-        own face it raises it (0.074 → 0.147); from loop to loop the landmark error falls 16 %
-        (``benchmarks/bench_live.py``, table 3).
+        over the first three seconds about as it was (RMSE 0.099 against 0.091) and drifts up
+        over the next ones (0.181 against 0.093 without by the ninth second), and on the rig's
+        own face it raises it (0.080 → 0.151); from loop to loop the landmark error falls 21 %
+        (``benchmarks/bench_live.py``, tables 2-3).
     l1, temporal : float, optional
         The tracker's relative λ's (default: :data:`LANDMARK_L1` and the marker tracker's
         ``DEFAULT_TEMPORAL``).
@@ -159,6 +168,15 @@ class LiveTracker:
         :func:`~workbench.capture.track.track_markers`, the registration's
         :attr:`~workbench.capture.landmark_registration.LandmarkRegistration.view_axis`), since
         FaceMesh's depth is a guess that does not follow the jaw; the head pose uses all three.
+    fit_scale : bool
+        Follow the actor's distance to the camera: the head pose is a similarity whose uniform
+        scale is fitted each frame and removed before the weights' fit
+        (:class:`~workbench.capture.frame_step.FrameStepper`). On by default: without it, an actor
+        leaning 15 % closer than at the neutral reads as every shape that widens the face (the
+        whole take's weight RMSE 0.33 against 0.10), and a sway of ±8 % costs 0.16 against 0.10; at
+        a distance that never changes it costs the sample head 0.094 → 0.104 and the foreign face
+        nothing (``benchmarks/bench_live.py`` table 9; a rigid pose loses more than that once the
+        actor moves by 2-3 %). :attr:`LiveFrame.scale` holds it.
 
     Attributes
     ----------
@@ -178,7 +196,8 @@ class LiveTracker:
 
     def __init__(self, model: FaceState, *, adapt: bool | dict[str, Any] = False, l1: float | None = None,
                  temporal: float | None = None, iterations: int = 2, min_markers: int = 4,
-                 min_confidence: float = 0.5, adapt_every: int = 5, depth: bool = False) -> None:
+                 min_confidence: float = 0.5, adapt_every: int = 5, depth: bool = False,
+                 fit_scale: bool = True) -> None:
         from workbench.capture.track import DEFAULT_TEMPORAL
 
         if not model.shapes:
@@ -199,6 +218,7 @@ class LiveTracker:
             raise VideoError(f"adapt_every must be an int ≥ 1, got {adapt_every!r}")
         self.adapt_every = adapt_every
         self.depth = bool(depth)
+        self.fit_scale = bool(fit_scale)
         self.registration_: LandmarkRegistration | None = None
         self.adapted_: Any = None
         self.n_frames_ = 0
@@ -219,6 +239,8 @@ class LiveTracker:
         self._landmarks: list[NDArray[np.float64]] = []
         self._last_w = np.zeros(len(model.shape_names))
         self._last_pose = np.eye(4)
+        self._last_scale = 1.0
+        self._scales: list[float] = []
 
     # ------------------------------------------------------------------ frames
     def _face_landmarks(self, img: NDArray[np.uint8]) -> NDArray[np.float64] | None:
@@ -264,7 +286,7 @@ class LiveTracker:
         check_marker_units(Y0, setup.X0, self.model)
         am, rows = adaptive_for_markers(self.adapt if self.adapt else None, self.model, ids, None)
         start_from_neutral(setup, Y0, 0, am, rows)
-        self._stepper = FrameStepper(setup, self.iterations, am, rows)
+        self._stepper = FrameStepper(setup, self.iterations, am, rows, fit_scale=self.fit_scale)
         self.registration_, self.adapted_ = reg, am
         return f"registered: {ids.size} landmarks on the rig (rms {reg.rms:.3g})"
 
@@ -319,6 +341,7 @@ class LiveTracker:
                     self._pending.add(t, w)
                 self._last_w = self._calibrated(w)
                 self._last_pose = M
+                self._last_scale = self._stepper.scale
                 ok = True
             else:
                 self._stepper.hold(self._stepper.w)
@@ -340,10 +363,12 @@ class LiveTracker:
         self._times.append(t)
         self._weights.append(self._last_w.copy())
         self._poses.append(self._last_pose.copy())
+        self._scales.append(self._last_scale)
         self._errors.append(err)
         self._flags.append(flag)  # FLAG_HELD unless the frame was solved
         self._landmarks.append(L if L is not None else np.full((N_LANDMARKS, 3), np.nan))
-        return LiveFrame(self._last_w.copy(), self._last_pose.copy(), L, ok, t, note, secs, prompt, prompt_index)
+        return LiveFrame(self._last_w.copy(), self._last_pose.copy(), L, ok, t, note, secs, prompt, prompt_index,
+                         self._last_scale)
 
     # ------------------------------------------------------------------ the neutral
     def set_neutral(self) -> None:
@@ -501,7 +526,8 @@ class LiveTracker:
 
         The keys go at the frames' own timestamps (``info["timestamps"]``: a camera drops
         frames); ``fps`` is the nominal 30 (the timeline's rate when it had none), and
-        ``info["rate"]`` the rate achieved (the median interval's). Frames before the first
+        ``info["rate"]`` the rate achieved (the median interval's), ``info["scales"]`` each
+        frame's :attr:`LiveFrame.scale` (None without ``fit_scale``). Frames before the first
         face take its values.
         """
         if not self._times:
@@ -511,18 +537,19 @@ class LiveTracker:
         T = len(self._times)
         ts = self.timestamps
         rate = 1.0 / float(np.median(np.diff(ts))) if T > 1 else float("nan")
-        W, P = np.array(self._weights), np.array(self._poses)
+        W, P, S = np.array(self._weights), np.array(self._poses), np.array(self._scales)
         flags = list(self._flags)
         solved = [i for i, f in enumerate(flags) if f != FLAG_HELD]
         if solved:
-            W[: solved[0]], P[: solved[0]] = W[solved[0]], P[solved[0]]
+            W[: solved[0]], P[: solved[0]], S[: solved[0]] = W[solved[0]], P[solved[0]], S[solved[0]]
         space = self._stepper.setup.space
         derived = space.unsolved_names
         return TrackResult(W, P, np.array(self._errors), tuple(flags), 30.0, space.shape_names, derived,
                            space.size, "markers",
                            {"l1": self.l1, "temporal": self.temporal, "live": True, "timestamps": ts, "rate": rate,
                             "vertex_ids": None if self.registration_ is None else self.registration_.vertex_ids,
-                            "adapted": self.adapted_})
+                            "adapted": self.adapted_,
+                            "scales": S if self.fit_scale else None})
 
     def close(self) -> None:
         """Release FaceMesh (the take stays readable)."""

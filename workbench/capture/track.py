@@ -436,6 +436,7 @@ def track_markers(
     adapt: Any = None,
     marker_weights: ArrayLike | None = None,
     depth_axis: ArrayLike | None = None,
+    fit_scale: bool = False,
     progress: Progress | None = None,
 ) -> TrackResult:
     """Track ``(T, m, 3)`` markers or landmarks glued to ``vertex_ids`` (see the module docstring).
@@ -474,6 +475,11 @@ def track_markers(
     with the camera: each frame's head rotation ``R`` carries it onto the rig (``Rᵀ a``), so a
     turned head's depth stays out of the fit (held in the rig's frame, a head turned by θ let
     ``sin θ`` of it back in: 21 % at 12°).
+
+    ``fit_scale`` (default False): the head pose is a similarity, its uniform scale fitted each
+    frame on the rigid markers and removed before the weights' fit — for landmarks from a camera
+    the actor moves toward or away from (:class:`~workbench.capture.frame_step.FrameStepper`);
+    ``info["scales"]`` (T,) holds it (None when off). Markers in metric units need it off.
 
     ``l1`` / ``temporal`` ``"auto"`` (the default; None is the same): chosen from the take by
     held-out markers (:func:`~workbench.capture.lambdas.choose_lambdas`); ``info["l1"]`` and
@@ -526,7 +532,8 @@ def track_markers(
         poses = np.tile(np.eye(4), (T, 1, 1))
         errors = np.full(T, np.nan)
         flags = [""] * T
-        stepper = FrameStepper(setup, int(iterations), am, rows)
+        stepper = FrameStepper(setup, int(iterations), am, rows, fit_scale=bool(fit_scale))
+        scales = np.ones(T)
         every = max(1, T // 100)
         first = int(np.argmax(good))
         for f in range(T):
@@ -535,13 +542,14 @@ def track_markers(
             if not good[f]:
                 flags[f] = FLAG_HELD
                 if f > first:  # hold the previous frame
-                    W[f], poses[f] = W[f - 1], poses[f - 1]
+                    W[f], poses[f], scales[f] = W[f - 1], poses[f - 1], scales[f - 1]
                     stepper.hold(W[f])
                 continue
             W[f], poses[f], errors[f], flags[f] = stepper.step(Y[f], visible[f])
+            scales[f] = stepper.scale
     sweeps = stepper.sweeps
     # frames before the first solvable one take its values
-    W[:first], poses[:first] = W[first], poses[first]
+    W[:first], poses[:first], scales[:first] = W[first], poses[first], scales[first]
     if progress is not None:
         progress(1.0, f"tracked {T} frames")
     derived = space.unsolved_names
@@ -551,7 +559,7 @@ def track_markers(
         {"l1": l1_, "temporal": temporal_, "iterations": int(iterations), "min_markers": int(min_markers),
          "rigid_markers": setup.rigid.copy(), "vertex_ids": ids.copy(), "lambda_scale": setup.ref,
          "marker_weights": setup.marker_weights.copy(),
-         "depth_axis": setup.depth_axis,
+         "depth_axis": setup.depth_axis, "scales": scales if fit_scale else None,
          "neutral_offsets": offsets, "adapted": am,
          "solver_sweeps": sweeps, "lambda_auto": (l1_given is None, temporal_given is None),
          "lambda_choice": None if choice is None else choice.as_info()},
@@ -598,7 +606,7 @@ def track(
         ``progress(fraction, message)``, called as frames are tracked.
     **options
         Passed on: for markers ``iterations``, ``min_markers``, ``rigid``, ``neutral``,
-        ``marker_weights``, ``depth_axis`` (:func:`track_markers`); for clouds, whatever ``track_clouds`` takes.
+        ``marker_weights``, ``depth_axis``, ``fit_scale`` (:func:`track_markers`); for clouds, whatever ``track_clouds`` takes.
 
     Returns
     -------

@@ -146,13 +146,14 @@ def track_video(
     ``marker_weights=landmark_weights()`` (the lips, eyes, brows and nose weigh more than the
     landmarks on smooth skin), ``l1=LANDMARK_L1`` (the live tracker's sparsity) and
     ``depth_axis=reg.view_axis`` (the weights fitted across FaceMesh's depth; ``None`` fits
-    them on it too) unless ``track_options`` says otherwise. The sparsity is fixed, not chosen
+    them on it too) and ``fit_scale=True`` (the head pose a similarity: the actor moving toward or
+    away from the camera is not read as expressions) unless ``track_options`` says otherwise. The sparsity is fixed, not chosen
     from the take as for markers (``l1="auto"``): held-out landmarks favour the weights that
     explain FaceMesh's misreadings best, the densest, and chose 0.003-0.01 on the rendered takes
     of ``benchmarks/bench_live.py`` (the issue's whole take 0.141 / 0.161 against 0.114 / 0.131 at
-    ``LANDMARK_L1``, before the depth left the fit). With these defaults the whole take is 0.093 /
-    0.118 (sample head / a foreign face; with the depth in the fit 0.121 / 0.145, all-zero
-    weights 0.112); dense takes and the held-out take of other expressions move by ≤ 0.004
+    ``LANDMARK_L1``, before the depth left the fit). With these defaults the whole take's second
+    loop is 0.091 / 0.110 (sample head / a foreign face; 0.089 / 0.110 with a rigid pose; with the
+    depth in the fit, measured before, 0.121 / 0.145; all-zero weights 0.112); dense takes and the held-out take of other expressions move by ≤ 0.004
     either way. ``temporal`` is still chosen from the take. The registration is not kept:
     call the steps yourself to inspect it.
     """
@@ -177,5 +178,6 @@ def track_video(
     track_options.setdefault("marker_weights", landmark_weights())  # the live tracker's weighting
     track_options.setdefault("l1", LANDMARK_L1)  # and its sparsity
     track_options.setdefault("depth_axis", reg.view_axis)  # and its fit across FaceMesh's depth
+    track_options.setdefault("fit_scale", True)  # and its head pose with the actor's distance
     return track(model, reg.to_model(seq), vertex_ids=reg.vertex_ids, fps=seq.fps, progress=part(0.7, 1.0),
                  **track_options)
