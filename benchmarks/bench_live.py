@@ -89,7 +89,9 @@ face, no better than per frame, and the ±8 % sway costs up to 0.19 with the lon
 scale from a few landmarks FaceMesh keeps still (the eye corners, the nose's bridge, tip and alar
 base; with or without the face's sides at the ears): 0.102-0.116 / 0.126-0.145; (3) the scale
 along the face's width only (brows and jaw move the face's height): 0.110 / 0.117 (per frame on
-all of them 0.104 / 0.121). (4) For the
+all of them 0.104 / 0.121). The scale fitted on every landmark at the frame's expression (the
+weights' own model explaining what the brows and jaw do), the rotation on the rigid ones: 0.109 /
+0.130. (4) For the
 foreign face's 0.120 without a calibration (not the distance): per-landmark rest offsets that
 depend on the head's turn (linear or quadratic in its rotation vector), since on the foreign face's
 take at rest FaceMesh's landmarks move with the yaw (RMSE 0.084 at rest with no expression at

@@ -18,11 +18,7 @@ L1 + temporal weights, warm-started), so a take pushed frame by frame gives what
   expressions at half 0.157). :meth:`~LiveTracker.set_neutral` takes the next face as the
   neutral instead (0.086-0.087 after those starts), and a calibration session takes it
   from its "relax" prompt.
-* **Distance.** The head pose is a similarity (``fit_scale``, on by default): each frame's
-  uniform scale — the actor leaning in or sitting back — is fitted with the rotation on the
-  landmarks no expression moves and taken off before the weights' fit. With a rigid pose a
-  face 15 % larger in the frame read as every shape that widens it (table 9: RMSE 0.33
-  against 0.10; a 5 % drift 0.127 / 0.187 on the sample head / a foreign face). The weights are fitted with the landmarks on the
+  The weights are fitted with the landmarks on the
   lips, eyes, brows and nose weighing 1 and those on smooth skin and the face's outline
   0.03 (:func:`~workbench.capture.landmark_registration.landmark_weights`: FaceMesh places
   the latter from the former, and they follow an expression only part of the way), in the
@@ -31,6 +27,11 @@ L1 + temporal weights, warm-started), so a take pushed frame by frame gives what
   frames arrive (the dynamic expression model, §4 — identity from the rest frame,
   correctives every few solved frames, :mod:`.adapt`); off by default (measured
   below).
+* **Distance.** The head pose is a similarity (``fit_scale``, on by default): each frame's
+  uniform scale — the actor leaning in or sitting back — is fitted with the rotation on the
+  landmarks no expression moves and taken off before the weights' fit. With a rigid pose a
+  face 15 % larger in the frame read as every shape that widens it (table 9: RMSE 0.33
+  against 0.10; a 5 % drift 0.127 / 0.187 on the sample head / a foreign face).
 * **Calibrate** (optional; FaceMesh reads some expressions short and mixes other
   shapes into them): :meth:`~LiveTracker.begin_calibration` runs a guided
   session — a neutral face, then a few prompted expressions, two seconds each
