@@ -177,7 +177,7 @@ class LiveTracker:
         whole take's weight RMSE 0.33 against 0.10), and a sway of ±8 % costs 0.16 against 0.10; at
         a distance that never changes it costs the sample head 0.094 → 0.104 and the foreign face
         nothing (``benchmarks/bench_live.py`` table 9; a rigid pose loses more than that once the
-        actor moves by 2-3 %). :attr:`LiveFrame.scale` holds it.
+        actor moves by more than 2-3 %). :attr:`LiveFrame.scale` holds it.
 
     Attributes
     ----------
