@@ -65,7 +65,8 @@ since): table 9 — the whole take with the actor at a fixed distance reads at 0
 head / foreign face) with a rigid pose and 0.104 / 0.121 with the similarity; drifting 5 % closer
 0.127 / 0.187 against 0.103 / 0.120, leaning in to 1.15 0.332 / 0.362 against 0.103 / 0.123, back to
 0.87 0.361 / 0.344 against 0.103 / 0.123, a ±2 % sway 0.095 / 0.121 against 0.103 / 0.120, a ±8 % sway
-0.159 / 0.181 against 0.102 / 0.121; the fitted scale is within 0.998-1.020 / 0.993-1.012 of the true
+0.159 / 0.181 against 0.102 / 0.121 (a ±4 % sway, run beside the table: 0.111 / 0.137 against
+0.103 / 0.123); the fitted scale is within 0.998-1.020 / 0.993-1.012 of the true
 one (p5-p95): FaceMesh's face grows ~2 % as the brows rise and the jaw opens (the scale's correlation
 with browInnerUp +0.54 on the sample head, with the blink -0.88 on the foreign face), and the scale
 takes that much of those expressions — the fixed-distance cost. The other tables with it: table 1,
