@@ -310,15 +310,17 @@ def camera_frames(model, loops: int, take=None, pose=None, zoom=None) -> list[by
     """The take rendered, in 640×480 JPEG frames, looped; ``zoom`` (loops × T,): each frame's size factor."""
     from PIL import Image
 
-    frames = list(render_take(model, take, pose)) * loops
+    rendered = list(render_take(model, take, pose))
+    # without a zoom every loop is the same frames: encode them once
+    frames = rendered if zoom is None else [zoomed(img, float(s)) for img, s in zip(rendered * loops, zoom, strict=True)]
     out = []
-    for f, img in enumerate(frames):
+    for img in frames:
         wide = np.full((480, 640, 3), 235, np.uint8)
-        wide[:, 80:560] = img if zoom is None else zoomed(img, float(zoom[f]))
+        wide[:, 80:560] = img
         buf = io.BytesIO()
         Image.fromarray(wide).save(buf, format="JPEG", quality=80)
         out.append(buf.getvalue())
-    return out
+    return out * loops if zoom is None else out
 
 
 def run(model, jpegs, *, adapt: bool, adapt_every: int = 5, workbench_view=None, l1=None, fit_scale=True):

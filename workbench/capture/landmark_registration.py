@@ -205,6 +205,9 @@ class LandmarkRegistration:
             the head moves toward or away from the camera. Off by default: MediaPipe's
             own scale wobbles by ±2 % with the expression (a blink shrinks the face), and
             on the test take removing it lowers jawOpen's correlation from 0.99 to 0.97.
+            The trackers fit the scale in the head pose instead, at each frame's expression
+            (``track(..., fit_scale=True)``, the default of ``track_video`` and
+            :class:`~workbench.capture.LiveTracker`): use one or the other, not both.
 
         Returns
         -------
